@@ -1,0 +1,19 @@
+"""ROS-free numerical core of rigid_body_sim (numpy and scipy only; never rclpy).
+
+The public API: :class:`RigidBody` specs, effects (:class:`Gravity`,
+:class:`Damping`, :class:`AppliedWrenches`), the :class:`Simulation` facade,
+the integrator registry :data:`INTEGRATORS`, and :class:`SpecError`, raised for
+every bad input with the offending field named.
+"""
+
+from .bodies import BodySet, RigidBody, State
+from .diagnostics import Diagnostics
+from .effects import AppliedWrenches, Damping, EFFECTS, Frame, Gravity
+from .errors import SpecError
+from .integrators import INTEGRATORS, Invariant
+from .simulation import Simulation
+
+__all__ = [
+    'AppliedWrenches', 'BodySet', 'Damping', 'Diagnostics', 'EFFECTS', 'Frame', 'Gravity',
+    'INTEGRATORS', 'Invariant', 'RigidBody', 'Simulation', 'SpecError', 'State',
+]

@@ -1,0 +1,278 @@
+"""Rigid-body specifications and the state arrays of all bodies.
+
+Frames
+------
+* **world**: the fixed inertial frame (REP 103: x forward, z up, SI units).
+* **body**: the user's frame of a body (its origin and axes, as in a URDF
+  link). The user gives the centre-of-mass offset ``com_body`` and the inertia
+  tensor about the centre of mass in this frame.
+* **principal**: origin at the centre of mass, axes along the principal axes of
+  inertia, so the inertia tensor is ``diag(J)``. Internally every body lives in
+  this frame (Euler's equations become element-wise); ``R_body_principal`` is a
+  fixed rotation applied on input and output, as URDF's ``<inertial origin>``.
+
+State (all bodies at once; ``n`` bodies)
+----------------------------------------
+``pos_com_world`` (n, 3), ``quat_principal_world`` (n, 4, scalar-last; maps
+principal-frame coordinates to world), ``vel_com_world`` (n, 3), and
+``ang_vel_principal`` (n, 3): the seed's body-frame angular velocity Ω, in the
+principal frame. See :mod:`rigid_body_sim.core.rotation` for the quaternion
+convention.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from . import rotation as so3
+from .errors import SpecError
+from .validate import finite_array, positive_scalar, unit_quaternion
+
+# Relative tolerances for properties of the inertia tensor given by a user in
+# decimal text: asymmetry or a triangle-inequality deficit smaller than this
+# fraction of the largest moment is rounding, not physics.
+INERTIA_RTOL = 1e-9
+# Principal moments equal to this relative tolerance make a body isotropic:
+# its gyroscopic term Ω × JΩ is then zero and is never evaluated.
+ISOTROPY_RTOL = 1e-12
+
+
+def inertia_matrix(value: Any, field_name: str = 'inertia') -> np.ndarray:
+    """Return a (3, 3) inertia tensor from a (3, 3) matrix or 3 principal moments.
+
+    Raises
+    ------
+    SpecError
+        If the tensor is not finite, not symmetric, not positive definite, or
+        violates the triangle inequality ``J_a + J_b >= J_c`` that every real
+        mass distribution obeys.
+    """
+    arr = np.array(value, dtype=float) if _is_numeric(value) else None
+    if arr is not None and arr.shape == (3,):
+        mat = np.diag(finite_array(value, field_name, (3,)))
+    else:
+        mat = finite_array(value, field_name, (3, 3))
+    scale = float(np.max(np.abs(mat)))
+    asym = np.abs(mat - mat.T)
+    if np.max(asym) > INERTIA_RTOL * scale:
+        i, j = np.unravel_index(np.argmax(asym), asym.shape)
+        raise SpecError(field_name, f'not symmetric: [{i}][{j}] = {mat[i, j]!r} but '
+                                    f'[{j}][{i}] = {mat[j, i]!r}')
+    mat = 0.5 * (mat + mat.T)
+    moments = np.linalg.eigvalsh(mat)
+    if not moments[0] > 0.0:
+        raise SpecError(field_name, f'not positive definite: principal moments {moments.tolist()}')
+    if moments[0] + moments[1] < moments[2] * (1.0 - INERTIA_RTOL):
+        raise SpecError(field_name, f'violates the triangle inequality: principal moments '
+                                    f'{moments.tolist()} have J1 + J2 < J3, which no mass '
+                                    f'distribution has')
+    return mat
+
+
+def _is_numeric(value: Any) -> bool:
+    try:
+        np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Principal moments (ascending) and axes of a symmetric positive-definite tensor.
+
+    Parameters
+    ----------
+    inertia : ndarray, shape (3, 3)
+
+    Returns
+    -------
+    moments : ndarray, shape (3,)
+    R_body_principal : ndarray, shape (3, 3)
+        Proper rotation (det +1) whose columns are the principal axes in the
+        body frame, so ``inertia == R diag(moments) Rᵀ``.
+    """
+    moments, axes = np.linalg.eigh(inertia)
+    if np.linalg.det(axes) < 0.0:
+        axes[:, 2] *= -1.0
+    return moments, axes
+
+
+@dataclass(frozen=True)
+class RigidBody:
+    """One rigid body as a user describes it (validated on construction).
+
+    Parameters
+    ----------
+    name : str
+        Unique, non-empty.
+    mass : float
+        kg, > 0.
+    inertia : array_like, shape (3, 3) or (3,)
+        kg m², about the centre of mass, axes of the body frame; 3 values are
+        the diagonal.
+    com_body : array_like, shape (3,)
+        m, centre of mass in the body frame (offset from the body origin).
+    position_world : array_like, shape (3,)
+        m, initial position of the body origin.
+    orientation_xyzw : array_like, shape (4,)
+        Initial orientation of the body frame in the world (unit quaternion).
+    linear_velocity_world : array_like, shape (3,)
+        m/s, initial velocity of the body origin, world frame.
+    angular_velocity_body : array_like, shape (3,)
+        rad/s, initial angular velocity in the body frame.
+    """
+
+    name: str
+    mass: float
+    inertia: Any
+    com_body: Any = (0.0, 0.0, 0.0)
+    position_world: Any = (0.0, 0.0, 0.0)
+    orientation_xyzw: Any = (0.0, 0.0, 0.0, 1.0)
+    linear_velocity_world: Any = (0.0, 0.0, 0.0)
+    angular_velocity_body: Any = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise SpecError('name', f'must be a non-empty string, got {self.name!r}')
+        conv = {
+            'mass': positive_scalar(self.mass, 'mass'),
+            'inertia': inertia_matrix(self.inertia, 'inertia'),
+            'com_body': finite_array(self.com_body, 'com_body', (3,)),
+            'position_world': finite_array(self.position_world, 'position_world', (3,)),
+            'orientation_xyzw': unit_quaternion(self.orientation_xyzw, 'orientation_xyzw'),
+            'linear_velocity_world': finite_array(self.linear_velocity_world,
+                                                  'linear_velocity_world', (3,)),
+            'angular_velocity_body': finite_array(self.angular_velocity_body,
+                                                  'angular_velocity_body', (3,)),
+        }
+        for key, value in conv.items():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, key, value)
+
+
+@dataclass
+class State:
+    """Dynamic state of all bodies (see the module docstring for frames)."""
+
+    time: float
+    pos_com_world: np.ndarray
+    quat_principal_world: np.ndarray
+    vel_com_world: np.ndarray
+    ang_vel_principal: np.ndarray
+
+    def copy(self) -> 'State':
+        """Deep copy."""
+        return State(self.time, self.pos_com_world.copy(), self.quat_principal_world.copy(),
+                     self.vel_com_world.copy(), self.ang_vel_principal.copy())
+
+
+@dataclass
+class BodySet:
+    """Constant properties of ``n`` bodies as arrays, in the principal frame.
+
+    Attributes
+    ----------
+    names : list of str
+    mass : ndarray, shape (n,)
+    inv_mass : ndarray, shape (n,)
+    moments : ndarray, shape (n, 3)
+        Principal moments J.
+    R_body_principal : ndarray, shape (n, 3, 3)
+    quat_body_principal : ndarray, shape (n, 4)
+    com_body : ndarray, shape (n, 3)
+    anisotropic : ndarray of int, shape (k,)
+        Indices of bodies whose principal moments differ (gyroscopic term
+        non-zero); isotropic bodies are skipped in every gyroscopic evaluation.
+    """
+
+    names: list[str]
+    mass: np.ndarray
+    inv_mass: np.ndarray
+    moments: np.ndarray
+    R_body_principal: np.ndarray
+    quat_body_principal: np.ndarray
+    com_body: np.ndarray
+    anisotropic: np.ndarray
+    index: dict[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def from_bodies(cls, bodies: Sequence[RigidBody]) -> 'BodySet':
+        """Build the arrays from validated :class:`RigidBody` specs."""
+        if len(bodies) == 0:
+            raise SpecError('bodies', 'a scene needs at least one body')
+        index: dict[str, int] = {}
+        for i, b in enumerate(bodies):
+            if not isinstance(b, RigidBody):
+                raise SpecError(f'bodies[{i}]', f'expected a RigidBody, got {type(b).__name__}')
+            if b.name in index:
+                raise SpecError(f'bodies[{i}].name', f'duplicate body name {b.name!r}')
+            index[b.name] = i
+        moments, axes = zip(*(principal_axes(b.inertia) for b in bodies))
+        moments = np.array(moments)
+        axes = np.array(axes)
+        mass = np.array([b.mass for b in bodies])
+        spread = moments.max(axis=1) - moments.min(axis=1)
+        aniso = np.flatnonzero(spread > ISOTROPY_RTOL * moments.max(axis=1))
+        return cls(names=[b.name for b in bodies], mass=mass, inv_mass=1.0 / mass,
+                   moments=moments, R_body_principal=axes,
+                   quat_body_principal=so3.matrix_to_quat(axes),
+                   com_body=np.array([b.com_body for b in bodies]), anisotropic=aniso,
+                   index=index)
+
+    def __len__(self) -> int:
+        """Number of bodies."""
+        return len(self.names)
+
+    def lookup(self, name: str, field_name: str = 'body') -> int:
+        """Index of the body called ``name``; SpecError naming ``field_name`` if unknown."""
+        try:
+            return self.index[name]
+        except (KeyError, TypeError):
+            raise SpecError(field_name, f'unknown body {name!r}; known bodies: '
+                                        f'{sorted(self.index)}') from None
+
+    def initial_state(self, bodies: Sequence[RigidBody]) -> State:
+        """State at t = 0 from the user-frame initial conditions of ``bodies``."""
+        q_wb = np.array([b.orientation_xyzw for b in bodies])
+        R_wb = so3.quat_to_matrix(q_wb)
+        pos_origin = np.array([b.position_world for b in bodies])
+        v_origin = np.array([b.linear_velocity_world for b in bodies])
+        w_body = np.array([b.angular_velocity_body for b in bodies])
+        com_world_offset = np.einsum('nij,nj->ni', R_wb, self.com_body)
+        w_world = np.einsum('nij,nj->ni', R_wb, w_body)
+        return State(
+            time=0.0,
+            pos_com_world=pos_origin + com_world_offset,
+            quat_principal_world=so3.quat_normalize(
+                so3.quat_multiply(q_wb, self.quat_body_principal)),
+            vel_com_world=v_origin + np.cross(w_world, com_world_offset),
+            ang_vel_principal=np.einsum('nji,nj->ni', self.R_body_principal, w_body),
+        )
+
+    # -- outputs in the user's body frame -------------------------------------------------
+
+    def pose_world(self, state: State) -> tuple[np.ndarray, np.ndarray]:
+        """Body-origin positions (n, 3) and body-frame orientations (n, 4, xyzw) in world."""
+        q_wb = so3.quat_multiply(state.quat_principal_world,
+                                 so3.quat_conjugate(self.quat_body_principal))
+        q_wb = np.where(q_wb[:, 3:4] < 0.0, -q_wb, q_wb)
+        offset = so3.rotate(q_wb, self.com_body)
+        return state.pos_com_world - offset, q_wb
+
+    def twist_world(self, state: State) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity of each body origin (n, 3) and angular velocity (n, 3), world frame."""
+        R_wp = so3.quat_to_matrix(state.quat_principal_world)
+        w_world = np.einsum('nij,nj->ni', R_wp, state.ang_vel_principal)
+        pos_origin, _ = self.pose_world(state)
+        return state.vel_com_world + np.cross(w_world, pos_origin - state.pos_com_world), w_world
+
+    def twist_body(self, state: State) -> tuple[np.ndarray, np.ndarray]:
+        """Origin velocity (n, 3) and angular velocity (n, 3), both in the body frame."""
+        v_world, w_world = self.twist_world(state)
+        _, q_wb = self.pose_world(state)
+        R_wb = so3.quat_to_matrix(q_wb)
+        return (np.einsum('nji,nj->ni', R_wb, v_world), np.einsum('nji,nj->ni', R_wb, w_world))

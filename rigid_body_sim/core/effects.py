@@ -1,0 +1,344 @@
+"""Force generators ("effects"): gravity, damping, applied wrenches.
+
+A scene lists the effects it needs and only those are evaluated: a scene
+without gravity never computes a gravity term. Each effect counts its own
+evaluations (``evaluations``: calls that did work; ``body_evaluations``: the
+number of bodies those calls touched), so tests and benchmarks can show it.
+
+An effect adds to a :class:`WrenchAccumulator`: forces in the world frame
+(acting at the centre of mass), torques about the centre of mass either in the
+world frame or in the principal frame, whichever is cheaper for the effect.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import enum
+from typing import Any, ClassVar, Optional, Sequence
+
+import numpy as np
+
+from .bodies import BodySet
+from .errors import SpecError
+from .validate import finite_array, finite_scalar, nonnegative_scalar
+
+
+class Frame(enum.Enum):
+    """Frame in which a vector of an applied wrench is expressed."""
+
+    WORLD = 'world'
+    BODY = 'body'
+
+    @classmethod
+    def parse(cls, value: Any, field_name: str = 'frame') -> 'Frame':
+        """Frame from a Frame or its name ('world' or 'body')."""
+        if isinstance(value, Frame):
+            return value
+        try:
+            return cls(value)
+        except ValueError:
+            raise SpecError(field_name, f"must be 'world' or 'body', got {value!r}") from None
+
+
+@dataclass
+class Kinematics:
+    """Positions and velocities at which effects are evaluated (n bodies).
+
+    Attributes
+    ----------
+    time : float
+    pos_com_world : ndarray, shape (n, 3)
+    R_principal_world : ndarray, shape (n, 3, 3)
+    vel_com_world : ndarray, shape (n, 3)
+    ang_vel_principal : ndarray, shape (n, 3)
+    """
+
+    time: float
+    pos_com_world: np.ndarray
+    R_principal_world: np.ndarray
+    vel_com_world: np.ndarray
+    ang_vel_principal: np.ndarray
+
+
+class WrenchAccumulator:
+    """Sums of forces (world) and torques (world or principal frame) on n bodies."""
+
+    def __init__(self, n: int) -> None:
+        self.force_world = np.zeros((n, 3))
+        self.torque_principal = np.zeros((n, 3))
+        self._torque_world: Optional[np.ndarray] = None
+
+    @property
+    def torque_world(self) -> np.ndarray:
+        """World-frame torque accumulator (n, 3), allocated on first use."""
+        if self._torque_world is None:
+            self._torque_world = np.zeros_like(self.force_world)
+        return self._torque_world
+
+    def total_torque_principal(self, R_principal_world: np.ndarray) -> np.ndarray:
+        """All torques in the principal frame, shape (n, 3)."""
+        if self._torque_world is None:
+            return self.torque_principal
+        return self.torque_principal + np.einsum('nji,nj->ni', R_principal_world,
+                                                 self._torque_world)
+
+
+class Effect:
+    """Base class: a force generator bound to a :class:`BodySet`."""
+
+    #: Name used in scene files and the registry.
+    name: ClassVar[str] = ''
+    #: True when the wrench depends on velocities (then it is not a potential force).
+    velocity_dependent: ClassVar[bool] = False
+
+    def __init__(self) -> None:
+        self.evaluations = 0
+        self.body_evaluations = 0
+
+    def bind(self, bodies: BodySet) -> None:
+        """Resolve body names to indices and precompute arrays."""
+        self.bodies = bodies
+
+    def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
+        """Add this effect's wrench at ``kin`` to ``acc``."""
+        raise NotImplementedError
+
+    def potential_energy(self, pos_com_world: np.ndarray) -> Optional[np.ndarray]:
+        """Potential energy of each body (n,), or None for a non-conservative effect."""
+        return None
+
+    def reset_counters(self) -> None:
+        """Zero the work counters."""
+        self.evaluations = 0
+        self.body_evaluations = 0
+
+
+class Gravity(Effect):
+    """Uniform gravity: force ``m g`` at each centre of mass.
+
+    Parameters
+    ----------
+    g_world : array_like, shape (3,)
+        m/s², e.g. ``(0, 0, -9.81)`` (REP 103: z up).
+    """
+
+    name = 'gravity'
+
+    def __init__(self, g_world: Any = (0.0, 0.0, -9.81)) -> None:
+        super().__init__()
+        self.g_world = finite_array(g_world, 'g_world', (3,))
+
+    def bind(self, bodies: BodySet) -> None:
+        """Precompute the constant gravity forces."""
+        super().bind(bodies)
+        self._force = bodies.mass[:, None] * self.g_world
+
+    def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
+        """Add ``m g`` to every body."""
+        self.evaluations += 1
+        self.body_evaluations += len(self._force)
+        acc.force_world += self._force
+
+    def potential_energy(self, pos_com_world: np.ndarray) -> np.ndarray:
+        """``-m g · x_com`` for each body (zero at the world origin)."""
+        return -self.bodies.mass * (pos_com_world @ self.g_world)
+
+
+class Damping(Effect):
+    """Linear viscous damping: ``F = -c_lin v_com`` and ``τ = -c_ang ω``.
+
+    Parameters
+    ----------
+    linear : float
+        N s/m, >= 0.
+    angular : float
+        N m s/rad, >= 0.
+    bodies : sequence of str, optional
+        Bodies damped; all bodies when omitted.
+    """
+
+    name = 'damping'
+    velocity_dependent = True
+
+    def __init__(self, linear: float = 0.0, angular: float = 0.0,
+                 bodies: Optional[Sequence[str]] = None) -> None:
+        super().__init__()
+        self.linear = nonnegative_scalar(linear, 'linear')
+        self.angular = nonnegative_scalar(angular, 'angular')
+        if bodies is not None and (isinstance(bodies, str) or not all(
+                isinstance(b, str) for b in bodies)):
+            raise SpecError('bodies', f'expected a list of body names, got {bodies!r}')
+        self.body_names = None if bodies is None else list(bodies)
+
+    def bind(self, bodies: BodySet) -> None:
+        """Resolve the damped bodies."""
+        super().bind(bodies)
+        if self.body_names is None:
+            self.index = np.arange(len(bodies))
+        else:
+            self.index = np.array([bodies.lookup(b, f'bodies[{i}]')
+                                   for i, b in enumerate(self.body_names)], dtype=int)
+
+    def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
+        """Add the damping force and torque of the damped bodies."""
+        idx = self.index
+        self.evaluations += 1
+        self.body_evaluations += len(idx)
+        if self.linear:
+            acc.force_world[idx] -= self.linear * kin.vel_com_world[idx]
+        if self.angular:
+            acc.torque_principal[idx] -= self.angular * kin.ang_vel_principal[idx]
+
+    def exact_flow(self, vel_com_world: np.ndarray, ang_mom_principal: np.ndarray,
+                   dt: float) -> None:
+        """Advance ``v`` and the body angular momentum by the exact damping flow, in place.
+
+        With damping alone, ``m dv/dt = -c v`` and ``J_i dΩ_i/dt = -c Ω_i`` in the
+        principal frame (``J`` diagonal), so both decay exponentially.
+        """
+        idx = self.index
+        self.evaluations += 1
+        self.body_evaluations += len(idx)
+        if self.linear:
+            vel_com_world[idx] *= np.exp(-self.linear * self.bodies.inv_mass[idx] * dt)[:, None]
+        if self.angular:
+            ang_mom_principal[idx] *= np.exp(-self.angular * dt / self.bodies.moments[idx])
+
+
+class AppliedWrenches(Effect):
+    """A table of applied wrenches, each constant over an interval of time.
+
+    Each entry acts on one body with a force (at a point given in the body
+    frame; the centre of mass when omitted) and a torque, expressed in the world
+    or the body frame, from ``start`` (s) for ``duration`` (s; forever when
+    None). Entries are evaluated together, vectorized over entries.
+    """
+
+    name = 'wrenches'
+
+    def __init__(self, entries: Sequence[dict] = ()) -> None:
+        super().__init__()
+        self._pending = list(entries)
+        self._rows: list[tuple] = []
+        self._arrays: Optional[dict] = None
+
+    def bind(self, bodies: BodySet) -> None:
+        """Validate the initial entries now that the bodies are known."""
+        super().bind(bodies)
+        self._rows = []
+        self._arrays = None
+        for i, entry in enumerate(self._pending):
+            if not isinstance(entry, dict):
+                raise SpecError(f'[{i}]', f'expected a mapping, got {entry!r}')
+            try:
+                self.add(**entry)
+            except TypeError as exc:
+                raise SpecError(f'[{i}]', str(exc)) from None
+            except SpecError as exc:
+                raise exc.within(f'[{i}]') from None
+
+    def add(self, body: str, force: Any = (0.0, 0.0, 0.0), torque: Any = (0.0, 0.0, 0.0),
+            frame: Any = 'world', point_body: Any = None, start: float = 0.0,
+            duration: Optional[float] = None) -> None:
+        """Add a wrench; every argument is validated and named on error.
+
+        Parameters
+        ----------
+        body : str
+        force, torque : array_like, shape (3,)
+            N and N m, in ``frame``.
+        frame : {'world', 'body'}
+        point_body : array_like, shape (3,), optional
+            Point of application in the body frame (m); default: centre of mass.
+        start : float
+            s, simulation time at which it starts.
+        duration : float, optional
+            s, > 0; None for forever.
+        """
+        b = self.bodies.lookup(body, 'body')
+        f = finite_array(force, 'force', (3,))
+        tau = finite_array(torque, 'torque', (3,))
+        fr = Frame.parse(frame)
+        t0 = finite_scalar(start, 'start')
+        if duration is None:
+            t1 = np.inf
+        else:
+            d = finite_scalar(duration, 'duration')
+            if not d > 0.0:
+                raise SpecError('duration', f'must be positive, got {d!r}')
+            t1 = t0 + d
+        V = self.bodies.R_body_principal[b]
+        if point_body is None:
+            r_p = np.zeros(3)
+        else:
+            r_b = finite_array(point_body, 'point_body', (3,))
+            r_p = V.T @ (r_b - self.bodies.com_body[b])
+        if fr is Frame.BODY:
+            f, tau = V.T @ f, V.T @ tau    # stored in the principal frame
+        self._rows.append((b, fr is Frame.BODY, f, tau, r_p, t0, t1))
+        self._arrays = None
+
+    def remove_expired(self, time: float) -> None:
+        """Drop entries that ended at or before ``time``."""
+        keep = [row for row in self._rows if row[6] > time]
+        if len(keep) != len(self._rows):
+            self._rows = keep
+            self._arrays = None
+
+    def clear(self, body: Optional[str] = None) -> None:
+        """Remove all entries, or those of one body."""
+        if body is None:
+            self._rows = []
+        else:
+            b = self.bodies.lookup(body, 'body')
+            self._rows = [row for row in self._rows if row[0] != b]
+        self._arrays = None
+
+    def __len__(self) -> int:
+        """Number of entries (active or not)."""
+        return len(self._rows)
+
+    def _table(self) -> dict:
+        if self._arrays is None:
+            rows = self._rows
+            self._arrays = {
+                'body': np.array([r[0] for r in rows], dtype=int),
+                'in_body': np.array([r[1] for r in rows], dtype=bool),
+                'force': np.array([r[2] for r in rows]).reshape(-1, 3),
+                'torque': np.array([r[3] for r in rows]).reshape(-1, 3),
+                'point': np.array([r[4] for r in rows]).reshape(-1, 3),
+                'start': np.array([r[5] for r in rows]),
+                'end': np.array([r[6] for r in rows]),
+            }
+        return self._arrays
+
+    def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
+        """Add the wrenches active at ``kin.time``."""
+        if not self._rows:
+            return
+        tab = self._table()
+        active = (tab['start'] <= kin.time) & (kin.time < tab['end'])
+        if not np.any(active):
+            return
+        self.evaluations += 1
+        body = tab['body'][active]
+        self.body_evaluations += len(body)
+        in_body = tab['in_body'][active]
+        f = tab['force'][active]
+        tau = tab['torque'][active]
+        r_p = tab['point'][active]
+        R = kin.R_principal_world[body]
+        # World-frame force on every entry; body-frame entries are rotated.
+        f_world = np.where(in_body[:, None], np.einsum('kij,kj->ki', R, f), f)
+        np.add.at(acc.force_world, body, f_world)
+        # Torque about the centre of mass: body-frame entries in the principal
+        # frame, world-frame entries in the world frame.
+        tau_p = np.where(in_body[:, None], tau + np.cross(r_p, f), 0.0)
+        np.add.at(acc.torque_principal, body, tau_p)
+        wb = ~in_body
+        if np.any(wb):
+            r_w = np.einsum('kij,kj->ki', R[wb], r_p[wb])
+            np.add.at(acc.torque_world, body[wb], tau[wb] + np.cross(r_w, f[wb]))
+
+
+EFFECTS: dict[str, type] = {cls.name: cls for cls in (Gravity, Damping, AppliedWrenches)}

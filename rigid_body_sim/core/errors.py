@@ -1,0 +1,24 @@
+"""The one exception type of the core: bad input, naming the field at fault."""
+
+from __future__ import annotations
+
+
+class SpecError(ValueError):
+    """Invalid input; ``field`` is the dotted key path of the offending value.
+
+    The message reads ``"<field>: <problem>"``. Callers that know more context
+    (a scene file, a list index) re-raise with :meth:`within`.
+    """
+
+    def __init__(self, field: str, problem: str) -> None:
+        self.field = field
+        self.problem = problem
+        super().__init__(f'{field}: {problem}' if field else problem)
+
+    def within(self, prefix: str) -> 'SpecError':
+        """Return the same error with ``prefix`` prepended to its field path."""
+        if not prefix:
+            return SpecError(self.field, self.problem)
+        joined = f'{prefix}.{self.field}' if self.field and not self.field.startswith('[') \
+            else f'{prefix}{self.field}'
+        return SpecError(joined, self.problem)
