@@ -28,6 +28,9 @@ class Diagnostics:
         kg m/s, total.
     angular_momentum_world : ndarray, shape (3,)
         kg m²/s, total, about the world origin.
+    angular_momentum_com_world : ndarray, shape (3,)
+        kg m²/s, total, about the (moving) centre of mass of all bodies, with
+        velocities relative to it; unchanged by uniform gravity.
     orthonormality_error : ndarray, shape (n,)
         Largest entry of ``|RᵀR - I|`` for each body's rotation matrix.
     """
@@ -37,6 +40,7 @@ class Diagnostics:
     potential_energy: np.ndarray
     linear_momentum_world: np.ndarray
     angular_momentum_world: np.ndarray
+    angular_momentum_com_world: np.ndarray
     orthonormality_error: np.ndarray
 
     @property
@@ -78,6 +82,16 @@ def angular_momentum_world(bodies: BodySet, state: State,
     return np.cross(r, linear_momentum_world(bodies, state)) + spin
 
 
+def angular_momentum_about_com(bodies: BodySet, state: State) -> np.ndarray:
+    """Total angular momentum (3,) about the centre of mass of all bodies, world frame."""
+    m = bodies.mass[:, None]
+    x_c = (m * state.pos_com_world).sum(axis=0) / m.sum()
+    v_c = (m * state.vel_com_world).sum(axis=0) / m.sum()
+    spin = so3.rotate(state.quat_principal_world, bodies.moments * state.ang_vel_principal)
+    return (np.cross(state.pos_com_world - x_c, m * (state.vel_com_world - v_c))
+            + spin).sum(axis=0)
+
+
 def diagnose(bodies: BodySet, effects: Sequence[Effect], state: State) -> Diagnostics:
     """All diagnostics of ``state``."""
     return Diagnostics(
@@ -86,6 +100,7 @@ def diagnose(bodies: BodySet, effects: Sequence[Effect], state: State) -> Diagno
         potential_energy=potential_energy(effects, state, len(bodies)),
         linear_momentum_world=linear_momentum_world(bodies, state).sum(axis=0),
         angular_momentum_world=angular_momentum_world(bodies, state).sum(axis=0),
+        angular_momentum_com_world=angular_momentum_about_com(bodies, state),
         orthonormality_error=so3.orthonormality_error(
             so3.quat_to_matrix(state.quat_principal_world)),
     )

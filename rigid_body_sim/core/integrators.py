@@ -73,16 +73,21 @@ class Integrator:
     def __init__(self, dynamics: Dynamics) -> None:
         self.dynamics = dynamics
 
-    def step(self, state: State, dt: float) -> State:
-        """Advance ``state`` by ``dt`` (s); returns a new State, ``state`` is not modified."""
-        new = self._step(state, dt)
-        new.time = state.time + dt
+    def step(self, state: State, dt: float, t_end: Optional[float] = None) -> State:
+        """Advance ``state`` by ``dt`` (s); returns a new State, ``state`` is not modified.
+
+        ``t_end`` is the time of the new state when the caller keeps time as
+        ``steps * dt`` (no rounding drift); default ``state.time + dt``.
+        """
+        t_end = state.time + dt if t_end is None else t_end
+        new = self._step(state, dt, t_end)
+        new.time = t_end
         q = new.quat_principal_world
         q /= np.linalg.norm(q, axis=-1, keepdims=True)   # rounding only, in place
         self.dynamics.counters.steps += 1
         return new
 
-    def _step(self, state: State, dt: float) -> State:
+    def _step(self, state: State, dt: float, t_end: float) -> State:
         raise NotImplementedError
 
     def _rotate(self, quat: np.ndarray, rotvec_principal: np.ndarray) -> np.ndarray:
@@ -120,7 +125,7 @@ class RungeKuttaMuntheKaas(Integrator):
     B: ClassVar[np.ndarray]
     C: ClassVar[np.ndarray]
 
-    def _step(self, state: State, dt: float) -> State:
+    def _step(self, state: State, dt: float, t_end: float) -> State:
         return rkmk_step(self, state, dt, self.A, self.B, self.C)
 
 
@@ -268,12 +273,12 @@ class Splitting(Integrator):
         return np.flatnonzero(mask)
 
     def _strang(self, t: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-                mom: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+                mom: np.ndarray, h: float, t_next: float) -> tuple[np.ndarray, np.ndarray]:
         if self.SYMMETRIC:
             self._flows(vel, mom, 0.5 * h)
             self._kick(t, pos, quat, vel, mom, 0.5 * h)
             pos, quat = self._drift(pos, quat, vel, mom, h)
-            self._kick(t + h, pos, quat, vel, mom, 0.5 * h)
+            self._kick(t_next, pos, quat, vel, mom, 0.5 * h)
             self._flows(vel, mom, 0.5 * h)
         else:
             self._flows(vel, mom, h)
@@ -281,15 +286,19 @@ class Splitting(Integrator):
             pos, quat = self._drift(pos, quat, vel, mom, h)
         return pos, quat
 
-    def _step(self, s: State, dt: float) -> State:
+    def _step(self, s: State, dt: float, t_end: float) -> State:
         moments = self.dynamics.bodies.moments
         vel = s.vel_com_world.copy()
         mom = s.ang_vel_principal * moments
         pos, quat = s.pos_com_world, s.quat_principal_world
         t = s.time
-        for w in self.COMPOSITION:
-            pos, quat = self._strang(t, pos, quat, vel, mom, w * dt)
-            t += w * dt
+        last = len(self.COMPOSITION) - 1
+        for i, w in enumerate(self.COMPOSITION):
+            # The last sub-step ends exactly at t_end, the time the next step starts
+            # from, so its final kick is reused there (first same as last).
+            t_next = t_end if i == last else t + w * dt
+            pos, quat = self._strang(t, pos, quat, vel, mom, w * dt, t_next)
+            t = t_next
         return State(s.time, pos, quat, vel, mom / moments)
 
 

@@ -79,10 +79,9 @@ class Simulation:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise SpecError('n', f'must be a non-negative integer, got {n!r}')
         for _ in range(int(n)):
-            self.state = self.integrator.step(self.state, self.dt)
-            self._steps += 1
             # Time as steps * dt, not a running sum: no rounding drift.
-            self.state.time = self._steps * self.dt
+            self.state = self.integrator.step(self.state, self.dt, (self._steps + 1) * self.dt)
+            self._steps += 1
             if self._wrenches is not None and len(self._wrenches):
                 self._wrenches.remove_expired(self.state.time)
 

@@ -1,0 +1,202 @@
+"""Scene files (YAML) -> core specs. Every error names the file, the key path and the problem.
+
+A scene file::
+
+    integrator: lie_poisson2        # a name from rigid_body_sim.core.INTEGRATORS
+    dt: 0.001                       # s
+    duration: 10.0                  # s, how long the command-line run lasts
+    effects:                        # only the effects listed are simulated
+      gravity: {g_world: [0, 0, -9.81]}
+      damping: {linear: 0.1, angular: 0.01, bodies: [box]}
+      wrenches:
+        - {body: box, force: [1, 0, 0], frame: world, point_body: [0, 0, 0.1],
+           start: 0.0, duration: 0.5}
+    bodies:
+      - name: box
+        mass: 2.0                                 # kg
+        inertia: {box: [0.3, 0.2, 0.1]}           # or [Ixx, Iyy, Izz], a 3x3 list,
+                                                  # or {ixx:, iyy:, izz:, ixy:, ixz:, iyz:}
+        com_body: [0, 0, 0]                       # m, centre of mass in the body frame
+        position_world: [0, 0, 1]                 # m, body origin
+        orientation_xyzw: [0, 0, 0, 1]            # or orientation_rpy: [r, p, y] (rad, URDF)
+        linear_velocity_world: [0, 0, 0]          # m/s, of the body origin
+        angular_velocity_body: [0, 1, 0]          # rad/s
+
+Shapes for ``inertia`` (uniform density, about the centre of mass):
+``{box: [lx, ly, lz]}``, ``{sphere: r}``, ``{cylinder: [r, length]}`` (axis z).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Union
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+import yaml
+
+from .core import Damping, Gravity, RigidBody, Simulation, SpecError
+from .core.effects import AppliedWrenches
+from .core.integrators import INTEGRATORS
+from .core.validate import finite_array, positive_scalar
+
+TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies')
+BODY_KEYS = ('name', 'mass', 'inertia', 'com_body', 'position_world', 'orientation_xyzw',
+             'orientation_rpy', 'linear_velocity_world', 'angular_velocity_body')
+EFFECT_KEYS = {'gravity': ('g_world',), 'damping': ('linear', 'angular', 'bodies'),
+               'wrenches': None}
+WRENCH_KEYS = ('body', 'force', 'torque', 'frame', 'point_body', 'start', 'duration')
+URDF_INERTIA_KEYS = ('ixx', 'iyy', 'izz', 'ixy', 'ixz', 'iyz')
+
+
+class SceneError(ValueError):
+    """A scene that cannot be loaded: ``"<file>: <key path>: <problem>"``."""
+
+
+@dataclass
+class Scene:
+    """A loaded scene: the simulation it describes and its run settings."""
+
+    name: str
+    simulation: Simulation
+    duration: float
+    source: str
+
+
+def load_scene(path: Union[str, Path]) -> Scene:
+    """Load a scene file and build its :class:`Simulation`.
+
+    Raises
+    ------
+    SceneError
+        Naming the file, the key path and the problem.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise SceneError(f'{path}: cannot read: {exc.strerror}') from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise SceneError(f'{path}: not valid YAML: {exc}') from None
+    return scene_from_dict(data, str(path))
+
+
+def scene_from_dict(data: Any, source: str = '<scene>') -> Scene:
+    """Build a :class:`Scene` from parsed YAML; ``source`` names it in errors."""
+    try:
+        return _build(data, source)
+    except SpecError as exc:
+        raise SceneError(f'{source}: {exc}') from None
+
+
+def _mapping(value: Any, field: str, allowed: tuple) -> dict:
+    if not isinstance(value, dict):
+        raise SpecError(field, f'expected a mapping, got {value!r}')
+    unknown = [k for k in value if k not in allowed]
+    if unknown:
+        raise SpecError(f'{field}.{unknown[0]}' if field else str(unknown[0]),
+                        f'unknown key; expected one of {list(allowed)}')
+    return value
+
+
+def _build(data: Any, source: str) -> Scene:
+    data = _mapping(data, '', TOP_KEYS)
+    for key in ('dt', 'bodies'):
+        if key not in data:
+            raise SpecError(key, 'missing (required)')
+    integrator = data.get('integrator', 'lie_poisson2')
+    if integrator not in INTEGRATORS:
+        raise SpecError('integrator', f'unknown integrator {integrator!r}; known: '
+                                      f'{sorted(INTEGRATORS)}')
+    dt = positive_scalar(data['dt'], 'dt')
+    duration = positive_scalar(data.get('duration', 10.0), 'duration')
+    bodies_data = data['bodies']
+    if not isinstance(bodies_data, list) or not bodies_data:
+        raise SpecError('bodies', f'expected a non-empty list of bodies, got {bodies_data!r}')
+    bodies = [_body(b, f'bodies[{i}]') for i, b in enumerate(bodies_data)]
+    effects = _effects(data.get('effects') or {})
+    try:
+        sim = Simulation(bodies, [e for _, e in effects], integrator, dt)
+    except SpecError as exc:
+        # Map 'effects[i]...' from the core back to the scene's effect key.
+        if exc.field.startswith('effects['):
+            i = int(exc.field[len('effects['):exc.field.index(']')])
+            rest = exc.field[exc.field.index(']') + 1:]
+            raise SpecError(f'effects.{effects[i][0]}{rest}', exc.problem) from None
+        raise
+    return Scene(name=str(data.get('name', Path(source).stem)), simulation=sim,
+                 duration=duration, source=source)
+
+
+def _body(data: Any, field: str) -> RigidBody:
+    data = _mapping(data, field, BODY_KEYS)
+    for key in ('name', 'mass', 'inertia'):
+        if key not in data:
+            raise SpecError(f'{field}.{key}', 'missing (required)')
+    kwargs = {k: v for k, v in data.items() if k not in ('orientation_rpy', 'inertia')}
+    try:
+        mass = positive_scalar(data['mass'], 'mass')
+        kwargs['inertia'] = _inertia(data['inertia'], mass)
+        if 'orientation_rpy' in data:
+            if 'orientation_xyzw' in data:
+                raise SpecError('orientation_rpy', 'give orientation_xyzw or orientation_rpy, '
+                                                   'not both')
+            rpy = finite_array(data['orientation_rpy'], 'orientation_rpy', (3,))
+            # URDF convention: fixed axes x, y, z (roll, then pitch, then yaw).
+            kwargs['orientation_xyzw'] = Rotation.from_euler('xyz', rpy).as_quat()
+        return RigidBody(**kwargs)
+    except SpecError as exc:
+        raise exc.within(field) from None
+
+
+def _inertia(value: Any, mass: float) -> Any:
+    """Inertia as given, or from URDF-style components or a uniform-density shape."""
+    if not isinstance(value, dict):
+        return value
+    if len(value) == 1 and next(iter(value)) in ('box', 'sphere', 'cylinder'):
+        shape, dims = next(iter(value.items()))
+        if shape == 'box':
+            lx, ly, lz = finite_array(dims, 'inertia.box', (3,))
+            for n, d in zip('xyz', (lx, ly, lz)):
+                if not d > 0.0:
+                    raise SpecError('inertia.box', f'side l{n} must be positive, got {d!r}')
+            return mass / 12.0 * np.array([ly**2 + lz**2, lx**2 + lz**2, lx**2 + ly**2])
+        if shape == 'sphere':
+            r = positive_scalar(dims, 'inertia.sphere')
+            return np.full(3, 0.4 * mass * r**2)
+        r, length = finite_array(dims, 'inertia.cylinder', (2,))
+        if not (r > 0.0 and length > 0.0):
+            raise SpecError('inertia.cylinder', f'radius and length must be positive, got {dims!r}')
+        side = mass * (3.0 * r**2 + length**2) / 12.0
+        return np.array([side, side, 0.5 * mass * r**2])
+    comp = _mapping(value, 'inertia', URDF_INERTIA_KEYS)
+    for key in ('ixx', 'iyy', 'izz'):
+        if key not in comp:
+            raise SpecError(f'inertia.{key}', 'missing (required)')
+    c = {k: float(finite_array(comp.get(k, 0.0), f'inertia.{k}', ())) for k in URDF_INERTIA_KEYS}
+    return [[c['ixx'], c['ixy'], c['ixz']], [c['ixy'], c['iyy'], c['iyz']],
+            [c['ixz'], c['iyz'], c['izz']]]
+
+
+def _effects(data: Any) -> list:
+    """Effects listed in the scene, as (key, Effect) pairs."""
+    data = _mapping(data, 'effects', tuple(EFFECT_KEYS))
+    out = []
+    for key, params in data.items():
+        field = f'effects.{key}'
+        if key == 'wrenches':
+            if not isinstance(params, list):
+                raise SpecError(field, f'expected a list of wrenches, got {params!r}')
+            for i, w in enumerate(params):
+                _mapping(w, f'{field}[{i}]', WRENCH_KEYS)
+            out.append((key, AppliedWrenches(params)))
+            continue
+        params = _mapping(params if params is not None else {}, field, EFFECT_KEYS[key])
+        try:
+            out.append((key, {'gravity': Gravity, 'damping': Damping}[key](**params)))
+        except SpecError as exc:
+            raise exc.within(field) from None
+    return out
