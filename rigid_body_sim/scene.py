@@ -162,7 +162,7 @@ def _inertia(value: Any, mass: float) -> Any:
             lx, ly, lz = finite_array(dims, 'inertia.box', (3,))
             for n, d in zip('xyz', (lx, ly, lz)):
                 if not d > 0.0:
-                    raise SpecError('inertia.box', f'side l{n} must be positive, got {d!r}')
+                    raise SpecError('inertia.box', f'side l{n} must be positive, got {d:.9g}')
             return mass / 12.0 * np.array([ly**2 + lz**2, lx**2 + lz**2, lx**2 + ly**2])
         if shape == 'sphere':
             r = positive_scalar(dims, 'inertia.sphere')

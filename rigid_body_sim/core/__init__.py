@@ -2,18 +2,20 @@
 
 The public API: :class:`RigidBody` specs, effects (:class:`Gravity`,
 :class:`Damping`, :class:`AppliedWrenches`), the :class:`Simulation` facade,
-the integrator registry :data:`INTEGRATORS`, and :class:`SpecError`, raised for
+the integrator registry :data:`INTEGRATORS`, :class:`Constraint` joints, and :class:`SpecError`, raised for
 every bad input with the offending field named.
 """
 
 from .bodies import BodySet, RigidBody, State
+from .constraints import Constraint, JointType
 from .diagnostics import Diagnostics
 from .effects import AppliedWrenches, Damping, EFFECTS, Frame, Gravity
 from .errors import SpecError
 from .integrators import INTEGRATORS, Invariant
-from .simulation import Simulation
+from .simulation import Reaction, Simulation
 
 __all__ = [
-    'AppliedWrenches', 'BodySet', 'Damping', 'Diagnostics', 'EFFECTS', 'Frame', 'Gravity',
-    'INTEGRATORS', 'Invariant', 'RigidBody', 'Simulation', 'SpecError', 'State',
+    'AppliedWrenches', 'BodySet', 'Constraint', 'Damping', 'Diagnostics', 'EFFECTS', 'Frame',
+    'Gravity', 'INTEGRATORS', 'Invariant', 'JointType', 'Reaction', 'RigidBody', 'Simulation',
+    'SpecError', 'State',
 ]

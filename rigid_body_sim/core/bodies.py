@@ -59,8 +59,8 @@ def inertia_matrix(value: Any, field_name: str = 'inertia') -> np.ndarray:
     asym = np.abs(mat - mat.T)
     if np.max(asym) > INERTIA_RTOL * scale:
         i, j = np.unravel_index(np.argmax(asym), asym.shape)
-        raise SpecError(field_name, f'not symmetric: [{i}][{j}] = {mat[i, j]!r} but '
-                                    f'[{j}][{i}] = {mat[j, i]!r}')
+        raise SpecError(field_name, f'not symmetric: [{i}][{j}] = {mat[i, j]:.9g} but '
+                                    f'[{j}][{i}] = {mat[j, i]:.9g}')
     mat = 0.5 * (mat + mat.T)
     moments = np.linalg.eigvalsh(mat)
     if not moments[0] > 0.0:
@@ -249,7 +249,7 @@ class BodySet:
             pos_com_world=pos_origin + com_world_offset,
             quat_principal_world=so3.quat_normalize(
                 so3.quat_multiply(q_wb, self.quat_body_principal)),
-            vel_com_world=v_origin + np.cross(w_world, com_world_offset),
+            vel_com_world=v_origin + so3.cross(w_world, com_world_offset),
             ang_vel_principal=np.einsum('nji,nj->ni', self.R_body_principal, w_body),
         )
 
@@ -268,7 +268,7 @@ class BodySet:
         R_wp = so3.quat_to_matrix(state.quat_principal_world)
         w_world = np.einsum('nij,nj->ni', R_wp, state.ang_vel_principal)
         pos_origin, _ = self.pose_world(state)
-        return state.vel_com_world + np.cross(w_world, pos_origin - state.pos_com_world), w_world
+        return state.vel_com_world + so3.cross(w_world, pos_origin - state.pos_com_world), w_world
 
     def twist_body(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Origin velocity (n, 3) and angular velocity (n, 3), both in the body frame."""

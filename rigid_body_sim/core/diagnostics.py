@@ -33,6 +33,8 @@ class Diagnostics:
         velocities relative to it; unchanged by uniform gravity.
     orthonormality_error : ndarray, shape (n,)
         Largest entry of ``|RᵀR - I|`` for each body's rotation matrix.
+    constraint_violation : float
+        Largest ``|Φ|`` over all constraint rows (0 without constraints).
     """
 
     time: float
@@ -42,6 +44,7 @@ class Diagnostics:
     angular_momentum_world: np.ndarray
     angular_momentum_com_world: np.ndarray
     orthonormality_error: np.ndarray
+    constraint_violation: float = 0.0
 
     @property
     def total_energy(self) -> float:
@@ -79,7 +82,7 @@ def angular_momentum_world(bodies: BodySet, state: State,
     """
     spin = so3.rotate(state.quat_principal_world, bodies.moments * state.ang_vel_principal)
     r = state.pos_com_world - np.asarray(about, dtype=float)
-    return np.cross(r, linear_momentum_world(bodies, state)) + spin
+    return so3.cross(r, linear_momentum_world(bodies, state)) + spin
 
 
 def angular_momentum_about_com(bodies: BodySet, state: State) -> np.ndarray:
@@ -88,7 +91,7 @@ def angular_momentum_about_com(bodies: BodySet, state: State) -> np.ndarray:
     x_c = (m * state.pos_com_world).sum(axis=0) / m.sum()
     v_c = (m * state.vel_com_world).sum(axis=0) / m.sum()
     spin = so3.rotate(state.quat_principal_world, bodies.moments * state.ang_vel_principal)
-    return (np.cross(state.pos_com_world - x_c, m * (state.vel_com_world - v_c))
+    return (so3.cross(state.pos_com_world - x_c, m * (state.vel_com_world - v_c))
             + spin).sum(axis=0)
 
 

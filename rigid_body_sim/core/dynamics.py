@@ -66,6 +66,9 @@ class Dynamics:
         self.bodies = bodies
         self.effects = list(effects)
         self.counters = WorkCounters()
+        # Set by the Simulation: constraint rows and their solver (None: no constraints).
+        self.solver = None
+        self.last_multipliers = np.zeros(0)
         # Incremented whenever the model changes between steps (a wrench is
         # applied, an effect added): integrators key cached evaluations on it.
         self.version = 0
@@ -88,6 +91,11 @@ class Dynamics:
         """Mark the model as changed (invalidates cached evaluations)."""
         self.version += 1
 
+    @property
+    def constrained(self) -> bool:
+        """True when the scene has constraint rows (only then is λ solved for)."""
+        return self.solver is not None and self.solver.constraints.n_rows > 0
+
     def kinematics(self, time: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                    omega: np.ndarray) -> Kinematics:
         """Bundle a state for effect evaluation (computes rotation matrices once)."""
@@ -106,7 +114,7 @@ class Dynamics:
         a = self.bodies.anisotropic
         if len(a):
             w = omega[a]
-            out[a] = np.cross(w, self.bodies.moments[a] * w)
+            out[a] = so3.cross(w, self.bodies.moments[a] * w)
             self.counters.gyroscopic_body_evaluations += len(a)
         return out
 
@@ -117,12 +125,33 @@ class Dynamics:
         kin = self.kinematics(time, pos, quat, vel, omega)
         force, torque = self.wrench(kin, self.effects)
         torque = torque - self.gyroscopic(omega)
-        return force * self.bodies.inv_mass[:, None], torque / self.bodies.moments
+        acc, om_dot = force * self.bodies.inv_mass[:, None], torque / self.bodies.moments
+        if not self.constrained:
+            return acc, om_dot
+        a6, self.last_multipliers, _ = self.solver.constrained(
+            pos, quat, vel, omega, np.hstack([acc, om_dot]))
+        return a6[:, :3], a6[:, 3:]
 
     def kick_wrench(self, time: float, pos: np.ndarray,
                     quat: np.ndarray, vel: np.ndarray,
                     omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Force (world) and torque (principal) of all effects but exact-flow ones."""
+        """Force (world) and torque (principal) of all effects but exact-flow ones.
+
+        With constraints, the constraint force ``−Gᵀλ`` is added, with λ solved
+        from the full accelerations (exact-flow effects and the gyroscopic term
+        included), so the kick, the flows and the free rotor together follow the
+        constrained vector field.
+        """
         self.counters.kick_evaluations += 1
         kin = self.kinematics(time, pos, quat, vel, omega)
-        return self.wrench(kin, self.position_effects + self.velocity_effects)
+        force, torque = self.wrench(kin, self.position_effects + self.velocity_effects)
+        if not self.constrained:
+            return force, torque
+        f_flow, t_flow = self.wrench(kin, self.flow_effects)
+        a6 = np.hstack([(force + f_flow) * self.bodies.inv_mass[:, None],
+                        (torque + t_flow - self.gyroscopic(omega)) / self.bodies.moments])
+        a6c, self.last_multipliers, _ = self.solver.constrained(pos, quat, vel, omega, a6)
+        # Constraint force = M (a_constrained - a_free).
+        m6 = 1.0 / self.solver.inv_mass_6.reshape(-1, 6)
+        dforce = m6 * (a6c - a6)
+        return force + dforce[:, :3], torque + dforce[:, 3:]

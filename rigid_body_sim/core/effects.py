@@ -19,6 +19,7 @@ from typing import Any, ClassVar, Optional, Sequence
 import numpy as np
 
 from .bodies import BodySet
+from . import rotation as so3
 from .errors import SpecError
 from .validate import finite_array, finite_scalar, nonnegative_scalar
 
@@ -333,12 +334,12 @@ class AppliedWrenches(Effect):
         np.add.at(acc.force_world, body, f_world)
         # Torque about the centre of mass: body-frame entries in the principal
         # frame, world-frame entries in the world frame.
-        tau_p = np.where(in_body[:, None], tau + np.cross(r_p, f), 0.0)
+        tau_p = np.where(in_body[:, None], tau + so3.cross(r_p, f), 0.0)
         np.add.at(acc.torque_principal, body, tau_p)
         wb = ~in_body
         if np.any(wb):
             r_w = np.einsum('kij,kj->ki', R[wb], r_p[wb])
-            np.add.at(acc.torque_world, body[wb], tau[wb] + np.cross(r_w, f[wb]))
+            np.add.at(acc.torque_world, body[wb], tau[wb] + so3.cross(r_w, f[wb]))
 
 
 EFFECTS: dict[str, type] = {cls.name: cls for cls in (Gravity, Damping, AppliedWrenches)}

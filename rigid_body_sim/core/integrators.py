@@ -114,8 +114,8 @@ def dexpinv_right(u: np.ndarray, w: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (n, 3)
     """
-    uw = np.cross(u, w)
-    return w + 0.5 * uw + np.cross(u, uw) / 12.0
+    uw = so3.cross(u, w)
+    return w + 0.5 * uw + so3.cross(u, uw) / 12.0
 
 
 class RungeKuttaMuntheKaas(Integrator):
@@ -126,7 +126,17 @@ class RungeKuttaMuntheKaas(Integrator):
     C: ClassVar[np.ndarray]
 
     def _step(self, state: State, dt: float, t_end: float) -> State:
-        return rkmk_step(self, state, dt, self.A, self.B, self.C)
+        dyn = self.dynamics
+        if not dyn.constrained:
+            return rkmk_step(self, state, dt, self.A, self.B, self.C)
+        start = dyn.solver.evaluate(state.pos_com_world, state.quat_principal_world,
+                                    state.vel_com_world, state.ang_vel_principal)
+        new = rkmk_step(self, state, dt, self.A, self.B, self.C)
+        pos, quat, vel, om = dyn.solver.project_positions(
+            start, new.pos_com_world, new.quat_principal_world, new.vel_com_world,
+            new.ang_vel_principal, dt)
+        vel, om = dyn.solver.project_velocities(pos, quat, vel, om)
+        return State(new.time, pos, quat, vel, om)
 
 
 def rkmk_step(integrator: Integrator, s: State, h: float, A: np.ndarray, B: np.ndarray,
@@ -193,11 +203,14 @@ def _axis_flow(quat: np.ndarray, mom: np.ndarray, moments: np.ndarray, axis: int
     lj, lk = mom[:, j].copy(), mom[:, k]
     mom[:, j] = c * lj + s * lk
     mom[:, k] = c * lk - s * lj
+    # q <- q ⊗ (sin(φ/2) e_axis, cos(φ/2)), written out for the one non-zero component.
     half = 0.5 * phi
-    rq = np.zeros((len(phi), 4))
-    rq[:, axis] = np.sin(half)
-    rq[:, 3] = np.cos(half)
-    quat[:] = so3.quat_multiply(quat, rq)
+    c, s = np.cos(half), np.sin(half)
+    qi, qj, qk, qw = quat[:, axis].copy(), quat[:, j].copy(), quat[:, k].copy(), quat[:, 3].copy()
+    quat[:, axis] = c * qi + s * qw
+    quat[:, j] = c * qj + s * qk
+    quat[:, k] = c * qk - s * qj
+    quat[:, 3] = c * qw - s * qi
 
 
 class Splitting(Integrator):
@@ -219,7 +232,7 @@ class Splitting(Integrator):
               mom: np.ndarray, tau: float) -> None:
         """``v += tau f/m`` and ``L += tau τ`` in place, reusing the last evaluation if valid."""
         dyn = self.dynamics
-        velocity_free = not dyn.velocity_effects
+        velocity_free = not dyn.velocity_effects and not dyn.constrained
         c = self._cache
         if (velocity_free and c is not None and c[0] == dyn.version and c[1] == time
                 and c[2] is pos and c[3] is quat):
@@ -273,18 +286,34 @@ class Splitting(Integrator):
         return np.flatnonzero(mask)
 
     def _strang(self, t: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-                mom: np.ndarray, h: float, t_next: float) -> tuple[np.ndarray, np.ndarray]:
+                mom: np.ndarray, h: float, t_next: float) -> tuple:
+        """One symmetric (or, if not SYMMETRIC, Lie–Trotter) sub-step; RATTLE with constraints.
+
+        With constraints, the positions after the drift are corrected along the
+        constraint forces at the sub-step start (SHAKE) and the final velocities
+        projected onto the velocity constraint (RATTLE), inside every sub-step,
+        so a composition of sub-steps stays symmetric.
+        """
+        dyn = self.dynamics
+        moments = dyn.bodies.moments
+        constrained = dyn.constrained
+        if constrained:
+            start = dyn.solver.evaluate(pos, quat, vel, mom / moments)
+        first = 0.5 * h if self.SYMMETRIC else h
+        self._flows(vel, mom, first)
+        self._kick(t, pos, quat, vel, mom, first)
+        pos, quat = self._drift(pos, quat, vel, mom, h)
+        if constrained:
+            pos, quat, vel, om = dyn.solver.project_positions(start, pos, quat, vel,
+                                                              mom / moments, h)
+            mom = om * moments
         if self.SYMMETRIC:
-            self._flows(vel, mom, 0.5 * h)
-            self._kick(t, pos, quat, vel, mom, 0.5 * h)
-            pos, quat = self._drift(pos, quat, vel, mom, h)
             self._kick(t_next, pos, quat, vel, mom, 0.5 * h)
             self._flows(vel, mom, 0.5 * h)
-        else:
-            self._flows(vel, mom, h)
-            self._kick(t, pos, quat, vel, mom, h)
-            pos, quat = self._drift(pos, quat, vel, mom, h)
-        return pos, quat
+        if constrained:
+            vel, om = dyn.solver.project_velocities(pos, quat, vel, mom / moments)
+            mom = om * moments
+        return pos, quat, vel, mom
 
     def _step(self, s: State, dt: float, t_end: float) -> State:
         moments = self.dynamics.bodies.moments
@@ -297,7 +326,7 @@ class Splitting(Integrator):
             # The last sub-step ends exactly at t_end, the time the next step starts
             # from, so its final kick is reused there (first same as last).
             t_next = t_end if i == last else t + w * dt
-            pos, quat = self._strang(t, pos, quat, vel, mom, w * dt, t_next)
+            pos, quat, vel, mom = self._strang(t, pos, quat, vel, mom, w * dt, t_next)
             t = t_next
         return State(s.time, pos, quat, vel, mom / moments)
 

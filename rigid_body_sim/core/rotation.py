@@ -48,6 +48,21 @@ def hat(v: np.ndarray) -> np.ndarray:
     return out
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis, broadcasting; shapes (..., 3).
+
+    Same result as ``np.cross`` for 3-vectors, without its axis bookkeeping,
+    which dominates the cost for the short arrays of a time step.
+    """
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
 def vee(m: np.ndarray) -> np.ndarray:
     """Inverse of :func:`hat`, from the antisymmetric part of ``m``.
 

@@ -17,17 +17,43 @@ as given); the core works in principal frames internally (see
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from typing import Any, Optional, Sequence
 
 import numpy as np
 
 from .bodies import BodySet, RigidBody, State
+from .constraints import Constraint, ConstraintSet
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
+from . import rotation as so3
 from .errors import SpecError
 from .integrators import integrator_class
+from .solver import ConstraintSolver
 from .validate import positive_scalar
+
+
+@dataclass(frozen=True)
+class Reaction:
+    """Wrench a constraint exerts on one body (world frame).
+
+    Attributes
+    ----------
+    force_world : ndarray, shape (3,)
+        N.
+    torque_com_world : ndarray, shape (3,)
+        N m, about the body's centre of mass.
+    torque_anchor_world : ndarray, shape (3,)
+        N m, about the joint anchor on this body.
+    anchor_world : ndarray, shape (3,)
+        m, where the anchor on this body is now.
+    """
+
+    force_world: np.ndarray
+    torque_com_world: np.ndarray
+    torque_anchor_world: np.ndarray
+    anchor_world: np.ndarray
 
 
 class Simulation:
@@ -42,10 +68,18 @@ class Simulation:
         A name from :data:`rigid_body_sim.core.integrators.INTEGRATORS`.
     dt : float
         Step size (s), > 0.
+    constraints : sequence of Constraint
+        Added in order at t = 0 (anchors and axes given in the world frame
+        refer to the initial poses).
+    constraint_time_constant : float
+        s: a violated constraint returns to Φ = 0 along ``exp(-t / this)``
+        (see :mod:`.solver`).
     """
 
     def __init__(self, bodies: Sequence[RigidBody], effects: Sequence[Effect] = (),
-                 integrator: str = 'lie_poisson2', dt: float = 1e-3) -> None:
+                 integrator: str = 'lie_poisson2', dt: float = 1e-3,
+                 constraints: Sequence[Constraint] = (),
+                 constraint_time_constant: float = 0.05) -> None:
         self.dt = positive_scalar(dt, 'dt')
         self._specs = list(bodies)
         self.bodies = BodySet.from_bodies(self._specs)
@@ -60,6 +94,10 @@ class Simulation:
         self.dynamics = Dynamics(self.bodies, effects)
         self.integrator = integrator_class(integrator)(self.dynamics)
         self._initial_wrenches = [self._wrench_rows(e) for e in effects]
+        self.dynamics.solver = ConstraintSolver(self.bodies, ConstraintSet(self.bodies),
+                                                time_constant=constraint_time_constant)
+        self.dynamics.solver.dt = self.dt
+        self._initial_constraints = list(constraints)
         self.reset()
 
     # -- time stepping --------------------------------------------------------------------
@@ -78,6 +116,8 @@ class Simulation:
         """Take ``n`` steps of size ``dt``."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise SpecError('n', f'must be a non-negative integer, got {n!r}')
+        solver = self.dynamics.solver
+        solver.dt = self.dt
         for _ in range(int(n)):
             # Time as steps * dt, not a running sum: no rounding drift.
             self.state = self.integrator.step(self.state, self.dt, (self._steps + 1) * self.dt)
@@ -106,6 +146,14 @@ class Simulation:
         for effect in self.dynamics.effects:
             effect.reset_counters()
         self.dynamics.counters.__init__()
+        solver = self.dynamics.solver
+        solver.constraints = ConstraintSet(self.bodies)
+        solver.counters.__init__()
+        for i, spec in enumerate(self._initial_constraints):
+            try:
+                solver.constraints.add(spec, self.state)
+            except SpecError as exc:
+                raise exc.within(f'constraints[{i}]') from None
         self.dynamics.changed()
 
     @staticmethod
@@ -146,6 +194,22 @@ class Simulation:
             self._wrenches.clear(body)
             self.dynamics.changed()
 
+    def add_constraint(self, constraint: Constraint) -> None:
+        """Add a constraint between steps; anchors and axes in the world refer to now."""
+        self.dynamics.solver.constraints.add(constraint, self.state)
+        self.dynamics.changed()
+
+    def remove_constraint(self, name: str) -> Constraint:
+        """Remove the constraint called ``name``; returns its description."""
+        spec = self.dynamics.solver.constraints.remove(name)
+        self.dynamics.changed()
+        return spec
+
+    @property
+    def constraint_names(self) -> list:
+        """Names of the constraints, in the order they were added."""
+        return self.dynamics.solver.constraints.names
+
     # -- outputs --------------------------------------------------------------------------
 
     def _select(self, arr: np.ndarray, body: Optional[str]) -> np.ndarray:
@@ -171,8 +235,65 @@ class Simulation:
         return self._select(v, body), self._select(w, body)
 
     def diagnostics(self) -> Diagnostics:
-        """Energies, world-frame momenta and orthonormality errors now."""
-        return diagnose(self.bodies, self.dynamics.effects, self.state)
+        """Energies, world-frame momenta, orthonormality and constraint violation now."""
+        d = diagnose(self.bodies, self.dynamics.effects, self.state)
+        if self.dynamics.constrained:
+            phi = self.dynamics.solver.violation(self.state)
+            d = replace(d, constraint_violation=float(np.max(np.abs(phi))))
+        return d
+
+    def constraint_violation(self) -> dict:
+        """Largest ``|Φ|`` of each constraint now (m or dimensionless for angles)."""
+        solver = self.dynamics.solver
+        if not self.dynamics.constrained:
+            return {}
+        phi = solver.violation(self.state)
+        return {name: float(np.max(np.abs(phi[solver.constraints.rows_of(name)])))
+                for name in solver.constraints.names}
+
+    def reactions(self) -> dict:
+        """Reaction wrench of each constraint on each of its bodies, now.
+
+        λ is solved at the current state from the full accelerations (all
+        effects, gyroscopic terms, wrenches), so these are the forces the joints
+        carry at this instant.
+
+        Returns
+        -------
+        dict
+            ``{name: {body_name: Reaction}}`` (the world is not listed).
+        """
+        dyn = self.dynamics
+        solver = dyn.solver
+        if not dyn.constrained:
+            return {}
+        s = self.state
+        kin = dyn.kinematics(s.time, s.pos_com_world, s.quat_principal_world, s.vel_com_world,
+                             s.ang_vel_principal)
+        force, torque = dyn.wrench(kin, dyn.effects)
+        torque = torque - dyn.gyroscopic(s.ang_vel_principal)
+        a6 = np.hstack([force * self.bodies.inv_mass[:, None], torque / self.bodies.moments])
+        ev = solver.constraints.evaluate(s.pos_com_world, s.quat_principal_world,
+                                         s.vel_com_world, s.ang_vel_principal)
+        lam = solver.multipliers(ev, a6)
+        gen = solver.generalized_forces(ev, lam)
+        R = kin.R_principal_world
+        out = {}
+        for i, name in enumerate(solver.constraints.names):
+            res = solver.constraints._resolved[name]
+            per_body = {}
+            for body, r_p in ((res.a, res.anchor[0]), (res.b, res.anchor[1])):
+                if body >= len(self.bodies):
+                    continue
+                f = gen[i, body, :3]
+                tau_com = R[body] @ gen[i, body, 3:]
+                lever = R[body] @ r_p
+                per_body[self.bodies.names[body]] = Reaction(
+                    force_world=f, torque_com_world=tau_com,
+                    torque_anchor_world=tau_com - so3.cross(lever, f),
+                    anchor_world=s.pos_com_world[body] + lever)
+            out[name] = per_body
+        return out
 
     def work(self) -> dict:
         """Work counters: integrator totals plus each effect's evaluations."""

@@ -1,0 +1,216 @@
+"""Benchmarks: what accuracy costs in time (not tests; timings are for reading, not asserting).
+
+1. Work-precision on free-body scenes: for each integrator and dt from 1e-1 to
+   1e-4, the error against a DOP853 reference (rtol 1e-12), the energy and
+   angular-momentum drift, and the wall time per simulated second.
+2. Cost per step against the number of bodies (1 to 10^4), and what the
+   effects a scene lists cost: gravity on/off, isotropic vs anisotropic bodies.
+   Speeds are compared as ratios measured side by side in one run.
+
+Writes ``bench/out/*.md`` (the tables) and, when matplotlib is installed,
+``bench/out/*.png`` (log-log plots). Run: ``./dev.sh bench`` (``--quick`` for a
+short run).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import platform
+import sys
+import time
+
+import numpy as np
+
+from rigid_body_sim.core import Gravity, INTEGRATORS, RigidBody, Simulation
+from rigid_body_sim.core import rotation as so3
+from rigid_body_sim.core.reference import free_body_reference
+
+OUT = Path(__file__).resolve().parent / 'out'
+
+# Free-body scenes: (name, principal moments, Ω0 in the principal frame, duration).
+SCENES = {
+    'intermediate_axis': ((1.0, 2.0, 3.0), (0.01, 1.0, 0.01), 10.0),
+    'symmetric_top': ((2.0, 2.0, 1.0), (0.3, 0.0, 5.0), 10.0),
+    'fast_asymmetric': ((1.0, 1.5, 2.8), (3.0, 2.0, -4.0), 5.0),
+}
+
+
+def _simulation(moments, omega0, integrator, dt, n=1, gravity=False):
+    bodies = [RigidBody(f'b{i}', 1.0, moments, angular_velocity_body=omega0)
+              for i in range(n)]
+    return Simulation(bodies, [Gravity()] if gravity else [], integrator, dt)
+
+
+def _timed_run(sim, n_steps, chunk=1000):
+    wall = 0.0
+    done = 0
+    e0 = sim.diagnostics()
+    l0 = np.linalg.norm(e0.angular_momentum_world)
+    de = dl = 0.0
+    while done < n_steps:
+        k = min(chunk, n_steps - done)
+        t0 = time.perf_counter()
+        sim.step(k)
+        wall += time.perf_counter() - t0
+        done += k
+        d = sim.diagnostics()
+        de = max(de, abs(d.total_energy - e0.total_energy) / e0.total_energy)
+        dl = max(dl, abs(np.linalg.norm(d.angular_momentum_world) - l0) / l0)
+    return wall, de, dl
+
+
+def work_precision(dts, max_steps):
+    """Rows (scene, integrator, dt, error, energy drift, |L| drift, wall s per sim s)."""
+    rows = []
+    for scene, (moments, omega0, duration) in SCENES.items():
+        omega_ref, quat_ref = free_body_reference(np.array(moments), np.array(omega0),
+                                                  np.array([0.0, 0.0, 0.0, 1.0]),
+                                                  np.array([duration]))
+        for name in INTEGRATORS:
+            for dt in dts:
+                n = int(round(duration / dt))
+                if n > max_steps:
+                    continue
+                sim = _simulation(moments, omega0, name, dt)
+                wall, de, dl = _timed_run(sim, n)
+                w = sim.state.ang_vel_principal[0]
+                q = sim.state.quat_principal_world[0]
+                err_w = np.linalg.norm(w - omega_ref[-1]) / np.linalg.norm(omega_ref[-1])
+                err_r = float(np.linalg.norm(so3.log_quat(
+                    so3.quat_multiply(so3.quat_conjugate(quat_ref[-1]), q))))
+                rows.append((scene, name, dt, max(err_w, err_r), de, dl, wall / duration))
+                print(f'  {scene:18s} {name:16s} dt {dt:7.0e}  err {max(err_w, err_r):8.1e}  '
+                      f'dE {de:8.1e}  d|L| {dl:8.1e}  {wall / duration:9.4f} s/sim-s',
+                      flush=True)
+    return rows
+
+
+def scaling(ns, repeats):
+    """Rows (integrator, n, us per step, us per body-step) for a mixed anisotropic scene."""
+    rows = []
+    rng = np.random.default_rng(0)
+    for name in INTEGRATORS:
+        for n in ns:
+            bodies = [RigidBody(f'b{i}', 1.0 + rng.random(),
+                                np.sort(1.0 + rng.random(3)) * (1.0, 1.0, 1.0),
+                                angular_velocity_body=rng.normal(size=3)) for i in range(n)]
+            sim = Simulation(bodies, [Gravity()], name, 1e-3)
+            sim.step(2)
+            k = max(repeats, int(20000 / n))
+            t0 = time.perf_counter()
+            sim.step(k)
+            per = (time.perf_counter() - t0) / k
+            rows.append((name, n, per * 1e6, per / n * 1e6))
+            print(f'  {name:16s} n {n:6d}  {per * 1e6:10.1f} us/step  '
+                  f'{per / n * 1e6:8.3f} us/body-step', flush=True)
+    return rows
+
+
+def effect_costs(n, repeats):
+    """Per-step cost of scenes that differ by one effect, measured side by side."""
+    rows = []
+    for name in INTEGRATORS:
+        variants = {
+            'isotropic, no gravity': ((1.0, 1.0, 1.0), False),
+            'isotropic, gravity': ((1.0, 1.0, 1.0), True),
+            'anisotropic, no gravity': ((1.0, 2.0, 3.0), False),
+            'anisotropic, gravity': ((1.0, 2.0, 3.0), True),
+        }
+        times = {}
+        for label, (moments, gravity) in variants.items():
+            sim = _simulation(moments, (0.3, 1.0, 0.2), name, 1e-3, n=n, gravity=gravity)
+            sim.step(2)
+            best = np.inf
+            for _ in range(3):   # interleaving repeats would be fairer; best-of-3 is enough
+                t0 = time.perf_counter()
+                sim.step(repeats)
+                best = min(best, (time.perf_counter() - t0) / repeats)
+            times[label] = best
+            work = sim.work()
+            rows.append((name, label, best * 1e6, work.get('gravity_evaluations', 0),
+                         work['gyroscopic_body_evaluations']))
+        base = times['isotropic, no gravity']
+        for row in rows[-4:]:
+            print(f'  {name:16s} {row[1]:24s} {row[2]:9.1f} us/step  '
+                  f'x{row[2] / (base * 1e6):5.2f}  gravity evals {row[3]:6d}  '
+                  f'gyroscopic body-evals {row[4]:8d}', flush=True)
+    return rows
+
+
+def _write_table(path, header, rows, fmt):
+    lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    lines += ['| ' + ' | '.join(f.format(v) for f, v in zip(fmt, r)) + ' |' for r in rows]
+    path.write_text('\n'.join(lines) + '\n')
+
+
+def _plots(wp_rows, sc_rows):
+    try:
+        import matplotlib
+        matplotlib.use('Agg')
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print('matplotlib not installed: no plots (pip install matplotlib)')
+        return
+    scenes = sorted({r[0] for r in wp_rows})
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5 * len(scenes), 4.2), squeeze=False)
+    for ax, scene in zip(axes[0], scenes):
+        for name in INTEGRATORS:
+            rs = [r for r in wp_rows if r[0] == scene and r[1] == name]
+            if rs:
+                ax.loglog([r[6] for r in rs], [max(r[3], 1e-16) for r in rs], 'o-', label=name)
+        ax.set_title(scene)
+        ax.set_xlabel('wall time per simulated second [s]')
+        ax.set_ylabel('error at end (rel. Ω / rotation angle)')
+        ax.grid(True, which='both', alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(OUT / 'work_precision.png', dpi=110)
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    for name in INTEGRATORS:
+        rs = [r for r in sc_rows if r[0] == name]
+        ax.loglog([r[1] for r in rs], [r[2] for r in rs], 'o-', label=name)
+    ax.set_xlabel('number of bodies')
+    ax.set_ylabel('wall time per step [us]')
+    ax.grid(True, which='both', alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(OUT / 'scaling.png', dpi=110)
+    print(f'plots: {OUT / "work_precision.png"}, {OUT / "scaling.png"}')
+
+
+def main(argv=None) -> int:
+    """Run the benchmarks; ``--quick`` for a short smoke run."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument('--quick', action='store_true', help='fewer step sizes and bodies')
+    args = p.parse_args(argv)
+    OUT.mkdir(exist_ok=True)
+    print(f'python {platform.python_version()}, numpy {np.__version__}, '
+          f'{platform.machine()}, {platform.processor() or "cpu"}')
+    if args.quick:
+        dts, max_steps, ns, repeats = (1e-1, 1e-2), 2000, (1, 100), 20
+    else:
+        dts, max_steps, ns, repeats = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4), 10 ** 5, \
+            (1, 10, 100, 1000, 10000), 200
+    print('\n== work-precision (free bodies; error vs DOP853 rtol 1e-12) ==')
+    wp = work_precision(dts, max_steps)
+    _write_table(OUT / 'work_precision.md',
+                 ('scene', 'integrator', 'dt [s]', 'error at end', 'max rel. dE',
+                  'max rel. d|L|', 'wall s / sim s'), wp,
+                 ('{}', '{}', '{:.0e}', '{:.1e}', '{:.1e}', '{:.1e}', '{:.4f}'))
+    print('\n== cost per step vs number of bodies (anisotropic bodies, gravity) ==')
+    sc = scaling(ns, repeats)
+    _write_table(OUT / 'scaling.md', ('integrator', 'bodies', 'us / step', 'us / body-step'),
+                 sc, ('{}', '{}', '{:.1f}', '{:.3f}'))
+    print(f'\n== what each effect costs ({ns[-1]} bodies; ratios to isotropic, no gravity) ==')
+    ec = effect_costs(ns[-1], repeats)
+    _write_table(OUT / 'effects.md', ('integrator', 'scene', 'us / step', 'gravity evals',
+                                      'gyroscopic body-evals'), ec,
+                 ('{}', '{}', '{:.1f}', '{}', '{}'))
+    _plots(wp, sc)
+    print(f'tables: {OUT}/work_precision.md, scaling.md, effects.md')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,667 @@
+"""Holonomic constraints Φ(x_g, R) = 0 between bodies or a body and the world.
+
+Each constraint contributes rows to the system of the seed's eq. 69::
+
+    m ẍ_g + (∂Φ/∂x_g)ᵀ λ = f,     J dΩ/dt + Ω × JΩ + (∂Φ/∂Θ)ᵀ λ = τ,     Φ = 0,
+
+with the Jacobian taken with respect to the centre-of-mass displacement δx_g
+(world frame) and the body-frame rotation δΘ (``δR = R hat(δΘ)``, eq. 13; here
+in the principal frame). The generalized velocity of body i is
+``ν_i = (v_com_world, Ω_principal)``, column block ``6 i .. 6 i + 5`` of the
+Jacobian ``G``. Differentiating ``Φ`` twice gives ``G ν̇ + γ = Φ̈`` with the
+velocity-product term ``γ = Ġ ν``.
+
+Joint types are built from four vectorized row primitives (all instances of a
+primitive are evaluated at once, with no Python loop over constraints):
+
+* ``point``: ``P_a − P_b`` (3 rows), anchor points ``P = x_g + R r``;
+* ``dot``: ``(R_b e) · (R_a s)`` for unit vectors ``s`` in a and ``e`` in b;
+* ``line``: ``(R_b e) · (P_a − P_b)``;
+* ``distance``: ``|P_a − P_b| − L``.
+
+=========  ==================================================  ====
+type       rows                                                 DOF
+=========  ==================================================  ====
+ball       point                                                3
+hinge      point + dot(k_a, e1_b) + dot(k_a, e2_b)              5
+slider     dot(k_a,e1_b) + dot(k_a,e2_b) + dot(e1_a,e2_b)
+           + line(e1_b) + line(e2_b)                            5
+fixed      point + the three dots of slider                     6
+distance   distance                                             1
+generic    a user function Φ(x_a, R_a, x_b, R_b) (finite-difference Jacobian
+           and γ unless given), evaluated one constraint at a time
+=========  ==================================================  ====
+
+Here ``k`` is the joint axis and ``(k, e1, e2)`` a right-handed orthonormal
+frame fixed in each body when the constraint is added. The world is body index
+``n`` (a virtual body with ``x = 0``, ``R = I``, ``ν = 0`` and no columns).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import enum
+from typing import Any, Callable, Optional
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import rotation as so3
+from .bodies import BodySet, State
+from .errors import SpecError
+from .validate import finite_array, positive_scalar
+
+
+class JointType(enum.Enum):
+    """Constraint (joint) types."""
+
+    BALL = 'ball'
+    HINGE = 'hinge'
+    SLIDER = 'slider'
+    FIXED = 'fixed'
+    DISTANCE = 'distance'
+    GENERIC = 'generic'
+
+    @classmethod
+    def parse(cls, value: Any, field_name: str = 'type') -> 'JointType':
+        """JointType from a JointType or its name."""
+        if isinstance(value, JointType):
+            return value
+        try:
+            return cls(value)
+        except ValueError:
+            raise SpecError(field_name, f'unknown constraint type {value!r}; known: '
+                                        f'{[t.value for t in cls]}') from None
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """A constraint as a user describes it.
+
+    Parameters
+    ----------
+    name : str
+        Unique among the simulation's constraints.
+    type : JointType or str
+        'ball', 'hinge', 'slider', 'fixed', 'distance' or 'generic'.
+    body_a : str
+    body_b : str, optional
+        The second body; None (or 'world') for the world.
+    anchor_world : array_like, shape (3,), optional
+        m: the joint point, world frame, at the time the constraint is added
+        (it is then satisfied exactly).
+    anchor_a_body, anchor_b_body : array_like, shape (3,), optional
+        m: the joint point in each body's frame (body b = world: world frame).
+        Instead of ``anchor_world``; the constraint may then start violated, and
+        its violation decays smoothly (see :mod:`.solver`). Default: each body's
+        origin.
+    axis_world : array_like, shape (3,), optional
+        Joint axis (hinge, slider), world frame at the time of adding; any
+        non-zero length. Required for hinge and slider.
+    length : float, optional
+        m, for distance: default the current distance between the anchors.
+    function : callable, optional
+        For generic: ``phi(x_a, R_a, x_b, R_b) -> ndarray (k,)`` with centre of
+        mass positions ``x`` (3,) and body-frame rotation matrices ``R`` (3, 3)
+        (``x_b = 0``, ``R_b = I`` for the world).
+    jacobian : callable, optional
+        For generic: same arguments, returns ``(k, 12)``: derivatives with
+        respect to ``[δx_a, δΘ_a, δx_b, δΘ_b]``, ``δΘ`` in each body frame
+        (``δR = R hat(δΘ)``). Finite differences when omitted.
+    """
+
+    name: str
+    type: Any
+    body_a: str
+    body_b: Optional[str] = None
+    anchor_world: Any = None
+    anchor_a_body: Any = None
+    anchor_b_body: Any = None
+    axis_world: Any = None
+    length: Any = None
+    function: Optional[Callable] = None
+    jacobian: Optional[Callable] = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise SpecError('name', f'must be a non-empty string, got {self.name!r}')
+        jt = JointType.parse(self.type)
+        object.__setattr__(self, 'type', jt)
+        if self.body_b == 'world':
+            object.__setattr__(self, 'body_b', None)
+        if self.body_a == self.body_b:
+            raise SpecError('body_b', f'a body cannot be constrained to itself ({self.body_a!r})')
+        if self.anchor_world is not None:
+            if self.anchor_a_body is not None or self.anchor_b_body is not None:
+                raise SpecError('anchor_world', 'give anchor_world or anchor_a_body/'
+                                                'anchor_b_body, not both')
+            object.__setattr__(self, 'anchor_world',
+                               finite_array(self.anchor_world, 'anchor_world', (3,)))
+        for key in ('anchor_a_body', 'anchor_b_body'):
+            value = getattr(self, key)
+            object.__setattr__(self, key, np.zeros(3) if value is None
+                               else finite_array(value, key, (3,)))
+        if jt in (JointType.HINGE, JointType.SLIDER):
+            if self.axis_world is None:
+                raise SpecError('axis_world', f'required for a {jt.value} constraint')
+        if self.axis_world is not None:
+            axis = finite_array(self.axis_world, 'axis_world', (3,))
+            norm = float(np.linalg.norm(axis))
+            if not norm > 1e-12:
+                raise SpecError('axis_world', f'zero-length axis {axis.tolist()}')
+            object.__setattr__(self, 'axis_world', axis / norm)
+        if self.length is not None:
+            if jt is not JointType.DISTANCE:
+                raise SpecError('length', f'only for distance constraints, not {jt.value}')
+            object.__setattr__(self, 'length', positive_scalar(self.length, 'length'))
+        if jt is JointType.GENERIC:
+            if not callable(self.function):
+                raise SpecError('function', 'a generic constraint needs a callable '
+                                            'phi(x_a, R_a, x_b, R_b)')
+            if self.jacobian is not None and not callable(self.jacobian):
+                raise SpecError('jacobian', f'must be callable, got {self.jacobian!r}')
+        elif self.function is not None or self.jacobian is not None:
+            raise SpecError('function', f'only for generic constraints, not {jt.value}')
+
+
+def perpendicular_frame(k: np.ndarray) -> np.ndarray:
+    """Right-handed orthonormal frame ``(k, e1, e2)`` as rows, from a unit vector k (3,)."""
+    helper = np.eye(3)[np.argmin(np.abs(k))]
+    e1 = so3.cross(k, helper)
+    e1 /= np.linalg.norm(e1)
+    return np.array([k, e1, so3.cross(k, e1)])
+
+
+# Systems of at most this many rows use dense linear algebra over the bodies
+# they touch; larger ones use scipy.sparse (faster there, and linear in size
+# for chains and trees).
+DENSE_ROWS = 48
+
+
+class RowJacobian:
+    """The constraint Jacobian ``G`` (m, 6 n), dense over touched bodies or sparse.
+
+    Parameters
+    ----------
+    rows, cols, vals : ndarray
+        COO entries (``cols`` index the full ``6 n`` columns).
+    m, n : int
+        Rows and bodies.
+    """
+
+    def __init__(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, m: int,
+                 n: int) -> None:
+        self.m, self.n = m, n
+        self.dense_mode = m <= DENSE_ROWS
+        if self.dense_mode:
+            self.bodies_used = np.unique(cols // 6)
+            compact = np.zeros(n, dtype=int)
+            compact[self.bodies_used] = np.arange(len(self.bodies_used))
+            self.matrix = np.zeros((m, 6 * len(self.bodies_used)))
+            self.matrix[rows, 6 * compact[cols // 6] + cols % 6] = vals
+        else:
+            self.matrix = sp.csr_matrix((vals, (rows, cols)), shape=(m, 6 * n))
+
+    def _cols(self, x6: np.ndarray) -> np.ndarray:
+        return (x6[self.bodies_used] if self.dense_mode else x6).ravel()
+
+    def matvec(self, x6: np.ndarray) -> np.ndarray:
+        """``G x`` for generalized vectors ``x6`` (n, 6); returns (m,)."""
+        return self.matrix @ self._cols(x6)
+
+    def rmatvec(self, lam: np.ndarray) -> np.ndarray:
+        """``Gᵀ λ`` as (n, 6)."""
+        y = self.matrix.T @ lam
+        if not self.dense_mode:
+            return y.reshape(-1, 6)
+        out = np.zeros((self.n, 6))
+        out[self.bodies_used] = y.reshape(-1, 6)
+        return out
+
+    def schur(self, minv6: np.ndarray, other: Optional['RowJacobian'] = None):
+        """``G M⁻¹ Hᵀ`` with ``H = other`` (default ``G``); ``minv6`` (n, 6)."""
+        h = self if other is None else other
+        w = self._cols(minv6)
+        if self.dense_mode:
+            return (self.matrix * w) @ h.matrix.T
+        return (self.matrix.multiply(w[None, :]) @ h.matrix.T).tocsc()
+
+    def toarray(self) -> np.ndarray:
+        """``G`` as a dense (m, 6 n) array (for tests and reactions)."""
+        out = np.zeros((self.m, 6 * self.n))
+        if self.dense_mode:
+            cols = (6 * self.bodies_used[:, None] + np.arange(6)).ravel()
+            out[:, cols] = self.matrix
+            return out
+        return self.matrix.toarray()
+
+
+@dataclass
+class Evaluation:
+    """Constraint rows at a state (m rows, n bodies).
+
+    Attributes
+    ----------
+    phi : ndarray, shape (m,)
+    jacobian : RowJacobian
+        ``G``, shape (m, 6 n).
+    phi_dot : ndarray, shape (m,)
+        ``G ν``.
+    gamma : ndarray, shape (m,)
+        ``Ġ ν``, the velocity-product term of ``Φ̈``.
+    """
+
+    phi: np.ndarray
+    jacobian: RowJacobian
+    phi_dot: np.ndarray
+    gamma: np.ndarray
+
+
+@dataclass
+class _Resolved:
+    """A constraint bound to body indices and principal-frame vectors."""
+
+    spec: Constraint
+    a: int
+    b: int
+    point: Optional[tuple] = None          # (r_a, r_b)
+    dots: list = field(default_factory=list)   # [(s_a, e_b, target)]
+    lines: list = field(default_factory=list)  # [(r_a, r_b, e_b)]
+    distance: Optional[tuple] = None       # (r_a, r_b, L)
+    n_rows: int = 0                        # generic: length of Φ
+    anchor: tuple = ()                     # (r_a, r_b): anchor lever arms, principal frames
+    rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+
+
+def _cross_rows(r: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Row-wise ``r × m[..., i, :]``: (k, 3), (k, 3, 3) -> (k, 3, 3)."""
+    return so3.cross(r[:, None, :], m)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum('ki,ki->k', a, b)
+
+
+def _rot(R: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.einsum('kij,kj->ki', R, v)
+
+
+def _rot_t(R: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.einsum('kji,kj->ki', R, v)
+
+
+class ConstraintSet:
+    """The constraints of a simulation, resolved to arrays per row primitive.
+
+    Parameters
+    ----------
+    bodies : BodySet
+    """
+
+    def __init__(self, bodies: BodySet) -> None:
+        self.bodies = bodies
+        self._resolved: dict[str, _Resolved] = {}
+        self.n_rows = 0
+        self._build()
+
+    # -- adding and removing (between steps) -----------------------------------------------
+
+    def __len__(self) -> int:
+        """Number of constraints."""
+        return len(self._resolved)
+
+    def __contains__(self, name: str) -> bool:
+        """True if a constraint called ``name`` exists."""
+        return name in self._resolved
+
+    @property
+    def names(self) -> list[str]:
+        """Constraint names in the order they were added."""
+        return list(self._resolved)
+
+    def spec(self, name: str) -> Constraint:
+        """The user's description of constraint ``name``."""
+        return self._get(name).spec
+
+    def rows_of(self, name: str) -> np.ndarray:
+        """Row indices of constraint ``name`` in Φ, G and λ."""
+        return self._get(name).rows
+
+    def _get(self, name: str) -> _Resolved:
+        try:
+            return self._resolved[name]
+        except (KeyError, TypeError):
+            raise SpecError('name', f'no constraint named {name!r}; constraints: '
+                                    f'{list(self._resolved)}') from None
+
+    def add(self, spec: Constraint, state: State) -> None:
+        """Add ``spec``, fixing its body-frame vectors from ``state``."""
+        if not isinstance(spec, Constraint):
+            raise SpecError('constraint', f'expected a Constraint, got {spec!r}')
+        if spec.name in self._resolved:
+            raise SpecError('name', f'duplicate constraint name {spec.name!r}')
+        res = self._resolve(spec, state)
+        if spec.type is JointType.GENERIC:
+            # Evaluate once: validates the function and fixes its number of rows.
+            res.n_rows = len(self._generic_rows(res, *self._frames(state))[0])
+        self._resolved[spec.name] = res
+        self._build()
+
+    def remove(self, name: str) -> Constraint:
+        """Remove constraint ``name``; returns its spec."""
+        res = self._get(name)
+        del self._resolved[name]
+        self._build()
+        return res.spec
+
+    def _frames(self, state: State) -> tuple:
+        """Positions (n+1, 3) and principal rotations (n+1, 3, 3), the world last."""
+        x = np.vstack([state.pos_com_world, np.zeros((1, 3))])
+        R = np.concatenate([so3.quat_to_matrix(state.quat_principal_world), np.eye(3)[None]])
+        return x, R
+
+    def _resolve(self, spec: Constraint, state: State) -> _Resolved:
+        bodies = self.bodies
+        n = len(bodies)
+        a = bodies.lookup(spec.body_a, 'body_a')
+        b = n if spec.body_b is None else bodies.lookup(spec.body_b, 'body_b')
+        x, R = self._frames(state)
+        V = np.concatenate([bodies.R_body_principal, np.eye(3)[None]])
+        com = np.vstack([bodies.com_body, np.zeros((1, 3))])
+
+        def local_point(i: int, p_world: np.ndarray) -> np.ndarray:
+            return R[i].T @ (p_world - x[i])
+
+        def body_point(i: int, p_body: np.ndarray) -> np.ndarray:
+            return V[i].T @ (p_body - com[i])
+
+        if spec.anchor_world is not None:
+            r_a, r_b = local_point(a, spec.anchor_world), local_point(b, spec.anchor_world)
+        else:
+            r_a, r_b = body_point(a, spec.anchor_a_body), body_point(b, spec.anchor_b_body)
+        res = _Resolved(spec, a, b, anchor=(r_a, r_b))
+        jt = spec.type
+        if jt in (JointType.HINGE, JointType.SLIDER, JointType.FIXED):
+            axis = spec.axis_world if spec.axis_world is not None else np.array([0.0, 0.0, 1.0])
+            k, e1, e2 = perpendicular_frame(axis)
+            fa = [R[a].T @ v for v in (k, e1, e2)]
+            fb = [R[b].T @ v for v in (k, e1, e2)]
+            # (s in a, e in b): k_a ⟂ e1_b, k_a ⟂ e2_b fix the axis; e1_a ⟂ e2_b the angle.
+            res.dots = [(fa[0], fb[1], 0.0), (fa[0], fb[2], 0.0)]
+            if jt is not JointType.HINGE:
+                res.dots.append((fa[1], fb[2], 0.0))
+            if jt is JointType.SLIDER:
+                res.lines = [(r_a, r_b, fb[1]), (r_a, r_b, fb[2])]
+        if jt in (JointType.BALL, JointType.HINGE, JointType.FIXED):
+            res.point = (r_a, r_b)
+        if jt is JointType.DISTANCE:
+            pa, pb = x[a] + R[a] @ r_a, x[b] + R[b] @ r_b
+            length = spec.length if spec.length is not None else float(np.linalg.norm(pa - pb))
+            if not length > 1e-9:
+                raise SpecError('length', 'the anchors coincide: a distance constraint needs '
+                                          'a positive length')
+            res.distance = (r_a, r_b, length)
+        return res
+
+    def _build(self) -> None:
+        """Rebuild the primitive arrays and row numbering (not on the hot path)."""
+        res = list(self._resolved.values())
+        pts = [r for r in res if r.point is not None]
+        dots = [(r, d) for r in res for d in r.dots]
+        lines = [(r, ln) for r in res for ln in r.lines]
+        dists = [r for r in res if r.distance is not None]
+        gens = [r for r in res if r.spec.type is JointType.GENERIC]
+
+        def arr(values: list, width: int = 3) -> np.ndarray:
+            return np.array(values, dtype=float).reshape(-1, width)
+
+        def idx(values: list) -> np.ndarray:
+            return np.array(values, dtype=int)
+
+        self._pt = dict(a=idx([r.a for r in pts]), b=idx([r.b for r in pts]),
+                        ra=arr([r.point[0] for r in pts]), rb=arr([r.point[1] for r in pts]))
+        self._dot = dict(a=idx([r.a for r, _ in dots]), b=idx([r.b for r, _ in dots]),
+                         s=arr([d[0] for _, d in dots]), e=arr([d[1] for _, d in dots]),
+                         c=np.array([d[2] for _, d in dots], dtype=float))
+        self._line = dict(a=idx([r.a for r, _ in lines]), b=idx([r.b for r, _ in lines]),
+                          ra=arr([ln[0] for _, ln in lines]), rb=arr([ln[1] for _, ln in lines]),
+                          e=arr([ln[2] for _, ln in lines]))
+        self._dist = dict(a=idx([r.a for r in dists]), b=idx([r.b for r in dists]),
+                          ra=arr([r.distance[0] for r in dists]),
+                          rb=arr([r.distance[1] for r in dists]),
+                          L=np.array([r.distance[2] for r in dists], dtype=float))
+        self._gen = gens
+        # Row numbering: point block, dot block, line block, distance block, generic.
+        rows: dict[str, list] = {r.spec.name: [] for r in res}
+        start = 0
+        for r in pts:
+            rows[r.spec.name] += [start, start + 1, start + 2]
+            start += 3
+        for r, _ in dots:
+            rows[r.spec.name].append(start)
+            start += 1
+        for r, _ in lines:
+            rows[r.spec.name].append(start)
+            start += 1
+        for r in dists:
+            rows[r.spec.name].append(start)
+            start += 1
+        self._gen_start = start
+        for r in gens:
+            rows[r.spec.name] += list(range(start, start + r.n_rows))
+            start += r.n_rows
+        for r in res:
+            r.rows = np.array(rows[r.spec.name], dtype=int)
+        self.n_rows = start
+        # Bodies that take part in any constraint (others need no constraint work).
+        self.touched = np.unique(np.concatenate(
+            [np.array([r.a, r.b], dtype=int) for r in res] or [np.zeros(0, dtype=int)]))
+        self.touched = self.touched[self.touched < len(self.bodies)]
+
+    # -- evaluation (hot path: vectorized per primitive) -----------------------------------
+
+    def evaluate(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
+                 omega: np.ndarray, need_gamma: bool = True) -> Evaluation:
+        """Φ, G, Φ̇ and γ = Ġν at a state of all bodies.
+
+        Parameters
+        ----------
+        pos, vel, omega : ndarray, shape (n, 3)
+            Centre-of-mass position and velocity (world), Ω (principal).
+        quat : ndarray, shape (n, 4)
+        need_gamma : bool
+            Skip γ when only Φ, G and Φ̇ are wanted (projections).
+        """
+        n = len(self.bodies)
+        x = np.vstack([pos, np.zeros((1, 3))])
+        R = np.concatenate([so3.quat_to_matrix(quat), np.eye(3)[None]])
+        v = np.vstack([vel, np.zeros((1, 3))])
+        w = np.vstack([np.einsum('nij,nj->ni', R[:n], omega), np.zeros((1, 3))])
+        phis, dots_, gammas, coo = [], [], [], []
+        row0 = 0
+
+        def add_block(k_rows: int, a: np.ndarray, b: np.ndarray, ga: np.ndarray,
+                      gb: np.ndarray) -> None:
+            """Jacobian entries: ga, gb of shape (rows, 6) for bodies a, b of each row."""
+            r = row0 + np.arange(k_rows)
+            for body, g in ((a, ga), (b, gb)):
+                cols = 6 * body[:, None] + np.arange(6)
+                keep = body < n
+                coo.append((np.repeat(r[keep], 6), cols[keep].ravel(), g[keep].ravel()))
+
+        # point: P_a - P_b, 3 rows per instance.
+        p = self._pt
+        if len(p['a']):
+            a, b = p['a'], p['b']
+            wa, wb = _rot(R[a], p['ra']), _rot(R[b], p['rb'])
+            phis.append((x[a] + wa - x[b] - wb).ravel())
+            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
+            dots_.append((v[a] + wva - v[b] - wvb).ravel())
+            gammas.append((so3.cross(w[a], wva) - so3.cross(w[b], wvb)).ravel())
+            k = len(a)
+            eye = np.broadcast_to(np.eye(3), (k, 3, 3))
+            ga = np.concatenate([eye, _cross_rows(p['ra'], R[a])], axis=2).reshape(3 * k, 6)
+            gb = -np.concatenate([eye, _cross_rows(p['rb'], R[b])], axis=2).reshape(3 * k, 6)
+            add_block(3 * k, np.repeat(a, 3), np.repeat(b, 3), ga, gb)
+            row0 += 3 * k
+        # dot: e_b · s_a - c.
+        d = self._dot
+        if len(d['a']):
+            a, b = d['a'], d['b']
+            u, e = _rot(R[a], d['s']), _rot(R[b], d['e'])
+            ue = so3.cross(u, e)
+            phis.append(_dot(e, u) - d['c'])
+            dots_.append(_dot(ue, w[a] - w[b]))
+            if need_gamma:
+                wbe, wau = so3.cross(w[b], e), so3.cross(w[a], u)
+                gammas.append(_dot(u, so3.cross(w[b], wbe)) + 2.0 * _dot(wbe, wau)
+                              + _dot(e, so3.cross(w[a], wau)))
+            z = np.zeros((len(a), 3))
+            add_block(len(a), a, b, np.hstack([z, _rot_t(R[a], ue)]),
+                      np.hstack([z, -_rot_t(R[b], ue)]))
+            row0 += len(a)
+        # line: e_b · (P_a - P_b).
+        ln = self._line
+        if len(ln['a']):
+            a, b = ln['a'], ln['b']
+            wa, wb = _rot(R[a], ln['ra']), _rot(R[b], ln['rb'])
+            e = _rot(R[b], ln['e'])
+            dd = x[a] + wa - x[b] - wb
+            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
+            ddot = v[a] + wva - v[b] - wvb
+            wbe = so3.cross(w[b], e)
+            phis.append(_dot(e, dd))
+            dots_.append(_dot(wbe, dd) + _dot(e, ddot))
+            if need_gamma:
+                gammas.append(_dot(dd, so3.cross(w[b], wbe)) + 2.0 * _dot(wbe, ddot)
+                              + _dot(e, so3.cross(w[a], wva) - so3.cross(w[b], wvb)))
+            ga = np.hstack([e, so3.cross(ln['ra'], _rot_t(R[a], e))])
+            gb = np.hstack([-e, -so3.cross(ln['rb'], _rot_t(R[b], e))
+                            + _rot_t(R[b], so3.cross(e, dd))])
+            add_block(len(a), a, b, ga, gb)
+            row0 += len(a)
+        # distance: |P_a - P_b| - L.
+        ds = self._dist
+        if len(ds['a']):
+            a, b = ds['a'], ds['b']
+            wa, wb = _rot(R[a], ds['ra']), _rot(R[b], ds['rb'])
+            dd = x[a] + wa - x[b] - wb
+            length = np.linalg.norm(dd, axis=1)
+            nrm = dd / np.maximum(length, 1e-300)[:, None]
+            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
+            ddot = v[a] + wva - v[b] - wvb
+            phis.append(length - ds['L'])
+            nd = _dot(nrm, ddot)
+            dots_.append(nd)
+            if need_gamma:
+                gammas.append(_dot(nrm, so3.cross(w[a], wva) - so3.cross(w[b], wvb))
+                              + (_dot(ddot, ddot) - nd**2) / np.maximum(length, 1e-300))
+            ga = np.hstack([nrm, so3.cross(ds['ra'], _rot_t(R[a], nrm))])
+            gb = -np.hstack([nrm, so3.cross(ds['rb'], _rot_t(R[b], nrm))])
+            add_block(len(a), a, b, ga, gb)
+            row0 += len(a)
+        # generic: one user function at a time.
+        for res in self._gen:
+            phi, g, gam = self._generic_rows(res, x, R, v, w, need_gamma)
+            k = len(phi)
+            nu = np.concatenate([v[res.a], R[res.a].T @ w[res.a], v[res.b], R[res.b].T @ w[res.b]])
+            phis.append(phi)
+            dots_.append(g @ nu)
+            gammas.append(gam if need_gamma else np.zeros(k))
+            add_block(k, np.full(k, res.a), np.full(k, res.b), g[:, :6], g[:, 6:])
+            row0 += k
+        m = row0
+        if coo:
+            rows = np.concatenate([c[0] for c in coo])
+            cols = np.concatenate([c[1] for c in coo])
+            vals = np.concatenate([c[2] for c in coo])
+        else:
+            rows = cols = np.zeros(0, dtype=int)
+            vals = np.zeros(0)
+        G = RowJacobian(rows, cols, vals, m, n)
+
+        def cat(parts: list) -> np.ndarray:
+            return np.concatenate(parts) if parts else np.zeros(0)
+
+        return Evaluation(cat(phis), G, cat(dots_),
+                          cat(gammas) if need_gamma else np.zeros(m))
+
+    # -- generic constraints ---------------------------------------------------------------
+
+    def _generic_rows(self, res: _Resolved, x: np.ndarray, R: np.ndarray,
+                      v: Optional[np.ndarray] = None, w: Optional[np.ndarray] = None,
+                      need_gamma: bool = False) -> tuple:
+        """Φ (k,), G (k, 12) in principal coordinates and γ (k,) of a generic constraint."""
+        spec = res.spec
+        n = len(self.bodies)
+        a, b = res.a, res.b
+        V = [self.bodies.R_body_principal[i] if i < n else np.eye(3) for i in (a, b)]
+
+        def phi_at(xa, Ra, xb, Rb) -> np.ndarray:
+            # R are principal rotations: the user sees body-frame rotations R Vᵀ.
+            try:
+                out = np.asarray(spec.function(xa, Ra @ V[0].T, xb, Rb @ V[1].T), dtype=float)
+            except SpecError:
+                raise
+            except Exception as exc:  # noqa: B902 - a user function may raise anything
+                raise SpecError('function', f'raised {type(exc).__name__}: {exc}') from None
+            if out.ndim != 1 or not len(out) or not np.all(np.isfinite(out)):
+                raise SpecError('function', f'must return a non-empty 1-D array of finite '
+                                            f'numbers, got {out!r}')
+            return out
+
+        xa, Ra, xb, Rb = x[a], R[a], x[b], R[b]
+        phi = phi_at(xa, Ra, xb, Rb)
+        if res.n_rows and len(phi) != res.n_rows:
+            raise SpecError('function', f'returned {len(phi)} values, earlier {res.n_rows}')
+        if spec.jacobian is not None:
+            def jac_at(xa, Ra, xb, Rb) -> np.ndarray:
+                g = np.asarray(spec.jacobian(xa, Ra @ V[0].T, xb, Rb @ V[1].T), dtype=float)
+                if g.shape != (len(phi), 12) or not np.all(np.isfinite(g)):
+                    raise SpecError('jacobian', f'must return finite numbers of shape '
+                                                f'({len(phi)}, 12), got shape {g.shape}')
+                g = g.copy()
+                g[:, 3:6] = g[:, 3:6] @ V[0]    # δΘ_body = V δΘ_principal
+                g[:, 9:12] = g[:, 9:12] @ V[1]
+                return g
+            G = jac_at(xa, Ra, xb, Rb)
+        else:
+            jac_at = None
+            G = np.zeros((len(phi), 12))
+            for blk, (i, xi, Ri) in enumerate(((a, xa, Ra), (b, xb, Rb))):
+                if i >= n:
+                    continue
+                scale = max(1.0, float(np.linalg.norm(xi)))
+                for j in range(3):
+                    h = 1e-6 * scale
+                    dx = np.zeros(3)
+                    dx[j] = h
+                    args_p = [xa, Ra, xb, Rb]
+                    args_m = [xa, Ra, xb, Rb]
+                    args_p[2 * blk], args_m[2 * blk] = xi + dx, xi - dx
+                    G[:, 6 * blk + j] = (phi_at(*args_p) - phi_at(*args_m)) / (2 * h)
+                    h = 1e-6
+                    rot = so3.quat_to_matrix(so3.exp_quat(np.eye(3)[j] * h))
+                    args_p = [xa, Ra, xb, Rb]
+                    args_m = [xa, Ra, xb, Rb]
+                    args_p[2 * blk + 1], args_m[2 * blk + 1] = Ri @ rot, Ri @ rot.T
+                    G[:, 6 * blk + 3 + j] = (phi_at(*args_p) - phi_at(*args_m)) / (2 * h)
+        if not need_gamma:
+            return phi, G, None
+        # γ = Ġν: derivative along the curve of zero acceleration
+        # x(t) = x + t v, R(t) = R exp(t hat(Ω)).
+        Om = [Ri.T @ wi for Ri, wi in ((Ra, w[a]), (Rb, w[b]))]
+
+        def curve(t: float) -> tuple:
+            return (xa + t * v[a], Ra @ so3.quat_to_matrix(so3.exp_quat(t * Om[0])),
+                    xb + t * v[b], Rb @ so3.quat_to_matrix(so3.exp_quat(t * Om[1])))
+
+        speed = max(1e-12, float(np.linalg.norm(np.concatenate([v[a], Om[0], v[b], Om[1]]))))
+        nu = np.concatenate([v[a], Om[0], v[b], Om[1]])
+        if jac_at is not None:
+            h = 1e-5 / speed
+            gam = (jac_at(*curve(h)) @ nu - jac_at(*curve(-h)) @ nu) / (2 * h)
+        else:
+            h = 1e-4 / speed
+            gam = (phi_at(*curve(h)) - 2.0 * phi + phi_at(*curve(-h))) / h**2
+        return phi, G, gam
