@@ -22,6 +22,12 @@ A scene file::
         linear_velocity_world: [0, 0, 0]          # m/s, of the body origin
         angular_velocity_body: [0, 1, 0]          # rad/s
 
+    constraints:                    # joints (see rigid_body_sim.core.constraints)
+      - {name: pivot, type: ball, body_a: box, body_b: world, anchor_world: [0, 0, 1.2]}
+      - {name: axle, type: hinge, body_a: wheel, body_b: box, anchor_world: [0, 0, 1],
+         axis_world: [0, 1, 0]}
+    constraint_time_constant: 0.05  # s, decay time of a violated constraint
+
 Shapes for ``inertia`` (uniform density, about the centre of mass):
 ``{box: [lx, ly, lz]}``, ``{sphere: r}``, ``{cylinder: [r, length]}`` (axis z).
 """
@@ -36,12 +42,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 import yaml
 
-from .core import Damping, Gravity, RigidBody, Simulation, SpecError
+from .core import Constraint, Damping, Gravity, RigidBody, Simulation, SpecError
 from .core.effects import AppliedWrenches
 from .core.integrators import INTEGRATORS
 from .core.validate import finite_array, positive_scalar
 
-TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies')
+TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constraints',
+            'constraint_time_constant')
+CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
+                   'anchor_b_body', 'axis_world', 'length')
 BODY_KEYS = ('name', 'mass', 'inertia', 'com_body', 'position_world', 'orientation_xyzw',
              'orientation_rpy', 'linear_velocity_world', 'angular_velocity_body')
 EFFECT_KEYS = {'gravity': ('g_world',), 'damping': ('linear', 'angular', 'bodies'),
@@ -118,8 +127,12 @@ def _build(data: Any, source: str) -> Scene:
         raise SpecError('bodies', f'expected a non-empty list of bodies, got {bodies_data!r}')
     bodies = [_body(b, f'bodies[{i}]') for i, b in enumerate(bodies_data)]
     effects = _effects(data.get('effects') or {})
+    constraints = _constraints(data.get('constraints') or [])
+    time_constant = positive_scalar(data.get('constraint_time_constant', 0.05),
+                                    'constraint_time_constant')
     try:
-        sim = Simulation(bodies, [e for _, e in effects], integrator, dt)
+        sim = Simulation(bodies, [e for _, e in effects], integrator, dt, constraints,
+                         time_constant)
     except SpecError as exc:
         # Map 'effects[i]...' from the core back to the scene's effect key.
         if exc.field.startswith('effects['):
@@ -179,6 +192,27 @@ def _inertia(value: Any, mass: float) -> Any:
     c = {k: float(finite_array(comp.get(k, 0.0), f'inertia.{k}', ())) for k in URDF_INERTIA_KEYS}
     return [[c['ixx'], c['ixy'], c['ixz']], [c['ixy'], c['iyy'], c['iyz']],
             [c['ixz'], c['iyz'], c['izz']]]
+
+
+def _constraints(data: Any) -> list:
+    """Constraints listed in the scene (generic ones need Python: not in files)."""
+    if not isinstance(data, list):
+        raise SpecError('constraints', f'expected a list of constraints, got {data!r}')
+    out = []
+    for i, c in enumerate(data):
+        field = f'constraints[{i}]'
+        c = _mapping(c, field, CONSTRAINT_KEYS)
+        for key in ('name', 'type', 'body_a'):
+            if key not in c:
+                raise SpecError(f'{field}.{key}', 'missing (required)')
+        if c['type'] == 'generic':
+            raise SpecError(f'{field}.type', 'generic constraints need a Python function: add '
+                                             'them with Simulation.add_constraint')
+        try:
+            out.append(Constraint(**c))
+        except SpecError as exc:
+            raise exc.within(field) from None
+    return out
 
 
 def _effects(data: Any) -> list:
