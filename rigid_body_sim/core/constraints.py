@@ -178,29 +178,52 @@ def perpendicular_frame(k: np.ndarray) -> np.ndarray:
 DENSE_ROWS = 48
 
 
-class RowJacobian:
-    """The constraint Jacobian ``G`` (m, 6 n), dense over touched bodies or sparse.
+class JacobianStructure:
+    """The sparsity pattern of ``G``, fixed while the constraint set is unchanged.
 
-    Parameters
-    ----------
-    rows, cols, vals : ndarray
-        COO entries (``cols`` index the full ``6 n`` columns).
-    m, n : int
-        Rows and bodies.
+    Dense over the touched bodies when ``m <= DENSE_ROWS`` (faster for small
+    systems), otherwise CSR; in both cases the index arithmetic is done once
+    here and each evaluation only fills in values.
     """
 
-    def __init__(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, m: int,
-                 n: int) -> None:
+    def __init__(self, rows: np.ndarray, cols: np.ndarray, m: int, n: int) -> None:
         self.m, self.n = m, n
         self.dense_mode = m <= DENSE_ROWS
         if self.dense_mode:
             self.bodies_used = np.unique(cols // 6)
-            compact = np.zeros(n, dtype=int)
+            compact = np.zeros(n + 1, dtype=int)
             compact[self.bodies_used] = np.arange(len(self.bodies_used))
-            self.matrix = np.zeros((m, 6 * len(self.bodies_used)))
-            self.matrix[rows, 6 * compact[cols // 6] + cols % 6] = vals
+            self.width = 6 * len(self.bodies_used)
+            self.flat = rows * self.width + 6 * compact[cols // 6] + cols % 6
         else:
-            self.matrix = sp.csr_matrix((vals, (rows, cols)), shape=(m, 6 * n))
+            order = sp.csr_matrix((np.arange(len(rows), dtype=float), (rows, cols)),
+                                  shape=(m, 6 * n))
+            self.perm = order.data.astype(int)
+            self.indices, self.indptr = order.indices, order.indptr
+
+
+class RowJacobian:
+    """The constraint Jacobian ``G`` (m, 6 n) at one configuration.
+
+    Parameters
+    ----------
+    structure : JacobianStructure
+    values : ndarray
+        Entries in the order of the structure's pattern.
+    """
+
+    def __init__(self, structure: JacobianStructure, values: np.ndarray) -> None:
+        self.structure = st = structure
+        self.m, self.n = st.m, st.n
+        self.dense_mode = st.dense_mode
+        if self.dense_mode:
+            self.bodies_used = st.bodies_used
+            matrix = np.zeros(st.m * st.width)
+            matrix[st.flat] = values
+            self.matrix = matrix.reshape(st.m, st.width)
+        else:
+            self.matrix = sp.csr_matrix((values[st.perm], st.indices, st.indptr),
+                                        shape=(st.m, 6 * st.n))
 
     def _cols(self, x6: np.ndarray) -> np.ndarray:
         return (x6[self.bodies_used] if self.dense_mode else x6).ravel()
@@ -234,6 +257,55 @@ class RowJacobian:
             out[:, cols] = self.matrix
             return out
         return self.matrix.toarray()
+
+
+class Geometry:
+    """Φ and G of all constraints at one configuration, and what the rates need."""
+
+    point = dot = line = dist = None
+
+    def __init__(self, owner: 'ConstraintSet', x: np.ndarray, R: np.ndarray) -> None:
+        self.owner, self.x, self.R = owner, x, R
+        self.phi: np.ndarray = np.zeros(0)
+        self.jacobian: Optional[RowJacobian] = None
+        self.n = 0
+
+    def rates(self, vel: np.ndarray, omega: np.ndarray,
+              need_gamma: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """``Φ̇ = G ν`` and ``γ = Ġ ν`` (zeros if not ``need_gamma``), each (m,)."""
+        n, R = self.n, self.R
+        phi_dot = self.jacobian.matvec(np.hstack([vel, omega]))
+        if not need_gamma:
+            return phi_dot, np.zeros_like(phi_dot)
+        v = np.vstack([vel, np.zeros((1, 3))])
+        w = np.vstack([np.einsum('nij,nj->ni', R[:n], omega), np.zeros((1, 3))])
+        gammas = []
+        if self.point is not None:
+            a, b, wa, wb = self.point
+            gammas.append((so3.cross(w[a], so3.cross(w[a], wa))
+                           - so3.cross(w[b], so3.cross(w[b], wb))).ravel())
+        if self.dot is not None:
+            a, b, u, e = self.dot
+            wbe, wau = so3.cross(w[b], e), so3.cross(w[a], u)
+            gammas.append(_dot(u, so3.cross(w[b], wbe)) + 2.0 * _dot(wbe, wau)
+                          + _dot(e, so3.cross(w[a], wau)))
+        if self.line is not None:
+            a, b, wa, wb, e, dd = self.line
+            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
+            ddot = v[a] + wva - v[b] - wvb
+            wbe = so3.cross(w[b], e)
+            gammas.append(_dot(dd, so3.cross(w[b], wbe)) + 2.0 * _dot(wbe, ddot)
+                          + _dot(e, so3.cross(w[a], wva) - so3.cross(w[b], wvb)))
+        if self.dist is not None:
+            a, b, wa, wb, nrm, length = self.dist
+            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
+            ddot = v[a] + wva - v[b] - wvb
+            nd = _dot(nrm, ddot)
+            gammas.append(_dot(nrm, so3.cross(w[a], wva) - so3.cross(w[b], wvb))
+                          + (_dot(ddot, ddot) - nd**2) / np.maximum(length, 1e-300))
+        for res in self.owner._gen:
+            gammas.append(self.owner._generic_rows(res, self.x, self.R, v, w, True)[2])
+        return phi_dot, (np.concatenate(gammas) if gammas else np.zeros(0))
 
 
 @dataclass
@@ -457,8 +529,103 @@ class ConstraintSet:
         self.touched = np.unique(np.concatenate(
             [np.array([r.a, r.b], dtype=int) for r in res] or [np.zeros(0, dtype=int)]))
         self.touched = self.touched[self.touched < len(self.bodies)]
+        self._pattern()
+        self.version = getattr(self, 'version', 0) + 1
 
     # -- evaluation (hot path: vectorized per primitive) -----------------------------------
+
+    def _pattern(self) -> None:
+        """Fixed sparsity pattern of G (rows, columns) in the order values are produced."""
+        n = len(self.bodies)
+        rows, cols, keep = [], [], []
+        row0 = 0
+        blocks = [(np.repeat(self._pt['a'], 3), np.repeat(self._pt['b'], 3)),
+                  (self._dot['a'], self._dot['b']), (self._line['a'], self._line['b']),
+                  (self._dist['a'], self._dist['b'])]
+        blocks += [(np.full(r.n_rows, r.a), np.full(r.n_rows, r.b)) for r in self._gen]
+        for a, b in blocks:
+            r = row0 + np.arange(len(a))
+            for body in (a, b):
+                rows.append(np.repeat(r, 6))
+                cols.append((6 * body[:, None] + np.arange(6)).ravel())
+                keep.append(np.repeat(body < n, 6))
+            row0 += len(a)
+        cat = (lambda x, dt: np.concatenate(x).astype(dt) if x else np.zeros(0, dtype=dt))
+        self._keep = cat(keep, bool)
+        self._rows = cat(rows, int)[self._keep]
+        self._cols = cat(cols, int)[self._keep]
+        self._structure = JacobianStructure(self._rows, self._cols, row0, n)
+
+    def geometry(self, pos: np.ndarray, quat: np.ndarray) -> 'Geometry':
+        """Φ and G at a configuration of all bodies (velocity terms via ``rates``).
+
+        Parameters
+        ----------
+        pos : ndarray, shape (n, 3)
+            Centre-of-mass positions, world frame.
+        quat : ndarray, shape (n, 4)
+            Principal-frame orientations.
+        """
+        n = len(self.bodies)
+        x = np.vstack([pos, np.zeros((1, 3))])
+        R = np.concatenate([so3.quat_to_matrix(quat), np.eye(3)[None]])
+        geo = Geometry(self, x, R)
+        phis, vals = [], []
+
+        def jac(ga: np.ndarray, gb: np.ndarray) -> None:
+            vals.append(ga.ravel())
+            vals.append(gb.ravel())
+
+        p = self._pt
+        if len(p['a']):
+            a, b = p['a'], p['b']
+            wa, wb = _rot(R[a], p['ra']), _rot(R[b], p['rb'])
+            phis.append((x[a] + wa - x[b] - wb).ravel())
+            k = len(a)
+            eye = np.broadcast_to(np.eye(3), (k, 3, 3))
+            jac(np.concatenate([eye, _cross_rows(p['ra'], R[a])], axis=2),
+                -np.concatenate([eye, _cross_rows(p['rb'], R[b])], axis=2))
+            geo.point = (a, b, wa, wb)
+        d = self._dot
+        if len(d['a']):
+            a, b = d['a'], d['b']
+            u, e = _rot(R[a], d['s']), _rot(R[b], d['e'])
+            ue = so3.cross(u, e)
+            phis.append(_dot(e, u) - d['c'])
+            z = np.zeros((len(a), 3))
+            jac(np.hstack([z, _rot_t(R[a], ue)]), np.hstack([z, -_rot_t(R[b], ue)]))
+            geo.dot = (a, b, u, e)
+        ln = self._line
+        if len(ln['a']):
+            a, b = ln['a'], ln['b']
+            wa, wb = _rot(R[a], ln['ra']), _rot(R[b], ln['rb'])
+            e = _rot(R[b], ln['e'])
+            dd = x[a] + wa - x[b] - wb
+            phis.append(_dot(e, dd))
+            jac(np.hstack([e, so3.cross(ln['ra'], _rot_t(R[a], e))]),
+                np.hstack([-e, -so3.cross(ln['rb'], _rot_t(R[b], e))
+                           + _rot_t(R[b], so3.cross(e, dd))]))
+            geo.line = (a, b, wa, wb, e, dd)
+        ds = self._dist
+        if len(ds['a']):
+            a, b = ds['a'], ds['b']
+            wa, wb = _rot(R[a], ds['ra']), _rot(R[b], ds['rb'])
+            dd = x[a] + wa - x[b] - wb
+            length = np.linalg.norm(dd, axis=1)
+            nrm = dd / np.maximum(length, 1e-300)[:, None]
+            phis.append(length - ds['L'])
+            jac(np.hstack([nrm, so3.cross(ds['ra'], _rot_t(R[a], nrm))]),
+                -np.hstack([nrm, so3.cross(ds['rb'], _rot_t(R[b], nrm))]))
+            geo.dist = (a, b, wa, wb, nrm, length)
+        for res in self._gen:
+            phi, g, _ = self._generic_rows(res, x, R)
+            phis.append(phi)
+            jac(g[:, :6], g[:, 6:])
+        values = np.concatenate(vals)[self._keep] if vals else np.zeros(0)
+        geo.phi = np.concatenate(phis) if phis else np.zeros(0)
+        geo.jacobian = RowJacobian(self._structure, values)
+        geo.n = n
+        return geo
 
     def evaluate(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                  omega: np.ndarray, need_gamma: bool = True) -> Evaluation:
@@ -472,119 +639,9 @@ class ConstraintSet:
         need_gamma : bool
             Skip γ when only Φ, G and Φ̇ are wanted (projections).
         """
-        n = len(self.bodies)
-        x = np.vstack([pos, np.zeros((1, 3))])
-        R = np.concatenate([so3.quat_to_matrix(quat), np.eye(3)[None]])
-        v = np.vstack([vel, np.zeros((1, 3))])
-        w = np.vstack([np.einsum('nij,nj->ni', R[:n], omega), np.zeros((1, 3))])
-        phis, dots_, gammas, coo = [], [], [], []
-        row0 = 0
-
-        def add_block(k_rows: int, a: np.ndarray, b: np.ndarray, ga: np.ndarray,
-                      gb: np.ndarray) -> None:
-            """Jacobian entries: ga, gb of shape (rows, 6) for bodies a, b of each row."""
-            r = row0 + np.arange(k_rows)
-            for body, g in ((a, ga), (b, gb)):
-                cols = 6 * body[:, None] + np.arange(6)
-                keep = body < n
-                coo.append((np.repeat(r[keep], 6), cols[keep].ravel(), g[keep].ravel()))
-
-        # point: P_a - P_b, 3 rows per instance.
-        p = self._pt
-        if len(p['a']):
-            a, b = p['a'], p['b']
-            wa, wb = _rot(R[a], p['ra']), _rot(R[b], p['rb'])
-            phis.append((x[a] + wa - x[b] - wb).ravel())
-            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
-            dots_.append((v[a] + wva - v[b] - wvb).ravel())
-            gammas.append((so3.cross(w[a], wva) - so3.cross(w[b], wvb)).ravel())
-            k = len(a)
-            eye = np.broadcast_to(np.eye(3), (k, 3, 3))
-            ga = np.concatenate([eye, _cross_rows(p['ra'], R[a])], axis=2).reshape(3 * k, 6)
-            gb = -np.concatenate([eye, _cross_rows(p['rb'], R[b])], axis=2).reshape(3 * k, 6)
-            add_block(3 * k, np.repeat(a, 3), np.repeat(b, 3), ga, gb)
-            row0 += 3 * k
-        # dot: e_b · s_a - c.
-        d = self._dot
-        if len(d['a']):
-            a, b = d['a'], d['b']
-            u, e = _rot(R[a], d['s']), _rot(R[b], d['e'])
-            ue = so3.cross(u, e)
-            phis.append(_dot(e, u) - d['c'])
-            dots_.append(_dot(ue, w[a] - w[b]))
-            if need_gamma:
-                wbe, wau = so3.cross(w[b], e), so3.cross(w[a], u)
-                gammas.append(_dot(u, so3.cross(w[b], wbe)) + 2.0 * _dot(wbe, wau)
-                              + _dot(e, so3.cross(w[a], wau)))
-            z = np.zeros((len(a), 3))
-            add_block(len(a), a, b, np.hstack([z, _rot_t(R[a], ue)]),
-                      np.hstack([z, -_rot_t(R[b], ue)]))
-            row0 += len(a)
-        # line: e_b · (P_a - P_b).
-        ln = self._line
-        if len(ln['a']):
-            a, b = ln['a'], ln['b']
-            wa, wb = _rot(R[a], ln['ra']), _rot(R[b], ln['rb'])
-            e = _rot(R[b], ln['e'])
-            dd = x[a] + wa - x[b] - wb
-            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
-            ddot = v[a] + wva - v[b] - wvb
-            wbe = so3.cross(w[b], e)
-            phis.append(_dot(e, dd))
-            dots_.append(_dot(wbe, dd) + _dot(e, ddot))
-            if need_gamma:
-                gammas.append(_dot(dd, so3.cross(w[b], wbe)) + 2.0 * _dot(wbe, ddot)
-                              + _dot(e, so3.cross(w[a], wva) - so3.cross(w[b], wvb)))
-            ga = np.hstack([e, so3.cross(ln['ra'], _rot_t(R[a], e))])
-            gb = np.hstack([-e, -so3.cross(ln['rb'], _rot_t(R[b], e))
-                            + _rot_t(R[b], so3.cross(e, dd))])
-            add_block(len(a), a, b, ga, gb)
-            row0 += len(a)
-        # distance: |P_a - P_b| - L.
-        ds = self._dist
-        if len(ds['a']):
-            a, b = ds['a'], ds['b']
-            wa, wb = _rot(R[a], ds['ra']), _rot(R[b], ds['rb'])
-            dd = x[a] + wa - x[b] - wb
-            length = np.linalg.norm(dd, axis=1)
-            nrm = dd / np.maximum(length, 1e-300)[:, None]
-            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
-            ddot = v[a] + wva - v[b] - wvb
-            phis.append(length - ds['L'])
-            nd = _dot(nrm, ddot)
-            dots_.append(nd)
-            if need_gamma:
-                gammas.append(_dot(nrm, so3.cross(w[a], wva) - so3.cross(w[b], wvb))
-                              + (_dot(ddot, ddot) - nd**2) / np.maximum(length, 1e-300))
-            ga = np.hstack([nrm, so3.cross(ds['ra'], _rot_t(R[a], nrm))])
-            gb = -np.hstack([nrm, so3.cross(ds['rb'], _rot_t(R[b], nrm))])
-            add_block(len(a), a, b, ga, gb)
-            row0 += len(a)
-        # generic: one user function at a time.
-        for res in self._gen:
-            phi, g, gam = self._generic_rows(res, x, R, v, w, need_gamma)
-            k = len(phi)
-            nu = np.concatenate([v[res.a], R[res.a].T @ w[res.a], v[res.b], R[res.b].T @ w[res.b]])
-            phis.append(phi)
-            dots_.append(g @ nu)
-            gammas.append(gam if need_gamma else np.zeros(k))
-            add_block(k, np.full(k, res.a), np.full(k, res.b), g[:, :6], g[:, 6:])
-            row0 += k
-        m = row0
-        if coo:
-            rows = np.concatenate([c[0] for c in coo])
-            cols = np.concatenate([c[1] for c in coo])
-            vals = np.concatenate([c[2] for c in coo])
-        else:
-            rows = cols = np.zeros(0, dtype=int)
-            vals = np.zeros(0)
-        G = RowJacobian(rows, cols, vals, m, n)
-
-        def cat(parts: list) -> np.ndarray:
-            return np.concatenate(parts) if parts else np.zeros(0)
-
-        return Evaluation(cat(phis), G, cat(dots_),
-                          cat(gammas) if need_gamma else np.zeros(m))
+        geo = self.geometry(pos, quat)
+        phi_dot, gamma = geo.rates(vel, omega, need_gamma)
+        return Evaluation(geo.phi, geo.jacobian, phi_dot, gamma)
 
     # -- generic constraints ---------------------------------------------------------------
 

@@ -53,7 +53,7 @@ import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constraints import ConstraintSet, Evaluation, RowJacobian
+from .constraints import ConstraintSet, Evaluation, Geometry, RowJacobian
 from .errors import SpecError
 from .validate import positive_scalar
 
@@ -63,6 +63,7 @@ from .validate import positive_scalar
 class SolverCounters:
     """Work of the constraint solver: factorizations and projection iterations."""
 
+    geometry_evaluations: int = 0
     factorizations: int = 0
     acceleration_solves: int = 0
     position_iterations: int = 0
@@ -99,6 +100,7 @@ class ConstraintSolver:
         self.max_iterations = int(max_iterations)
         self.counters = SolverCounters()
         self.dt: Optional[float] = None
+        self._geometry_cache: Optional[tuple] = None
         self.inv_mass_6 = np.hstack([np.repeat(bodies.inv_mass[:, None], 3, axis=1),
                                      1.0 / bodies.moments])
 
@@ -142,16 +144,37 @@ class ConstraintSolver:
     def constrained(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                     omega: np.ndarray, acc_free: np.ndarray) -> tuple:
         """Constrained accelerations (n, 6), λ (m,) and the evaluation used."""
-        ev = self.constraints.evaluate(pos, quat, vel, omega)
+        geo = self.geometry(pos, quat)
+        phi_dot, gamma = geo.rates(vel, omega)
+        ev = Evaluation(geo.phi, geo.jacobian, phi_dot, gamma)
         lam = self.multipliers(ev, acc_free)
         return acc_free - self.inv_mass_6 * ev.jacobian.rmatvec(lam), lam, ev
 
     # -- position and velocity level -------------------------------------------------------
 
+    def geometry(self, pos: np.ndarray, quat: np.ndarray) -> Geometry:
+        """Φ and G at a configuration, reusing the last one if it is the same.
+
+        A step evaluates the same configuration several times (the kick after a
+        projection, the velocity projection); the one-entry cache is keyed on the
+        constraint set and the values of ``pos`` and ``quat``.
+        """
+        c = self._geometry_cache
+        cs = self.constraints
+        if (c is not None and c[0] is cs and c[1] == cs.version
+                and np.array_equal(c[2], pos) and np.array_equal(c[3], quat)):
+            return c[4]
+        geo = cs.geometry(pos, quat)
+        self.counters.geometry_evaluations += 1
+        self._geometry_cache = (cs, cs.version, pos.copy(), quat.copy(), geo)
+        return geo
+
     def evaluate(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                  omega: np.ndarray) -> Evaluation:
         """Φ, G and Φ̇ (no γ) at a state."""
-        return self.constraints.evaluate(pos, quat, vel, omega, need_gamma=False)
+        geo = self.geometry(pos, quat)
+        phi_dot, gamma = geo.rates(vel, omega, need_gamma=False)
+        return Evaluation(geo.phi, geo.jacobian, phi_dot, gamma)
 
     def violation(self, state: State) -> np.ndarray:
         """Φ (m,) at ``state``."""
@@ -175,7 +198,7 @@ class ConstraintSolver:
         target = np.exp(-h / self.time_constant) * start.phi
         delta = np.zeros_like(pos, shape=(len(pos), 6))
         for _ in range(self.max_iterations + 1):
-            ev = self.evaluate(pos, quat, vel, omega)
+            ev = self.geometry(pos, quat)
             r = ev.phi - target
             if np.max(np.abs(r), initial=0.0) <= self.position_tolerance:
                 break
@@ -193,9 +216,9 @@ class ConstraintSolver:
                            omega: np.ndarray) -> tuple:
         """Project velocities onto ``Φ̇ = −Φ / τ`` (mass-orthogonally); returns (vel, omega)."""
         self.counters.velocity_projections += 1
-        ev = self.evaluate(pos, quat, vel, omega)
-        r = ev.phi_dot + ev.phi / self.time_constant
-        d = -self.inv_mass_6 * ev.jacobian.rmatvec(self._factor(ev.jacobian)(r))
+        geo = self.geometry(pos, quat)
+        r = geo.jacobian.matvec(np.hstack([vel, omega])) + geo.phi / self.time_constant
+        d = -self.inv_mass_6 * geo.jacobian.rmatvec(self._factor(geo.jacobian)(r))
         return vel + d[:, :3], omega + d[:, 3:]
 
     # -- reaction wrenches -----------------------------------------------------------------
