@@ -183,6 +183,8 @@ def main(argv=None) -> int:
     """Run the benchmarks; ``--quick`` for a short smoke run."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--quick', action='store_true', help='fewer step sizes and bodies')
+    p.add_argument('--skip-constraints', action='store_true',
+                   help='free bodies only (bench/constraints.py runs the rest)')
     args = p.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     print(f'python {platform.python_version()}, numpy {np.__version__}, '
@@ -209,6 +211,9 @@ def main(argv=None) -> int:
                  ('{}', '{}', '{:.1f}', '{}', '{}'))
     _plots(wp, sc)
     print(f'tables: {OUT}/work_precision.md, scaling.md, effects.md')
+    if not args.skip_constraints:
+        import constraints
+        constraints.main(['--quick'] if args.quick else [])
     return 0
 
 

@@ -1,0 +1,260 @@
+"""Constraint benchmarks: cost per step of chains and trees, and error vs wall time.
+
+1. Chains and binary trees of N = 10, 100, 1000 rods joined by ball joints:
+   wall time per step and the fitted growth exponent p of ``time ∝ N^p``
+   (p near 1: linear; the Python overhead per step flattens small N).
+2. Pendulum (ball joint, 60° release) and four-bar linkage (four parallel
+   hinges: a closed loop with 3 redundant rows) across integrators and step
+   sizes: error (pendulum: period against 4 sqrt(L/g) K(sin²(θ0/2)); four-bar:
+   crank angle at 2 s against an rkmk4 run with dt = 1e-4), energy error,
+   constraint violation, wall time per simulated second.
+
+Writes ``bench/out/constraints_*.md`` and ``constraints_*.png`` (with
+matplotlib). Run: ``./dev.sh bench`` (runs this too) or
+``python bench/constraints.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import sys
+import time
+
+import numpy as np
+from scipy.special import ellipk
+
+from rigid_body_sim.core import Constraint, Gravity, INTEGRATORS, RigidBody, Simulation
+
+OUT = Path(__file__).resolve().parent / 'out'
+ROD_MASS, ROD_LENGTH, ROD_RADIUS = 0.1, 0.1, 0.005
+
+
+def rod(name: str, start: np.ndarray, direction: np.ndarray, length: float = ROD_LENGTH,
+        mass: float = ROD_MASS) -> RigidBody:
+    """A thin rod (body x axis along it) from ``start`` along unit ``direction``."""
+    x = direction / np.linalg.norm(direction)
+    helper = np.eye(3)[np.argmin(np.abs(x))]
+    y = np.cross(x, helper)
+    y /= np.linalg.norm(y)
+    from scipy.spatial.transform import Rotation
+    quat = Rotation.from_matrix(np.column_stack([x, y, np.cross(x, y)])).as_quat()
+    side = mass * (3 * ROD_RADIUS**2 + length**2) / 12.0
+    return RigidBody(name, mass, [0.5 * mass * ROD_RADIUS**2, side, side],
+                     position_world=start + 0.5 * length * x, orientation_xyzw=quat)
+
+
+def chain(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
+    """N rods along +x joined by ball joints, the first to the world, under gravity."""
+    bodies, joints = [], []
+    for i in range(n):
+        start = np.array([i * ROD_LENGTH, 0.0, 0.0])
+        bodies.append(rod(f'l{i}', start, np.array([1.0, 0.0, 0.0])))
+        joints.append(Constraint(f'j{i}', 'ball', f'l{i}', None if i == 0 else f'l{i - 1}',
+                                 anchor_world=start))
+    return Simulation(bodies, [Gravity()], integrator, dt, joints)
+
+
+def tree(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
+    """A binary tree of N rods: rod i hangs from the tip of rod (i - 1) // 2."""
+    rng = np.random.default_rng(1)
+    bodies, joints, tips = [], [], []
+    for i in range(n):
+        start = np.zeros(3) if i == 0 else tips[(i - 1) // 2]
+        d = rng.normal(size=3)
+        d[2] = -abs(d[2]) - 0.5
+        d /= np.linalg.norm(d)
+        bodies.append(rod(f'l{i}', start, d))
+        tips.append(start + ROD_LENGTH * d)
+        joints.append(Constraint(f'j{i}', 'ball', f'l{i}', None if i == 0 else f'l{(i - 1) // 2}',
+                                 anchor_world=start))
+    return Simulation(bodies, [Gravity()], integrator, dt, joints)
+
+
+def scaling(ns, integrators, min_steps):
+    """Rows (topology, integrator, N, ms per step)."""
+    rows = []
+    for topo, build in (('chain', chain), ('tree', tree)):
+        for name in integrators:
+            for n in ns:
+                sim = build(n, name)
+                sim.step(2)
+                k = max(min_steps, int(200 / n))
+                t0 = time.perf_counter()
+                sim.step(k)
+                per = (time.perf_counter() - t0) / k
+                viol = sim.diagnostics().constraint_violation
+                rows.append((topo, name, n, per * 1e3, viol))
+                print(f'  {topo:5s} {name:16s} N {n:5d}  {per * 1e3:9.2f} ms/step  '
+                      f'violation {viol:.1e}', flush=True)
+    fits = []
+    for topo in ('chain', 'tree'):
+        for name in integrators:
+            rs = [r for r in rows if r[0] == topo and r[1] == name]
+            p = np.polyfit(np.log([r[2] for r in rs]), np.log([r[3] for r in rs]), 1)[0]
+            big = [r for r in rs if r[2] >= 100]
+            p_big = (np.log(big[-1][3] / big[0][3]) / np.log(big[-1][2] / big[0][2])
+                     if len(big) > 1 else float('nan'))
+            fits.append((topo, name, p, p_big))
+            print(f'  {topo:5s} {name:16s} growth exponent {p:.2f} (all N), '
+                  f'{p_big:.2f} (N >= 100)')
+    return rows, fits
+
+
+def pendulum(integrator: str, dt: float, theta0: float = np.radians(60.0),
+             length: float = 1.0, g: float = 9.81, periods: int = 4):
+    """Period error, energy error, violation and wall time per simulated second."""
+    m = 1.0
+    pos = [length * np.sin(theta0), 0.0, -length * np.cos(theta0)]
+    sim = Simulation([RigidBody('bob', m, [1e-9] * 3, position_world=pos)],
+                     [Gravity((0.0, 0.0, -g))], integrator, dt,
+                     [Constraint('rod', 'ball', 'bob', None, anchor_world=[0.0, 0.0, 0.0])])
+    exact = 4.0 * np.sqrt(length / g) * ellipk(np.sin(theta0 / 2.0) ** 2)
+    e0 = sim.diagnostics().total_energy
+    n = int(round((periods + 0.5) * exact / dt))
+    xs = np.empty(n)
+    t0 = time.perf_counter()
+    for k in range(n):
+        sim.step()
+        xs[k] = sim.state.pos_com_world[0, 0]
+    wall = time.perf_counter() - t0
+    ts = dt * np.arange(1, n + 1)
+    i = np.flatnonzero((xs[:-1] < 0.0) & (xs[1:] >= 0.0))
+    crossings = ts[i] + dt * (-xs[i]) / (xs[i + 1] - xs[i])
+    period = (crossings[-1] - crossings[0]) / (len(crossings) - 1)
+    d = sim.diagnostics()
+    return (abs(period / exact - 1.0), abs(d.total_energy - e0) / abs(e0),
+            d.constraint_violation, wall / (n * dt))
+
+
+def four_bar(integrator: str, dt: float, duration: float = 2.0):
+    """Four-bar linkage (ground 0.4, crank 0.1, coupler 0.35, rocker 0.3 m) under gravity.
+
+    Returns the crank angle (rad) at ``duration``, the relative energy error,
+    the largest violation and the wall time per simulated second.
+    """
+    ground, crank, coupler, rocker = 0.4, 0.1, 0.35, 0.3
+    theta = np.radians(60.0)
+    a = np.zeros(3)
+    d = np.array([ground, 0.0, 0.0])
+    b = crank * np.array([np.cos(theta), 0.0, np.sin(theta)])
+    # C: intersection of circles (B, coupler) and (D, rocker) in the x-z plane, upper one.
+    bd = d - b
+    dist = np.linalg.norm(bd)
+    along = (coupler**2 - rocker**2 + dist**2) / (2.0 * dist)
+    h = np.sqrt(coupler**2 - along**2)
+    perp = np.array([-bd[2], 0.0, bd[0]]) / dist
+    c = b + along * bd / dist + h * perp
+    if c[2] < 0:
+        c = b + along * bd / dist - h * perp
+    bodies = [rod('crank', a, b - a, crank, 0.2), rod('coupler', b, c - b, coupler, 0.5),
+              rod('rocker', d, c - d, rocker, 0.4)]
+    y = [0.0, 1.0, 0.0]
+    joints = [Constraint('A', 'hinge', 'crank', None, anchor_world=a, axis_world=y),
+              Constraint('B', 'hinge', 'coupler', 'crank', anchor_world=b, axis_world=y),
+              Constraint('C', 'hinge', 'rocker', 'coupler', anchor_world=c, axis_world=y),
+              Constraint('D', 'hinge', 'rocker', None, anchor_world=d, axis_world=y)]
+    sim = Simulation(bodies, [Gravity()], integrator, dt, joints)
+    e0 = sim.diagnostics().total_energy
+    n = int(round(duration / dt))
+    viol = 0.0
+    t0 = time.perf_counter()
+    for _ in range(n // 10):
+        sim.step(10)
+        viol = max(viol, sim.diagnostics().constraint_violation)
+    sim.step(n - 10 * (n // 10))
+    wall = time.perf_counter() - t0
+    tip = sim.state.pos_com_world[0]   # crank centre: crank angle from it
+    angle = np.arctan2(tip[2], tip[0])
+    energy = sim.diagnostics().total_energy
+    return angle, abs(energy - e0) / abs(e0), viol, wall / duration
+
+
+def accuracy(dts, integrators):
+    """Rows (scene, integrator, dt, error, energy error, violation, wall s per sim s)."""
+    rows = []
+    for name in integrators:
+        for dt in dts:
+            err, de, viol, cost = pendulum(name, dt)
+            rows.append(('pendulum', name, dt, err, de, viol, cost))
+            print(f'  pendulum {name:16s} dt {dt:6.0e}  period err {err:8.1e}  dE {de:8.1e}  '
+                  f'violation {viol:8.1e}  {cost:8.3f} s/sim-s', flush=True)
+    ref = four_bar('rkmk4', 1e-4)[0]
+    for name in integrators:
+        for dt in dts:
+            angle, de, viol, cost = four_bar(name, dt)
+            err = abs(angle - ref)
+            rows.append(('four_bar', name, dt, err, de, viol, cost))
+            print(f'  four-bar {name:16s} dt {dt:6.0e}  angle err {err:8.1e}  dE {de:8.1e}  '
+                  f'violation {viol:8.1e}  {cost:8.3f} s/sim-s', flush=True)
+    return rows
+
+
+def _table(path, header, rows, fmt):
+    lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    lines += ['| ' + ' | '.join(f.format(v) for f, v in zip(fmt, r)) + ' |' for r in rows]
+    path.write_text('\n'.join(lines) + '\n')
+
+
+def _plot(sc_rows, acc_rows, integrators):
+    try:
+        import matplotlib
+        matplotlib.use('Agg')
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print('matplotlib not installed: no plots')
+        return
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    for topo, style in (('chain', 'o-'), ('tree', 's--')):
+        for name in integrators:
+            rs = [r for r in sc_rows if r[0] == topo and r[1] == name]
+            axes[0].loglog([r[2] for r in rs], [r[3] for r in rs], style,
+                           label=f'{topo} {name}')
+    axes[0].set_xlabel('links N')
+    axes[0].set_ylabel('wall time per step [ms]')
+    axes[0].legend(fontsize=7)
+    for ax, scene in zip(axes[1:], ('pendulum', 'four_bar')):
+        for name in integrators:
+            rs = [r for r in acc_rows if r[0] == scene and r[1] == name]
+            ax.loglog([r[6] for r in rs], [max(r[3], 1e-16) for r in rs], 'o-', label=name)
+        ax.set_title(scene)
+        ax.set_xlabel('wall time per simulated second [s]')
+        ax.set_ylabel('error')
+        ax.legend(fontsize=7)
+    for ax in axes:
+        ax.grid(True, which='both', alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(OUT / 'constraints.png', dpi=110)
+    print(f'plot: {OUT / "constraints.png"}')
+
+
+def main(argv=None) -> int:
+    """Run the constraint benchmarks."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument('--quick', action='store_true', help='small sizes, two step sizes')
+    args = p.parse_args(argv)
+    OUT.mkdir(exist_ok=True)
+    integrators = list(INTEGRATORS)
+    if args.quick:
+        ns, dts, min_steps = (10, 30), (1e-2, 5e-3), 3
+    else:
+        ns, dts, min_steps = (10, 100, 1000), (1e-2, 3e-3, 1e-3), 5
+    print('\n== constraints: cost per step of chains and trees (ball joints) ==')
+    sc, fits = scaling(ns, ('lie_poisson2', 'rkmk4'), min_steps)
+    _table(OUT / 'constraints_scaling.md', ('topology', 'integrator', 'links', 'ms / step',
+                                            'violation'), sc,
+           ('{}', '{}', '{}', '{:.2f}', '{:.1e}'))
+    _table(OUT / 'constraints_growth.md', ('topology', 'integrator', 'exponent (all N)',
+                                           'exponent (N >= 100)'), fits,
+           ('{}', '{}', '{:.2f}', '{:.2f}'))
+    print('\n== constraints: error vs wall time (pendulum, four-bar) ==')
+    acc = accuracy(dts, integrators)
+    _table(OUT / 'constraints_accuracy.md', ('scene', 'integrator', 'dt [s]', 'error',
+                                             'rel. dE', 'violation', 'wall s / sim s'), acc,
+           ('{}', '{}', '{:.0e}', '{:.1e}', '{:.1e}', '{:.1e}', '{:.3f}'))
+    _plot(sc, acc, integrators)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
