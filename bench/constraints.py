@@ -1,4 +1,5 @@
-"""Constraint benchmarks: cost per step of chains and trees, and error vs wall time.
+"""
+Constraint benchmarks: cost per step of chains and trees, and error vs wall time.
 
 1. Chains and binary trees of N = 10, 100, 1000 rods joined by ball joints:
    wall time per step and the fitted growth exponent p of ``time ∝ N^p``
@@ -22,9 +23,9 @@ import sys
 import time
 
 import numpy as np
-from scipy.special import ellipk
-
 from rigid_body_sim.core import Constraint, Gravity, INTEGRATORS, RigidBody, Simulation
+from scipy.spatial.transform import Rotation
+from scipy.special import ellipk
 
 OUT = Path(__file__).resolve().parent / 'out'
 ROD_MASS, ROD_LENGTH, ROD_RADIUS = 0.1, 0.1, 0.005
@@ -32,12 +33,11 @@ ROD_MASS, ROD_LENGTH, ROD_RADIUS = 0.1, 0.1, 0.005
 
 def rod(name: str, start: np.ndarray, direction: np.ndarray, length: float = ROD_LENGTH,
         mass: float = ROD_MASS) -> RigidBody:
-    """A thin rod (body x axis along it) from ``start`` along unit ``direction``."""
+    """Make a thin rod from ``start`` along unit ``direction`` (its body x axis)."""
     x = direction / np.linalg.norm(direction)
     helper = np.eye(3)[np.argmin(np.abs(x))]
     y = np.cross(x, helper)
     y /= np.linalg.norm(y)
-    from scipy.spatial.transform import Rotation
     quat = Rotation.from_matrix(np.column_stack([x, y, np.cross(x, y)])).as_quat()
     side = mass * (3 * ROD_RADIUS**2 + length**2) / 12.0
     return RigidBody(name, mass, [0.5 * mass * ROD_RADIUS**2, side, side],
@@ -45,7 +45,7 @@ def rod(name: str, start: np.ndarray, direction: np.ndarray, length: float = ROD
 
 
 def chain(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
-    """N rods along +x joined by ball joints, the first to the world, under gravity."""
+    """Build N rods along +x joined by ball joints, the first to the world, under gravity."""
     bodies, joints = [], []
     for i in range(n):
         start = np.array([i * ROD_LENGTH, 0.0, 0.0])
@@ -56,7 +56,7 @@ def chain(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
 
 
 def tree(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
-    """A binary tree of N rods: rod i hangs from the tip of rod (i - 1) // 2."""
+    """Build a binary tree of N rods: rod i hangs from the tip of rod (i - 1) // 2."""
     rng = np.random.default_rng(1)
     bodies, joints, tips = [], [], []
     for i in range(n):
@@ -128,7 +128,8 @@ def pendulum(integrator: str, dt: float, theta0: float = np.radians(60.0),
 
 
 def four_bar(integrator: str, dt: float, duration: float = 2.0):
-    """Four-bar linkage (ground 0.4, crank 0.1, coupler 0.35, rocker 0.3 m) under gravity.
+    """
+    Four-bar linkage (ground 0.4, crank 0.1, coupler 0.35, rocker 0.3 m) under gravity.
 
     Returns the crank angle (rad) at ``duration``, the relative energy error,
     the largest violation and the wall time per simulated second.

@@ -1,4 +1,5 @@
-"""Benchmarks: what accuracy costs in time (not tests; timings are for reading, not asserting).
+"""
+Benchmarks: what accuracy costs in time (not tests; timings are for reading, not asserting).
 
 1. Work-precision on free-body scenes: for each integrator and dt from 1e-1 to
    1e-4, the error against a DOP853 reference (rtol 1e-12), the energy and
@@ -21,7 +22,6 @@ import sys
 import time
 
 import numpy as np
-
 from rigid_body_sim.core import Gravity, INTEGRATORS, RigidBody, Simulation
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core.reference import free_body_reference

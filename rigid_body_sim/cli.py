@@ -1,4 +1,5 @@
-"""Command-line run of a scene: steps it and prints a short, readable summary as it goes.
+"""
+Command-line run of a scene: steps it and prints a short, readable summary as it goes.
 
 Usage: ``rigid_body_sim_run [SCENE.yaml] [--duration S] [--integrator NAME] [--dt S]
 [--print-every S]``. Without a scene file the installed default scene runs.
@@ -20,7 +21,7 @@ from .scene import load_scene, SceneError
 
 
 def default_scene_path() -> Path:
-    """The installed default scene, or the one in this source tree."""
+    """Return the installed default scene, or the one in this source tree."""
     try:
         from ament_index_python.packages import get_package_share_directory
         share = Path(get_package_share_directory('rigid_body_sim'))
@@ -35,10 +36,10 @@ def default_scene_path() -> Path:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='rigid_body_sim_run', description=__doc__.splitlines()[0])
     p.add_argument('scene', nargs='?', help='scene YAML file (default: the default scene)')
-    p.add_argument('--duration', type=float, help='simulated seconds (default: the scene\'s)')
+    p.add_argument('--duration', type=float, help="simulated seconds (default: the scene's)")
     p.add_argument('--integrator', choices=sorted(INTEGRATORS),
-                   help='override the scene\'s integrator')
-    p.add_argument('--dt', type=float, help='override the scene\'s step size (s)')
+                   help="override the scene's integrator")
+    p.add_argument('--dt', type=float, help="override the scene's step size (s)")
     p.add_argument('--print-every', type=float, default=0.25,
                    help='simulated seconds between summary lines (default 0.25)')
     return p

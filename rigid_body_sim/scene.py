@@ -1,4 +1,5 @@
-"""Scene files (YAML) -> core specs. Every error names the file, the key path and the problem.
+"""
+Scene files (YAML) -> core specs. Every error names the file, the key path and the problem.
 
 A scene file::
 
@@ -74,12 +75,14 @@ class Scene:
 
 
 def load_scene(path: Union[str, Path]) -> Scene:
-    """Load a scene file and build its :class:`Simulation`.
+    """
+    Load a scene file and build its :class:`Simulation`.
 
     Raises
     ------
     SceneError
         Naming the file, the key path and the problem.
+
     """
     path = Path(path)
     try:
@@ -182,7 +185,8 @@ def _inertia(value: Any, mass: float) -> Any:
             return np.full(3, 0.4 * mass * r**2)
         r, length = finite_array(dims, 'inertia.cylinder', (2,))
         if not (r > 0.0 and length > 0.0):
-            raise SpecError('inertia.cylinder', f'radius and length must be positive, got {dims!r}')
+            raise SpecError('inertia.cylinder',
+                            f'radius and length must be positive, got {dims!r}')
         side = mass * (3.0 * r**2 + length**2) / 12.0
         return np.array([side, side, 0.5 * mass * r**2])
     comp = _mapping(value, 'inertia', URDF_INERTIA_KEYS)

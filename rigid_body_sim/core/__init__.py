@@ -1,9 +1,10 @@
-"""ROS-free numerical core of rigid_body_sim (numpy and scipy only; never rclpy).
+"""
+ROS-free numerical core of rigid_body_sim (numpy and scipy only; never rclpy).
 
 The public API: :class:`RigidBody` specs, effects (:class:`Gravity`,
 :class:`Damping`, :class:`AppliedWrenches`), the :class:`Simulation` facade,
-the integrator registry :data:`INTEGRATORS`, :class:`Constraint` joints, and :class:`SpecError`, raised for
-every bad input with the offending field named.
+the integrator registry :data:`INTEGRATORS`, :class:`Constraint` joints, and
+:class:`SpecError`, raised for every bad input with the offending field named.
 """
 
 from .bodies import BodySet, RigidBody, State

@@ -1,4 +1,5 @@
-"""Rigid-body specifications and the state arrays of all bodies.
+"""
+Rigid-body specifications and the state arrays of all bodies.
 
 Frames
 ------
@@ -18,6 +19,7 @@ principal-frame coordinates to world), ``vel_com_world`` (n, 3), and
 ``ang_vel_principal`` (n, 3): the seed's body-frame angular velocity Ω, in the
 principal frame. See :mod:`rigid_body_sim.core.rotation` for the quaternion
 convention.
+
 """
 
 from __future__ import annotations
@@ -41,7 +43,8 @@ ISOTROPY_RTOL = 1e-12
 
 
 def inertia_matrix(value: Any, field_name: str = 'inertia') -> np.ndarray:
-    """Return a (3, 3) inertia tensor from a (3, 3) matrix or 3 principal moments.
+    """
+    Return a (3, 3) inertia tensor from a (3, 3) matrix or 3 principal moments.
 
     Raises
     ------
@@ -49,6 +52,7 @@ def inertia_matrix(value: Any, field_name: str = 'inertia') -> np.ndarray:
         If the tensor is not finite, not symmetric, not positive definite, or
         violates the triangle inequality ``J_a + J_b >= J_c`` that every real
         mass distribution obeys.
+
     """
     arr = np.array(value, dtype=float) if _is_numeric(value) else None
     if arr is not None and arr.shape == (3,):
@@ -81,11 +85,13 @@ def _is_numeric(value: Any) -> bool:
 
 
 def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Principal moments (ascending) and axes of a symmetric positive-definite tensor.
+    """
+    Principal moments (ascending) and axes of a symmetric positive-definite tensor.
 
     Parameters
     ----------
     inertia : ndarray, shape (3, 3)
+        Symmetric positive-definite inertia tensor.
 
     Returns
     -------
@@ -93,6 +99,7 @@ def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     R_body_principal : ndarray, shape (3, 3)
         Proper rotation (det +1) whose columns are the principal axes in the
         body frame, so ``inertia == R diag(moments) Rᵀ``.
+
     """
     moments, axes = np.linalg.eigh(inertia)
     if np.linalg.det(axes) < 0.0:
@@ -102,7 +109,8 @@ def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class RigidBody:
-    """One rigid body as a user describes it (validated on construction).
+    """
+    One rigid body as a user describes it (validated on construction).
 
     Parameters
     ----------
@@ -123,6 +131,7 @@ class RigidBody:
         m/s, initial velocity of the body origin, world frame.
     angular_velocity_body : array_like, shape (3,)
         rad/s, initial angular velocity in the body frame.
+
     """
 
     name: str
@@ -172,7 +181,8 @@ class State:
 
 @dataclass
 class BodySet:
-    """Constant properties of ``n`` bodies as arrays, in the principal frame.
+    """
+    Constant properties of ``n`` bodies as arrays, in the principal frame.
 
     Attributes
     ----------
@@ -187,6 +197,7 @@ class BodySet:
     anisotropic : ndarray of int, shape (k,)
         Indices of bodies whose principal moments differ (gyroscopic term
         non-zero); isotropic bodies are skipped in every gyroscopic evaluation.
+
     """
 
     names: list[str]
@@ -224,7 +235,7 @@ class BodySet:
                    index=index)
 
     def __len__(self) -> int:
-        """Number of bodies."""
+        """Return the number of bodies."""
         return len(self.names)
 
     def lookup(self, name: str, field_name: str = 'body') -> int:

@@ -1,4 +1,5 @@
-"""Holonomic constraints Φ(x_g, R) = 0 between bodies or a body and the world.
+"""
+Holonomic constraints Φ(x_g, R) = 0 between bodies or a body and the world.
 
 Each constraint contributes rows to the system of the seed's eq. 69::
 
@@ -64,7 +65,7 @@ class JointType(enum.Enum):
 
     @classmethod
     def parse(cls, value: Any, field_name: str = 'type') -> 'JointType':
-        """JointType from a JointType or its name."""
+        """Return the joint type of a JointType or of its name."""
         if isinstance(value, JointType):
             return value
         try:
@@ -76,7 +77,8 @@ class JointType(enum.Enum):
 
 @dataclass(frozen=True)
 class Constraint:
-    """A constraint as a user describes it.
+    """
+    A constraint as a user describes it.
 
     Parameters
     ----------
@@ -108,10 +110,11 @@ class Constraint:
         For generic: same arguments, returns ``(k, 12)``: derivatives with
         respect to ``[δx_a, δΘ_a, δx_b, δΘ_b]``, ``δΘ`` in each body frame
         (``δR = R hat(δΘ)``). Finite differences when omitted.
+
     """
 
     name: str
-    type: Any
+    type: Any  # noqa: A003 - the key of scene files and of the ROS service
     body_a: str
     body_b: Optional[str] = None
     anchor_world: Any = None
@@ -179,7 +182,8 @@ DENSE_ROWS = 48
 
 
 class JacobianStructure:
-    """The sparsity pattern of ``G``, fixed while the constraint set is unchanged.
+    """
+    The sparsity pattern of ``G``, fixed while the constraint set is unchanged.
 
     Dense over the touched bodies when ``m <= DENSE_ROWS`` (faster for small
     systems), otherwise CSR; in both cases the index arithmetic is done once
@@ -203,13 +207,15 @@ class JacobianStructure:
 
 
 class RowJacobian:
-    """The constraint Jacobian ``G`` (m, 6 n) at one configuration.
+    """
+    The constraint Jacobian ``G`` (m, 6 n) at one configuration.
 
     Parameters
     ----------
     structure : JacobianStructure
     values : ndarray
         Entries in the order of the structure's pattern.
+
     """
 
     def __init__(self, structure: JacobianStructure, values: np.ndarray) -> None:
@@ -310,7 +316,8 @@ class Geometry:
 
 @dataclass
 class Evaluation:
-    """Constraint rows at a state (m rows, n bodies).
+    """
+    Constraint rows at a state (m rows, n bodies).
 
     Attributes
     ----------
@@ -321,6 +328,7 @@ class Evaluation:
         ``G ν``.
     gamma : ndarray, shape (m,)
         ``Ġ ν``, the velocity-product term of ``Φ̈``.
+
     """
 
     phi: np.ndarray
@@ -363,11 +371,13 @@ def _rot_t(R: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 class ConstraintSet:
-    """The constraints of a simulation, resolved to arrays per row primitive.
+    """
+    The constraints of a simulation, resolved to arrays per row primitive.
 
     Parameters
     ----------
     bodies : BodySet
+
     """
 
     def __init__(self, bodies: BodySet) -> None:
@@ -379,11 +389,11 @@ class ConstraintSet:
     # -- adding and removing (between steps) -----------------------------------------------
 
     def __len__(self) -> int:
-        """Number of constraints."""
+        """Return the number of constraints."""
         return len(self._resolved)
 
     def __contains__(self, name: str) -> bool:
-        """True if a constraint called ``name`` exists."""
+        """Tell whether a constraint called ``name`` exists."""
         return name in self._resolved
 
     @property
@@ -392,7 +402,7 @@ class ConstraintSet:
         return list(self._resolved)
 
     def spec(self, name: str) -> Constraint:
-        """The user's description of constraint ``name``."""
+        """Return the user's description of constraint ``name``."""
         return self._get(name).spec
 
     def rows_of(self, name: str) -> np.ndarray:
@@ -490,18 +500,18 @@ class ConstraintSet:
         def idx(values: list) -> np.ndarray:
             return np.array(values, dtype=int)
 
-        self._pt = dict(a=idx([r.a for r in pts]), b=idx([r.b for r in pts]),
-                        ra=arr([r.point[0] for r in pts]), rb=arr([r.point[1] for r in pts]))
-        self._dot = dict(a=idx([r.a for r, _ in dots]), b=idx([r.b for r, _ in dots]),
-                         s=arr([d[0] for _, d in dots]), e=arr([d[1] for _, d in dots]),
-                         c=np.array([d[2] for _, d in dots], dtype=float))
-        self._line = dict(a=idx([r.a for r, _ in lines]), b=idx([r.b for r, _ in lines]),
-                          ra=arr([ln[0] for _, ln in lines]), rb=arr([ln[1] for _, ln in lines]),
-                          e=arr([ln[2] for _, ln in lines]))
-        self._dist = dict(a=idx([r.a for r in dists]), b=idx([r.b for r in dists]),
-                          ra=arr([r.distance[0] for r in dists]),
-                          rb=arr([r.distance[1] for r in dists]),
-                          L=np.array([r.distance[2] for r in dists], dtype=float))
+        self._pt = {'a': idx([r.a for r in pts]), 'b': idx([r.b for r in pts]),
+                    'ra': arr([r.point[0] for r in pts]), 'rb': arr([r.point[1] for r in pts])}
+        self._dot = {'a': idx([r.a for r, _ in dots]), 'b': idx([r.b for r, _ in dots]),
+                     's': arr([d[0] for _, d in dots]), 'e': arr([d[1] for _, d in dots]),
+                     'c': np.array([d[2] for _, d in dots], dtype=float)}
+        self._line = {'a': idx([r.a for r, _ in lines]), 'b': idx([r.b for r, _ in lines]),
+                      'ra': arr([ln[0] for _, ln in lines]), 'rb': arr([ln[1] for _, ln in lines]),
+                      'e': arr([ln[2] for _, ln in lines])}
+        self._dist = {'a': idx([r.a for r in dists]), 'b': idx([r.b for r in dists]),
+                      'ra': arr([r.distance[0] for r in dists]),
+                      'rb': arr([r.distance[1] for r in dists]),
+                      'L': np.array([r.distance[2] for r in dists], dtype=float)}
         self._gen = gens
         # Row numbering: point block, dot block, line block, distance block, generic.
         rows: dict[str, list] = {r.spec.name: [] for r in res}
@@ -535,7 +545,7 @@ class ConstraintSet:
     # -- evaluation (hot path: vectorized per primitive) -----------------------------------
 
     def _pattern(self) -> None:
-        """Fixed sparsity pattern of G (rows, columns) in the order values are produced."""
+        """Compute the fixed sparsity pattern of G, in the order values are produced."""
         n = len(self.bodies)
         rows, cols, keep = [], [], []
         row0 = 0
@@ -557,7 +567,8 @@ class ConstraintSet:
         self._structure = JacobianStructure(self._rows, self._cols, row0, n)
 
     def geometry(self, pos: np.ndarray, quat: np.ndarray) -> 'Geometry':
-        """Φ and G at a configuration of all bodies (velocity terms via ``rates``).
+        """
+        Φ and G at a configuration of all bodies (velocity terms via ``rates``).
 
         Parameters
         ----------
@@ -565,6 +576,7 @@ class ConstraintSet:
             Centre-of-mass positions, world frame.
         quat : ndarray, shape (n, 4)
             Principal-frame orientations.
+
         """
         n = len(self.bodies)
         x = np.vstack([pos, np.zeros((1, 3))])
@@ -629,15 +641,18 @@ class ConstraintSet:
 
     def evaluate(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                  omega: np.ndarray, need_gamma: bool = True) -> Evaluation:
-        """Φ, G, Φ̇ and γ = Ġν at a state of all bodies.
+        """
+        Φ, G, Φ̇ and γ = Ġν at a state of all bodies.
 
         Parameters
         ----------
         pos, vel, omega : ndarray, shape (n, 3)
             Centre-of-mass position and velocity (world), Ω (principal).
         quat : ndarray, shape (n, 4)
+            Principal-frame orientations.
         need_gamma : bool
             Skip γ when only Φ, G and Φ̇ are wanted (projections).
+
         """
         geo = self.geometry(pos, quat)
         phi_dot, gamma = geo.rates(vel, omega, need_gamma)

@@ -14,7 +14,8 @@ from .effects import Effect
 
 @dataclass(frozen=True)
 class Diagnostics:
-    """Physical invariants of a state.
+    """
+    Physical invariants of a state.
 
     Attributes
     ----------
@@ -35,6 +36,7 @@ class Diagnostics:
         Largest entry of ``|RᵀR - I|`` for each body's rotation matrix.
     constraint_violation : float
         Largest ``|Φ|`` over all constraint rows (0 without constraints).
+
     """
 
     time: float
@@ -76,7 +78,8 @@ def linear_momentum_world(bodies: BodySet, state: State) -> np.ndarray:
 
 def angular_momentum_world(bodies: BodySet, state: State,
                            about: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-    """Angular momentum of each body about the point ``about`` (n, 3), world frame.
+    """
+    Angular momentum of each body about the point ``about`` (n, 3), world frame.
 
     Orbital part ``(x - about) × m v`` plus spin ``R (J Ω)``.
     """

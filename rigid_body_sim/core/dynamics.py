@@ -1,4 +1,5 @@
-"""Right-hand side of the Newton–Euler equations for all bodies at once.
+"""
+Right-hand side of the Newton–Euler equations for all bodies at once.
 
 For body k (seed eq. 69 without constraints), in the principal frame::
 
@@ -25,7 +26,8 @@ from .effects import Effect, Kinematics, WrenchAccumulator
 
 @dataclass
 class WorkCounters:
-    """Work done so far (reset with the simulation).
+    """
+    Work done so far (reset with the simulation).
 
     Attributes
     ----------
@@ -39,6 +41,7 @@ class WorkCounters:
         Bodies for which ``Ω × JΩ`` or a free-rotor sub-flow was computed.
     rotation_updates : int
         Body orientations updated by an exponential map.
+
     """
 
     steps: int = 0
@@ -53,13 +56,15 @@ class WorkCounters:
 
 
 class Dynamics:
-    """Bodies plus effects: forces, torques and accelerations, vectorized over bodies.
+    """
+    Bodies plus effects: forces, torques and accelerations, vectorized over bodies.
 
     Parameters
     ----------
     bodies : BodySet
     effects : sequence of Effect
         Already bound to ``bodies``.
+
     """
 
     def __init__(self, bodies: BodySet, effects: Sequence[Effect]) -> None:
@@ -88,12 +93,12 @@ class Dynamics:
         self.changed()
 
     def changed(self) -> None:
-        """Mark the model as changed (invalidates cached evaluations)."""
+        """Mark the model as changed, which invalidates cached evaluations."""
         self.version += 1
 
     @property
     def constrained(self) -> bool:
-        """True when the scene has constraint rows (only then is λ solved for)."""
+        """Tell whether the scene has constraint rows (only then is λ solved for)."""
         return self.solver is not None and self.solver.constraints.n_rows > 0
 
     def kinematics(self, time: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
@@ -135,7 +140,8 @@ class Dynamics:
     def kick_wrench(self, time: float, pos: np.ndarray,
                     quat: np.ndarray, vel: np.ndarray,
                     omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Force (world) and torque (principal) of all effects but exact-flow ones.
+        """
+        Force (world) and torque (principal) of all effects but exact-flow ones.
 
         With constraints, the constraint force ``−Gᵀλ`` is added, with λ solved
         from the full accelerations (exact-flow effects and the gyroscopic term

@@ -1,4 +1,5 @@
-"""Force generators ("effects"): gravity, damping, applied wrenches.
+"""
+Force generators ("effects"): gravity, damping, applied wrenches.
 
 A scene lists the effects it needs and only those are evaluated: a scene
 without gravity never computes a gravity term. Each effect counts its own
@@ -18,8 +19,8 @@ from typing import Any, ClassVar, Optional, Sequence
 
 import numpy as np
 
-from .bodies import BodySet
 from . import rotation as so3
+from .bodies import BodySet
 from .errors import SpecError
 from .validate import finite_array, finite_scalar, nonnegative_scalar
 
@@ -43,7 +44,8 @@ class Frame(enum.Enum):
 
 @dataclass
 class Kinematics:
-    """Positions and velocities at which effects are evaluated (n bodies).
+    """
+    Positions and velocities at which effects are evaluated (n bodies).
 
     Attributes
     ----------
@@ -52,6 +54,7 @@ class Kinematics:
     R_principal_world : ndarray, shape (n, 3, 3)
     vel_com_world : ndarray, shape (n, 3)
     ang_vel_principal : ndarray, shape (n, 3)
+
     """
 
     time: float
@@ -115,12 +118,14 @@ class Effect:
 
 
 class Gravity(Effect):
-    """Uniform gravity: force ``m g`` at each centre of mass.
+    """
+    Uniform gravity: force ``m g`` at each centre of mass.
 
     Parameters
     ----------
     g_world : array_like, shape (3,)
         m/s², e.g. ``(0, 0, -9.81)`` (REP 103: z up).
+
     """
 
     name = 'gravity'
@@ -146,7 +151,8 @@ class Gravity(Effect):
 
 
 class Damping(Effect):
-    """Linear viscous damping: ``F = -c_lin v_com`` and ``τ = -c_ang ω``.
+    """
+    Linear viscous damping: ``F = -c_lin v_com`` and ``τ = -c_ang ω``.
 
     Parameters
     ----------
@@ -156,6 +162,7 @@ class Damping(Effect):
         N m s/rad, >= 0.
     bodies : sequence of str, optional
         Bodies damped; all bodies when omitted.
+
     """
 
     name = 'damping'
@@ -192,7 +199,8 @@ class Damping(Effect):
 
     def exact_flow(self, vel_com_world: np.ndarray, ang_mom_principal: np.ndarray,
                    dt: float) -> None:
-        """Advance ``v`` and the body angular momentum by the exact damping flow, in place.
+        """
+        Advance ``v`` and the body angular momentum by the exact damping flow, in place.
 
         With damping alone, ``m dv/dt = -c v`` and ``J_i dΩ_i/dt = -c Ω_i`` in the
         principal frame (``J`` diagonal), so both decay exponentially.
@@ -207,7 +215,8 @@ class Damping(Effect):
 
 
 class AppliedWrenches(Effect):
-    """A table of applied wrenches, each constant over an interval of time.
+    """
+    A table of applied wrenches, each constant over an interval of time.
 
     Each entry acts on one body with a force (at a point given in the body
     frame; the centre of mass when omitted) and a torque, expressed in the world
@@ -241,20 +250,24 @@ class AppliedWrenches(Effect):
     def add(self, body: str, force: Any = (0.0, 0.0, 0.0), torque: Any = (0.0, 0.0, 0.0),
             frame: Any = 'world', point_body: Any = None, start: float = 0.0,
             duration: Optional[float] = None) -> None:
-        """Add a wrench; every argument is validated and named on error.
+        """
+        Add a wrench; every argument is validated and named on error.
 
         Parameters
         ----------
         body : str
+            Name of the body.
         force, torque : array_like, shape (3,)
             N and N m, in ``frame``.
         frame : {'world', 'body'}
+            Frame of ``force`` and ``torque``.
         point_body : array_like, shape (3,), optional
             Point of application in the body frame (m); default: centre of mass.
         start : float
             s, simulation time at which it starts.
         duration : float, optional
             s, > 0; None for forever.
+
         """
         b = self.bodies.lookup(body, 'body')
         f = finite_array(force, 'force', (3,))
@@ -296,7 +309,7 @@ class AppliedWrenches(Effect):
         self._arrays = None
 
     def __len__(self) -> int:
-        """Number of entries (active or not)."""
+        """Return the number of entries (active or not)."""
         return len(self._rows)
 
     def _table(self) -> dict:

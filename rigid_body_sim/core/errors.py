@@ -4,7 +4,8 @@ from __future__ import annotations
 
 
 class SpecError(ValueError):
-    """Invalid input; ``field`` is the dotted key path of the offending value.
+    """
+    Invalid input; ``field`` is the dotted key path of the offending value.
 
     The message reads ``"<field>: <problem>"``. Callers that know more context
     (a scene file, a list index) re-raise with :meth:`within`.

@@ -1,4 +1,5 @@
-"""Fixed-step integrators on (R³ × SO(3) × R³ × R³)ⁿ behind one contract.
+"""
+Fixed-step integrators on (R³ × SO(3) × R³ × R³)ⁿ behind one contract.
 
 Each integrator class is mostly data (name, order, what it conserves, a
 tableau) and implements ``_step``; the public :meth:`Integrator.step` does the
@@ -33,6 +34,7 @@ Methods
 Damping, where the scene has it, is advanced by its exact exponential flow
 inside the splitting methods (first half-step and last half-step), so they keep
 their order; other velocity-dependent effects are evaluated in the kick.
+
 """
 
 from __future__ import annotations
@@ -59,11 +61,13 @@ class Invariant(enum.Enum):
 
 
 class Integrator:
-    """Base class. Subclasses set ``name``, ``order``, ``conserves`` and ``_step``.
+    """
+    Base class. Subclasses set ``name``, ``order``, ``conserves`` and ``_step``.
 
     Parameters
     ----------
     dynamics : Dynamics
+
     """
 
     name: ClassVar[str] = ''
@@ -74,7 +78,8 @@ class Integrator:
         self.dynamics = dynamics
 
     def step(self, state: State, dt: float, t_end: Optional[float] = None) -> State:
-        """Advance ``state`` by ``dt`` (s); returns a new State, ``state`` is not modified.
+        """
+        Advance ``state`` by ``dt`` (s); returns a new State, ``state`` is not modified.
 
         ``t_end`` is the time of the new state when the caller keeps time as
         ``steps * dt`` (no rounding drift); default ``state.time + dt``.
@@ -101,7 +106,8 @@ class Integrator:
 
 
 def dexpinv_right(u: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Inverse right-trivialized derivative of exp on so(3), to second order in ``u``.
+    """
+    Inverse right-trivialized derivative of exp on so(3), to second order in ``u``.
 
     For ``R(t) = R0 exp(hat(u(t)))`` with ``dR/dt = R hat(w)``,
     ``du/dt = w + u × w / 2 + u × (u × w) / 12 + O(|u|⁴)``.
@@ -109,10 +115,12 @@ def dexpinv_right(u: np.ndarray, w: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     u, w : ndarray, shape (n, 3)
+        Rotation vectors of the step so far, and body angular velocities.
 
     Returns
     -------
     ndarray, shape (n, 3)
+
     """
     uw = so3.cross(u, w)
     return w + 0.5 * uw + so3.cross(u, uw) / 12.0
@@ -191,7 +199,8 @@ class RKMK4(RungeKuttaMuntheKaas):
 
 def _axis_flow(quat: np.ndarray, mom: np.ndarray, moments: np.ndarray, axis: int,
                dt: float) -> None:
-    """Exact flow of ``H = L_axis² / (2 J_axis)`` over ``dt``, in place.
+    """
+    Exact flow of ``H = L_axis² / (2 J_axis)`` over ``dt``, in place.
 
     The body rotates by ``φ = dt L_axis / J_axis`` about its principal axis
     ``axis``: ``q <- q ⊗ exp(φ e_axis)`` and ``L <- exp(-φ hat(e_axis)) L``,
@@ -214,7 +223,8 @@ def _axis_flow(quat: np.ndarray, mom: np.ndarray, moments: np.ndarray, axis: int
 
 
 class Splitting(Integrator):
-    """Kick–drift splitting with the free rotor split about principal axes.
+    """
+    Kick–drift splitting with the free rotor split about principal axes.
 
     ``COMPOSITION`` lists the sub-step weights (fractions of ``dt``) of
     symmetric Strang steps composed into one step; ``SYMMETRIC`` False gives the
@@ -287,7 +297,8 @@ class Splitting(Integrator):
 
     def _strang(self, t: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                 mom: np.ndarray, h: float, t_next: float) -> tuple:
-        """One symmetric (or, if not SYMMETRIC, Lie–Trotter) sub-step; RATTLE with constraints.
+        """
+        One symmetric (or, if not SYMMETRIC, Lie–Trotter) sub-step; RATTLE with constraints.
 
         With constraints, the positions after the drift are corrected along the
         constraint forces at the sub-step start (SHAKE) and the final velocities

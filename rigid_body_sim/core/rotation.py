@@ -1,4 +1,5 @@
-"""SO(3) on arrays: hat/vee, exponential map, quaternions.
+"""
+SO(3) on arrays: hat/vee, exponential map, quaternions.
 
 Convention (the only one used in this package)
 ----------------------------------------------
@@ -15,6 +16,7 @@ Convention (the only one used in this package)
 
 Every function accepts a leading batch dimension ``(..., 3)``, ``(..., 4)`` or
 ``(..., 3, 3)`` and is vectorized over it.
+
 """
 
 from __future__ import annotations
@@ -27,15 +29,18 @@ _SMALL_ANGLE = 1e-4
 
 
 def hat(v: np.ndarray) -> np.ndarray:
-    """Skew-symmetric matrix of ``v``: ``hat(a) @ b == cross(a, b)``.
+    """
+    Return the skew-symmetric matrix of ``v``: its product with ``b`` is ``v × b``.
 
     Parameters
     ----------
     v : ndarray, shape (..., 3)
+        Vectors.
 
     Returns
     -------
     ndarray, shape (..., 3, 3)
+
     """
     v = np.asarray(v, dtype=float)
     out = np.zeros(v.shape[:-1] + (3, 3))
@@ -49,7 +54,8 @@ def hat(v: np.ndarray) -> np.ndarray:
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis, broadcasting; shapes (..., 3).
+    """
+    Cross product over the last axis, broadcasting; shapes (..., 3).
 
     Same result as ``np.cross`` for 3-vectors, without its axis bookkeeping,
     which dominates the cost for the short arrays of a time step.
@@ -64,15 +70,18 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def vee(m: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`hat`, from the antisymmetric part of ``m``.
+    """
+    Inverse of :func:`hat`, from the antisymmetric part of ``m``.
 
     Parameters
     ----------
     m : ndarray, shape (..., 3, 3)
+        Matrices.
 
     Returns
     -------
     ndarray, shape (..., 3)
+
     """
     m = np.asarray(m, dtype=float)
     return 0.5 * np.stack(
@@ -82,7 +91,8 @@ def vee(m: np.ndarray) -> np.ndarray:
 
 
 def exp_quat(u: np.ndarray) -> np.ndarray:
-    """Unit quaternion of the rotation vector ``u`` (angle ``|u|`` about ``u/|u|``).
+    """
+    Return the unit quaternion of rotation vector ``u`` (angle ``|u|`` about ``u/|u|``).
 
     Parameters
     ----------
@@ -93,6 +103,7 @@ def exp_quat(u: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (..., 4)
         Quaternions ``(x, y, z, w)``, unit to rounding error.
+
     """
     u = np.asarray(u, dtype=float)
     theta = np.linalg.norm(u, axis=-1)
@@ -108,15 +119,18 @@ def exp_quat(u: np.ndarray) -> np.ndarray:
 
 
 def log_quat(q: np.ndarray) -> np.ndarray:
-    """Rotation vector of the unit quaternion ``q`` (angle in [0, pi]).
+    """
+    Rotation vector of the unit quaternion ``q`` (angle in [0, pi]).
 
     Parameters
     ----------
     q : ndarray, shape (..., 4)
+        Unit quaternions (x, y, z, w).
 
     Returns
     -------
     ndarray, shape (..., 3)
+
     """
     q = np.asarray(q, dtype=float)
     # q and -q are the same rotation: take w >= 0 so the angle is <= pi.
@@ -131,15 +145,18 @@ def log_quat(q: np.ndarray) -> np.ndarray:
 
 
 def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a ⊗ b`` of scalar-last quaternions.
+    """
+    Hamilton product ``a ⊗ b`` of scalar-last quaternions.
 
     Parameters
     ----------
     a, b : ndarray, shape (..., 4)
+        Quaternions (x, y, z, w).
 
     Returns
     -------
     ndarray, shape (..., 4)
+
     """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
@@ -165,7 +182,8 @@ def quat_conjugate(q: np.ndarray) -> np.ndarray:
 
 
 def quat_normalize(q: np.ndarray) -> np.ndarray:
-    """Divide ``q`` by its norm; shape (..., 4).
+    """
+    Divide ``q`` by its norm; shape (..., 4).
 
     The integrators update orientation by the exponential map, so a quaternion
     leaves the unit sphere only by rounding error (about 1e-16 a step); this
@@ -176,15 +194,18 @@ def quat_normalize(q: np.ndarray) -> np.ndarray:
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix of the unit quaternion ``q``.
+    """
+    Rotation matrix of the unit quaternion ``q``.
 
     Parameters
     ----------
     q : ndarray, shape (..., 4)
+        Unit quaternions (x, y, z, w).
 
     Returns
     -------
     ndarray, shape (..., 3, 3)
+
     """
     q = np.asarray(q, dtype=float)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -205,7 +226,8 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
-    """Unit quaternion (``w >= 0``) of the rotation matrix ``m``.
+    """
+    Return the unit quaternion (``w >= 0``) of the rotation matrix ``m``.
 
     Uses Shepperd's method: the largest of ``w, x, y, z`` is computed from the
     trace or the diagonal, the others from off-diagonal sums, so the result is
@@ -214,10 +236,12 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     m : ndarray, shape (..., 3, 3)
+        Matrices.
 
     Returns
     -------
     ndarray, shape (..., 4)
+
     """
     m = np.asarray(m, dtype=float)
     batch = m.shape[:-2]

@@ -1,6 +1,7 @@
-"""The facade a user scripts: build a scene, step it, apply wrenches, read state, reset.
+"""
+The facade a user scripts: build a scene, step it, apply wrenches, read state, reset.
 
-Example
+Example:
 -------
 >>> from rigid_body_sim.core import RigidBody, Simulation, Gravity
 >>> sim = Simulation([RigidBody('ball', mass=1.0, inertia=[0.1, 0.1, 0.1])],
@@ -13,6 +14,7 @@ Example
 Inputs and outputs are in the user's body frame (origin and axes of each body
 as given); the core works in principal frames internally (see
 :mod:`.bodies`). Changes (wrenches, reset) take effect between steps.
+
 """
 
 from __future__ import annotations
@@ -22,12 +24,12 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
+from . import rotation as so3
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, ConstraintSet
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
-from . import rotation as so3
 from .errors import SpecError
 from .integrators import integrator_class
 from .solver import ConstraintSolver
@@ -36,7 +38,8 @@ from .validate import positive_scalar
 
 @dataclass(frozen=True)
 class Reaction:
-    """Wrench a constraint exerts on one body (world frame).
+    """
+    Wrench a constraint exerts on one body (world frame).
 
     Attributes
     ----------
@@ -48,6 +51,7 @@ class Reaction:
         N m, about the joint anchor on this body.
     anchor_world : ndarray, shape (3,)
         m, where the anchor on this body is now.
+
     """
 
     force_world: np.ndarray
@@ -57,7 +61,8 @@ class Reaction:
 
 
 class Simulation:
-    """Rigid bodies, the effects that act on them, and a fixed-step integrator.
+    """
+    Rigid bodies, the effects that act on them, and a fixed-step integrator.
 
     Parameters
     ----------
@@ -74,6 +79,7 @@ class Simulation:
     constraint_time_constant : float
         s: a violated constraint returns to Φ = 0 along ``exp(-t / this)``
         (see :mod:`.solver`).
+
     """
 
     def __init__(self, bodies: Sequence[RigidBody], effects: Sequence[Effect] = (),
@@ -104,7 +110,7 @@ class Simulation:
 
     @property
     def time(self) -> float:
-        """Simulation time (s)."""
+        """Return the simulation time in seconds."""
         return self.state.time
 
     @property
@@ -166,19 +172,24 @@ class Simulation:
                      torque: Any = (0.0, 0.0, 0.0), frame: str = 'world',
                      point_body: Any = None, duration: Optional[float] = None,
                      start: Optional[float] = None) -> None:
-        """Apply a force (at ``point_body``, default the centre of mass) and a torque.
+        """
+        Apply a force (at ``point_body``, default the centre of mass) and a torque.
 
         Parameters
         ----------
         body : str
+            Name of the body.
         force, torque : array_like, shape (3,)
-            N, N m, in ``frame`` ('world' or 'body').
+            N, N m.
+        frame : {'world', 'body'}
+            Frame of ``force`` and ``torque``.
         point_body : array_like, shape (3,), optional
             m, in the body frame.
         duration : float, optional
             s; None: until cleared or reset.
         start : float, optional
             s, simulation time; default now.
+
         """
         if self._wrenches is None:
             self._wrenches = AppliedWrenches()
@@ -216,7 +227,8 @@ class Simulation:
         return arr if body is None else arr[self.bodies.lookup(body)]
 
     def pose(self, body: Optional[str] = None) -> tuple[np.ndarray, np.ndarray]:
-        """Position of the body origin (3,) and orientation (4,, xyzw), world frame.
+        """
+        Position of the body origin (3,) and orientation (4,, xyzw), world frame.
 
         With ``body`` None, arrays of all bodies, (n, 3) and (n, 4).
         """
@@ -252,7 +264,8 @@ class Simulation:
                 for name in solver.constraints.names}
 
     def reactions(self) -> dict:
-        """Reaction wrench of each constraint on each of its bodies, now.
+        """
+        Reaction wrench of each constraint on each of its bodies, now.
 
         λ is solved at the current state from the full accelerations (all
         effects, gyroscopic terms, wrenches), so these are the forces the joints
@@ -262,6 +275,7 @@ class Simulation:
         -------
         dict
             ``{name: {body_name: Reaction}}`` (the world is not listed).
+
         """
         dyn = self.dynamics
         solver = dyn.solver

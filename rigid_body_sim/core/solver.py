@@ -1,4 +1,5 @@
-"""Constraint forces and drift control: the Schur-complement (KKT) solve and projections.
+"""
+Constraint forces and drift control: the Schur-complement (KKT) solve and projections.
 
 Acceleration level (every right-hand side evaluation)
 -----------------------------------------------------
@@ -39,6 +40,7 @@ robots usually control (~1 Hz) so a violated joint closes well within a second,
 yet slow enough that the stabilization force of a 0.1 m violation stays of the
 order of the gravity force of the body. Step sizes above
 ``time_constant / 2`` are stabilized at ``ω = 1 / (2 dt)`` instead.
+
 """
 
 from __future__ import annotations
@@ -58,7 +60,6 @@ from .errors import SpecError
 from .validate import positive_scalar
 
 
-
 @dataclass
 class SolverCounters:
     """Work of the constraint solver: factorizations and projection iterations."""
@@ -71,7 +72,8 @@ class SolverCounters:
 
 
 class ConstraintSolver:
-    """Multipliers, reaction forces and projections for a :class:`ConstraintSet`.
+    """
+    Multipliers, reaction forces and projections for a :class:`ConstraintSet`.
 
     Parameters
     ----------
@@ -85,6 +87,7 @@ class ConstraintSolver:
         Stop the position projection when ``max |Φ − target|`` is below this.
     max_iterations : int
         Position projection (Newton) iterations at most.
+
     """
 
     def __init__(self, bodies: BodySet, constraints: ConstraintSet,
@@ -153,7 +156,8 @@ class ConstraintSolver:
     # -- position and velocity level -------------------------------------------------------
 
     def geometry(self, pos: np.ndarray, quat: np.ndarray) -> Geometry:
-        """Φ and G at a configuration, reusing the last one if it is the same.
+        """
+        Φ and G at a configuration, reusing the last one if it is the same.
 
         A step evaluates the same configuration several times (the kick after a
         projection, the velocity projection); the one-entry cache is keyed on the
@@ -183,7 +187,8 @@ class ConstraintSolver:
 
     def project_positions(self, start: Evaluation, pos: np.ndarray, quat: np.ndarray,
                           vel: np.ndarray, omega: np.ndarray, h: float) -> tuple:
-        """Correct the end of a (sub)step of size ``h`` onto ``Φ = exp(−h/τ) Φ_start``.
+        """
+        Correct the end of a (sub)step of size ``h`` onto ``Φ = exp(−h/τ) Φ_start``.
 
         The correction ``δ = −M⁻¹ G_startᵀ μ`` is along the constraint forces at
         the start of the step (as in SHAKE and RATTLE, which keeps splitting
@@ -194,6 +199,7 @@ class ConstraintSolver:
         -------
         pos, quat, vel, omega : ndarray
             New arrays.
+
         """
         target = np.exp(-h / self.time_constant) * start.phi
         delta = np.zeros_like(pos, shape=(len(pos), 6))

@@ -10,12 +10,14 @@ from .errors import SpecError
 
 
 def finite_array(value: Any, field: str, shape: tuple[int, ...]) -> np.ndarray:
-    """Return ``value`` as a float array of ``shape``, all finite.
+    """
+    Return ``value`` as a float array of ``shape``, all finite.
 
     Raises
     ------
     SpecError
         If the value is not numeric, has another shape, or holds NaN or inf.
+
     """
     try:
         arr = np.array(value, dtype=float)

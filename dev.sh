@@ -1,0 +1,118 @@
+#!/usr/bin/env bash
+# One entry point for newcomers, CI and developers. Every command first sets up
+# everything (idempotent: a second run skips work already done):
+#   1. a project-local virtual environment .venv with ROS 2 Jazzy from PyPI wheels,
+#      numpy, scipy, the test and lint tools (exact versions: requirements.txt);
+#   2. the CMake path fix-up the ROS wheels need for colcon builds (../shared/ros-wheels.md);
+#   3. `colcon build --symlink-install` of this ament_python package into install/.
+#
+# Usage:
+#   ./dev.sh run [SCENE.yaml] [options]   run a scene (default: config/default_scene.yaml)
+#   ./dev.sh test [pytest args]           run the whole test suite
+#   ./dev.sh bench [--quick]              run the benchmarks (tables and plots in bench/out/)
+#   ./dev.sh setup                        set up only
+set -euo pipefail
+
+cd "$(dirname "$0")"
+ROOT=$(pwd)
+VENV="$ROOT/.venv"
+PYTHON=${PYTHON:-python3}
+
+say() { echo "[dev.sh] $*" >&2; }
+
+hash_of() { cat "$@" | sha256sum | cut -d' ' -f1; }
+
+setup_venv() {
+    if [ ! -x "$VENV/bin/python" ]; then
+        local version
+        version=$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
+        case "$version" in
+            3.10|3.11|3.12|3.13) ;;
+            *) say "ROS 2 Jazzy wheels exist for Python 3.10-3.13; $PYTHON is $version"; exit 1 ;;
+        esac
+        say "creating $VENV with $PYTHON ($version)"
+        "$PYTHON" -m venv "$VENV"
+    fi
+    local want have
+    want=$(hash_of requirements.txt)
+    have=$(cat "$VENV/.requirements.sha256" 2>/dev/null || true)
+    if [ "$want" != "$have" ]; then
+        say "installing requirements.txt into .venv (about 1 minute the first time)"
+        "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r requirements.txt
+        echo "$want" > "$VENV/.requirements.sha256"
+        rm -f "$VENV/.cmake-paths-fixed"
+    fi
+}
+
+fix_cmake_paths() {
+    # The wheels' exported CMake files name include directories of the machine that
+    # built them; point them at this interpreter's (needed to build interface packages).
+    [ -f "$VENV/.cmake-paths-fixed" ] && return 0
+    local py_inc np_inc
+    py_inc=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+    np_inc=$("$VENV/bin/python" -c 'import numpy; print(numpy.get_include())')
+    if [ -d "$VENV/share" ]; then
+        grep -rlF '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null | while read -r f; do
+            sed -i \
+                -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$np_inc#g" \
+                -e "s#/opt/python/cp311-cp311/include/python3.11#$py_inc#g" "$f"
+        done
+    fi
+    touch "$VENV/.cmake-paths-fixed"
+}
+
+build() {
+    # Rebuild when the package's metadata or its list of installed files changes;
+    # with --symlink-install, edits to Python sources and config files need no rebuild.
+    local want have
+    want=$( (cat package.xml setup.py setup.cfg; ls config resource) | sha256sum | cut -d' ' -f1)
+    have=$(cat "$ROOT/install/.build.sha256" 2>/dev/null || true)
+    if [ "$want" != "$have" ] || [ ! -f "$ROOT/install/setup.sh" ]; then
+        say "colcon build"
+        (
+            export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
+            "$VENV/bin/colcon" --log-base "$ROOT/log" build --symlink-install --base-paths . \
+                --build-base "$ROOT/build" --install-base "$ROOT/install" \
+                --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" >&2
+        )
+        echo "$want" > "$ROOT/install/.build.sha256"
+    fi
+}
+
+activate() {
+    # shellcheck disable=SC1091
+    source "$VENV/bin/activate"
+    # install/setup.sh is POSIX sh and reads unset variables.
+    set +u
+    AMENT_PREFIX_PATH="$VENV" COLCON_CURRENT_PREFIX="$ROOT/install" . "$ROOT/install/setup.sh"
+    set -u
+}
+
+setup() {
+    setup_venv
+    fix_cmake_paths
+    build
+    activate
+}
+
+cmd=${1:-}
+[ $# -gt 0 ] && shift
+case "$cmd" in
+    setup) setup ;;
+    run)
+        setup
+        exec "$ROOT/install/rigid_body_sim/lib/rigid_body_sim/rigid_body_sim_run" "$@"
+        ;;
+    test)
+        setup
+        exec python -m pytest "$@"
+        ;;
+    bench)
+        setup
+        exec python bench/run_all.py "$@"
+        ;;
+    *)
+        sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'
+        exit 2
+        ;;
+esac

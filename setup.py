@@ -1,0 +1,30 @@
+"""Install rigid_body_sim as an ament_python package (colcon build or pip)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'rigid_body_sim'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(include=[package_name, package_name + '.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
+    extras_require={'plot': ['matplotlib'], 'test': ['pytest']},
+    zip_safe=True,
+    maintainer='rigid_body_sim developers',
+    maintainer_email='rigid-body-sim@example.com',
+    description='Rigid-body simulation with exact constraints as a ROS 2 service.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'rigid_body_sim_run = rigid_body_sim.cli:main',
+        ],
+    },
+)
