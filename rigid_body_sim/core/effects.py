@@ -107,6 +107,14 @@ class Effect:
         """Add this effect's wrench at ``kin`` to ``acc``."""
         raise NotImplementedError
 
+    def begin_step(self, time_mid: float) -> bool:
+        """
+        Prepare a step whose midpoint is ``time_mid``; True if the model changed.
+
+        Time-dependent effects switch here, between steps, never inside one.
+        """
+        return False
+
     def potential_energy(self, pos_com_world: np.ndarray) -> Optional[np.ndarray]:
         """Potential energy of each body (n,), or None for a non-conservative effect."""
         return None
@@ -222,6 +230,13 @@ class AppliedWrenches(Effect):
     frame; the centre of mass when omitted) and a torque, expressed in the world
     or the body frame, from ``start`` (s) for ``duration`` (s; forever when
     None). Entries are evaluated together, vectorized over entries.
+
+    Inside a :class:`Simulation`, wrenches switch on and off between steps: an
+    entry acts over every step whose midpoint lies in ``[start, start +
+    duration)``, so the impulse it delivers is exact when the duration is a
+    whole number of steps (and rounded to whole steps otherwise), whatever the
+    integrator's stage times. Evaluated outside a simulation (no
+    :meth:`begin_step`), an entry is active at times ``start <= t < end``.
     """
 
     name = 'wrenches'
@@ -231,6 +246,7 @@ class AppliedWrenches(Effect):
         self._pending = list(entries)
         self._rows: list[tuple] = []
         self._arrays: Optional[dict] = None
+        self._active: Optional[np.ndarray] = None
 
     def bind(self, bodies: BodySet) -> None:
         """Validate the initial entries now that the bodies are known."""
@@ -291,6 +307,7 @@ class AppliedWrenches(Effect):
             f, tau = V.T @ f, V.T @ tau    # stored in the principal frame
         self._rows.append((b, fr is Frame.BODY, f, tau, r_p, t0, t1))
         self._arrays = None
+        self._active = None
 
     def remove_expired(self, time: float) -> None:
         """Drop entries that ended at or before ``time``."""
@@ -298,6 +315,7 @@ class AppliedWrenches(Effect):
         if len(keep) != len(self._rows):
             self._rows = keep
             self._arrays = None
+            self._active = None
 
     def clear(self, body: Optional[str] = None) -> None:
         """Remove all entries, or those of one body."""
@@ -307,6 +325,15 @@ class AppliedWrenches(Effect):
             b = self.bodies.lookup(body, 'body')
             self._rows = [row for row in self._rows if row[0] != b]
         self._arrays = None
+        self._active = None
+
+    def begin_step(self, time_mid: float) -> bool:
+        """Fix the entries active during the step whose midpoint is ``time_mid``."""
+        tab = self._table()
+        active = (tab['start'] <= time_mid) & (time_mid < tab['end'])
+        changed = self._active is None or not np.array_equal(active, self._active)
+        self._active = active
+        return changed
 
     def __len__(self) -> int:
         """Return the number of entries (active or not)."""
@@ -327,11 +354,13 @@ class AppliedWrenches(Effect):
         return self._arrays
 
     def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
-        """Add the wrenches active at ``kin.time``."""
+        """Add the wrenches active in this step (or at ``kin.time``, outside a simulation)."""
         if not self._rows:
             return
         tab = self._table()
-        active = (tab['start'] <= kin.time) & (kin.time < tab['end'])
+        active = self._active
+        if active is None:
+            active = (tab['start'] <= kin.time) & (kin.time < tab['end'])
         if not np.any(active):
             return
         self.evaluations += 1

@@ -124,7 +124,11 @@ class Simulation:
             raise SpecError('n', f'must be a non-negative integer, got {n!r}')
         solver = self.dynamics.solver
         solver.dt = self.dt
+        effects = self.dynamics.effects
         for _ in range(int(n)):
+            mid = (self._steps + 0.5) * self.dt
+            if any([effect.begin_step(mid) for effect in effects]):
+                self.dynamics.changed()
             # Time as steps * dt, not a running sum: no rounding drift.
             self.state = self.integrator.step(self.state, self.dt, (self._steps + 1) * self.dt)
             self._steps += 1
@@ -144,6 +148,7 @@ class Simulation:
             if rows is not None:
                 effect._rows = list(rows)
                 effect._arrays = None
+                effect._active = None
         # Effects added at run time (a lazily created wrench table) are dropped.
         self.dynamics.effects = self.dynamics.effects[:len(self._initial_wrenches)]
         self.dynamics._refresh()
