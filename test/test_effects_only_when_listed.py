@@ -1,0 +1,62 @@
+"""A step evaluates only the effects a scene lists; work counters show it."""
+
+import pytest
+from rigid_body_sim.core import Gravity, INTEGRATORS, RigidBody, Simulation
+
+STEPS = 50
+# Right-hand sides per step: rkmk4 has 4 stages; the splitting methods evaluate
+# position-dependent forces in kicks, reusing the last kick of a step as the first of
+# the next (first same as last): 1 per Strang sub-step (+1 at the very start).
+KICKS = {'symplectic_euler': (STEPS, 0), 'lie_poisson2': (STEPS + 1, 0),
+         'lie_poisson4': (3 * STEPS + 1, 0)}
+# Free-rotor sub-flows per step and anisotropic body (splittings) or gyroscopic
+# evaluations (rkmk4: one per stage).
+GYRO = {'symplectic_euler': 3, 'lie_poisson2': 5, 'lie_poisson4': 15, 'rkmk4': 4}
+
+
+def scene(name, gravity, moments):
+    bodies = [RigidBody(f'b{i}', 1.0, moments, angular_velocity_body=(0.1, 1.0, 0.2))
+              for i in range(3)]
+    return Simulation(bodies, [Gravity()] if gravity else [], name, 1e-3)
+
+
+@pytest.mark.parametrize('name', sorted(INTEGRATORS))
+def test_no_gravity_term_without_gravity(name):
+    sim = scene(name, False, (1.0, 2.0, 3.0))
+    sim.step(STEPS)
+    work = sim.work()
+    assert 'gravity_evaluations' not in work
+    assert work['kick_evaluations'] == 0 or name == 'rkmk4'
+
+
+@pytest.mark.parametrize('name', sorted(INTEGRATORS))
+def test_gravity_evaluated_once_per_force_evaluation(name):
+    sim = scene(name, True, (1.0, 2.0, 3.0))
+    sim.step(STEPS)
+    work = sim.work()
+    expected = 4 * STEPS if name == 'rkmk4' else KICKS[name][0]
+    assert work['gravity_evaluations'] == expected
+    assert work['gravity_body_evaluations'] == 3 * expected
+
+
+@pytest.mark.parametrize('name', sorted(INTEGRATORS))
+def test_no_gyroscopic_work_for_isotropic_bodies(name):
+    sim = scene(name, True, (2.0, 2.0, 2.0))
+    sim.step(STEPS)
+    assert sim.work()['gyroscopic_body_evaluations'] == 0
+
+
+@pytest.mark.parametrize('name', sorted(INTEGRATORS))
+def test_gyroscopic_work_for_anisotropic_bodies_only(name):
+    bodies = [RigidBody('iso', 1.0, (1.0, 1.0, 1.0), angular_velocity_body=(0, 1, 0)),
+              RigidBody('aniso', 1.0, (1.0, 2.0, 3.0), angular_velocity_body=(0, 1, 0))]
+    sim = Simulation(bodies, [], name, 1e-3)
+    sim.step(STEPS)
+    assert sim.work()['gyroscopic_body_evaluations'] == GYRO[name] * STEPS * 1
+
+
+def test_no_constraint_work_without_constraints():
+    sim = scene('rkmk4', True, (1.0, 2.0, 3.0))
+    sim.step(STEPS)
+    counters = sim.dynamics.solver.counters
+    assert counters.geometry_evaluations == counters.factorizations == 0
