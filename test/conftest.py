@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core import RigidBody
+from rigid_body_sim.core import rotation as so3
 
 
 def random_inertia(rng: np.random.Generator) -> np.ndarray:

@@ -11,8 +11,12 @@ T_END = 1.0
 
 
 def build(name: str, dt: float) -> Simulation:
-    """Every code path at once: gravity, damping, world and body wrenches off the COM,
-    an anisotropic body with a non-diagonal inertia and an isotropic one."""
+    """
+    Build a scene with every code path at once.
+
+    Gravity, damping, world and body wrenches off the centre of mass, an
+    anisotropic body with a non-diagonal inertia and an isotropic one.
+    """
     inertia = np.array([[0.30, 0.02, -0.05], [0.02, 0.25, 0.01], [-0.05, 0.01, 0.20]])
     bodies = [RigidBody('box', 3.0, inertia, com_body=[0.1, -0.2, 0.05],
                         orientation_xyzw=so3.quat_normalize(np.array([0.2, -0.3, 0.1, 0.9])),

@@ -4,7 +4,7 @@ import subprocess
 import sys
 import textwrap
 
-SCRIPT = textwrap.dedent('''
+SCRIPT = textwrap.dedent("""
     import importlib.abc
     import sys
 
@@ -25,7 +25,7 @@ SCRIPT = textwrap.dedent('''
     assert sim.time > 0.0
     assert not [m for m in sys.modules if m.startswith(('rclpy', 'rosidl'))]
     print('ok')
-''')
+""")
 
 
 def test_core_runs_with_ros_blocked():

@@ -129,8 +129,9 @@ def _off_centre_body():
 @pytest.mark.parametrize('frame', ['world', 'body'])
 def test_off_centre_wrench_gives_exact_accelerations(frame):
     body = _off_centre_body()
-    force, torque, point = np.array([2.0, -1.0, 3.0]), np.array([0.1, 0.2, -0.3]), \
-        np.array([0.3, 0.1, -0.2])
+    force = np.array([2.0, -1.0, 3.0])
+    torque = np.array([0.1, 0.2, -0.3])
+    point = np.array([0.3, 0.1, -0.2])
     sim = Simulation([body], [AppliedWrenches([{'body': 'box', 'force': force,
                                                  'torque': torque, 'frame': frame,
                                                  'point_body': point}])], 'rkmk4', 1e-3)

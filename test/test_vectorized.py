@@ -1,10 +1,9 @@
 """A vectorized step of many bodies equals stepping each body alone."""
 
+from conftest import random_body
 import numpy as np
 import pytest
-from rigid_body_sim.core import (AppliedWrenches, Damping, Gravity, INTEGRATORS, Simulation)
-
-from conftest import random_body
+from rigid_body_sim.core import AppliedWrenches, Damping, Gravity, INTEGRATORS, Simulation
 
 
 @pytest.mark.parametrize('name', sorted(INTEGRATORS))

@@ -127,7 +127,9 @@ class Simulation:
         effects = self.dynamics.effects
         for _ in range(int(n)):
             mid = (self._steps + 0.5) * self.dt
-            if any([effect.begin_step(mid) for effect in effects]):
+            # Every effect must see the new step: no short-circuit.
+            switched = [effect.begin_step(mid) for effect in effects]
+            if any(switched):
                 self.dynamics.changed()
             # Time as steps * dt, not a running sum: no rounding drift.
             self.state = self.integrator.step(self.state, self.dt, (self._steps + 1) * self.dt)
