@@ -132,9 +132,9 @@ def test_off_centre_wrench_gives_exact_accelerations(frame):
     force = np.array([2.0, -1.0, 3.0])
     torque = np.array([0.1, 0.2, -0.3])
     point = np.array([0.3, 0.1, -0.2])
-    sim = Simulation([body], [AppliedWrenches([{'body': 'box', 'force': force,
-                                                 'torque': torque, 'frame': frame,
-                                                 'point_body': point}])], 'rkmk4', 1e-3)
+    wrench = {'body': 'box', 'force': force, 'torque': torque, 'frame': frame,
+              'point_body': point}
+    sim = Simulation([body], [AppliedWrenches([wrench])], 'rkmk4', 1e-3)
     s = sim.state
     acc, om_dot = sim.dynamics.accelerations(0.0, s.pos_com_world, s.quat_principal_world,
                                              s.vel_com_world, s.ang_vel_principal)
