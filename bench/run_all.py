@@ -32,7 +32,7 @@ OUT = Path(__file__).resolve().parent / 'out'
 SCENES = {
     'intermediate_axis': ((1.0, 2.0, 3.0), (0.01, 1.0, 0.01), 10.0),
     'symmetric_top': ((2.0, 2.0, 1.0), (0.3, 0.0, 5.0), 10.0),
-    'fast_asymmetric': ((1.0, 1.5, 2.8), (3.0, 2.0, -4.0), 5.0),
+    'fast_asymmetric': ((1.0, 1.5, 2.3), (3.0, 2.0, -4.0), 5.0),
 }
 
 
@@ -64,14 +64,15 @@ def work_precision(dts, max_steps):
     """Rows (scene, integrator, dt, error, energy drift, |L| drift, wall s per sim s)."""
     rows = []
     for scene, (moments, omega0, duration) in SCENES.items():
-        omega_ref, quat_ref = free_body_reference(np.array(moments), np.array(omega0),
-                                                  np.array([0.0, 0.0, 0.0, 1.0]),
-                                                  np.array([duration]))
         for name in INTEGRATORS:
             for dt in dts:
                 n = int(round(duration / dt))
                 if n > max_steps:
                     continue
+                # The reference at the time actually reached (n dt may differ from duration).
+                omega_ref, quat_ref = free_body_reference(
+                    np.array(moments), np.array(omega0), np.array([0.0, 0.0, 0.0, 1.0]),
+                    np.array([n * dt]))
                 sim = _simulation(moments, omega0, name, dt)
                 wall, de, dl = _timed_run(sim, n)
                 w = sim.state.ang_vel_principal[0]
@@ -79,9 +80,10 @@ def work_precision(dts, max_steps):
                 err_w = np.linalg.norm(w - omega_ref[-1]) / np.linalg.norm(omega_ref[-1])
                 err_r = float(np.linalg.norm(so3.log_quat(
                     so3.quat_multiply(so3.quat_conjugate(quat_ref[-1]), q))))
-                rows.append((scene, name, dt, max(err_w, err_r), de, dl, wall / duration))
+                t_end = n * dt
+                rows.append((scene, name, dt, max(err_w, err_r), de, dl, wall / t_end))
                 print(f'  {scene:18s} {name:16s} dt {dt:7.0e}  err {max(err_w, err_r):8.1e}  '
-                      f'dE {de:8.1e}  d|L| {dl:8.1e}  {wall / duration:9.4f} s/sim-s',
+                      f'dE {de:8.1e}  d|L| {dl:8.1e}  {wall / t_end:9.4f} s/sim-s',
                       flush=True)
     return rows
 

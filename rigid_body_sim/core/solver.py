@@ -8,13 +8,15 @@ With the block-diagonal mass matrix ``M = diag(m, m, m, J1, J2, J3)`` per body
 ``a_u = M⁻¹ (f − [0, Ω × JΩ])`` and the constraint rows of :mod:`.constraints`,
 the multipliers solve::
 
-    (G M⁻¹ Gᵀ + ε D) λ = G a_u + γ + 2 ω Φ̇ + ω² Φ,      a = a_u − M⁻¹ Gᵀ λ,
+    G M⁻¹ Gᵀ λ = G a_u + γ + 2 ω Φ̇ + ω² Φ,      a = a_u − M⁻¹ Gᵀ λ,
 
 i.e. ``Φ̈ = −2 ω Φ̇ − ω² Φ`` (critically damped Baumgarte stabilization with
-``ω = 1 / time_constant``). ``D = diag(G M⁻¹ Gᵀ)`` and ``ε = regularization``
-(1e-10): a relative Tikhonov term that makes redundant rows (closed loops, a
-joint added twice) solvable, giving the minimum-norm multipliers in the limit,
-and changes a well-posed solve by ~1e-10 relative.
+``ω = 1 / time_constant``). Redundant rows (closed loops, a joint added twice)
+make ``G M⁻¹ Gᵀ`` singular; a vanishing pivot reveals it, and the
+minimum-norm multipliers are then taken (truncated SVD for small systems, a
+1e-12 relative Tikhonov term for large sparse ones). A full-rank system is
+solved as it is: no regularization biases the reaction forces, however
+ill-conditioned the mass ratios make it (a point mass on a rod: 1e9).
 
 The matrix ``G M⁻¹ Gᵀ`` couples only constraints that share a body: block
 tridiagonal for chains, tree-shaped for trees. It is factorized by SuperLU with
@@ -66,6 +68,8 @@ class SolverCounters:
 
     geometry_evaluations: int = 0
     factorizations: int = 0
+    rank_deficient_solves: int = 0
+    projection_fallbacks: int = 0
     acceleration_solves: int = 0
     position_iterations: int = 0
     velocity_projections: int = 0
@@ -82,7 +86,11 @@ class ConstraintSolver:
     time_constant : float
         s, > 0: decay time of a violation (see the module docstring).
     regularization : float
-        Relative Tikhonov regularization of ``G M⁻¹ Gᵀ``, >= 0.
+        Tikhonov term (relative to the largest diagonal entry of ``G M⁻¹ Gᵀ``)
+        for large sparse systems with redundant rows, >= 0.
+    rank_rtol : float
+        A factorization pivot below this times the largest diagonal entry
+        marks the system as rank-deficient (redundant rows).
     position_tolerance : float
         Stop the position projection when ``max |Φ − target|`` is below this.
     max_iterations : int
@@ -91,7 +99,8 @@ class ConstraintSolver:
     """
 
     def __init__(self, bodies: BodySet, constraints: ConstraintSet,
-                 time_constant: float = 0.05, regularization: float = 1e-10,
+                 time_constant: float = 0.05, regularization: float = 1e-12,
+                 rank_rtol: float = 1e-12,
                  position_tolerance: float = 1e-13, max_iterations: int = 6) -> None:
         self.bodies = bodies
         self.constraints = constraints
@@ -99,6 +108,7 @@ class ConstraintSolver:
         if not (regularization >= 0.0 and np.isfinite(regularization)):
             raise SpecError('regularization', f'must be finite and >= 0, got {regularization!r}')
         self.regularization = float(regularization)
+        self.rank_rtol = positive_scalar(rank_rtol, 'rank_rtol')
         self.position_tolerance = positive_scalar(position_tolerance, 'position_tolerance')
         self.max_iterations = int(max_iterations)
         self.counters = SolverCounters()
@@ -116,20 +126,53 @@ class ConstraintSolver:
     # -- linear algebra --------------------------------------------------------------------
 
     def _factor(self, G: RowJacobian, H: Optional[RowJacobian] = None) -> Callable:
-        """Solve function for ``G M⁻¹ Hᵀ + ε D`` (``H = G``: symmetric positive definite)."""
+        """
+        Return a solve function for ``A = G M⁻¹ Hᵀ`` (``H = G``: symmetric).
+
+        Full-rank systems are factorized as they are (Cholesky or LU, no
+        regularization, so no bias however ill-conditioned the masses make
+        them). A pivot below ``rank_rtol`` times the largest diagonal entry
+        reveals redundant rows; then dense systems are solved by a truncated
+        eigen- or singular-value decomposition (minimum-norm multipliers), and
+        sparse ones with ``A + regularization · max|diag A| · I``.
+        """
         self.counters.factorizations += 1
         A = G.schur(self.inv_mass_6, H)
+        if A.shape[0] == 0:
+            return lambda b: np.zeros(0)
         diag = np.abs(A.diagonal())
-        floor = 1e-12 * (diag.max() if len(diag) else 1.0)
-        reg = self.regularization * np.maximum(diag, floor) + 1e-300
+        scale = float(diag.max()) if diag.max() > 0.0 else 1.0
+        tiny = self.rank_rtol * scale
         if G.dense_mode:
-            A = A + np.diag(reg)
+            try:
+                if H is None:
+                    c = sla.cho_factor(A, check_finite=False)
+                    if np.min(np.diag(c[0])) ** 2 > tiny:
+                        return lambda b: sla.cho_solve(c, b, check_finite=False)
+                else:
+                    lu = sla.lu_factor(A, check_finite=False)
+                    if np.min(np.abs(np.diag(lu[0]))) > tiny:
+                        return lambda b: sla.lu_solve(lu, b, check_finite=False)
+            except (np.linalg.LinAlgError, ValueError):
+                pass
+            self.counters.rank_deficient_solves += 1
+            U, s, Vt = np.linalg.svd(A)
+            keep = s > 1e-13 * s[0]
+            U, s, Vt = U[:, keep], s[keep], Vt[keep]
+            return lambda b: Vt.T @ ((U.T @ b) / s)
+        A = A.tocsc()
+        try:
             if H is None:
-                c = sla.cho_factor(A, check_finite=False)
-                return lambda b: sla.cho_solve(c, b, check_finite=False)
-            lu = sla.lu_factor(A, check_finite=False)
-            return lambda b: sla.lu_solve(lu, b, check_finite=False)
-        A = (A + sp.diags(reg)).tocsc()
+                lu = spla.splu(A, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
+                               options={'SymmetricMode': True})
+            else:
+                lu = spla.splu(A, permc_spec='COLAMD')
+            if np.min(np.abs(lu.U.diagonal())) > tiny:
+                return lu.solve
+        except RuntimeError:   # exactly singular
+            pass
+        self.counters.rank_deficient_solves += 1
+        A = (A + sp.identity(A.shape[0], format='csc') * (self.regularization * scale)).tocsc()
         if H is None:
             return spla.splu(A, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
                              options={'SymmetricMode': True}).solve
@@ -194,6 +237,9 @@ class ConstraintSolver:
         the start of the step (as in SHAKE and RATTLE, which keeps splitting
         methods symplectic), with μ from Newton's method on
         ``Φ(q ⊕ δ) = target``; the same impulse changes the velocities by δ/h.
+        If Newton's method stops converging (the configuration moved too far in
+        one step), it continues with the orthogonal projection ``δ = −M⁻¹ Gᵀ μ``
+        at the current configuration, and counts a ``projection_fallback``.
 
         Returns
         -------
@@ -203,16 +249,24 @@ class ConstraintSolver:
         """
         target = np.exp(-h / self.time_constant) * start.phi
         delta = np.zeros_like(pos, shape=(len(pos), 6))
-        for _ in range(self.max_iterations + 1):
+        direction = start.jacobian
+        previous = np.inf
+        for it in range(self.max_iterations + 1):
             ev = self.geometry(pos, quat)
             r = ev.phi - target
-            if np.max(np.abs(r), initial=0.0) <= self.position_tolerance:
+            norm = np.max(np.abs(r), initial=0.0)
+            if norm <= self.position_tolerance or it == self.max_iterations:
                 break
-            if _ == self.max_iterations:
-                break
+            if norm > 0.5 * previous and direction is start.jacobian:
+                # Not converging: the configuration moved too far in the step for the
+                # start-of-step direction (a whip, a large dt). Project orthogonally.
+                self.counters.projection_fallbacks += 1
+                direction = None
+            previous = norm
             self.counters.position_iterations += 1
-            d = -self.inv_mass_6 * start.jacobian.rmatvec(
-                self._factor(ev.jacobian, start.jacobian)(r))
+            H = ev.jacobian if direction is None else direction
+            d = -self.inv_mass_6 * H.rmatvec(
+                self._factor(ev.jacobian, None if direction is None else H)(r))
             pos = pos + d[:, :3]
             quat = so3.quat_normalize(so3.quat_multiply(quat, so3.exp_quat(d[:, 3:])))
             delta += d
