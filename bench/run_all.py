@@ -28,10 +28,11 @@ from rigid_body_sim.core.reference import free_body_reference
 
 OUT = Path(__file__).resolve().parent / 'out'
 
-# Free-body scenes: (name, principal moments, Ω0 in the principal frame, duration).
+# Free-body scenes: (name, principal moments in ascending order, so that the principal
+# frame is the body frame, Ω0 in it, duration).
 SCENES = {
     'intermediate_axis': ((1.0, 2.0, 3.0), (0.01, 1.0, 0.01), 10.0),
-    'symmetric_top': ((2.0, 2.0, 1.0), (0.3, 0.0, 5.0), 10.0),
+    'symmetric_top': ((1.0, 2.0, 2.0), (5.0, 0.3, 0.0), 10.0),
     'fast_asymmetric': ((1.0, 1.5, 2.3), (3.0, 2.0, -4.0), 5.0),
 }
 

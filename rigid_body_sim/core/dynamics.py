@@ -41,6 +41,9 @@ class WorkCounters:
         Bodies for which ``Ω × JΩ`` or a free-rotor sub-flow was computed.
     rotation_updates : int
         Body orientations updated by an exponential map.
+    substeps : int
+        Sub-steps taken by steps that had to be split (see
+        ``Integrator.substeps``); 0 when every step was taken whole.
 
     """
 
@@ -49,6 +52,7 @@ class WorkCounters:
     kick_evaluations: int = 0
     gyroscopic_body_evaluations: int = 0
     rotation_updates: int = 0
+    substeps: int = 0
 
     def as_dict(self) -> dict:
         """Counters as a plain dict."""

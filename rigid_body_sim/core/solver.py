@@ -269,7 +269,8 @@ class ConstraintSolver:
                 self._factor(ev.jacobian, None if direction is None else H)(r))
             pos = pos + d[:, :3]
             quat = so3.quat_normalize(so3.quat_multiply(quat, so3.exp_quat(d[:, 3:])))
-            delta += d
+            if direction is not None:
+                delta += d   # an impulse of the step; an orthogonal projection is not
         return pos, quat, vel + delta[:, :3] / h, omega + delta[:, 3:] / h
 
     def project_velocities(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
