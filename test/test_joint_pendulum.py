@@ -10,8 +10,8 @@ from rigid_body_sim.core import INTEGRATORS
 ANGLES = [np.radians(30.0), np.radians(120.0)]
 DT = 2e-3
 # Relative period error measured at dt = 2e-3 (30 deg / 120 deg): symplectic_euler
-# 8.3e-6 / 2.1e-5, lie_poisson2 8.9e-6 / 2.7e-5, rkmk4 6.0e-8 / 9.3e-8, lie_poisson4
-# 1.6e-8 / 3.5e-8. Bounds about 4x the larger one.
+# 8.3e-6 / 2.1e-5, lie_poisson2 8.9e-6 / 2.7e-5, rkmk4 1.9e-8 / 5.0e-8, lie_poisson4
+# 2.0e-8 / 5.1e-8. Bounds about 4x the larger one.
 PERIOD_RTOL = {'symplectic_euler': 1e-4, 'lie_poisson2': 1e-4, 'rkmk4': 5e-7,
                'lie_poisson4': 2e-7}
 
@@ -45,7 +45,7 @@ def test_period_and_tension(name, theta0):
     np.testing.assert_allclose(period, pendulum_period(theta0), rtol=PERIOD_RTOL[name])
     # The tension follows from the simulated speed, so its error is the method's energy
     # error. Measured (in units of mg, 30 / 120 deg): symplectic_euler 1.7e-3 / 1.5e-2,
-    # lie_poisson2 1.1e-5 / 2.1e-4, rkmk4 6e-9 / 7.2e-7, lie_poisson4 5e-9 / 1.0e-7.
+    # lie_poisson2 1.1e-5 / 2.1e-4, rkmk4 1.9e-8 / 1.5e-7, lie_poisson4 5.5e-9 / 1.0e-7.
     assert tension_error < {1: 5e-2, 2: 1e-3, 4: 5e-6}[INTEGRATORS[name].order]
 
 

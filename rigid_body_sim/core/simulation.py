@@ -75,7 +75,8 @@ class Simulation:
         Step size (s), > 0.
     constraints : sequence of Constraint
         Added in order at t = 0 (anchors and axes given in the world frame
-        refer to the initial poses).
+        refer to the initial poses); initial velocities that disagree with them
+        are reconciled as by :meth:`add_constraint`.
     constraint_time_constant : float
         s: a violated constraint returns to Φ = 0 along ``exp(-t / this)``
         (see :mod:`.solver`).
@@ -168,6 +169,7 @@ class Simulation:
             except SpecError as exc:
                 raise exc.within(f'constraints[{i}]') from None
         self.dynamics.changed()
+        self._reconcile_velocities()
 
     @staticmethod
     def _wrench_rows(effect: Effect) -> Optional[list]:
@@ -213,9 +215,25 @@ class Simulation:
             self.dynamics.changed()
 
     def add_constraint(self, constraint: Constraint) -> None:
-        """Add a constraint between steps; anchors and axes in the world refer to now."""
+        """
+        Add a constraint between steps; anchors and axes in the world refer to now.
+
+        Bodies whose velocities disagree with the new joint are reconciled at
+        once, by the mass-weighted projection onto ``Φ̇ = −Φ/τ`` (a perfectly
+        inelastic impact, which conserves momenta); a position violation then
+        decays along ``exp(−t/τ)``.
+        """
         self.dynamics.solver.constraints.add(constraint, self.state)
         self.dynamics.changed()
+        self._reconcile_velocities()
+
+    def _reconcile_velocities(self) -> None:
+        if not self.dynamics.constrained:
+            return
+        s = self.state
+        vel, om = self.dynamics.solver.project_velocities(
+            s.pos_com_world, s.quat_principal_world, s.vel_com_world, s.ang_vel_principal)
+        self.state = State(s.time, s.pos_com_world, s.quat_principal_world, vel, om)
 
     def remove_constraint(self, name: str) -> Constraint:
         """Remove the constraint called ``name``; returns its description."""

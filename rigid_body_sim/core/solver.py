@@ -228,8 +228,13 @@ class ConstraintSolver:
         return self.evaluate(state.pos_com_world, state.quat_principal_world,
                              state.vel_com_world, state.ang_vel_principal).phi
 
+    def solve(self, G: RowJacobian, H: Optional[RowJacobian], rhs: np.ndarray) -> np.ndarray:
+        """Solve ``G M⁻¹ Hᵀ x = rhs`` (``H`` None: ``H = G``)."""
+        return self._factor(G, H)(rhs)
+
     def project_positions(self, start: Evaluation, pos: np.ndarray, quat: np.ndarray,
-                          vel: np.ndarray, omega: np.ndarray, h: float) -> tuple:
+                          vel: np.ndarray, omega: np.ndarray, h: float,
+                          orthogonal: bool = False) -> tuple:
         """
         Correct the end of a (sub)step of size ``h`` onto ``Φ = exp(−h/τ) Φ_start``.
 
@@ -239,7 +244,8 @@ class ConstraintSolver:
         ``Φ(q ⊕ δ) = target``; the same impulse changes the velocities by δ/h.
         If Newton's method stops converging (the configuration moved too far in
         one step), it continues with the orthogonal projection ``δ = −M⁻¹ Gᵀ μ``
-        at the current configuration, and counts a ``projection_fallback``.
+        at the current configuration, and counts a ``projection_fallback``;
+        ``orthogonal`` starts with it (a plain projection: velocities unchanged).
 
         Returns
         -------
@@ -249,7 +255,7 @@ class ConstraintSolver:
         """
         target = np.exp(-h / self.time_constant) * start.phi
         delta = np.zeros_like(pos, shape=(len(pos), 6))
-        direction = start.jacobian
+        direction = None if orthogonal else start.jacobian
         previous = np.inf
         for it in range(self.max_iterations + 1):
             ev = self.geometry(pos, quat)
