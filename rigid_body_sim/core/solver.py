@@ -49,6 +49,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Callable, Optional
+import warnings
 
 import numpy as np
 import scipy.linalg as sla
@@ -145,14 +146,16 @@ class ConstraintSolver:
         tiny = self.rank_rtol * scale
         if G.dense_mode:
             try:
+                with warnings.catch_warnings():
+                    # A zero pivot is expected for redundant rows and handled below.
+                    warnings.simplefilter('ignore', sla.LinAlgWarning)
+                    factors = (sla.cho_factor(A, check_finite=False) if H is None
+                               else sla.lu_factor(A, check_finite=False))
                 if H is None:
-                    c = sla.cho_factor(A, check_finite=False)
-                    if np.min(np.diag(c[0])) ** 2 > tiny:
-                        return lambda b: sla.cho_solve(c, b, check_finite=False)
-                else:
-                    lu = sla.lu_factor(A, check_finite=False)
-                    if np.min(np.abs(np.diag(lu[0]))) > tiny:
-                        return lambda b: sla.lu_solve(lu, b, check_finite=False)
+                    if np.min(np.diag(factors[0])) ** 2 > tiny:
+                        return lambda b: sla.cho_solve(factors, b, check_finite=False)
+                elif np.min(np.abs(np.diag(factors[0]))) > tiny:
+                    return lambda b: sla.lu_solve(factors, b, check_finite=False)
             except (np.linalg.LinAlgError, ValueError):
                 pass
             self.counters.rank_deficient_solves += 1

@@ -1,0 +1,77 @@
+"""Bad constraint input: a clear SpecError naming the field; the simulation carries on."""
+
+import numpy as np
+import pytest
+from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation, SpecError
+
+NAN = float('nan')
+
+
+def simulation():
+    bodies = [RigidBody('a', 1.0, [0.1, 0.1, 0.1], position_world=[0.5, 0.0, 0.0]),
+              RigidBody('b', 1.0, [0.1, 0.2, 0.25], position_world=[1.0, 0.0, 0.0])]
+    return Simulation(bodies, [Gravity()], 'lie_poisson2', 1e-3,
+                      [Constraint('pivot', 'ball', 'a', None, anchor_world=[0.0, 0.0, 0.0])])
+
+
+@pytest.mark.parametrize('make, message', [
+    (lambda: Constraint('j', 'ball', 'a', 'a'), r"^body_b: a body cannot be constrained to "
+                                                r"itself \('a'\)"),
+    (lambda: Constraint('j', 'hinge', 'a', 'b', anchor_world=[0, 0, 0], axis_world=[0, 0, 0]),
+     r'^axis_world: zero-length axis'),
+    (lambda: Constraint('j', 'hinge', 'a', 'b'), r'^axis_world: required for a hinge'),
+    (lambda: Constraint('j', 'ball', 'a', 'b', anchor_world=[0.0, NAN, 0.0]),
+     r'^anchor_world: must be finite'),
+    (lambda: Constraint('j', 'ball', 'a', 'b', anchor_a_body=[np.inf, 0, 0]),
+     r'^anchor_a_body: must be finite'),
+    (lambda: Constraint('j', 'weld', 'a', 'b'), r"^type: unknown constraint type 'weld'"),
+    (lambda: Constraint('j', 'generic', 'a', 'b'), r'^function: a generic constraint needs'),
+    (lambda: Constraint('', 'ball', 'a', 'b'), r'^name: must be a non-empty string'),
+    (lambda: Constraint('j', 'distance', 'a', 'b', length=-1.0), r'^length: must be positive'),
+])
+def test_bad_constraint_spec(make, message):
+    with pytest.raises(SpecError, match=message):
+        make()
+
+
+@pytest.mark.parametrize('spec, message', [
+    (Constraint('j', 'ball', 'nobody', 'b'), r"^body_a: unknown body 'nobody'"),
+    (Constraint('j', 'ball', 'a', 'nobody'), r"^body_b: unknown body 'nobody'"),
+    (Constraint('pivot', 'ball', 'b', None), r"^name: duplicate constraint name 'pivot'"),
+    (Constraint('j', 'generic', 'a', 'b', function=lambda xa, Ra, xb, Rb: np.array([NAN])),
+     r'^function: must return a non-empty 1-D array of finite numbers'),
+    (Constraint('j', 'generic', 'a', 'b', function=lambda xa, Ra, xb, Rb: 1 / 0),
+     r'^function: raised ZeroDivisionError'),
+    (Constraint('j', 'distance', 'a', 'b', anchor_a_body=[0.25, 0, 0],
+                anchor_b_body=[-0.25, 0, 0]), r'^length: the anchors coincide'),
+])
+def test_rejected_constraint_leaves_the_simulation_intact(spec, message):
+    sim, reference = simulation(), simulation()
+    with pytest.raises(SpecError, match=message):
+        sim.add_constraint(spec)
+    assert sim.constraint_names == ['pivot']
+    sim.step(200)
+    reference.step(200)
+    np.testing.assert_array_equal(sim.pose()[0], reference.pose()[0])
+
+
+def test_removing_an_unknown_constraint():
+    sim = simulation()
+    with pytest.raises(SpecError, match=r"^name: no constraint named 'nope'; constraints: "
+                                        r"\['pivot'\]"):
+        sim.remove_constraint('nope')
+    sim.step(10)
+    assert sim.constraint_names == ['pivot']
+
+
+def test_removed_joint_releases_the_body_into_free_fall():
+    sim = simulation()
+    sim.run(0.3)
+    sim.remove_constraint('pivot')
+    x0, v0 = sim.state.pos_com_world[0].copy(), sim.state.vel_com_world[0].copy()
+    sim.run(0.5)
+    g = np.array([0.0, 0.0, -9.81])
+    np.testing.assert_allclose(sim.state.pos_com_world[0], x0 + 0.5 * v0 + 0.125 * g,
+                               rtol=1e-12, atol=1e-12)
+    assert sim.constraint_names == []
+    assert not sim.dynamics.constrained

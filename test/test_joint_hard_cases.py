@@ -1,0 +1,158 @@
+"""The hard cases: long runs that must stay finite, conservative and on the constraints."""
+
+import sys
+from pathlib import Path
+
+from joint_scenes import G
+import numpy as np
+import pytest
+from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation
+from rigid_body_sim.core import rotation as so3
+from rigid_body_sim.core.reference import intermediate_axis_period
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
+from constraints import chain, four_bar, rod  # noqa: E402 - the benchmark's scenes
+
+
+def run_and_watch(sim, seconds, every=50):
+    """Step, recording the worst energy error, violation and kinetic energy; no NaN."""
+    e0 = sim.diagnostics().total_energy
+    worst_de = worst_violation = max_ke = 0.0
+    for _ in range(int(round(seconds / sim.dt / every))):
+        sim.step(every)
+        d = sim.diagnostics()
+        assert np.isfinite(d.total_energy) and np.all(np.isfinite(sim.state.pos_com_world))
+        worst_de = max(worst_de, abs(d.total_energy - e0))
+        worst_violation = max(worst_violation, d.constraint_violation)
+        max_ke = max(max_ke, float(np.sum(d.kinetic_energy)))
+    return worst_de, worst_violation, max_ke
+
+
+@pytest.mark.slow
+def test_chain_of_50_links_released_horizontal_for_20s():
+    # 5 m, 5 kg of rods on ball joints falls 2.5 m and whips: the tip links turn at
+    # 400 rad/s, so steps are split into sub-steps there. Measured with lie_poisson2 at
+    # dt = 1e-3: worst |dE| 3.5e-3 of the largest kinetic energy (150 J), violation
+    # 2e-13, about 350 sub-steps in 20 000 steps.
+    sim = chain(50, 'lie_poisson2', 1e-3)
+    worst_de, worst_violation, max_ke = run_and_watch(sim, 20.0, every=100)
+    assert max_ke > 100.0   # it really fell and whipped
+    assert worst_de < 2e-2 * max_ke
+    assert worst_violation < 1e-10
+
+
+def test_four_bar_linkage_redundant_closed_loop():
+    # Four parallel hinges in a plane: 20 rows for 1 degree of freedom, 3 of them
+    # redundant. Measured over 3 s at dt = 2e-3: dE 1e-7 relative, violation 3e-13.
+    angle, de, violation, _ = four_bar('lie_poisson2', 2e-3, duration=3.0)
+    assert np.isfinite(angle)
+    assert de < 1e-5
+    assert violation < 1e-10
+
+
+def test_same_joint_added_twice_moves_like_once():
+    def pendulum(joints):
+        return Simulation([RigidBody('bob', 1.0, [1e-3] * 3, position_world=[0.3, 0.0, -0.2])],
+                          [Gravity()], 'lie_poisson2', 1e-3, joints)
+
+    once = pendulum([Constraint('a', 'ball', 'bob', None, anchor_world=[0.0, 0.0, 0.0])])
+    twice = pendulum([Constraint('a', 'ball', 'bob', None, anchor_world=[0.0, 0.0, 0.0]),
+                      Constraint('b', 'ball', 'bob', None, anchor_world=[0.0, 0.0, 0.0])])
+    once.run(2.0)
+    twice.run(2.0)
+    assert twice.dynamics.solver.counters.rank_deficient_solves > 0
+    np.testing.assert_allclose(twice.pose('bob')[0], once.pose('bob')[0], atol=1e-9)
+    # The load is shared, not doubled: the two reactions add up to the single one.
+    r1 = once.reactions()['a']['bob'].force_world
+    r2 = twice.reactions()
+    np.testing.assert_allclose(r2['a']['bob'].force_world + r2['b']['bob'].force_world, r1,
+                               rtol=1e-6, atol=1e-12)
+
+
+def test_mass_ratio_1e4_between_neighbouring_links():
+    # Alternate 1 kg and 0.1 g rods in a 10-link chain. Measured at dt = 1e-3 over 5 s:
+    # worst |dE| 3.6e-3 of the largest kinetic energy, violation 1e-13.
+    bodies, joints = [], []
+    for i in range(10):
+        start = np.array([0.2 * i, 0.0, 0.0])
+        bodies.append(rod(f'l{i}', start, np.array([1.0, 0.0, 0.0]), 0.2,
+                          1.0 if i % 2 == 0 else 1e-4))
+        joints.append(Constraint(f'j{i}', 'ball', f'l{i}', None if i == 0 else f'l{i - 1}',
+                                 anchor_world=start))
+    sim = Simulation(bodies, [Gravity()], 'lie_poisson2', 1e-3, joints)
+    worst_de, worst_violation, max_ke = run_and_watch(sim, 5.0)
+    assert worst_de < 1e-2 * max_ke
+    assert worst_violation < 1e-10
+
+
+def test_top_spinning_at_100_rad_s_on_a_ball_joint():
+    # A tilted top spinning at 100 rad/s about its axis, released without precession:
+    # it nutates. Measured over 3 s at dt = 1e-3 with lie_poisson2: worst |dE| 3.6e-7 of
+    # the kinetic energy (15 J), violation 1e-12.
+    m, l, i1, i3 = 0.5, 0.1, 2e-3, 3e-3
+    tilt = so3.exp_quat(np.array([0.0, np.radians(20.0), 0.0]))
+    axis = so3.rotate(tilt, np.array([0.0, 0.0, 1.0]))
+    top = RigidBody('top', m, [i1, i1, i3], position_world=l * axis, orientation_xyzw=tilt,
+                    angular_velocity_body=[0.0, 0.0, 100.0])
+    sim = Simulation([top], [Gravity((0.0, 0.0, -G))], 'lie_poisson2', 1e-3,
+                     [Constraint('tip', 'ball', 'top', None, anchor_world=[0.0, 0.0, 0.0])])
+    worst_de, worst_violation, max_ke = run_and_watch(sim, 3.0)
+    assert worst_de < 2e-6 * max_ke
+    assert worst_violation < 1e-10
+
+
+def test_constraint_added_mid_run_while_violated_by_10cm():
+    bodies = [RigidBody('a', 1.0, [0.01, 0.02, 0.03], position_world=[0.0, 0.0, 0.0]),
+              RigidBody('b', 2.0, [0.02, 0.02, 0.04], position_world=[0.5, 0.0, 0.0],
+                        linear_velocity_world=[0.0, 0.3, 0.0])]
+    sim = Simulation(bodies, [], 'lie_poisson2', 1e-3)
+    sim.run(0.2)
+    # The anchors are 0.4 m and 0.1 m from the centres: 0.1 m apart when added.
+    sim.add_constraint(Constraint('snap', 'ball', 'a', 'b', anchor_a_body=[0.4, 0.16, 0.0],
+                                  anchor_b_body=[-0.1, 0.0, 0.0]))
+    tau = sim.dynamics.solver.time_constant
+    v0 = sim.constraint_violation()['snap']
+    assert 0.05 < v0 < 0.15
+    times, violation = [], []
+    for _ in range(200):
+        sim.step(3)
+        times.append(sim.time)
+        violation.append(sim.constraint_violation()['snap'])
+    violation = np.array(violation)
+    # Smooth: monotonic decay ...
+    assert np.all(np.diff(violation) <= 1e-15)
+    # ... along exp(-t / tau) while it is far above rounding.
+    t = np.array(times) - times[0]
+    big = violation > 1e-9
+    rate = -np.polyfit(t[big], np.log(violation[big]), 1)[0]
+    assert abs(rate * tau - 1.0) < 0.05
+    assert violation[-1] < 1e-4 * v0   # exp(-0.6 / 0.05) = 6e-6
+    d = sim.diagnostics()
+    assert np.all(np.isfinite(d.kinetic_energy))
+
+
+def test_intermediate_axis_body_held_at_its_centre_of_mass():
+    # A ball joint at the centre of mass leaves the rotation free: the flip still happens
+    # with the torque-free period, energy and |L| are conserved.
+    moments, omega0 = (1.0, 2.0, 3.0), (0.1, 2.0, 0.1)
+    period = intermediate_axis_period(moments, omega0)
+    sim = Simulation([RigidBody('racket', 1.0, moments, position_world=[0.0, 0.0, 1.0],
+                                angular_velocity_body=omega0)], [Gravity()], 'lie_poisson2',
+                     2e-3, [Constraint('pin', 'ball', 'racket', None,
+                                       anchor_world=[0.0, 0.0, 1.0])])
+    d0 = sim.diagnostics()
+    n = int(2.2 * period / sim.dt)
+    w2 = np.empty(n)
+    for k in range(n):
+        sim.step()
+        w2[k] = sim.state.ang_vel_principal[0, 1]
+    t = sim.dt * np.arange(1, n + 1)
+    i = np.flatnonzero((w2[:-1] < 0.0) & (w2[1:] >= 0.0))
+    crossings = t[i] + sim.dt * (-w2[i]) / (w2[i + 1] - w2[i])
+    assert len(crossings) >= 2
+    np.testing.assert_allclose(np.diff(crossings), period, rtol=2e-5)
+    d = sim.diagnostics()
+    assert abs(d.total_energy - d0.total_energy) < 1e-5 * d0.total_energy
+    l0 = np.linalg.norm(d0.angular_momentum_world)
+    assert abs(np.linalg.norm(d.angular_momentum_world) - l0) < 1e-10 * l0
+    assert d.constraint_violation < 1e-12
