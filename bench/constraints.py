@@ -24,51 +24,10 @@ import time
 
 import numpy as np
 from rigid_body_sim.core import Constraint, Gravity, INTEGRATORS, RigidBody, Simulation
-from scipy.spatial.transform import Rotation
+from rigid_body_sim.core.mechanisms import chain, four_bar, tree
 from scipy.special import ellipk
 
 OUT = Path(__file__).resolve().parent / 'out'
-ROD_MASS, ROD_LENGTH, ROD_RADIUS = 0.1, 0.1, 0.005
-
-
-def rod(name: str, start: np.ndarray, direction: np.ndarray, length: float = ROD_LENGTH,
-        mass: float = ROD_MASS) -> RigidBody:
-    """Make a thin rod from ``start`` along unit ``direction`` (its body x axis)."""
-    x = direction / np.linalg.norm(direction)
-    helper = np.eye(3)[np.argmin(np.abs(x))]
-    y = np.cross(x, helper)
-    y /= np.linalg.norm(y)
-    quat = Rotation.from_matrix(np.column_stack([x, y, np.cross(x, y)])).as_quat()
-    side = mass * (3 * ROD_RADIUS**2 + length**2) / 12.0
-    return RigidBody(name, mass, [0.5 * mass * ROD_RADIUS**2, side, side],
-                     position_world=start + 0.5 * length * x, orientation_xyzw=quat)
-
-
-def chain(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
-    """Build N rods along +x joined by ball joints, the first to the world, under gravity."""
-    bodies, joints = [], []
-    for i in range(n):
-        start = np.array([i * ROD_LENGTH, 0.0, 0.0])
-        bodies.append(rod(f'l{i}', start, np.array([1.0, 0.0, 0.0])))
-        joints.append(Constraint(f'j{i}', 'ball', f'l{i}', None if i == 0 else f'l{i - 1}',
-                                 anchor_world=start))
-    return Simulation(bodies, [Gravity()], integrator, dt, joints)
-
-
-def tree(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
-    """Build a binary tree of N rods: rod i hangs from the tip of rod (i - 1) // 2."""
-    rng = np.random.default_rng(1)
-    bodies, joints, tips = [], [], []
-    for i in range(n):
-        start = np.zeros(3) if i == 0 else tips[(i - 1) // 2]
-        d = rng.normal(size=3)
-        d[2] = -abs(d[2]) - 0.5
-        d /= np.linalg.norm(d)
-        bodies.append(rod(f'l{i}', start, d))
-        tips.append(start + ROD_LENGTH * d)
-        joints.append(Constraint(f'j{i}', 'ball', f'l{i}', None if i == 0 else f'l{(i - 1) // 2}',
-                                 anchor_world=start))
-    return Simulation(bodies, [Gravity()], integrator, dt, joints)
 
 
 def scaling(ns, integrators, min_steps):
@@ -127,35 +86,14 @@ def pendulum(integrator: str, dt: float, theta0: float = np.radians(60.0),
             d.constraint_violation, wall / (n * dt))
 
 
-def four_bar(integrator: str, dt: float, duration: float = 2.0):
+def four_bar_run(integrator: str, dt: float, duration: float = 2.0):
     """
-    Four-bar linkage (ground 0.4, crank 0.1, coupler 0.35, rocker 0.3 m) under gravity.
+    Run the four-bar linkage of :func:`rigid_body_sim.core.mechanisms.four_bar`.
 
     Returns the crank angle (rad) at ``duration``, the relative energy error,
     the largest violation and the wall time per simulated second.
     """
-    ground, crank, coupler, rocker = 0.4, 0.1, 0.35, 0.3
-    theta = np.radians(60.0)
-    a = np.zeros(3)
-    d = np.array([ground, 0.0, 0.0])
-    b = crank * np.array([np.cos(theta), 0.0, np.sin(theta)])
-    # C: intersection of circles (B, coupler) and (D, rocker) in the x-z plane, upper one.
-    bd = d - b
-    dist = np.linalg.norm(bd)
-    along = (coupler**2 - rocker**2 + dist**2) / (2.0 * dist)
-    h = np.sqrt(coupler**2 - along**2)
-    perp = np.array([-bd[2], 0.0, bd[0]]) / dist
-    c = b + along * bd / dist + h * perp
-    if c[2] < 0:
-        c = b + along * bd / dist - h * perp
-    bodies = [rod('crank', a, b - a, crank, 0.2), rod('coupler', b, c - b, coupler, 0.5),
-              rod('rocker', d, c - d, rocker, 0.4)]
-    y = [0.0, 1.0, 0.0]
-    joints = [Constraint('A', 'hinge', 'crank', None, anchor_world=a, axis_world=y),
-              Constraint('B', 'hinge', 'coupler', 'crank', anchor_world=b, axis_world=y),
-              Constraint('C', 'hinge', 'rocker', 'coupler', anchor_world=c, axis_world=y),
-              Constraint('D', 'hinge', 'rocker', None, anchor_world=d, axis_world=y)]
-    sim = Simulation(bodies, [Gravity()], integrator, dt, joints)
+    sim = four_bar(integrator, dt)
     e0 = sim.diagnostics().total_energy
     n = int(round(duration / dt))
     viol = 0.0
@@ -180,10 +118,10 @@ def accuracy(dts, integrators):
             rows.append(('pendulum', name, dt, err, de, viol, cost))
             print(f'  pendulum {name:16s} dt {dt:6.0e}  period err {err:8.1e}  dE {de:8.1e}  '
                   f'violation {viol:8.1e}  {cost:8.3f} s/sim-s', flush=True)
-    ref = four_bar('rkmk4', 1e-4)[0]
+    ref = four_bar_run('rkmk4', 1e-4)[0]
     for name in integrators:
         for dt in dts:
-            angle, de, viol, cost = four_bar(name, dt)
+            angle, de, viol, cost = four_bar_run(name, dt)
             err = abs(angle - ref)
             rows.append(('four_bar', name, dt, err, de, viol, cost))
             print(f'  four-bar {name:16s} dt {dt:6.0e}  angle err {err:8.1e}  dE {de:8.1e}  '

@@ -15,8 +15,8 @@ def simulation():
 
 
 @pytest.mark.parametrize('make, message', [
-    (lambda: Constraint('j', 'ball', 'a', 'a'), r"^body_b: a body cannot be constrained to "
-                                                r"itself \('a'\)"),
+    (lambda: Constraint('j', 'ball', 'a', 'a'),
+     r'^body_b: a body cannot be constrained to itself'),
     (lambda: Constraint('j', 'hinge', 'a', 'b', anchor_world=[0, 0, 0], axis_world=[0, 0, 0]),
      r'^axis_world: zero-length axis'),
     (lambda: Constraint('j', 'hinge', 'a', 'b'), r'^axis_world: required for a hinge'),

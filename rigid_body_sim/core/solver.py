@@ -25,16 +25,18 @@ cost is linear in the number of links); systems of at most ``DENSE_ROWS`` rows
 use a dense Cholesky factorization, which is faster at that size
 (see :data:`.constraints.DENSE_ROWS`).
 
-Position and velocity level (after every step)
-----------------------------------------------
-The step's end state is projected, by the mass-weighted minimum-norm
-correction ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁻¹ r`` (Gauss–Newton, a few iterations), onto
-``Φ = ρ Φ_start`` with ``ρ = exp(−dt / time_constant)``, and then onto
-``Φ̇ = −Φ / time_constant``. For a satisfied constraint this is projection onto
-``Φ = 0`` and ``Φ̇ = 0`` (drift stays at rounding level); a constraint that was
-violated when added (or by a large disturbance) returns to ``Φ = 0`` along
-``exp(−t / time_constant)``: smoothly, at a rate that does not depend on ``dt``,
-and consistent with the Baumgarte term (``exp(−ω t)`` solves
+Position and velocity level (every step)
+----------------------------------------
+The integrators (see :mod:`.integrators`) correct positions onto
+``Φ = ρ Φ_start`` with ``ρ = exp(−h / time_constant)`` (SHAKE in the splitting
+methods; :meth:`ConstraintSolver.project_positions` as a fallback) and
+velocities onto ``Φ̇ = −Φ / time_constant``
+(:meth:`ConstraintSolver.project_velocities`, the mass-weighted minimum-norm
+impulse ``−M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁻¹ r``). For a satisfied constraint this is
+projection onto ``Φ = 0`` and ``Φ̇ = 0`` (drift stays at rounding level); a
+constraint that was violated when added (or by a large disturbance) returns to
+``Φ = 0`` along ``exp(−t / time_constant)``: smoothly, at a rate that does not
+depend on ``dt``, and consistent with the Baumgarte term (``exp(−ω t)`` solves
 ``Φ̈ + 2 ω Φ̇ + ω² Φ = 0``).
 
 Default ``time_constant = 0.05 s``: five times faster than the slowest motions
