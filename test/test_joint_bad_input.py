@@ -44,6 +44,11 @@ def test_bad_constraint_spec(make, message):
      r'^function: raised ZeroDivisionError'),
     (Constraint('j', 'distance', 'a', 'b', anchor_a_body=[0.25, 0, 0],
                 anchor_b_body=[-0.25, 0, 0]), r'^length: the anchors coincide'),
+    # The pivot holds a's point (-0.5, 0, 0) at the world origin; this one would hold the
+    # same point 0.3 m away: no configuration satisfies both.
+    (Constraint('j', 'ball', 'a', None, anchor_a_body=[-0.5, 0, 0], anchor_b_body=[0.3, 0, 0]),
+     r"^constraint: constraint 'j' is inconsistent with \['pivot'\]: no configuration "
+     r'satisfies them all \(the closest leaves max \|Φ\| = 0\.15 m or rad\); it was not added'),
 ])
 def test_rejected_constraint_leaves_the_simulation_intact(spec, message):
     sim, reference = simulation(), simulation()
@@ -75,3 +80,27 @@ def test_removed_joint_releases_the_body_into_free_fall():
                                rtol=1e-12, atol=1e-12)
     assert sim.constraint_names == []
     assert not sim.dynamics.constrained
+
+
+def test_inconsistent_initial_constraint_is_named():
+    bodies = [RigidBody('a', 1.0, [0.1, 0.1, 0.1], position_world=[0.5, 0.0, 0.0]),
+              RigidBody('b', 1.0, [0.1, 0.2, 0.25], position_world=[1.0, 0.0, 0.0])]
+    joints = [Constraint('pivot', 'ball', 'a', None, anchor_world=[0.0, 0.0, 0.0]),
+              Constraint('link', 'ball', 'b', 'a', anchor_world=[0.75, 0.0, 0.0]),
+              # The pivot keeps a's centre 0.5 m from the origin: 0.2 m cannot hold.
+              Constraint('rod', 'distance', 'a', None, length=0.2),
+              Constraint('spare', 'distance', 'b', None)]
+    with pytest.raises(SpecError, match=r"^constraints\[2\]: constraint 'rod' is inconsistent "
+                                        r"with \['pivot', 'link'\].*no simulation was built"):
+        Simulation(bodies, [Gravity()], 'lie_poisson2', 1e-3, joints)
+
+
+def test_consistent_but_violated_constraint_is_accepted():
+    # The pivot keeps a's point (0.5, 0, 0) 1 m from the origin; (0.6, 0.8, 0) is 1 m away:
+    # reachable, so the joint is added 0.8 m violated and closes along exp(-t / tau).
+    sim = simulation()
+    sim.add_constraint(Constraint('far', 'ball', 'a', None, anchor_a_body=[0.5, 0, 0],
+                                  anchor_b_body=[0.6, 0.8, 0.0]))
+    assert sim.constraint_violation()['far'] > 0.7
+    sim.run(1.0)
+    assert sim.constraint_violation()['far'] < 1e-7   # 0.8 exp(-20) = 1.6e-9

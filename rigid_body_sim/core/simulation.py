@@ -168,8 +168,47 @@ class Simulation:
                 solver.constraints.add(spec, self.state)
             except SpecError as exc:
                 raise exc.within(f'constraints[{i}]') from None
+        if not self._consistent():
+            self._name_first_inconsistent()
         self.dynamics.changed()
         self._reconcile_velocities()
+
+    #: m or rad: a constraint set is consistent if Gauss–Newton gets ``max |Φ|`` below this.
+    CONSISTENCY_TOLERANCE = 1e-8
+
+    def _consistent(self) -> bool:
+        """Tell whether the constraints can all hold (see :meth:`ConstraintSolver.closest_reach`)."""
+        solver = self.dynamics.solver
+        s = self.state
+        return solver.closest_reach(s.pos_com_world, s.quat_principal_world,
+                                    self.CONSISTENCY_TOLERANCE) <= self.CONSISTENCY_TOLERANCE
+
+    def _inconsistent(self, name: str, field: str, outcome: str) -> SpecError:
+        solver = self.dynamics.solver
+        s = self.state
+        residual = solver.closest_reach(s.pos_com_world, s.quat_principal_world,
+                                        self.CONSISTENCY_TOLERANCE)
+        others = [n for n in solver.constraints.names if n != name]
+        return SpecError(field, f'constraint {name!r} is inconsistent with {others}: no '
+                                f'configuration satisfies them all (the closest leaves '
+                                f'max |Φ| = {residual:.3g} m or rad); {outcome}')
+
+    def _name_first_inconsistent(self) -> None:
+        """Raise for the first initial constraint that cannot hold with those before it."""
+        solver = self.dynamics.solver
+        specs = self._initial_constraints
+        lo, hi = 0, len(specs)   # the first len(specs[:lo]) hold together, specs[:hi] do not
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            solver.constraints = ConstraintSet(self.bodies)
+            for spec in specs[:mid]:
+                solver.constraints.add(spec, self.state)
+            lo, hi = (mid, hi) if self._consistent() else (lo, mid)
+        solver.constraints = ConstraintSet(self.bodies)
+        for spec in specs[:hi]:
+            solver.constraints.add(spec, self.state)
+        raise self._inconsistent(specs[hi - 1].name, f'constraints[{hi - 1}]',
+                                 'no simulation was built')
 
     @staticmethod
     def _wrench_rows(effect: Effect) -> Optional[list]:
@@ -222,8 +261,18 @@ class Simulation:
         once, by the mass-weighted projection onto ``Φ̇ = −Φ/τ`` (a perfectly
         inelastic impact, which conserves momenta); a position violation then
         decays along ``exp(−t/τ)``.
+
+        A constraint that cannot hold together with the others (no configuration
+        satisfies them all, e.g. one body point pinned to two world points) is
+        refused with a :class:`SpecError`; a redundant but consistent one (a
+        closed loop, the same joint twice) is accepted.
         """
-        self.dynamics.solver.constraints.add(constraint, self.state)
+        constraints = self.dynamics.solver.constraints
+        constraints.add(constraint, self.state)
+        if not self._consistent():
+            error = self._inconsistent(constraint.name, 'constraint', 'it was not added')
+            constraints.remove(constraint.name)
+            raise error
         self.dynamics.changed()
         self._reconcile_velocities()
 

@@ -284,6 +284,49 @@ class ConstraintSolver:
                 delta += d   # an impulse of the step; an orthogonal projection is not
         return pos, quat, vel + delta[:, :3] / h, omega + delta[:, 3:] / h
 
+    def closest_reach(self, pos: np.ndarray, quat: np.ndarray, tolerance: float,
+                      max_iterations: int = 50) -> float:
+        """
+        Smallest ``max |Φ|`` that Gauss–Newton reaches from a configuration.
+
+        Minimum-norm steps ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁺ Φ`` (redundant rows get
+        the pseudo-inverse, see :meth:`_factor`) converge quadratically to a
+        configuration with ``Φ = 0`` when the constraints can hold together; for
+        an inconsistent set (say one body point pinned to two world points) they
+        stall at the least-squares compromise, whose residual is returned. Stops
+        below ``tolerance`` or after three iterations that do not reduce the residual.
+        Nothing is modified: this answers "can these constraints all hold?".
+
+        Parameters
+        ----------
+        pos : ndarray, shape (n, 3)
+        quat : ndarray, shape (n, 4)
+        tolerance : float
+            m or rad.
+        max_iterations : int
+
+        Returns
+        -------
+        float
+            ``max |Φ|`` at the last iterate.
+
+        """
+        best, stalled = np.inf, 0
+        for _ in range(max_iterations + 1):
+            geo = self.constraints.geometry(pos, quat)
+            norm = float(np.max(np.abs(geo.phi), initial=0.0))
+            if not np.isfinite(norm) or norm <= tolerance:
+                break
+            # Far from the solution one step may overshoot; three without progress stall.
+            stalled = stalled + 1 if norm >= (1.0 - 1e-6) * best else 0
+            best = min(best, norm)
+            if stalled == 3:
+                break
+            d = -self.inv_mass_6 * geo.jacobian.rmatvec(self._factor(geo.jacobian)(geo.phi))
+            pos = pos + d[:, :3]
+            quat = so3.quat_normalize(so3.quat_multiply(quat, so3.exp_quat(d[:, 3:])))
+        return min(best, norm)
+
     def project_velocities(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                            omega: np.ndarray) -> tuple:
         """Project velocities onto ``Φ̇ = −Φ / τ`` (mass-orthogonally); returns (vel, omega)."""
