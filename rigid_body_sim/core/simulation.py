@@ -177,7 +177,7 @@ class Simulation:
     CONSISTENCY_TOLERANCE = 1e-8
 
     def _consistent(self) -> bool:
-        """Tell whether the constraints can all hold (see :meth:`ConstraintSolver.closest_reach`)."""
+        """Tell whether the constraints can all hold (see ``ConstraintSolver.closest_reach``)."""
         solver = self.dynamics.solver
         s = self.state
         return solver.closest_reach(s.pos_com_world, s.quat_principal_world,

@@ -300,10 +300,13 @@ class ConstraintSolver:
         Parameters
         ----------
         pos : ndarray, shape (n, 3)
+            m, centres of mass (world frame).
         quat : ndarray, shape (n, 4)
+            Principal-frame orientations, xyzw.
         tolerance : float
             m or rad.
         max_iterations : int
+            Gauss–Newton iterations at most.
 
         Returns
         -------
