@@ -110,34 +110,39 @@ def scaling(ns, repeats):
     return rows
 
 
-def effect_costs(n, repeats):
-    """Per-step cost of scenes that differ by one effect, measured side by side."""
+def effect_costs(n, repeats, rounds=7):
+    """
+    Per-step cost of scenes that differ by one effect, measured side by side.
+
+    The four variants are timed in turn, ``rounds`` times over (interleaved, so a
+    slow spell of a shared machine hits them alike), and each keeps its best round.
+    """
     rows = []
+    variants = {
+        'isotropic, no gravity': ((1.0, 1.0, 1.0), False),
+        'isotropic, gravity': ((1.0, 1.0, 1.0), True),
+        'anisotropic, no gravity': ((1.0, 2.0, 3.0), False),
+        'anisotropic, gravity': ((1.0, 2.0, 3.0), True),
+    }
     for name in INTEGRATORS:
-        variants = {
-            'isotropic, no gravity': ((1.0, 1.0, 1.0), False),
-            'isotropic, gravity': ((1.0, 1.0, 1.0), True),
-            'anisotropic, no gravity': ((1.0, 2.0, 3.0), False),
-            'anisotropic, gravity': ((1.0, 2.0, 3.0), True),
-        }
-        times = {}
-        for label, (moments, gravity) in variants.items():
-            sim = _simulation(moments, (0.3, 1.0, 0.2), name, 1e-3, n=n, gravity=gravity)
+        sims = {label: _simulation(moments, (0.3, 1.0, 0.2), name, 1e-3, n=n, gravity=gravity)
+                for label, (moments, gravity) in variants.items()}
+        best = dict.fromkeys(variants, np.inf)
+        for sim in sims.values():
             sim.step(2)
-            best = np.inf
-            for _ in range(3):   # interleaving repeats would be fairer; best-of-3 is enough
+        for _ in range(rounds):
+            for label, sim in sims.items():
                 t0 = time.perf_counter()
                 sim.step(repeats)
-                best = min(best, (time.perf_counter() - t0) / repeats)
-            times[label] = best
+                best[label] = min(best[label], (time.perf_counter() - t0) / repeats)
+        base = best['isotropic, no gravity']
+        for label, sim in sims.items():
             work = sim.work()
-            rows.append((name, label, best * 1e6, work.get('gravity_evaluations', 0),
-                         work['gyroscopic_body_evaluations']))
-        base = times['isotropic, no gravity']
-        for row in rows[-4:]:
-            print(f'  {name:16s} {row[1]:24s} {row[2]:9.1f} us/step  '
-                  f'x{row[2] / (base * 1e6):5.2f}  gravity evals {row[3]:6d}  '
-                  f'gyroscopic body-evals {row[4]:8d}', flush=True)
+            rows.append((name, label, best[label] * 1e6, best[label] / base,
+                         work.get('gravity_evaluations', 0), work['gyroscopic_body_evaluations']))
+            print(f'  {name:16s} {label:24s} {best[label] * 1e6:9.1f} us/step  '
+                  f'x{best[label] / base:5.2f}  gravity evals {rows[-1][4]:6d}  '
+                  f'gyroscopic body-evals {rows[-1][5]:8d}', flush=True)
     return rows
 
 
@@ -208,10 +213,11 @@ def main(argv=None) -> int:
     _write_table(OUT / 'scaling.md', ('integrator', 'bodies', 'us / step', 'us / body-step'),
                  sc, ('{}', '{}', '{:.1f}', '{:.3f}'))
     print(f'\n== what each effect costs ({ns[-1]} bodies; ratios to isotropic, no gravity) ==')
-    ec = effect_costs(ns[-1], repeats)
-    _write_table(OUT / 'effects.md', ('integrator', 'scene', 'us / step', 'gravity evals',
+    ec = effect_costs(ns[-1], max(10, repeats // 10))
+    _write_table(OUT / 'effects.md', ('integrator', 'scene', 'us / step',
+                                      'ratio to isotropic, no gravity', 'gravity evals',
                                       'gyroscopic body-evals'), ec,
-                 ('{}', '{}', '{:.1f}', '{}', '{}'))
+                 ('{}', '{}', '{:.1f}', '{:.2f}', '{}', '{}'))
     _plots(wp, sc)
     print(f'tables: {OUT}/work_precision.md, scaling.md, effects.md')
     if not args.skip_constraints:

@@ -120,7 +120,7 @@ def _build(data: Any, source: str) -> Scene:
         if key not in data:
             raise SpecError(key, 'missing (required)')
     integrator = data.get('integrator', 'lie_poisson2')
-    if integrator not in INTEGRATORS:
+    if not isinstance(integrator, str) or integrator not in INTEGRATORS:
         raise SpecError('integrator', f'unknown integrator {integrator!r}; known: '
                                       f'{sorted(INTEGRATORS)}')
     dt = positive_scalar(data['dt'], 'dt')

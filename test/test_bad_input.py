@@ -32,6 +32,31 @@ def test_non_physical_inertia(inertia, message):
         body(inertia=inertia)
 
 
+@pytest.mark.parametrize('overrides, message', [
+    ({'mass': 1e-320}, r'^mass: mass 1e-320 is outside \[1e-100, 1e\+100\]'),
+    ({'mass': '1'}, r"^mass: expected a number, got '1'"),
+    ({'inertia': [1e308] * 3}, r'^inertia: largest entry 1e\+308 is outside'),
+    ({'inertia': [1e-120] * 3}, r'^inertia: smallest principal moment 1e-120 is outside'),
+])
+def test_values_whose_arithmetic_would_overflow(overrides, message):
+    with pytest.raises(SpecError, match=message):
+        body(**overrides)
+
+
+def test_constraint_time_constant_is_named():
+    with pytest.raises(SpecError, match=r'^constraint_time_constant: must be positive'):
+        Simulation([body()], [], 'rkmk4', 1e-3, constraint_time_constant=0.0)
+
+
+@pytest.mark.parametrize('entry, message', [
+    ({'body': 'b', 'forc': [1.0, 0.0, 0.0]}, r'^effects\[0\]\[0\]\.forc: unknown key'),
+    ({'force': [1.0, 0.0, 0.0]}, r'^effects\[0\]\[0\]\.body: required'),
+])
+def test_wrench_entry_keys(entry, message):
+    with pytest.raises(SpecError, match=message):
+        Simulation([body()], [AppliedWrenches([entry])], 'rkmk4', 1e-3)
+
+
 @pytest.mark.parametrize('field, value', [
     ('mass', NAN), ('inertia', [1.0, NAN, 2.0]), ('com_body', [0.0, INF, 0.0]),
     ('position_world', [NAN, 0.0, 0.0]), ('orientation_xyzw', [0.0, 0.0, NAN, 1.0]),

@@ -1,7 +1,7 @@
 """A step evaluates only the effects a scene lists; work counters show it."""
 
 import pytest
-from rigid_body_sim.core import Gravity, INTEGRATORS, RigidBody, Simulation
+from rigid_body_sim.core import Constraint, Gravity, INTEGRATORS, RigidBody, Simulation
 
 STEPS = 50
 # Right-hand sides per step: rkmk4 has 4 stages; the splitting methods evaluate
@@ -60,3 +60,22 @@ def test_no_constraint_work_without_constraints():
     sim.step(STEPS)
     counters = sim.dynamics.solver.counters
     assert counters.geometry_evaluations == counters.factorizations == 0
+
+
+def test_reading_outputs_does_no_counted_work():
+    # Reactions, diagnostics and violations are read between steps (a node publishes
+    # them at its own rate): the work counters must show the steps' work only.
+    def pendulum():
+        return Simulation([RigidBody('bob', 1.0, (1.0, 2.0, 3.0), position_world=(0.3, 0, 0))],
+                          [Gravity()], 'lie_poisson2', 1e-3,
+                          [Constraint('rod', 'ball', 'bob', None, anchor_world=(0, 0, 0))])
+
+    quiet, watched = pendulum(), pendulum()
+    for _ in range(STEPS):
+        quiet.step()
+        watched.step()
+        watched.reactions()
+        watched.diagnostics()
+        watched.constraint_violation()
+    assert watched.work() == quiet.work()
+    assert watched.dynamics.solver.counters == quiet.dynamics.solver.counters

@@ -27,6 +27,8 @@ def simulation():
     (lambda: Constraint('j', 'weld', 'a', 'b'), r"^type: unknown constraint type 'weld'"),
     (lambda: Constraint('j', 'generic', 'a', 'b'), r'^function: a generic constraint needs'),
     (lambda: Constraint('', 'ball', 'a', 'b'), r'^name: must be a non-empty string'),
+    (lambda: Constraint('j', 'ball', None), r'^body_a: must name a body, got None'),
+    (lambda: Constraint('j', 'ball', 'a', 3), r'^body_b: must name a body, or be None or '),
     (lambda: Constraint('j', 'distance', 'a', 'b', length=-1.0), r'^length: must be positive'),
 ])
 def test_bad_constraint_spec(make, message):

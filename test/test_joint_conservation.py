@@ -19,6 +19,30 @@ def hand_distance_jacobian(x_a, R_a, x_b, R_b):
     return np.concatenate([2 * d, np.zeros(3), -2 * d, np.zeros(3)])[None, :]
 
 
+E_X, E_Y, E_Z = np.eye(3)
+
+
+def parallel_axes(x_a, R_a, x_b, R_b):
+    """Return a generic constraint that depends on rotation only: z_a stays along z_b."""
+    z_a = R_a @ E_Z
+    return np.array([z_a @ (R_b @ E_X), z_a @ (R_b @ E_Y)])
+
+
+def parallel_axes_jacobian(x_a, R_a, x_b, R_b):
+    """
+    Return the analytic Jacobian of ``parallel_axes``, δΘ in each body frame.
+
+    ``δ(R e) = R (δΘ × e)``, so ``∂(R_a e · u)/∂δΘ_a = e × (R_aᵀ u)``.
+    """
+    z_a = R_a @ E_Z
+    rows = []
+    for e in (E_X, E_Y):
+        u = R_b @ e
+        rows.append(np.concatenate([np.zeros(3), np.cross(E_Z, R_a.T @ u),
+                                    np.zeros(3), np.cross(e, R_b.T @ z_a)]))
+    return np.array(rows)
+
+
 def joint(kind: str) -> Constraint:
     anchor = [0.1, 0.2, -0.1]
     return {
@@ -30,6 +54,9 @@ def joint(kind: str) -> Constraint:
         'distance': Constraint('j', 'distance', 'a', 'b', anchor_a_body=[0.1, 0, 0],
                                anchor_b_body=[0, 0.2, 0]),
         'generic': Constraint('j', 'generic', 'a', 'b', function=hand_distance),
+        'generic_axes': Constraint('j', 'generic', 'a', 'b', function=parallel_axes),
+        'generic_axes_jacobian': Constraint('j', 'generic', 'a', 'b', function=parallel_axes,
+                                            jacobian=parallel_axes_jacobian),
     }[kind]
 
 
@@ -43,10 +70,16 @@ def two_bodies(rng, kind, name='lie_poisson2', dt=1e-3):
         offset = b.position_world - sim0.state.pos_com_world[1]
         from dataclasses import replace
         b = replace(b, position_world=xa + 0.7 * direction / np.linalg.norm(direction) + offset)
+    if kind.startswith('generic_axes'):   # start on it: the same orientation
+        from dataclasses import replace
+        b = replace(b, orientation_xyzw=a.orientation_xyzw)
     return Simulation([a, b], [], name, dt, [joint(kind)])
 
 
-KINDS = ['ball', 'hinge', 'slider', 'fixed', 'distance', 'generic']
+# The random bodies' inertia tensors are not diagonal in their body frames, so the
+# generic rows also check the conversion between body and principal frames.
+KINDS = ['ball', 'hinge', 'slider', 'fixed', 'distance', 'generic', 'generic_axes',
+         'generic_axes_jacobian']
 
 
 @pytest.mark.parametrize('name', sorted(INTEGRATORS))

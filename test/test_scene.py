@@ -81,6 +81,26 @@ def test_invalid_yaml_names_the_file(tmp_path):
         load_scene(path)
 
 
+@pytest.mark.parametrize('text, message', [
+    # YAML's own NaN and infinity load as floats, not strings.
+    ('bodies: [{name: b, mass: 1, inertia: [1, 1, 1], com_body: [0, .nan, 0]}]',
+     r'bodies\[0\]\.com_body: must be finite'),
+    ('bodies: [{name: b, mass: .inf, inertia: [1, 1, 1]}]', r'bodies\[0\]\.mass: must be finite'),
+    ("bodies: [{name: b, mass: '1', inertia: [1, 1, 1]}]",
+     r"bodies\[0\]\.mass: expected a number, got '1'"),
+    ('integrator: [rkmk4]\nbodies: [{name: b, mass: 1, inertia: [1, 1, 1]}]',
+     r"integrator: unknown integrator \['rkmk4'\]"),
+    ('bodies: [{name: b, mass: 1, inertia: [1, 1, 1]}]\n'
+     'effects: {wrenches: [{body: b, forc: [1, 0, 0]}]}',
+     r'effects\.wrenches\[0\]\.forc: unknown key'),
+])
+def test_yaml_values_are_checked_as_loaded(tmp_path, text, message):
+    path = tmp_path / 'odd.yaml'
+    path.write_text('dt: 0.001\n' + text + '\n')
+    with pytest.raises(SceneError, match=r'odd\.yaml: ' + message):
+        load_scene(path)
+
+
 def test_command_line_run_prints_a_summary(capsys):
     assert main([str(CONFIG / 'default_scene.yaml'), '--duration', '0.1']) == 0
     out = capsys.readouterr().out

@@ -40,6 +40,17 @@ INERTIA_RTOL = 1e-9
 # Principal moments equal to this relative tolerance make a body isotropic:
 # its gyroscopic term Ω × JΩ is then zero and is never evaluated.
 ISOTROPY_RTOL = 1e-12
+# Masses (kg) and inertia entries (kg m²) must lie in [1/LIMIT, LIMIT]: far beyond
+# any body (a 1 µm grain has about 1e-27 kg m²), and narrow enough that inverses,
+# squares and the products of a step stay finite in double precision.
+MAGNITUDE_LIMIT = 1e100
+
+
+def _in_range(x: float, field_name: str, what: str) -> None:
+    if not 1.0 / MAGNITUDE_LIMIT <= x <= MAGNITUDE_LIMIT:
+        raise SpecError(field_name, f'{what} {x!r} is outside [{1.0 / MAGNITUDE_LIMIT:g}, '
+                                    f'{MAGNITUDE_LIMIT:g}]: inverses and products would '
+                                    f'overflow or lose all precision')
 
 
 def inertia_matrix(value: Any, field_name: str = 'inertia') -> np.ndarray:
@@ -60,6 +71,8 @@ def inertia_matrix(value: Any, field_name: str = 'inertia') -> np.ndarray:
     else:
         mat = finite_array(value, field_name, (3, 3))
     scale = float(np.max(np.abs(mat)))
+    if scale > MAGNITUDE_LIMIT:
+        _in_range(scale, field_name, 'largest entry')
     asym = np.abs(mat - mat.T)
     if np.max(asym) > INERTIA_RTOL * scale:
         i, j = np.unravel_index(np.argmax(asym), asym.shape)
@@ -69,11 +82,18 @@ def inertia_matrix(value: Any, field_name: str = 'inertia') -> np.ndarray:
     moments = np.linalg.eigvalsh(mat)
     if not moments[0] > 0.0:
         raise SpecError(field_name, f'not positive definite: principal moments {moments.tolist()}')
+    _in_range(float(moments[0]), field_name, 'smallest principal moment')
     if moments[0] + moments[1] < moments[2] * (1.0 - INERTIA_RTOL):
         raise SpecError(field_name, f'violates the triangle inequality: principal moments '
                                     f'{moments.tolist()} have J1 + J2 < J3, which no mass '
                                     f'distribution has')
     return mat
+
+
+def _mass(value: Any) -> float:
+    mass = positive_scalar(value, 'mass')
+    _in_range(mass, 'mass', 'mass')
+    return mass
 
 
 def _is_numeric(value: Any) -> bool:
@@ -147,7 +167,7 @@ class RigidBody:
         if not isinstance(self.name, str) or not self.name:
             raise SpecError('name', f'must be a non-empty string, got {self.name!r}')
         conv = {
-            'mass': positive_scalar(self.mass, 'mass'),
+            'mass': _mass(self.mass),
             'inertia': inertia_matrix(self.inertia, 'inertia'),
             'com_body': finite_array(self.com_body, 'com_body', (3,)),
             'position_world': finite_array(self.position_world, 'position_world', (3,)),

@@ -132,6 +132,11 @@ class Constraint:
         object.__setattr__(self, 'type', jt)
         if self.body_b == 'world':
             object.__setattr__(self, 'body_b', None)
+        if not isinstance(self.body_a, str) or not self.body_a or self.body_a == 'world':
+            raise SpecError('body_a', f'must name a body, got {self.body_a!r}')
+        if self.body_b is not None and (not isinstance(self.body_b, str) or not self.body_b):
+            raise SpecError('body_b', f"must name a body, or be None or 'world', "
+                                      f'got {self.body_b!r}')
         if self.body_a == self.body_b:
             raise SpecError('body_b', f'a body cannot be constrained to itself ({self.body_a!r})')
         if self.anchor_world is not None:

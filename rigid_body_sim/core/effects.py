@@ -256,12 +256,19 @@ class AppliedWrenches(Effect):
         for i, entry in enumerate(self._pending):
             if not isinstance(entry, dict):
                 raise SpecError(f'[{i}]', f'expected a mapping, got {entry!r}')
+            unknown = sorted(set(entry) - set(self.KEYS), key=str)
+            if unknown:
+                raise SpecError(f'[{i}].{unknown[0]}',
+                                f'unknown key; known keys: {list(self.KEYS)}')
+            if 'body' not in entry:
+                raise SpecError(f'[{i}].body', 'required: the name of the body it acts on')
             try:
                 self.add(**entry)
-            except TypeError as exc:
-                raise SpecError(f'[{i}]', str(exc)) from None
             except SpecError as exc:
                 raise exc.within(f'[{i}]') from None
+
+    #: The keys of an entry: the parameters of :meth:`add`.
+    KEYS = ('body', 'force', 'torque', 'frame', 'point_body', 'start', 'duration')
 
     def add(self, body: str, force: Any = (0.0, 0.0, 0.0), torque: Any = (0.0, 0.0, 0.0),
             frame: Any = 'world', point_body: Any = None, start: float = 0.0,

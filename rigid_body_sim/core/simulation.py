@@ -19,8 +19,9 @@ as given); the core works in principal frames internally (see
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, replace
-from typing import Any, Optional, Sequence
+from typing import Any, Iterator, Optional, Sequence
 
 import numpy as np
 
@@ -324,7 +325,8 @@ class Simulation:
         """Energies, world-frame momenta, orthonormality and constraint violation now."""
         d = diagnose(self.bodies, self.dynamics.effects, self.state)
         if self.dynamics.constrained:
-            phi = self.dynamics.solver.violation(self.state)
+            with self._uncounted():
+                phi = self.dynamics.solver.violation(self.state)
             d = replace(d, constraint_violation=float(np.max(np.abs(phi))))
         return d
 
@@ -333,7 +335,8 @@ class Simulation:
         solver = self.dynamics.solver
         if not self.dynamics.constrained:
             return {}
-        phi = solver.violation(self.state)
+        with self._uncounted():
+            phi = solver.violation(self.state)
         return {name: float(np.max(np.abs(phi[solver.constraints.rows_of(name)])))
                 for name in solver.constraints.names}
 
@@ -351,10 +354,34 @@ class Simulation:
             ``{name: {body_name: Reaction}}`` (the world is not listed).
 
         """
+        if not self.dynamics.constrained:
+            return {}
+        with self._uncounted():
+            return self._reactions()
+
+    @contextlib.contextmanager
+    def _uncounted(self) -> Iterator[None]:
+        """
+        Leave the work counters and the geometry cache as they were.
+
+        Reading outputs is not stepping: it must neither count as work nor evict
+        the configuration the next step would reuse.
+        """
+        dyn = self.dynamics
+        saved = (replace(dyn.counters), replace(dyn.solver.counters),
+                 [(e.evaluations, e.body_evaluations) for e in dyn.effects],
+                 dyn.solver._geometry_cache)
+        try:
+            yield
+        finally:
+            dyn.counters, dyn.solver.counters = saved[0], saved[1]
+            dyn.solver._geometry_cache = saved[3]
+            for effect, (evaluations, body_evaluations) in zip(dyn.effects, saved[2]):
+                effect.evaluations, effect.body_evaluations = evaluations, body_evaluations
+
+    def _reactions(self) -> dict:
         dyn = self.dynamics
         solver = dyn.solver
-        if not dyn.constrained:
-            return {}
         s = self.state
         kin = dyn.kinematics(s.time, s.pos_com_world, s.quat_principal_world, s.vel_com_world,
                              s.ang_vel_principal)

@@ -20,9 +20,12 @@ def finite_array(value: Any, field: str, shape: tuple[int, ...]) -> np.ndarray:
 
     """
     try:
+        if isinstance(value, (str, bytes)) or np.asarray(value).dtype.kind not in 'iuf':
+            raise TypeError
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise SpecError(field, f'expected numbers of shape {shape}, got {value!r}') from None
+        what = 'a number' if shape == () else f'numbers of shape {shape}'
+        raise SpecError(field, f'expected {what}, got {value!r}') from None
     if arr.shape != shape:
         raise SpecError(field, f'expected shape {shape}, got shape {arr.shape} ({value!r})')
     if not np.all(np.isfinite(arr)):
