@@ -71,6 +71,7 @@ def test_reading_outputs_does_no_counted_work():
                           [Constraint('rod', 'ball', 'bob', None, anchor_world=(0, 0, 0))])
 
     quiet, watched = pendulum(), pendulum()
+    held = (watched.dynamics.counters, watched.dynamics.solver.counters)
     for _ in range(STEPS):
         quiet.step()
         watched.step()
@@ -79,3 +80,6 @@ def test_reading_outputs_does_no_counted_work():
         watched.constraint_violation()
     assert watched.work() == quiet.work()
     assert watched.dynamics.solver.counters == quiet.dynamics.solver.counters
+    # Counters are restored in place: references a caller holds stay live.
+    assert held == (watched.dynamics.counters, watched.dynamics.solver.counters)
+    assert held[0] is watched.dynamics.counters and held[1] is watched.dynamics.solver.counters

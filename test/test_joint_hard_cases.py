@@ -3,7 +3,7 @@
 from joint_scenes import G
 import numpy as np
 import pytest
-from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation
+from rigid_body_sim.core import Constraint, DivergenceError, Gravity, RigidBody, Simulation
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core.mechanisms import chain, four_bar, rod
 from rigid_body_sim.core.reference import intermediate_axis_period
@@ -199,3 +199,52 @@ def test_violation_decays_at_any_step_size(name, dt):
         big = violation > 1e-9
         assert np.all(np.diff(violation[big]) < 0.0)
         assert violation[-1] < 1e-8 * violation[0]
+
+
+def spinning_top(dt):
+    m, l, i1, i3 = 0.5, 0.1, 2e-3, 3e-3
+    tilt = so3.exp_quat(np.array([0.0, np.radians(20.0), 0.0]))
+    axis = so3.rotate(tilt, np.array([0.0, 0.0, 1.0]))
+    top = RigidBody('top', m, [i1, i1, i3], position_world=l * axis, orientation_xyzw=tilt,
+                    angular_velocity_body=[0.0, 0.0, 100.0])
+    return Simulation([top], [Gravity((0.0, 0.0, -G))], 'lie_poisson2', dt,
+                      [Constraint('tip', 'ball', 'top', None, anchor_world=[0.0, 0.0, 0.0])])
+
+
+def test_step_is_redone_finer_when_the_projection_cannot_converge():
+    # 100 rad/s at dt = 2e-2 turns the top 2 rad per step, too far for SHAKE's
+    # linearization. With the up-front sub-steps switched off, such steps are redone
+    # with twice the sub-steps instead of ending in the last-resort projection.
+    # Measured over 1 s: 100 retries, no fallback, energy error 8.4e-6 of the kinetic
+    # energy; without retries: 50 fallbacks and 3.6e-3 (at dt = 3e-2 a blow-up).
+    sim = spinning_top(2e-2)
+    sim.integrator.max_rotation = None
+    worst_de, worst_violation, max_ke = run_and_watch(sim, 1.0, every=1)
+    assert sim.work()['retries'] > 50
+    assert sim.dynamics.solver.counters.projection_fallbacks == 0
+    assert worst_de < 1e-4 * max_ke
+    assert worst_violation < 1e-8
+    coarse = spinning_top(2e-2)
+    coarse.integrator.max_rotation = None
+    coarse.integrator.max_substeps = 1
+    coarse_de, _, coarse_ke = run_and_watch(coarse, 1.0, every=1)
+    assert coarse.dynamics.solver.counters.projection_fallbacks > 0
+    assert coarse_de > 1e-3 * coarse_ke
+
+
+def test_a_step_that_diverges_raises_and_keeps_the_last_finite_state():
+    # The top at dt = 3e-2 with neither sub-steps nor retries overflows within a second.
+    sim = spinning_top(3e-2)
+    sim.integrator.max_rotation = None
+    sim.integrator.max_substeps = 1
+    message = r"^the step from t = .* gave a non-finite state \(bodies \['top'\]\)"
+    with np.errstate(all='ignore'), pytest.raises(DivergenceError, match=message):
+        sim.step(100)
+    assert 0.0 < sim.time < 3.0
+    pos, quat = sim.pose('top')
+    assert np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))
+    # The defaults (sub-steps up front, retries) take the same steps without trouble.
+    ok = spinning_top(3e-2)
+    ok.step(34)
+    assert ok.work()['substeps'] > 0
+    assert np.all(np.isfinite(ok.pose('top')[0]))

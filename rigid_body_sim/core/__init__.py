@@ -4,19 +4,21 @@ ROS-free numerical core of rigid_body_sim (numpy and scipy only; never rclpy).
 The public API: :class:`RigidBody` specs, effects (:class:`Gravity`,
 :class:`Damping`, :class:`AppliedWrenches`), the :class:`Simulation` facade,
 the integrator registry :data:`INTEGRATORS`, :class:`Constraint` joints, and
-:class:`SpecError`, raised for every bad input with the offending field named.
+:class:`SpecError`, raised for every bad input with the offending field named,
+and :class:`DivergenceError`, raised by a step that would leave a non-finite state.
 """
 
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, JointType
 from .diagnostics import Diagnostics
 from .effects import AppliedWrenches, Damping, EFFECTS, Frame, Gravity
-from .errors import SpecError
+from .errors import DivergenceError, SpecError
 from .integrators import INTEGRATORS, Invariant
 from .simulation import Reaction, Simulation
 
 __all__ = [
-    'AppliedWrenches', 'BodySet', 'Constraint', 'Damping', 'Diagnostics', 'EFFECTS', 'Frame',
+    'AppliedWrenches', 'BodySet', 'Constraint', 'Damping', 'Diagnostics', 'DivergenceError',
+    'EFFECTS', 'Frame',
     'Gravity', 'INTEGRATORS', 'Invariant', 'JointType', 'Reaction', 'RigidBody', 'Simulation',
     'SpecError', 'State',
 ]

@@ -44,6 +44,9 @@ class WorkCounters:
     substeps : int
         Sub-steps taken by steps that had to be split (see
         ``Integrator.substeps``); 0 when every step was taken whole.
+    retries : int
+        Steps redone with twice as many sub-steps because the position
+        projection (SHAKE) did not converge in them.
 
     """
 
@@ -53,6 +56,7 @@ class WorkCounters:
     gyroscopic_body_evaluations: int = 0
     rotation_updates: int = 0
     substeps: int = 0
+    retries: int = 0
 
     def as_dict(self) -> dict:
         """Counters as a plain dict."""

@@ -23,3 +23,20 @@ class SpecError(ValueError):
         joined = f'{prefix}.{self.field}' if self.field and not self.field.startswith('[') \
             else f'{prefix}{self.field}'
         return SpecError(joined, self.problem)
+
+
+class DivergenceError(RuntimeError):
+    """
+    A step produced a non-finite state; the simulation stays at the last finite one.
+
+    Not bad input but a step the method could not take (a step size far too
+    large for the motion, a stiff wrench). ``time`` is the simulation time (s)
+    the state stays at and ``bodies`` the names of the bodies that diverged.
+    """
+
+    def __init__(self, time: float, bodies: list) -> None:
+        self.time = time
+        self.bodies = bodies
+        super().__init__(f'the step from t = {time:.9g} s gave a non-finite state (bodies '
+                         f'{bodies}); the simulation stays at t = {time:.9g} s '
+                         f'(a smaller dt resolves the motion)')

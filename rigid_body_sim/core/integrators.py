@@ -71,6 +71,19 @@ from .dynamics import Dynamics
 from .errors import SpecError
 
 
+class NotConverged(Exception):
+    """
+    A (sub)step's position projection did not converge: redo the step finer.
+
+    Raised inside a splitting step when SHAKE's Newton iterations stop
+    reducing the residual, which happens when a constrained body turned much
+    further within the step than at its start (a whip that accelerates). The
+    step is then retried from its start with twice the sub-steps, up to
+    ``Integrator.max_substeps``; only there does the projection fall back to an
+    orthogonal projection (not momentum-consistent: a last resort).
+    """
+
+
 class Invariant(enum.Enum):
     """Quantities an integrator preserves (to rounding unless stated)."""
 
@@ -98,6 +111,10 @@ class Integrator:
     #: Largest rotation (rad) of a constrained body in one (sub)step; a faster one
     #: makes the step split into equal sub-steps (None: never).
     max_rotation: Optional[float] = 0.25
+    #: Most sub-steps a step is split into when the position projection of a
+    #: constrained step does not converge (see :class:`NotConverged`).
+    max_substeps: int = 64
+    _last_resort: bool = True
 
     def __init__(self, dynamics: Dynamics) -> None:
         self.dynamics = dynamics
@@ -137,19 +154,32 @@ class Integrator:
         """
         t_end = state.time + dt if t_end is None else t_end
         k = self.substeps(state, dt)
-        if k == 1:
-            new = self._step(state, dt, t_end)
-        else:
-            self.dynamics.counters.substeps += k
-            new, h = state, dt / k
-            for i in range(k):
-                te = t_end if i == k - 1 else state.time + (i + 1) * h
-                new = self._step(new, h, te)
-                new.time = te
+        while True:
+            # At the finest split a step must finish: the projection then falls back.
+            self._last_resort = k >= self.max_substeps
+            try:
+                new = self._substepped(state, dt, t_end, k)
+                break
+            except NotConverged:
+                # A whip sped up within the step: redo it from the start, finer.
+                self.dynamics.counters.retries += 1
+                k = min(2 * k, self.max_substeps)
         new.time = t_end
         q = new.quat_principal_world
         q /= np.linalg.norm(q, axis=-1, keepdims=True)   # rounding only, in place
         self.dynamics.counters.steps += 1
+        return new
+
+    def _substepped(self, state: State, dt: float, t_end: float, k: int) -> State:
+        """Advance by ``k`` equal sub-steps of ``dt / k``."""
+        if k == 1:
+            return self._step(state, dt, t_end)
+        self.dynamics.counters.substeps += k
+        new, h = state, dt / k
+        for i in range(k):
+            te = t_end if i == k - 1 else state.time + (i + 1) * h
+            new = self._step(new, h, te)
+            new.time = te
         return new
 
     def _step(self, state: State, dt: float, t_end: float) -> State:
@@ -403,11 +433,21 @@ class Splitting(Integrator):
             geo = solver.geometry(pos_end, quat_end)
             r = geo.phi - target
             norm = np.max(np.abs(r), initial=0.0)
-            if norm <= solver.position_tolerance or it == solver.max_iterations:
+            if norm <= solver.position_tolerance:
+                break
+            if it == solver.max_iterations:
+                # Slow (linear) convergence leaves rounding-level residuals, which the
+                # next step removes; a residual far above rounding means the step was
+                # too coarse for the linearization.
+                if norm > 1e-9 * max(1.0, float(np.max(np.abs(pos_end), initial=0.0))) \
+                        and not self._last_resort:
+                    raise NotConverged
                 break
             if norm > 0.5 * previous:
-                # Not converging (a body turned too far in the step): finish with a
-                # plain projection of the end configuration.
+                # Not converging (a body turned too far in the step): redo the step
+                # finer; at the finest split, finish with a plain projection.
+                if not self._last_resort:
+                    raise NotConverged
                 solver.counters.projection_fallbacks += 1
                 pos_end, quat_end, _, _ = solver.project_positions(
                     start, pos_end, quat_end, vel, mom_end / moments, h, orthogonal=True)

@@ -31,10 +31,23 @@ from .constraints import Constraint, ConstraintSet
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
-from .errors import SpecError
+from .errors import DivergenceError, SpecError
 from .integrators import integrator_class
 from .solver import ConstraintSolver
 from .validate import positive_scalar
+
+
+def _finite(s: State) -> bool:
+    """Tell whether a state is finite (one sum per array: NaN and inf propagate)."""
+    with np.errstate(over='ignore', invalid='ignore'):
+        total = (s.pos_com_world.sum() + s.quat_principal_world.sum() + s.vel_com_world.sum()
+                 + s.ang_vel_principal.sum())
+    return bool(np.isfinite(total))
+
+
+def _non_finite_bodies(s: State) -> np.ndarray:
+    arrays = (s.pos_com_world, s.quat_principal_world, s.vel_com_world, s.ang_vel_principal)
+    return np.flatnonzero(~np.all([np.all(np.isfinite(a), axis=1) for a in arrays], axis=0))
 
 
 @dataclass(frozen=True)
@@ -134,10 +147,24 @@ class Simulation:
             if any(switched):
                 self.dynamics.changed()
             # Time as steps * dt, not a running sum: no rounding drift.
-            self.state = self.integrator.step(self.state, self.dt, (self._steps + 1) * self.dt)
+            try:
+                new = self.integrator.step(self.state, self.dt, (self._steps + 1) * self.dt)
+            except np.linalg.LinAlgError:
+                # A factorization met non-finite numbers: the step diverged on the way.
+                raise DivergenceError(self.time, self._moving_fastest()) from None
+            if not _finite(new):
+                bad = _non_finite_bodies(new)
+                if len(bad):   # (a sum can overflow where every value is finite)
+                    raise DivergenceError(self.time, [self.bodies.names[i] for i in bad])
+            self.state = new
             self._steps += 1
             if self._wrenches is not None and len(self._wrenches):
                 self._wrenches.remove_expired(self.state.time)
+
+    def _moving_fastest(self) -> list:
+        """Name the body turning fastest (where a divergence most likely began)."""
+        rates = np.linalg.norm(self.state.ang_vel_principal, axis=1)
+        return [self.bodies.names[int(np.argmax(rates))]]
 
     def run(self, duration: float) -> None:
         """Step until ``duration`` (s) more has elapsed (rounded to whole steps)."""
@@ -368,15 +395,18 @@ class Simulation:
         the configuration the next step would reuse.
         """
         dyn = self.dynamics
-        saved = (replace(dyn.counters), replace(dyn.solver.counters),
+        counters = (dyn.counters, dyn.solver.counters)
+        saved = ([replace(c) for c in counters],
                  [(e.evaluations, e.body_evaluations) for e in dyn.effects],
                  dyn.solver._geometry_cache)
         try:
             yield
         finally:
-            dyn.counters, dyn.solver.counters = saved[0], saved[1]
-            dyn.solver._geometry_cache = saved[3]
-            for effect, (evaluations, body_evaluations) in zip(dyn.effects, saved[2]):
+            # In place: callers may hold references to the counter objects.
+            for live, old in zip(counters, saved[0]):
+                live.__dict__.update(old.__dict__)
+            dyn.solver._geometry_cache = saved[2]
+            for effect, (evaluations, body_evaluations) in zip(dyn.effects, saved[1]):
                 effect.evaluations, effect.body_evaluations = evaluations, body_evaluations
 
     def _reactions(self) -> dict:
