@@ -43,18 +43,21 @@ Constraints (see :mod:`.solver`)
     the impulse along ``G(q_start)ᵀ`` for which the drift from the start lands
     on ``Φ = exp(−h/τ) Φ_start`` (SHAKE, Newton iterations that redo the drift),
     and the end velocities the impulse along ``G(q_end)ᵀ`` onto
-    ``Φ̇ = −Φ/τ``. Symmetric and symplectic; internal joints conserve linear and
+    ``Φ̇ = −ωΦ`` (``ω = 1/τ``, at most ``1/(2 dt)``). Symmetric and symplectic; internal joints conserve linear and
     angular momentum to rounding; the orders stay 1, 2 and 4 (measured).
 ``rkmk4``
     The constraint force of the Baumgarte-stabilized acceleration-level solve
-    at every stage, then the end velocities projected onto ``Φ̇ = −Φ/τ`` (an
+    at every stage, then the end velocities projected onto ``Φ̇ = −ωΦ`` (an
     internal impulse: momenta conserved). No position projection: it would move
     bodies at fixed momenta; the O(h⁵) drift per step decays through the
-    velocity target instead (measured violation ~1e-11).
+    velocity target instead (measured violation ~1e-12 m at dt = 1e-3, 1e-3 m
+    at dt = 0.2 s, where the capped ω still halves it every step).
 
 A step in which a constrained body would turn by more than ``max_rotation``
 (0.25 rad) is split into equal sub-steps (see :meth:`Integrator.substeps`):
-a fixed step cannot resolve a whip. Free bodies are never sub-stepped.
+a fixed step cannot resolve a whip. A splitting step whose SHAKE iterations
+still fail is redone with twice the sub-steps (:class:`NotConverged`). Free
+bodies are never sub-stepped.
 
 """
 
@@ -228,7 +231,7 @@ class RungeKuttaMuntheKaas(Integrator):
         if not dyn.constrained:
             return rkmk_step(self, state, dt, self.A, self.B, self.C)
         # Constraint forces at every stage (Baumgarte-stabilized); then the velocities
-        # are projected onto Φ̇ = −Φ/τ at the end configuration, an internal impulse
+        # are projected onto Φ̇ = −ωΦ at the end configuration, an internal impulse
         # that conserves momenta and makes the O(dt⁵) position drift decay. A position
         # projection would move bodies at fixed momenta and break angular momentum.
         new = rkmk_step(self, state, dt, self.A, self.B, self.C)

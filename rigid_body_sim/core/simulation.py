@@ -286,7 +286,7 @@ class Simulation:
         Add a constraint between steps; anchors and axes in the world refer to now.
 
         Bodies whose velocities disagree with the new joint are reconciled at
-        once, by the mass-weighted projection onto ``Φ̇ = −Φ/τ`` (a perfectly
+        once, by the mass-weighted projection onto ``Φ̇ = −ωΦ`` (a perfectly
         inelastic impact, which conserves momenta); a position violation then
         decays along ``exp(−t/τ)``.
 

@@ -30,7 +30,7 @@ Position and velocity level (every step)
 The integrators (see :mod:`.integrators`) correct positions onto
 ``Φ = ρ Φ_start`` with ``ρ = exp(−h / time_constant)`` (SHAKE in the splitting
 methods; :meth:`ConstraintSolver.project_positions` as a fallback) and
-velocities onto ``Φ̇ = −Φ / time_constant``
+velocities onto ``Φ̇ = −ω Φ``, ``ω = 1 / time_constant`` (at most ``1 / (2 dt)``)
 (:meth:`ConstraintSolver.project_velocities`, the mass-weighted minimum-norm
 impulse ``−M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁻¹ r``). For a satisfied constraint this is
 projection onto ``Φ = 0`` and ``Φ̇ = 0`` (drift stays at rounding level); a
