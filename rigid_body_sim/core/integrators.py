@@ -43,8 +43,9 @@ Constraints (see :mod:`.solver`)
     the impulse along ``G(q_start)ᵀ`` for which the drift from the start lands
     on ``Φ = exp(−h/τ) Φ_start`` (SHAKE, Newton iterations that redo the drift),
     and the end velocities the impulse along ``G(q_end)ᵀ`` onto
-    ``Φ̇ = −ωΦ`` (``ω = 1/τ``, at most ``1/(2 dt)``). Symmetric and symplectic; internal joints conserve linear and
-    angular momentum to rounding; the orders stay 1, 2 and 4 (measured).
+    ``Φ̇ = −ωΦ`` (``ω = 1/τ``, at most ``1/(2 dt)``). Symmetric and
+    symplectic; internal joints conserve linear and angular momentum to
+    rounding; the orders stay 1, 2 and 4 (measured).
 ``rkmk4``
     The constraint force of the Baumgarte-stabilized acceleration-level solve
     at every stage, then the end velocities projected onto ``Φ̇ = −ωΦ`` (an
