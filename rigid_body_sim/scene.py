@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+import re
 from typing import Any, Union
 
 import numpy as np
@@ -90,10 +91,28 @@ def load_scene(path: Union[str, Path]) -> Scene:
     except OSError as exc:
         raise SceneError(f'{path}: cannot read: {exc.strerror}') from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as exc:
         raise SceneError(f'{path}: not valid YAML: {exc}') from None
     return scene_from_dict(data, str(path))
+
+
+class _Loader(yaml.SafeLoader):
+    """
+    PyYAML's safe loader with YAML 1.2 floats.
+
+    PyYAML implements YAML 1.1, where ``1e-3`` (no dot) is a string; scene files
+    are written by people who mean a number, as YAML 1.2 and ROS parameter files
+    (read by a YAML 1.2 parser) agree.
+    """
+
+
+_Loader.yaml_implicit_resolvers = {k: list(v) for k, v in
+                                   yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_Loader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
+    list('-+0123456789'))
 
 
 def scene_from_dict(data: Any, source: str = '<scene>') -> Scene:

@@ -1,8 +1,11 @@
 """Bad constraint input: a clear SpecError naming the field; the simulation carries on."""
 
+import math
+
 import numpy as np
 import pytest
 from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation, SpecError
+from rigid_body_sim.core.mechanisms import chain
 
 NAN = float('nan')
 
@@ -106,3 +109,28 @@ def test_consistent_but_violated_constraint_is_accepted():
     assert sim.constraint_violation()['far'] > 0.7
     sim.run(1.0)
     assert sim.constraint_violation()['far'] < 1e-7   # 0.8 exp(-20) = 1.6e-9
+
+
+def test_reachable_only_by_folding_is_accepted():
+    # A straight chain is a singular start: Gauss–Newton from it stalls, although folding
+    # the chain (0.5 m long) puts its tip on a point 0.45 m away at 162 degrees.
+    sim = chain(5, 'lie_poisson2')
+    angle = 0.9 * np.pi
+    sim.add_constraint(Constraint('tip', 'ball', 'l4', None, anchor_a_body=[0.05, 0, 0],
+                                  anchor_b_body=[0.45 * np.cos(angle), 0.45 * np.sin(angle),
+                                                 0.0]))
+    assert sim.constraint_violation()['tip'] > 0.5
+    sim.run(2.0)
+    assert sim.constraint_violation()['tip'] < 1e-9   # measured 1.1e-11
+
+
+def test_generic_function_undefined_away_from_here_is_accepted():
+    # sqrt(x - 0.4) exists only for x >= 0.4: the consistency search may step outside;
+    # it cannot tell, so the constraint is accepted and the motion goes on.
+    sim = simulation()
+    sim.add_constraint(Constraint('g', 'generic', 'b', None,
+                                  function=lambda xa, Ra, xb, Rb: np.array(
+                                      [math.sqrt(xa[0] - 0.4) - 0.7])))
+    assert sim.constraint_names == ['pivot', 'g']
+    sim.run(1.0)
+    assert sim.constraint_violation()['g'] < 1e-8   # 0.075 m exp(-1 / 0.05) = 1.5e-10

@@ -113,3 +113,12 @@ def test_command_line_reports_bad_scene(tmp_path, capsys):
     path.write_text('dt: 0.001\nbodies: [{name: b, mass: 0, inertia: [1, 1, 1]}]\n')
     assert main([str(path)]) == 2
     assert 'bad.yaml: bodies[0].mass: must be positive' in capsys.readouterr().err
+
+
+def test_exponent_notation_is_a_number(tmp_path):
+    # YAML 1.1 (PyYAML) reads 1e-3 as a string; scene files follow YAML 1.2.
+    path = tmp_path / 'sci.yaml'
+    path.write_text('dt: 1e-3\nbodies: [{name: b, mass: 2E+0, inertia: [1e-2, 1e-2, 1e-2]}]\n')
+    sim = load_scene(path).simulation
+    assert sim.dt == 1e-3
+    assert sim.bodies.mass[0] == 2.0

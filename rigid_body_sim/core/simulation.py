@@ -204,19 +204,43 @@ class Simulation:
     #: m or rad: a constraint set is consistent if Gauss–Newton gets ``max |Φ|`` below this.
     CONSISTENCY_TOLERANCE = 1e-8
 
-    def _consistent(self) -> bool:
-        """Tell whether the constraints can all hold (see ``ConstraintSolver.closest_reach``)."""
-        solver = self.dynamics.solver
-        s = self.state
-        return solver.closest_reach(s.pos_com_world, s.quat_principal_world,
-                                    self.CONSISTENCY_TOLERANCE) <= self.CONSISTENCY_TOLERANCE
+    def _reach(self) -> float:
+        """
+        Smallest ``max |Φ|`` Gauss–Newton reaches (see ``ConstraintSolver.closest_reach``).
 
-    def _inconsistent(self, name: str, field: str, outcome: str) -> SpecError:
+        From the current configuration and, if that stalls, from three random
+        re-orientations of growing size (0.3, 1 and 3 rad): a singular start,
+        such as a straight chain asked to fold, stalls where a solution exists,
+        and only a residual left from every start marks the set inconsistent.
+        Returns 0 when a generic constraint's function fails away from the
+        current configuration (the search cannot tell: the constraint is
+        accepted). Counts no work.
+        """
         solver = self.dynamics.solver
         s = self.state
-        residual = solver.closest_reach(s.pos_com_world, s.quat_principal_world,
-                                        self.CONSISTENCY_TOLERANCE)
-        others = [n for n in solver.constraints.names if n != name]
+        tol = self.CONSISTENCY_TOLERANCE
+        rng = np.random.default_rng(0)   # the same verdict every time
+        best = np.inf
+        with self._uncounted():
+            try:
+                for scale in (0.0, 0.3, 1.0, 3.0):
+                    quat = s.quat_principal_world
+                    if scale:
+                        turn = so3.exp_quat(scale * rng.normal(size=(len(quat), 3)))
+                        quat = so3.quat_multiply(quat, turn)
+                    best = min(best, solver.closest_reach(s.pos_com_world, quat, tol))
+                    if best <= tol:
+                        break
+            except SpecError:
+                return 0.0
+        return best
+
+    def _consistent(self) -> bool:
+        """Tell whether the constraints can all hold."""
+        return self._reach() <= self.CONSISTENCY_TOLERANCE
+
+    def _inconsistent(self, name: str, field: str, outcome: str, residual: float) -> SpecError:
+        others = [n for n in self.dynamics.solver.constraints.names if n != name]
         return SpecError(field, f'constraint {name!r} is inconsistent with {others}: no '
                                 f'configuration satisfies them all (the closest leaves '
                                 f'max |Φ| = {residual:.3g} m or rad); {outcome}')
@@ -236,7 +260,7 @@ class Simulation:
         for spec in specs[:hi]:
             solver.constraints.add(spec, self.state)
         raise self._inconsistent(specs[hi - 1].name, f'constraints[{hi - 1}]',
-                                 'no simulation was built')
+                                 'no simulation was built', self._reach())
 
     @staticmethod
     def _wrench_rows(effect: Effect) -> Optional[list]:
@@ -297,10 +321,15 @@ class Simulation:
         """
         constraints = self.dynamics.solver.constraints
         constraints.add(constraint, self.state)
-        if not self._consistent():
-            error = self._inconsistent(constraint.name, 'constraint', 'it was not added')
+        try:
+            residual = self._reach()
+        except BaseException:
             constraints.remove(constraint.name)
-            raise error
+            raise
+        if residual > self.CONSISTENCY_TOLERANCE:
+            constraints.remove(constraint.name)
+            raise self._inconsistent(constraint.name, 'constraint', 'it was not added',
+                                     residual)
         self.dynamics.changed()
         self._reconcile_velocities()
 

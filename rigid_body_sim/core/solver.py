@@ -311,7 +311,7 @@ class ConstraintSolver:
         Returns
         -------
         float
-            ``max |Φ|`` at the last iterate.
+            The smallest ``max |Φ|`` of the iterates.
 
         """
         best, stalled = np.inf, 0
