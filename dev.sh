@@ -4,7 +4,8 @@
 #   1. a project-local virtual environment .venv with ROS 2 Jazzy from PyPI wheels,
 #      numpy, scipy, the test and lint tools (exact versions: requirements.txt);
 #   2. the CMake path fix-up the ROS wheels need for colcon builds (../shared/ros-wheels.md);
-#   3. `colcon build --symlink-install` of this ament_python package into install/.
+#   3. `colcon build --symlink-install` into install/ of this ament_python package and of
+#      the ament_cmake interface package rigid_body_sim_interfaces in interfaces/.
 #
 # Usage:
 #   ./dev.sh run [SCENE.yaml] [options]   run a scene (default: config/default_scene.yaml)
@@ -62,16 +63,25 @@ fix_cmake_paths() {
 }
 
 build() {
-    # Rebuild when the package's metadata or its list of installed files changes;
-    # with --symlink-install, edits to Python sources and config files need no rebuild.
-    local want have
-    want=$( (cat package.xml setup.py setup.cfg; ls config resource) | sha256sum | cut -d' ' -f1)
+    # Rebuild when a package's metadata or its list of installed files changes, a message
+    # or service definition changes, or the wheels the interface code is generated and
+    # compiled against (requirements.txt); with --symlink-install, edits to Python sources
+    # and config files need no rebuild. install/ holds symlinks into build/: rebuild when
+    # either is missing.
+    local want have pkg complete=1
+    want=$( (cat requirements.txt package.xml setup.py setup.cfg \
+                 interfaces/package.xml interfaces/CMakeLists.txt interfaces/msg/* interfaces/srv/*
+             ls config resource interfaces/msg interfaces/srv) | sha256sum | cut -d' ' -f1)
     have=$(cat "$ROOT/install/.build.sha256" 2>/dev/null || true)
-    if [ "$want" != "$have" ] || [ ! -f "$ROOT/install/setup.sh" ]; then
+    for pkg in rigid_body_sim rigid_body_sim_interfaces; do
+        [ -d "$ROOT/build/$pkg" ] && [ -d "$ROOT/install/$pkg" ] || complete=0
+    done
+    if [ "$want" != "$have" ] || [ ! -f "$ROOT/install/setup.sh" ] || [ "$complete" = 0 ]; then
         say "colcon build"
         (
             export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
-            "$VENV/bin/colcon" --log-base "$ROOT/log" build --symlink-install --base-paths . \
+            "$VENV/bin/colcon" --log-base "$ROOT/log" build --symlink-install \
+                --base-paths . interfaces \
                 --build-base "$ROOT/build" --install-base "$ROOT/install" \
                 --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" >&2
         )
@@ -82,9 +92,12 @@ build() {
 activate() {
     # shellcheck disable=SC1091
     source "$VENV/bin/activate"
-    # install/setup.sh is POSIX sh and reads unset variables.
+    # install/setup.sh is POSIX sh and reads unset variables. It prepends the install
+    # prefixes to AMENT_PREFIX_PATH; export the venv first (bash keeps what a sourced file
+    # exports over a `VAR=value . file` prefix only inside a function).
     set +u
-    AMENT_PREFIX_PATH="$VENV" COLCON_CURRENT_PREFIX="$ROOT/install" . "$ROOT/install/setup.sh"
+    export AMENT_PREFIX_PATH="$VENV"
+    COLCON_CURRENT_PREFIX="$ROOT/install" . "$ROOT/install/setup.sh"
     set -u
 }
 

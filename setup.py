@@ -25,6 +25,8 @@ setup(
     entry_points={
         'console_scripts': [
             'rigid_body_sim_run = rigid_body_sim.cli:main',
+            'sim_node = rigid_body_sim.ros.node:main',
+            'echo_body = rigid_body_sim.ros.echo:main',
         ],
     },
 )

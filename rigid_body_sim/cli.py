@@ -16,7 +16,6 @@ from typing import Optional, Sequence
 import numpy as np
 
 from .core import INTEGRATORS, SpecError
-from .core.integrators import integrator_class
 from .scene import load_scene, SceneError
 
 
@@ -55,9 +54,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.integrator or args.dt:
             if args.dt is not None and not (args.dt > 0.0 and np.isfinite(args.dt)):
                 raise SpecError('--dt', f'must be a positive number, got {args.dt!r}')
-            sim.dt = args.dt or sim.dt
-            sim.integrator = integrator_class(args.integrator or sim.integrator_name)(
-                sim.dynamics)
+            sim.set_step(args.dt, args.integrator)
         duration = scene.duration if args.duration is None else args.duration
         if not (duration > 0.0 and np.isfinite(duration)):
             raise SpecError('--duration', f'must be a positive number, got {duration!r}')

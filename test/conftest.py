@@ -28,3 +28,10 @@ def random_body(rng: np.random.Generator, name: str) -> RigidBody:
 def rng():
     """Seeded generator: tests are repeatable."""
     return np.random.default_rng(20261122)
+
+
+@pytest.fixture
+def ros(tmp_path):
+    """Nodes in child processes and a client here, on a random DDS domain (ros_harness)."""
+    harness = pytest.importorskip('ros_harness', reason='rclpy not installed')
+    yield from harness.ros_session(tmp_path)

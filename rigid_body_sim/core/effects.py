@@ -272,9 +272,13 @@ class AppliedWrenches(Effect):
 
     def add(self, body: str, force: Any = (0.0, 0.0, 0.0), torque: Any = (0.0, 0.0, 0.0),
             frame: Any = 'world', point_body: Any = None, start: float = 0.0,
-            duration: Optional[float] = None) -> None:
+            duration: Optional[float] = None, key: Optional[str] = None) -> None:
         """
         Add a wrench; every argument is validated and named on error.
+
+        An entry with a ``key`` replaces the entry added earlier with the same
+        key (a held input, such as the latest message on a topic); a keyed
+        entry whose force and torque are both zero only removes the old one.
 
         Parameters
         ----------
@@ -290,6 +294,8 @@ class AppliedWrenches(Effect):
             s, simulation time at which it starts.
         duration : float, optional
             s, > 0; None for forever.
+        key : str, optional
+            Replace the entry with this key, if any.
 
         """
         b = self.bodies.lookup(body, 'body')
@@ -312,7 +318,13 @@ class AppliedWrenches(Effect):
             r_p = V.T @ (r_b - self.bodies.com_body[b])
         if fr is Frame.BODY:
             f, tau = V.T @ f, V.T @ tau    # stored in the principal frame
-        self._rows.append((b, fr is Frame.BODY, f, tau, r_p, t0, t1))
+        if key is not None:
+            self._rows = [row for row in self._rows if row[7] != key]
+            if not (np.any(f) or np.any(tau)):
+                self._arrays = None
+                self._active = None
+                return
+        self._rows.append((b, fr is Frame.BODY, f, tau, r_p, t0, t1, key))
         self._arrays = None
         self._active = None
 

@@ -141,14 +141,15 @@ class Simulation:
         solver.dt = self.dt
         effects = self.dynamics.effects
         for _ in range(int(n)):
-            mid = (self._steps + 0.5) * self.dt
+            mid = self._time_base + (self._steps + 0.5) * self.dt
             # Every effect must see the new step: no short-circuit.
             switched = [effect.begin_step(mid) for effect in effects]
             if any(switched):
                 self.dynamics.changed()
-            # Time as steps * dt, not a running sum: no rounding drift.
+            # Time as base + steps * dt, not a running sum: no rounding drift.
             try:
-                new = self.integrator.step(self.state, self.dt, (self._steps + 1) * self.dt)
+                new = self.integrator.step(self.state, self.dt,
+                                           self._time_base + (self._steps + 1) * self.dt)
             except np.linalg.LinAlgError:
                 # A factorization met non-finite numbers: the step diverged on the way.
                 raise DivergenceError(self.time, self._moving_fastest()) from None
@@ -166,6 +167,23 @@ class Simulation:
         rates = np.linalg.norm(self.state.ang_vel_principal, axis=1)
         return [self.bodies.names[int(np.argmax(rates))]]
 
+    def set_step(self, dt: Optional[float] = None, integrator: Optional[str] = None) -> None:
+        """
+        Change the step size and/or the integrator between steps.
+
+        Time stays continuous: later steps end at ``now + k * dt``. Both values are
+        validated before either changes.
+        """
+        new_dt = self.dt if dt is None else positive_scalar(dt, 'dt')
+        cls = integrator_class(integrator) if integrator is not None else None
+        if new_dt != self.dt:
+            self._time_base = self.time
+            self._steps = 0
+            self.dt = new_dt
+            self.dynamics.solver.dt = new_dt
+        if cls is not None and cls is not type(self.integrator):
+            self.integrator = cls(self.dynamics)
+
     def run(self, duration: float) -> None:
         """Step until ``duration`` (s) more has elapsed (rounded to whole steps)."""
         d = positive_scalar(duration, 'duration')
@@ -174,7 +192,8 @@ class Simulation:
     def reset(self) -> None:
         """Back to the initial state; applied wrenches return to the scene's own."""
         self.state: State = self.bodies.initial_state(self._specs)
-        self._steps = 0
+        self._steps = 0          # steps of the current dt since _time_base
+        self._time_base = 0.0    # s: when dt was last changed
         for effect, rows in zip(self.dynamics.effects, self._initial_wrenches):
             if rows is not None:
                 effect._rows = list(rows)
@@ -271,7 +290,7 @@ class Simulation:
     def apply_wrench(self, body: str, force: Any = (0.0, 0.0, 0.0),
                      torque: Any = (0.0, 0.0, 0.0), frame: str = 'world',
                      point_body: Any = None, duration: Optional[float] = None,
-                     start: Optional[float] = None) -> None:
+                     start: Optional[float] = None, key: Optional[str] = None) -> None:
         """
         Apply a force (at ``point_body``, default the centre of mass) and a torque.
 
@@ -289,6 +308,10 @@ class Simulation:
             s; None: until cleared or reset.
         start : float, optional
             s, simulation time; default now.
+        key : str, optional
+            Replaces the wrench applied earlier with the same key (a held input,
+            e.g. the latest message on a topic); with zero force and torque it
+            only removes that one. Wrenches without a key add up.
 
         """
         if self._wrenches is None:
@@ -296,7 +319,7 @@ class Simulation:
             self._wrenches.bind(self.bodies)
             self.dynamics.add_effect(self._wrenches)
         self._wrenches.add(body, force, torque, frame, point_body,
-                           self.time if start is None else start, duration)
+                           self.time if start is None else start, duration, key)
         self.dynamics.changed()
 
     def clear_wrenches(self, body: Optional[str] = None) -> None:

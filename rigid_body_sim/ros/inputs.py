@@ -1,0 +1,131 @@
+"""
+Checks of what arrives from ROS, before it reaches the core (no rclpy).
+
+Every rejection names the field and the problem, and carries a cause (an
+:class:`Rejection` member) that the node counts on ``/diagnostics``.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import re
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..core import Constraint, JointType, SpecError
+
+
+class Rejection(enum.Enum):
+    """Why an input was refused (the keys of the node's rejection counters)."""
+
+    NON_FINITE = 'non_finite'                  # NaN or inf in a wrench
+    TOO_LARGE = 'too_large'                    # beyond max_force / max_torque
+    UNKNOWN_FRAME = 'unknown_frame'            # wrench frame_id neither world nor the body
+    UNKNOWN_BODY = 'unknown_body'              # a request names no body of the scene
+    UNKNOWN_CONSTRAINT = 'unknown_constraint'  # remove_constraint of a name not present
+    BAD_CONSTRAINT = 'bad_constraint'          # malformed request (type, sizes, name)
+    INCONSISTENT_CONSTRAINT = 'inconsistent_constraint'   # no configuration satisfies it
+    NOT_PAUSED = 'not_paused'                  # ~/step while running
+    BAD_STEP = 'bad_step'                      # ~/step with too many steps
+    DIVERGED = 'diverged'                      # a request the diverged state cannot serve
+
+
+class Rejected(ValueError):
+    """An input refused, with its cause."""
+
+    def __init__(self, cause: Rejection, message: str) -> None:
+        self.cause = cause
+        super().__init__(message)
+
+
+_TOKEN = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
+
+
+def check_name_token(name: str, what: str) -> None:
+    """Raise SpecError unless ``name`` can be one token of a ROS topic name."""
+    if not isinstance(name, str) or not _TOKEN.match(name) or '__' in name:
+        raise SpecError(what, f'{name!r} cannot be part of a ROS topic name: use letters, '
+                              'digits and single underscores, starting with a letter')
+
+
+def check_wrench(force: np.ndarray, torque: np.ndarray, frame_id: str, body: str,
+                 world_frame: str, max_force: float, max_torque: float) -> str:
+    """
+    Check a wrench message's values; return the core frame ('world' or 'body').
+
+    Raises
+    ------
+    Rejected
+        Naming the field and the problem.
+
+    """
+    for field, v in (('wrench.force', force), ('wrench.torque', torque)):
+        if not np.all(np.isfinite(v)):
+            raise Rejected(Rejection.NON_FINITE, f'{field}: must be finite, got {v.tolist()}')
+    for field, v, limit, param in (('wrench.force', force, max_force, 'max_force'),
+                                   ('wrench.torque', torque, max_torque, 'max_torque')):
+        size = math.hypot(*v.tolist())   # (no overflow for values near the float limit)
+        if size > limit:
+            raise Rejected(Rejection.TOO_LARGE, f'{field}: magnitude {size:.3g} exceeds the '
+                                                f'parameter {param} = {limit:.3g}')
+    if frame_id == world_frame:
+        return 'world'
+    if frame_id == body:
+        return 'body'
+    raise Rejected(Rejection.UNKNOWN_FRAME,
+                   f'header.frame_id: {frame_id!r} is neither the world frame '
+                   f'{world_frame!r} nor the body {body!r}')
+
+
+def _optional_vector(value: Sequence[float], field: str) -> Any:
+    values = list(value)
+    if not values:
+        return None
+    if len(values) != 3:
+        raise SpecError(field, f'expected [] or 3 values [x, y, z], got {len(values)}: '
+                               f'{values}')
+    return np.array(values, dtype=float)
+
+
+def constraint_from_request(req: Any, body_names: Sequence[str]) -> Constraint:
+    """
+    Build a core :class:`Constraint` from an ``AddConstraint`` request.
+
+    Raises
+    ------
+    Rejected
+        UNKNOWN_BODY or BAD_CONSTRAINT, naming the field and the problem.
+
+    """
+    try:
+        check_name_token(req.name, 'name')
+        kind = JointType.parse(req.type)
+        if kind is JointType.GENERIC:
+            raise SpecError('type', 'a generic constraint takes a Python function: add it '
+                                    'through the core API (Simulation.add_constraint)')
+        for field in ('body_a', 'body_b'):
+            body = getattr(req, field)
+            if field == 'body_b' and body in ('', 'world'):
+                continue
+            if body not in body_names:
+                raise Rejected(Rejection.UNKNOWN_BODY,
+                               f'{field}: unknown body {body!r}; known bodies: '
+                               f'{list(body_names)}')
+        length = float(req.length)
+        if length != length or length < 0.0 or length == float('inf'):
+            raise SpecError('length', f'must be 0 (the current distance) or a positive '
+                                      f'number of metres, got {req.length!r}')
+        if length and kind is not JointType.DISTANCE:
+            raise SpecError('length', f'only for distance constraints, not {kind.value}')
+        return Constraint(
+            name=req.name, type=kind, body_a=req.body_a,
+            body_b=None if req.body_b in ('', 'world') else req.body_b,
+            anchor_world=_optional_vector(req.anchor_world, 'anchor_world'),
+            anchor_a_body=_optional_vector(req.anchor_a_body, 'anchor_a_body'),
+            anchor_b_body=_optional_vector(req.anchor_b_body, 'anchor_b_body'),
+            axis_world=_optional_vector(req.axis_world, 'axis_world'),
+            length=length or None)
+    except SpecError as exc:
+        raise Rejected(Rejection.BAD_CONSTRAINT, str(exc)) from None

@@ -1,0 +1,538 @@
+"""
+The ROS 2 node ``rigid_body_sim``: a thin adapter over :class:`~rigid_body_sim.core.Simulation`.
+
+One thread runs both the physics loop and the ROS callbacks: the loop takes a
+step when the wall clock says one is due (see :mod:`.pacing`) and, between
+steps, lets the executor run callbacks. So a callback never runs during a
+step. Wrench messages are queued (the latest per topic) and applied just
+before the next step; services (reset, add/remove constraint, step) act
+between steps and reply when done.
+
+Topics (private, ``~`` = ``/<namespace>/rigid_body_sim``):
+
+- in: ``~/bodies/<B>/wrench`` (geometry_msgs/WrenchStamped)
+- out: ``~/bodies/<B>/pose`` (PoseStamped), ``~/bodies/<B>/twist`` (TwistStamped),
+  ``~/body_states`` (rigid_body_sim_interfaces/BodyStates),
+  ``~/constraints/<C>/wrench`` (WrenchStamped), ``/clock``, ``/diagnostics``.
+
+See the README for the frames, points and conventions of every message.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from typing import Optional
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+from rigid_body_sim_interfaces.msg import BodyStates
+from rigid_body_sim_interfaces.srv import AddConstraint, RemoveConstraint, Step
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Header
+from std_srvs.srv import SetBool, Trigger
+
+from . import conversions as conv
+from .inputs import check_name_token, check_wrench, constraint_from_request, Rejected, \
+    Rejection
+from .pacing import output_due, Pacer, Totals, WindowStats
+from .settings import PARAMETERS, Settings
+from ..cli import default_scene_path
+from ..core import DivergenceError, Simulation, SpecError
+from ..core import rotation as so3
+from ..scene import load_scene, SceneError
+
+#: The most steps one ~/step request may ask for (the node serves nothing else meanwhile).
+MAX_STEPS_PER_REQUEST = 1_000_000
+#: s of wall time between diagnostics (and the one-line summary in the log).
+REPORT_PERIOD = 1.0
+#: s of wall time the loop waits for events at most while paused (bounds shutdown latency).
+IDLE_WAIT = 0.05
+
+
+class SimNode(Node):
+    """
+    The simulation node: parameters, topics and services over one Simulation.
+
+    Parameters
+    ----------
+    node_name, namespace : str
+        As for :class:`rclpy.node.Node`.
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (e.g. ``parameter_overrides``).
+
+    Raises
+    ------
+    SpecError, SceneError
+        For an invalid parameter (named) or scene file.
+
+    """
+
+    def __init__(self, node_name: str = 'rigid_body_sim', **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        values = {}
+        for p in PARAMETERS:
+            descriptor = ParameterDescriptor(description=p.description, read_only=p.read_only,
+                                             dynamic_typing=True)
+            values[p.name] = self.declare_parameter(p.name, p.default, descriptor).value
+        self.settings = Settings.from_values(values)
+        s = self.settings
+        scene_path = s.scene or str(default_scene_path())
+        self.scene = load_scene(scene_path)
+        self.sim: Simulation = self.scene.simulation
+        for name in self.sim.bodies.names:
+            check_name_token(name, f'scene {scene_path}: body name')
+        for name in self.sim.constraint_names:
+            check_name_token(name, f'scene {scene_path}: constraint name')
+        self._initial_dt = self.sim.dt
+        self._scene_integrator = self.sim.integrator_name
+        self.sim.set_step(1.0 / s.physics_rate, s.integrator or None)
+
+        self._pending_wrenches: dict = {}   # body -> (force, torque, frame): latest message
+        self._paused = s.start_paused
+        self._diverged: Optional[str] = None
+        self._running = True
+        self.totals = Totals()
+        self._step_count = 0   # steps since the last reset
+        self._superseded = 0
+        self._pacer = Pacer(self.sim.dt, s.real_time_factor)
+        self._window = WindowStats()
+        self._energy0 = self.sim.diagnostics().total_energy
+
+        self._make_interfaces()
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.executor_ = SingleThreadedExecutor(context=self.context)
+        self.executor_.add_node(self)
+        self.get_logger().info(
+            f'scene {self.scene.name!r} ({scene_path}): {len(self.sim.bodies)} bodies, '
+            f'{len(self.sim.constraint_names)} constraints, integrator '
+            f'{self.sim.integrator_name}, physics {s.physics_rate:g} Hz (dt {self.sim.dt:g} s'
+            + ('' if self.sim.dt == self._initial_dt
+               else f"; the scene's dt {self._initial_dt:g} s is overridden") + '), publish '
+            f'{s.publish_rate:g} Hz, real-time factor {s.real_time_factor:g}'
+            + (', paused' if self._paused else ''))
+
+    # -- interfaces -----------------------------------------------------------------------
+
+    def _make_interfaces(self) -> None:
+        s = self.settings
+        self._pose_pubs, self._twist_pubs, self._wrench_subs = {}, {}, {}
+        if s.per_body_topics:
+            for name in self.sim.bodies.names:
+                self._pose_pubs[name] = self.create_publisher(
+                    PoseStamped, f'~/bodies/{name}/pose', 10)
+                self._twist_pubs[name] = self.create_publisher(
+                    TwistStamped, f'~/bodies/{name}/twist', 10)
+                self._wrench_subs[name] = self.create_subscription(
+                    WrenchStamped, f'~/bodies/{name}/wrench',
+                    lambda msg, body=name: self._on_wrench(body, msg), QoSProfile(depth=10))
+        self._states_pub = self.create_publisher(BodyStates, '~/body_states', 10)
+        self._constraint_pubs: dict = {}
+        self._sync_constraint_publishers()
+        self._clock_pub = self.create_publisher(Clock, '/clock', 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_service(SetBool, '~/pause', self._on_pause)
+        self.create_service(Step, '~/step', self._on_step)
+        self.create_service(AddConstraint, '~/add_constraint', self._on_add_constraint)
+        self.create_service(RemoveConstraint, '~/remove_constraint', self._on_remove_constraint)
+
+    def _sync_constraint_publishers(self) -> None:
+        """One ``~/constraints/<C>/wrench`` publisher per constraint present."""
+        names = set(self.sim.constraint_names)
+        for name in list(self._constraint_pubs):
+            if name not in names:
+                self.destroy_publisher(self._constraint_pubs.pop(name))
+        for name in self.sim.constraint_names:
+            if name not in self._constraint_pubs:
+                self._constraint_pubs[name] = self.create_publisher(
+                    WrenchStamped, f'~/constraints/{name}/wrench', 10)
+
+    # -- inputs ---------------------------------------------------------------------------
+
+    def _reject(self, cause: Rejection, where: str, message: str) -> str:
+        self.totals.reject(cause.value)
+        text = f'{where}: rejected ({cause.value}): {message}'
+        self.get_logger().warning(text, throttle_duration_sec=1.0)
+        return text
+
+    def _on_wrench(self, body: str, msg: WrenchStamped) -> None:
+        s = self.settings
+        force, torque = conv.wrench_arrays(msg)
+        try:
+            frame = check_wrench(force, torque, msg.header.frame_id, body, s.world_frame,
+                                 s.max_force, s.max_torque)
+        except Rejected as exc:
+            self._reject(exc.cause, f'~/bodies/{body}/wrench', str(exc))
+            return
+        if body in self._pending_wrenches:
+            self._superseded += 1   # two messages between steps: the later one wins
+        self._pending_wrenches[body] = (force, torque, frame)
+
+    def _apply_pending(self) -> None:
+        """Apply the queued wrench messages (between steps)."""
+        if not self._pending_wrenches:
+            return
+        timeout = self.settings.wrench_timeout or None
+        for body, (force, torque, frame) in self._pending_wrenches.items():
+            # Applied at the body frame's origin; replaces this topic's previous wrench.
+            self.sim.apply_wrench(body, force, torque, frame=frame, point_body=(0.0, 0.0, 0.0),
+                                  duration=timeout, key=f'topic:{body}')
+        self._pending_wrenches.clear()
+
+    # -- services -------------------------------------------------------------------------
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response):
+        self.sim.reset()   # keeps dt and the integrator
+        self._pending_wrenches.clear()
+        self._diverged = None
+        self._step_count = 0
+        self._energy0 = self.sim.diagnostics().total_energy
+        self._sync_constraint_publishers()
+        self._pacer.restart(time.perf_counter())
+        self._publish_clock()
+        self._publish_state()
+        response.success = True
+        response.message = ('reset to the initial state of the scene at t = 0 s; applied '
+                            'wrenches cleared, constraints as in the scene'
+                            + (' (still paused)' if self._paused else ''))
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response):
+        if not request.data and self._diverged:
+            response.success = False
+            response.message = self._reject(Rejection.DIVERGED, '~/pause',
+                                            f'cannot resume after a divergence '
+                                            f'({self._diverged}); call ~/reset')
+            return response
+        was = self._paused
+        self._paused = bool(request.data)
+        if was and not self._paused:
+            self._pacer.restart(time.perf_counter())
+        response.success = True
+        response.message = f'{"paused" if self._paused else "running"} at t = ' \
+                           f'{self.sim.time:.9g} s'
+        return response
+
+    def _on_step(self, request: Step.Request, response: Step.Response):
+        response.time = conv.time_msg(self.sim.time)
+        response.step_count = self._step_count
+        if not self._paused:
+            response.success = False
+            response.message = self._reject(Rejection.NOT_PAUSED, '~/step',
+                                            'the simulation is running: pause it first '
+                                            '(~/pause true)')
+            return response
+        if self._diverged:
+            response.success = False
+            response.message = self._reject(Rejection.DIVERGED, '~/step',
+                                            f'{self._diverged}; call ~/reset')
+            return response
+        if request.steps > MAX_STEPS_PER_REQUEST:
+            response.success = False
+            response.message = self._reject(Rejection.BAD_STEP, '~/step',
+                                            f'steps: at most {MAX_STEPS_PER_REQUEST} per '
+                                            f'request, got {request.steps}')
+            return response
+        published = True
+        for _ in range(request.steps):
+            published = self._advance()
+            if self._diverged:
+                break
+        if not published:
+            self._publish_state()
+        response.time = conv.time_msg(self.sim.time)
+        response.step_count = self._step_count
+        response.success = self._diverged is None
+        response.message = self._diverged or f'{request.steps} steps to t = ' \
+                                             f'{self.sim.time:.9g} s'
+        return response
+
+    def _on_add_constraint(self, request: AddConstraint.Request,
+                           response: AddConstraint.Response):
+        where = f'~/add_constraint {request.name!r}'
+        try:
+            spec = constraint_from_request(request, self.sim.bodies.names)
+            if spec.name in self.sim.constraint_names:
+                raise Rejected(Rejection.BAD_CONSTRAINT,
+                               f'name: a constraint {spec.name!r} exists already')
+            self._apply_pending()
+            try:
+                self.sim.add_constraint(spec)
+            except SpecError as exc:
+                cause = Rejection.INCONSISTENT_CONSTRAINT if 'inconsistent' in str(exc) \
+                    else Rejection.BAD_CONSTRAINT
+                raise Rejected(cause, str(exc)) from None
+        except Rejected as exc:
+            response.success = False
+            response.message = self._reject(exc.cause, where, str(exc))
+            return response
+        rows = len(self.sim.dynamics.solver.constraints.rows_of(spec.name))
+        self._sync_constraint_publishers()
+        response.success = True
+        response.rows_added = rows
+        response.message = (f'added {spec.type.value} constraint {spec.name!r} '
+                            f'({rows} rows) at t = {self.sim.time:.9g} s')
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_remove_constraint(self, request: RemoveConstraint.Request,
+                              response: RemoveConstraint.Response):
+        name = request.name
+        if name not in self.sim.constraint_names:
+            response.success = False
+            response.message = self._reject(
+                Rejection.UNKNOWN_CONSTRAINT, '~/remove_constraint',
+                f'name: no constraint {name!r}; present: {self.sim.constraint_names}')
+            return response
+        rows = len(self.sim.dynamics.solver.constraints.rows_of(name))
+        self.sim.remove_constraint(name)
+        self._sync_constraint_publishers()
+        response.success = True
+        response.rows_removed = rows
+        response.message = f'removed constraint {name!r} ({rows} rows) at t = ' \
+                           f'{self.sim.time:.9g} s'
+        self.get_logger().info(response.message)
+        return response
+
+    # -- parameters -----------------------------------------------------------------------
+
+    def _check_parameters(self, params: list) -> SetParametersResult:
+        try:
+            trial = Settings(**vars(self.settings))
+            trial.update({p.name: p.value for p in params})
+        except SpecError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list) -> None:
+        s = self.settings
+        s.update({p.name: p.value for p in params})
+        names = {p.name for p in params}
+        if names & {'physics_rate', 'integrator'}:
+            self.sim.set_step(1.0 / s.physics_rate, s.integrator or self._scene_integrator)
+        if names & {'physics_rate', 'real_time_factor'}:
+            self._pacer.dt = self.sim.dt
+            self._pacer.real_time_factor = s.real_time_factor
+            self._pacer.restart(time.perf_counter())
+        self.get_logger().info('parameters set: ' + ', '.join(
+            f'{p.name} = {p.value!r}' for p in params))
+
+    # -- stepping and output --------------------------------------------------------------
+
+    def _advance(self) -> bool:
+        """Apply pending inputs, take one step, publish what is due; tell if state was."""
+        self._apply_pending()
+        t_before = self.sim.time
+        t0 = time.perf_counter()
+        try:
+            self.sim.step()
+        except DivergenceError as exc:
+            self._diverge(exc)
+            return False
+        self._window.record_step(time.perf_counter() - t0, self._pacer.period)
+        self.totals.steps += 1
+        self._step_count += 1
+        s = self.settings
+        t_after = self.sim.time
+        if output_due(t_before, t_after, s.clock_rate):
+            self._publish_clock()
+        if output_due(t_before, t_after, s.publish_rate):
+            self._publish_state()
+            return True
+        return False
+
+    def _diverge(self, exc: DivergenceError) -> None:
+        self._diverged = str(exc)
+        self._paused = True
+        self.get_logger().error(f'paused: {exc}; ~/reset recovers')
+        self._publish_diagnostics(time.perf_counter())
+
+    def _header(self, frame_id: str, stamp: Time) -> Header:
+        return Header(stamp=stamp, frame_id=frame_id)
+
+    def _publish_clock(self) -> None:
+        self._clock_pub.publish(Clock(clock=conv.time_msg(self.sim.time)))
+
+    def _publish_state(self) -> None:
+        t0 = time.perf_counter()
+        sim = self.sim
+        stamp = conv.time_msg(sim.time)
+        world = self._header(self.settings.world_frame, stamp)
+        pos, quat = sim.pose()
+        vel, omega = sim.twist()
+        self._states_pub.publish(conv.body_states(world, sim.bodies.names, pos, quat, vel,
+                                                  omega))
+        for i, name in enumerate(sim.bodies.names):
+            if name in self._pose_pubs:
+                self._pose_pubs[name].publish(conv.pose_stamped(world, pos[i], quat[i]))
+                self._twist_pubs[name].publish(conv.twist_stamped(world, vel[i], omega[i]))
+        if self._constraint_pubs:
+            self._publish_reactions(stamp, pos, quat)
+        self._window.record_publish(time.perf_counter() - t0)
+
+    def _publish_reactions(self, stamp: Time, pos: np.ndarray, quat: np.ndarray) -> None:
+        """
+        Each constraint's wrench on each body it acts on, and on the world.
+
+        One WrenchStamped per body, with ``frame_id`` the body's name: force and
+        torque in the body's frame, the torque about the body frame's origin
+        (the point ``~/bodies/<B>/pose`` reports). For a constraint to the world,
+        one more with ``frame_id`` the world frame: the wrench on the world,
+        torque about the world origin (equal and opposite).
+        """
+        sim = self.sim
+        index = {n: i for i, n in enumerate(sim.bodies.names)}
+        com = sim.state.pos_com_world
+        for name, per_body in sim.reactions().items():
+            pub = self._constraint_pubs.get(name)
+            if pub is None:
+                continue
+            on_world_f = np.zeros(3)
+            on_world_t = np.zeros(3)
+            for body, r in per_body.items():
+                i = index[body]
+                R = so3.quat_to_matrix(quat[i])
+                torque_origin = r.torque_com_world + so3.cross(com[i] - pos[i], r.force_world)
+                pub.publish(conv.wrench_stamped(self._header(body, stamp),
+                                                R.T @ r.force_world, R.T @ torque_origin))
+                on_world_f -= r.force_world
+                on_world_t -= r.torque_com_world + so3.cross(com[i], r.force_world)
+            if sim.dynamics.solver.constraints.spec(name).body_b is None:
+                pub.publish(conv.wrench_stamped(
+                    self._header(self.settings.world_frame, stamp), on_world_f, on_world_t))
+
+    def _publish_diagnostics(self, now: float) -> None:
+        w = self._window
+        wall = max(now - w.wall_start, 1e-9)
+        sim = self.sim
+        d = sim.diagnostics()
+        work = sim.work()
+        rtf = (sim.time - w.sim_start) / wall
+        level = DiagnosticStatus.OK
+        summary = 'running'
+        if self._diverged:
+            level, summary = DiagnosticStatus.ERROR, f'diverged: {self._diverged}'
+        elif self._paused:
+            summary = 'paused'
+        elif w.overruns or self._pacer.lag_resets:
+            level, summary = DiagnosticStatus.WARN, f'{w.overruns} steps over budget'
+        values = {
+            'sim_time_s': f'{sim.time:.9g}',
+            'steps': str(self.totals.steps),
+            'paused': str(self._paused).lower(),
+            'integrator': sim.integrator_name,
+            'dt_s': f'{sim.dt:.9g}',
+            'physics_rate_target_hz': f'{self.settings.physics_rate:.6g}',
+            'physics_rate_achieved_hz': f'{w.steps / wall:.6g}',
+            'real_time_factor_target': f'{self.settings.real_time_factor:.6g}',
+            'real_time_factor_achieved': f'{rtf:.6g}',
+            'step_cost_mean_us': f'{(w.step_cost_sum / w.steps * 1e6) if w.steps else 0:.4g}',
+            'step_cost_max_us': f'{w.step_cost_max * 1e6:.4g}',
+            'publish_cost_mean_us':
+                f'{(w.publish_cost_sum / w.publishes * 1e6) if w.publishes else 0:.4g}',
+            'overruns_window': str(w.overruns),
+            'overruns_total': str(self.totals.overruns + w.overruns),
+            'lag_resets_total': str(self._pacer.lag_resets),
+            'lag_dropped_wall_s': f'{self._pacer.dropped_wall:.6g}',
+            'energy_j': f'{d.total_energy:.12g}',
+            'energy_change_j': f'{d.total_energy - self._energy0:.6g}',
+            'constraint_violation': f'{d.constraint_violation:.3g}',
+            'substeps_total': str(work.get('substeps', 0)),
+            'retries_total': str(work.get('retries', 0)),
+            'wrench_messages_superseded': str(self._superseded),
+        }
+        for cause in Rejection:
+            values[f'rejected_{cause.value}'] = str(self.totals.rejected.get(cause.value, 0))
+        status = DiagnosticStatus(level=level, name=f'{self.get_name()}: physics',
+                                  message=summary, hardware_id=self.get_fully_qualified_name(),
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(DiagnosticArray(header=Header(stamp=stamp), status=[status]))
+        self.get_logger().info(
+            f't={sim.time:.3f} s  rtf={rtf:.2f}  {w.steps / wall:.0f} steps/s  '
+            f'E={d.total_energy:.6g} J  dE={d.total_energy - self._energy0:+.1e} J  '
+            f'violation={d.constraint_violation:.1e}'
+            + (f'  overruns={w.overruns}' if w.overruns else '') + f'  [{summary}]')
+        self.totals.overruns += w.overruns
+        self._window = WindowStats(wall_start=now, sim_start=sim.time)
+
+    # -- the loop -------------------------------------------------------------------------
+
+    def stop(self) -> None:
+        """Ask the loop to end (safe from a signal handler)."""
+        self._running = False
+
+    def run(self) -> None:
+        """Step at the physics rate, paced to the wall clock, until :meth:`stop`."""
+        now = time.perf_counter()
+        self._pacer.restart(now)
+        self._window = WindowStats(wall_start=now, sim_start=self.sim.time)
+        self._publish_clock()
+        self._publish_state()
+        next_report = next_republish = now + REPORT_PERIOD
+        spin = self.executor_.spin_once
+        last_spin = now
+        while self._running and rclpy.ok(context=self.context):
+            now = time.perf_counter()
+            if now >= next_report:
+                self._publish_diagnostics(now)
+                next_report += REPORT_PERIOD
+                if next_report < now:
+                    next_report = now + REPORT_PERIOD
+            if self._paused:
+                if now >= next_republish:
+                    # Late subscribers see a paused simulation too (same stamp again).
+                    self._publish_clock()
+                    self._publish_state()
+                    next_republish = now + REPORT_PERIOD
+                spin(timeout_sec=IDLE_WAIT)
+                last_spin = time.perf_counter()
+                continue
+            next_republish = now + REPORT_PERIOD
+            if self._pacer.due(now):
+                self._advance()
+                self._pacer.stepped()
+                # Events are served at least once a millisecond of wall time.
+                if time.perf_counter() - last_spin > 1e-3 or self._pacer.period:
+                    spin(timeout_sec=0.0)
+                    last_spin = time.perf_counter()
+            else:
+                spin(timeout_sec=min(max(self._pacer.next_due() - now, 0.0), IDLE_WAIT))
+                last_spin = time.perf_counter()
+
+
+def main(args: Optional[list] = None) -> int:
+    """Run the node until SIGINT or SIGTERM; exit code 0, or 2 for a bad parameter or scene."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        try:
+            node = SimNode()
+        except (SpecError, SceneError) as exc:
+            print(f'rigid_body_sim: error: {exc}', file=sys.stderr)
+            return 2
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: node.stop())
+        node.run()
+        node.get_logger().info('shutting down')
+        return 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,149 @@
+"""
+The node's parameters: names, defaults, documentation and validation (no ROS).
+
+Each parameter is validated the same way at start-up (a bad value stops the
+node with an error naming it) and when set at run time (the set is refused
+with the same message and the node runs on). Numbers may be given as integers
+or floats (``physics_rate: 1000`` in a YAML file is fine); booleans are not
+numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from ..core import INTEGRATORS, SpecError
+
+
+def _number(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SpecError(name, f'expected a number, got {value!r}')
+    x = float(value)
+    if x != x or x in (float('inf'), float('-inf')):
+        raise SpecError(name, f'must be finite, got {value!r}')
+    return x
+
+
+def _positive(limit: float) -> Callable:
+    def check(name: str, value: Any) -> float:
+        x = _number(name, value)
+        if not 0.0 < x <= limit:
+            raise SpecError(name, f'must be in (0, {limit:g}], got {value!r}')
+        return x
+    return check
+
+
+def _non_negative(name: str, value: Any) -> float:
+    x = _number(name, value)
+    if x < 0.0:
+        raise SpecError(name, f'must be >= 0, got {value!r}')
+    return x
+
+
+def _boolean(name: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise SpecError(name, f'expected true or false, got {value!r}')
+    return value
+
+
+def _string(name: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise SpecError(name, f'expected a string, got {value!r}')
+    return value
+
+
+def _integrator(name: str, value: Any) -> str:
+    value = _string(name, value)
+    if value and value not in INTEGRATORS:
+        raise SpecError(name, f'unknown integrator {value!r}; known: {sorted(INTEGRATORS)} '
+                              "('' for the scene's)")
+    return value
+
+
+def _frame(name: str, value: Any) -> str:
+    value = _string(name, value)
+    if not value or value.startswith('/') or any(c.isspace() for c in value):
+        raise SpecError(name, f'must be a non-empty frame name without spaces or a leading '
+                              f"'/', got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One node parameter."""
+
+    name: str
+    default: Any
+    check: Callable
+    description: str
+    read_only: bool = False
+
+
+PARAMETERS = (
+    Parameter('scene', '', _string,
+              "scene YAML file; '' for the installed default scene", read_only=True),
+    Parameter('physics_rate', 1000.0, _positive(1e6),
+              'Hz: physics steps per simulated second (dt = 1 / physics_rate; overrides the '
+              "scene's dt)"),
+    Parameter('publish_rate', 100.0, _positive(1e6),
+              'Hz of simulated time: poses, twists, body states, reactions (every step if '
+              '>= physics_rate)'),
+    Parameter('clock_rate', 1000.0, _positive(1e6),
+              'Hz of simulated time: /clock (every step if >= physics_rate)'),
+    Parameter('integrator', '', _integrator,
+              f"{', '.join(sorted(INTEGRATORS))}; '' for the scene's"),
+    Parameter('real_time_factor', 1.0, _non_negative,
+              'simulated seconds per wall second; 0: as fast as possible'),
+    Parameter('start_paused', False, _boolean,
+              'start paused (then step with ~/step or resume with ~/pause false)'),
+    Parameter('world_frame', 'world', _frame,
+              'frame_id of world-frame outputs, and the world frame of wrench inputs'),
+    Parameter('wrench_timeout', 0.0, _non_negative,
+              's of simulated time a wrench message holds; 0: until the next message on '
+              'its topic'),
+    Parameter('max_force', 1e8, _positive(1.7976931348623157e308),
+              'N: wrench messages with a larger force are rejected'),
+    Parameter('max_torque', 1e8, _positive(1.7976931348623157e308),
+              'N m: wrench messages with a larger torque are rejected'),
+    Parameter('per_body_topics', True, _boolean,
+              'pose, twist and wrench topics per body (off: ~/body_states only, for large '
+              'scenes)', read_only=True),
+)
+
+BY_NAME = {p.name: p for p in PARAMETERS}
+
+
+@dataclass
+class Settings:
+    """Validated parameter values."""
+
+    scene: str = ''
+    physics_rate: float = 1000.0
+    publish_rate: float = 100.0
+    clock_rate: float = 1000.0
+    integrator: str = ''
+    real_time_factor: float = 1.0
+    start_paused: bool = False
+    world_frame: str = 'world'
+    wrench_timeout: float = 0.0
+    max_force: float = 1e8
+    max_torque: float = 1e8
+    per_body_topics: bool = True
+
+    @classmethod
+    def from_values(cls, values: dict) -> 'Settings':
+        """Validate ``{name: value}`` (names missing take their defaults)."""
+        out = cls()
+        out.update(values)
+        return out
+
+    def update(self, values: dict) -> None:
+        """Validate every value first, then assign them all (or none)."""
+        checked = {}
+        for name, value in values.items():
+            if name not in BY_NAME:
+                raise SpecError(name, f'unknown parameter; known: {sorted(BY_NAME)}')
+            checked[name] = BY_NAME[name].check(name, value)
+        for name, value in checked.items():
+            setattr(self, name, value)

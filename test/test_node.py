@@ -1,0 +1,466 @@
+"""
+The node through real DDS: the node in its own process, this test as its client.
+
+Every number is checked against the core run directly (bit for bit where the
+node and the core take the same steps) or against Newton's laws.
+"""
+
+import math
+import signal
+
+from geometry_msgs.msg import WrenchStamped
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rigid_body_sim.core import rotation as so3
+from rigid_body_sim.ros.conversions import body_states_arrays, time_seconds
+from rigid_body_sim.scene import load_scene
+from rigid_body_sim_interfaces.msg import BodyStates
+from rigid_body_sim_interfaces.srv import AddConstraint, RemoveConstraint, Step
+from ros_harness import CONFIG, executable
+from std_srvs.srv import SetBool, Trigger
+
+NODE = '/rigid_body_sim'
+
+FREE_BODY = """
+name: free_body
+integrator: lie_poisson2
+dt: 0.001
+bodies:
+  - name: box
+    mass: 2.0
+    inertia: [0.02, 0.03, 0.04]
+    com_body: [0.1, 0.0, 0.0]
+    position_world: [0.0, 0.0, 1.0]
+"""
+
+FALLING_BOB = """
+name: falling_bob
+integrator: lie_poisson2
+dt: 0.001
+effects:
+  gravity: {g_world: [0.0, 0.0, -9.81]}
+bodies:
+  - {name: bob, mass: 1.0, inertia: [1.0e-6, 1.0e-6, 1.0e-6], position_world: [0.5, 0.0, 0.0]}
+"""
+
+
+def _scene(tmp_path, text, name='scene.yaml'):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+def _wrench(frame, force=(0.0, 0.0, 0.0), torque=(0.0, 0.0, 0.0)):
+    msg = WrenchStamped()
+    msg.header.frame_id = frame
+    msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = map(float, force)
+    msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = map(float, torque)
+    return msg
+
+
+def _step(ros, node, n, ns=NODE):
+    reply = ros.client.call(Step, f'{ns}/step', Step.Request(steps=n), node=node)
+    assert reply.success, reply.message
+    return reply
+
+
+def _state_at(ros, node, states, t, what='body states'):
+    """Wait for the BodyStates message stamped ``t`` and return its bodies."""
+    def found():
+        return any(abs(time_seconds(m.header.stamp) - t) < 1e-9 for m in states)
+    ros.client.wait_for(found, f'{what} at t = {t}', node=node)
+    msg = next(m for m in states if abs(time_seconds(m.header.stamp) - t) < 1e-9)
+    return body_states_arrays(msg)
+
+
+def test_executables_are_where_ros2_run_looks():
+    for name in ('sim_node', 'echo_body', 'rigid_body_sim_run'):
+        path = executable(name)
+        assert path.is_file() and path.stat().st_mode & 0o111, path
+
+
+def test_wrench_moves_the_body_as_the_core_predicts(ros, tmp_path):
+    scene = _scene(tmp_path, FREE_BODY)
+    node = ros.start({'scene': scene, 'publish_rate': 1000.0})
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    pub = ros.client.node.create_publisher(WrenchStamped, f'{NODE}/bodies/box/wrench', 10)
+    ros.client.wait_for(lambda: len(states) > 5, 'body states', node=node)
+    force = np.array([4.0, 0.0, 2.0])
+    pub.publish(_wrench('world', force))
+
+    def moving():
+        return bool(states) and bool(np.any(body_states_arrays(states[-1])['box'][2]))
+    ros.client.wait_for(moving, 'the box to move', node=node)
+    # States come every step: the last one at rest is the step before the wrench acted.
+    i = next(i for i, m in enumerate(states) if np.any(body_states_arrays(m)['box'][2]))
+    msg = states[i]
+    t = time_seconds(msg.header.stamp)
+    k0 = round(time_seconds(states[i - 1].header.stamp) / 1e-3)
+    assert round(t / 1e-3) == k0 + 1
+    # The core, stepped the same way, gives the same state, bit for bit.
+    sim = load_scene(scene).simulation
+    sim.step(k0)
+    sim.apply_wrench('box', force, frame='world', point_body=[0.0, 0.0, 0.0], key='topic:box')
+    sim.step(1)
+    pos, quat = sim.pose('box')
+    vel, omega = sim.twist('box')
+    got = body_states_arrays(msg)['box']
+    for a, b in zip(got, (pos, quat, vel, omega)):
+        np.testing.assert_array_equal(a, b)
+    # Applied at the body frame's origin, 0.1 m from the centre of mass: it also turns it.
+    assert np.linalg.norm(omega) > 0.0
+    # And Newton: the centre of mass accelerates at F/m from t0 on.
+    np.testing.assert_allclose(sim.state.vel_com_world[0], force / 2.0 * 1e-3, rtol=1e-12)
+
+
+def test_body_frame_torque_spins_the_body(ros, tmp_path):
+    scene = _scene(tmp_path, FREE_BODY.replace('com_body: [0.1, 0.0, 0.0]',
+                                               'com_body: [0.0, 0.0, 0.0]'))
+    node = ros.start({'scene': scene, 'start_paused': True})
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    pub = ros.client.node.create_publisher(WrenchStamped, f'{NODE}/bodies/box/wrench', 10)
+    ros.client.wait_for(lambda: pub.get_subscription_count() > 0, 'the wrench subscriber',
+                        node=node)
+    # While paused, a published wrench is queued until a step; publish it and step until
+    # the body turns, then the spin rate is tau / Izz times the time since it started.
+    pub.publish(_wrench('box', torque=(0.0, 0.0, 0.08)))
+    for _ in range(200):
+        reply = _step(ros, node, 10)
+        t = time_seconds(reply.time)
+        w = _state_at(ros, node, states, t)['box'][3]
+        if np.any(w):
+            break
+    else:
+        pytest.fail('the torque never took effect')
+    reply = _step(ros, node, 100)
+    t1 = time_seconds(reply.time)
+    w1 = _state_at(ros, node, states, t1)['box'][3]
+    assert w1[0] == 0.0 and w1[1] == 0.0
+    # 0.08 N m about z on Izz = 0.04: 2 rad/s^2 over exactly the 100 steps (and what before).
+    assert w1[2] - w[2] == pytest.approx(2.0 * 0.1, rel=1e-12)
+
+
+def test_reset_returns_to_the_initial_state_at_time_zero(ros, tmp_path):
+    scene = _scene(tmp_path, FREE_BODY)
+    node = ros.start({'scene': scene, 'start_paused': True})
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    _step(ros, node, 0)   # replies with the state published
+    initial = _state_at(ros, node, states, 0.0, 'the initial state')['box']
+    pub = ros.client.node.create_publisher(WrenchStamped, f'{NODE}/bodies/box/wrench', 10)
+    ros.client.wait_for(lambda: pub.get_subscription_count() > 0, 'the wrench subscriber',
+                        node=node)
+    pub.publish(_wrench('world', force=(1.0, 0.0, 0.0)))
+    for _ in range(200):
+        reply = _step(ros, node, 10)
+        if np.any(_state_at(ros, node, states, time_seconds(reply.time))['box'][2]):
+            break
+    del states[:]
+    reply = ros.client.call(Trigger, f'{NODE}/reset', Trigger.Request(), node=node)
+    assert reply.success, reply.message
+    after = _state_at(ros, node, states, 0.0, 'the state after reset')['box']
+    for a, b in zip(after, initial):
+        np.testing.assert_array_equal(a, b)
+    # The held wrench was cleared: 100 more steps leave the body at rest.
+    reply = _step(ros, node, 100)
+    assert time_seconds(reply.time) == pytest.approx(0.1, abs=1e-12)
+    assert reply.step_count == 100
+    later = _state_at(ros, node, states, time_seconds(reply.time))['box']
+    for a, b in zip(later, initial):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_ball_joint_added_while_falling_swings_as_a_pendulum(ros, tmp_path):
+    length, g = 0.5, 9.81
+    node = ros.start({'scene': _scene(tmp_path, FALLING_BOB), 'start_paused': True})
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    _step(ros, node, 100)   # 0.1 s of free fall
+    t_add = 0.1
+    bob = _state_at(ros, node, states, t_add)['bob']
+    # A pivot 0.5 m from the bob, up and to the side: the joint takes the radial velocity
+    # (an inelastic impact) and the bob swings from there.
+    direction = np.array([-np.sin(0.6), 0.0, np.cos(0.6)])
+    pivot = bob[0] + length * direction
+    request = AddConstraint.Request(name='rod', type='ball', body_a='bob', body_b='world',
+                                    anchor_world=pivot.tolist())
+    reply = ros.client.call(AddConstraint, f'{NODE}/add_constraint', request, node=node)
+    assert reply.success, reply.message
+    assert reply.rows_added == 3
+    reactions = ros.client.subscribe(WrenchStamped, f'{NODE}/constraints/rod/wrench')
+    ros.client.wait_for(lambda: ros.client.node.count_publishers(
+        f'{NODE}/constraints/rod/wrench') > 0, 'the reaction publisher', node=node)
+    samples = []
+    t = t_add
+    while t < t_add + 3.2:
+        reply = _step(ros, node, 10)
+        t = time_seconds(reply.time)
+        p, q, v, w = _state_at(ros, node, states, t)['bob']
+        samples.append((t, p, q, v))
+    # The energy after the impact fixes the amplitude: v^2 = 2 g L (cos th - cos th_max).
+    t0, p0, q0, v0 = samples[0]
+    rel0 = p0 - pivot
+    cos0 = -rel0[2] / length
+    cos_max = cos0 - float(v0 @ v0) / (2 * g * length)
+    k = math.sin(math.acos(cos_max) / 2)
+    period = 4 * math.sqrt(length / g) * _ellipk(k * k)
+    # The period between upward zero crossings of the swing, to 1e-5.
+    xs = np.array([s[1][0] - pivot[0] for s in samples])
+    ts = np.array([s[0] for s in samples])
+    ups = [ts[i] - xs[i] * (ts[i + 1] - ts[i]) / (xs[i + 1] - xs[i])
+           for i in range(len(xs) - 1) if xs[i] < 0.0 <= xs[i + 1]]
+    assert len(ups) >= 2, 'the bob swings through the bottom twice'
+    assert ups[1] - ups[0] == pytest.approx(period, rel=1e-5)
+    # The rod's pull on the bob, in the bob's frame: along the rod, of the tension
+    # m (g cos th + v^2 / L) of a point mass on a circle.
+    ros.client.wait_for(lambda: any(abs(time_seconds(m.header.stamp) - samples[-1][0]) < 1e-9
+                                    for m in reactions), 'the last reaction', node=node)
+    checked = 0
+    for t, p, q, v in samples:
+        msgs = [m for m in reactions if abs(time_seconds(m.header.stamp) - t) < 1e-9]
+        on_bob = [m for m in msgs if m.header.frame_id == 'bob']
+        on_world = [m for m in msgs if m.header.frame_id == 'world']
+        if not on_bob:
+            continue
+        f_body = np.array([on_bob[0].wrench.force.x, on_bob[0].wrench.force.y,
+                           on_bob[0].wrench.force.z])
+        f_world = so3.quat_to_matrix(q) @ f_body
+        rel = p - pivot
+        tension = 1.0 * (g * (-rel[2] / length) + float(v @ v) / length)
+        np.testing.assert_allclose(f_world, -tension * rel / length, rtol=1e-4, atol=1e-4)
+        fw = on_world[0].wrench.force
+        np.testing.assert_allclose([fw.x, fw.y, fw.z], -f_world, rtol=1e-12, atol=1e-12)
+        checked += 1
+    assert checked >= len(samples) // 2
+
+
+def _ellipk(m):
+    """Return the complete elliptic integral K(m) by the arithmetic-geometric mean."""
+    a, b = 1.0, math.sqrt(1.0 - m)
+    while abs(a - b) > 1e-15:
+        a, b = (a + b) / 2, math.sqrt(a * b)
+    return math.pi / (2 * a)
+
+
+def test_stepping_is_bit_identical_across_runs_and_equal_to_the_core(ros, tmp_path):
+    scene = str(CONFIG / 'default_scene.yaml')
+    finals = []
+    for run in range(2):
+        ns = f'/run{run}'
+        node = ros.start({'scene': scene, 'start_paused': True}, namespace=ns)
+        states = ros.client.subscribe(BodyStates, f'{ns}{NODE}/body_states')
+        for _ in range(3):
+            reply = _step(ros, node, 250, ns=f'{ns}{NODE}')
+        assert reply.step_count == 750
+        finals.append(_state_at(ros, node, states, time_seconds(reply.time)))
+        node.stop()
+    sim = load_scene(scene).simulation
+    sim.step(750)
+    for name in sim.bodies.names:
+        pos, quat = sim.pose(name)
+        vel, omega = sim.twist(name)
+        for a, b, c in zip(finals[0][name], finals[1][name], (pos, quat, vel, omega)):
+            np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(a, c)
+
+
+def test_as_fast_as_possible_is_bit_identical_to_the_core(ros, tmp_path):
+    scene = str(CONFIG / 'default_scene.yaml')
+    node = ros.start({'scene': scene, 'real_time_factor': 0.0})
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    got = _state_at(ros, node, states, 0.5)
+    sim = load_scene(scene).simulation
+    sim.step(500)
+    for name in sim.bodies.names:
+        pos, quat = sim.pose(name)
+        vel, omega = sim.twist(name)
+        for a, c in zip(got[name], (pos, quat, vel, omega)):
+            np.testing.assert_array_equal(a, c)
+
+
+def test_two_namespaced_simulators_do_not_interfere(ros, tmp_path):
+    scene = _scene(tmp_path, FREE_BODY)
+    nodes = {ns: ros.start({'scene': scene}, namespace=ns) for ns in ('/robot1', '/robot2')}
+    states = {ns: ros.client.subscribe(BodyStates, f'{ns}{NODE}/body_states') for ns in nodes}
+    pub = ros.client.node.create_publisher(WrenchStamped, f'/robot1{NODE}/bodies/box/wrench',
+                                           10)
+    ros.client.wait_for(lambda: pub.get_subscription_count() == 1, 'robot1 to subscribe')
+    pub.publish(_wrench('world', force=(0.0, 1.0, 0.0)))
+
+    def moved(ns):
+        return any(np.any(body_states_arrays(m)['box'][2]) for m in states[ns])
+    ros.client.wait_for(lambda: moved('/robot1'), 'robot1 to move', node=nodes['/robot1'])
+    t1 = time_seconds(states['/robot1'][-1].header.stamp)
+    ros.client.wait_for(lambda: states['/robot2'] and time_seconds(
+        states['/robot2'][-1].header.stamp) > t1, 'robot2 to pass that time')
+    assert not moved('/robot2')
+
+
+def test_sigterm_and_sigint_end_the_node_cleanly(ros, tmp_path):
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        node = ros.start({'scene': _scene(tmp_path, FREE_BODY)})
+        states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+        ros.client.wait_for(lambda: len(states) > 2, 'body states', node=node)
+        assert node.stop(sig) == 0
+        assert 'Traceback' not in node.log()
+        ros.client.received.clear()
+
+
+def test_a_bad_parameter_stops_start_up_naming_it(tmp_path):
+    import subprocess
+    from ros_harness import random_domain, ros_env
+    for params, message in ((['-p', 'physics_rate:=-5.0'], 'physics_rate: must be in'),
+                            (['-p', 'integrator:=euler'], 'integrator: unknown integrator'),
+                            (['-p', f'scene:={tmp_path}/none.yaml'], 'none.yaml: cannot read')):
+        done = subprocess.run([str(executable('sim_node')), '--ros-args', *params],
+                              env=ros_env(random_domain()), capture_output=True, text=True,
+                              timeout=60)
+        assert done.returncode == 2, done.stderr
+        assert message in done.stderr
+        assert 'Traceback' not in done.stderr
+
+
+def _set_parameter(ros, node, name, value):
+    if isinstance(value, float):
+        pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+    else:
+        pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+    request = SetParameters.Request(parameters=[Parameter(name=name, value=pv)])
+    return ros.client.call(SetParameters, f'{NODE}/set_parameters', request,
+                           node=node).results[0]
+
+
+def test_run_time_parameters_are_checked_and_the_node_runs_on(ros, tmp_path):
+    node = ros.start({'scene': _scene(tmp_path, FREE_BODY), 'start_paused': True})
+    result = _set_parameter(ros, node, 'physics_rate', -1.0)
+    assert not result.successful and 'physics_rate: must be in' in result.reason
+    result = _set_parameter(ros, node, 'integrator', 'euler')
+    assert not result.successful and 'integrator: unknown integrator' in result.reason
+    result = _set_parameter(ros, node, 'scene', 'other.yaml')
+    assert not result.successful
+    result = _set_parameter(ros, node, 'physics_rate', 500.0)
+    assert result.successful, result.reason
+    reply = _step(ros, node, 10)
+    assert time_seconds(reply.time) == pytest.approx(10 / 500.0, abs=1e-12)
+
+
+def test_bad_inputs_are_rejected_and_leave_the_state_unchanged(ros, tmp_path):
+    scene = _scene(tmp_path, FALLING_BOB)
+    node = ros.start({'scene': scene, 'start_paused': True})
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    pub = ros.client.node.create_publisher(WrenchStamped, f'{NODE}/bodies/bob/wrench', 10)
+    ros.client.wait_for(lambda: pub.get_subscription_count() > 0, 'the wrench subscriber',
+                        node=node)
+    for msg in (_wrench('world', force=(math.nan, 0.0, 0.0)),
+                _wrench('world', torque=(0.0, math.inf, 0.0)),
+                _wrench('world', force=(1e30, 0.0, 0.0)),
+                _wrench('bob', torque=(0.0, 0.0, -1e30)),
+                _wrench('', force=(1.0, 0.0, 0.0)),
+                _wrench('base_link', force=(1.0, 0.0, 0.0))):
+        pub.publish(msg)
+    bad_requests = [
+        AddConstraint.Request(name='a', type='ball', body_a='nobody', body_b='world',
+                              anchor_world=[0.0, 0.0, 0.0]),
+        AddConstraint.Request(name='b', type='ball', body_a='bob', body_b='world',
+                              anchor_world=[0.0, 0.0]),
+        AddConstraint.Request(name='c', type='hinge', body_a='bob', body_b='world',
+                              anchor_world=[0.0, 0.0, 0.0]),
+        AddConstraint.Request(name='d', type='spring', body_a='bob', body_b='world'),
+        AddConstraint.Request(name='e', type='generic', body_a='bob', body_b='world'),
+        AddConstraint.Request(name='bad name', type='ball', body_a='bob', body_b='world'),
+        AddConstraint.Request(name='f', type='distance', body_a='bob', body_b='world',
+                              length=-1.0),
+    ]
+    messages = ['body_a: unknown body', 'anchor_world: expected [] or 3 values',
+                'axis_world: required', 'unknown constraint type', 'generic constraint',
+                'cannot be part of a ROS topic name', 'length: must be 0']
+    for request, message in zip(bad_requests, messages):
+        reply = ros.client.call(AddConstraint, f'{NODE}/add_constraint', request, node=node)
+        assert not reply.success and message in reply.message, reply.message
+    # Pinning the bob's origin to the world origin holds; then also to (1, 0, 0) cannot.
+    ok = AddConstraint.Request(name='pin', type='ball', body_a='bob', body_b='world',
+                               anchor_a_body=[0.0, 0.0, 0.0], anchor_b_body=[0.5, 0.0, 0.0])
+    assert ros.client.call(AddConstraint, f'{NODE}/add_constraint', ok, node=node).success
+    clash = AddConstraint.Request(name='clash', type='ball', body_a='bob', body_b='world',
+                                  anchor_a_body=[0.0, 0.0, 0.0], anchor_b_body=[1.0, 0.0, 0.0])
+    reply = ros.client.call(AddConstraint, f'{NODE}/add_constraint', clash, node=node)
+    assert not reply.success and 'inconsistent' in reply.message
+    reply = ros.client.call(RemoveConstraint, f'{NODE}/remove_constraint',
+                            RemoveConstraint.Request(name='nothing'), node=node)
+    assert not reply.success and "no constraint 'nothing'" in reply.message
+    reply = ros.client.call(RemoveConstraint, f'{NODE}/remove_constraint',
+                            RemoveConstraint.Request(name='pin'), node=node)
+    assert reply.success and reply.rows_removed == 3
+    # The node still steps, and as if none of that had been sent: free fall, bit for bit.
+    reply = _step(ros, node, 200)
+    got = _state_at(ros, node, states, time_seconds(reply.time))['bob']
+    sim = load_scene(scene).simulation
+    sim.step(200)
+    np.testing.assert_array_equal(got[0], sim.pose('bob')[0])
+    np.testing.assert_array_equal(got[2], sim.twist('bob')[0])
+    # A flood: 10 kHz of NaN wrenches for a second while the node runs; it keeps publishing.
+    assert ros.client.call(SetBool, f'{NODE}/pause', SetBool.Request(data=False),
+                           node=node).success
+    del states[:]
+    flood = _wrench('world', force=(math.nan, 0.0, 0.0))
+    import time
+    start = time.monotonic()
+    sent = 0
+    while time.monotonic() - start < 1.0:
+        pub.publish(flood)
+        sent += 1
+        if sent % 10 == 0:
+            ros.client.executor.spin_once(timeout_sec=0.0)
+    assert sent > 5000
+    n_before = len(states)
+    ros.client.wait_for(lambda: len(states) > n_before + 20, 'states after the flood',
+                        node=node)
+    assert node.proc.poll() is None
+    # Diagnostics count each cause.
+    from diagnostic_msgs.msg import DiagnosticArray
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    ros.client.wait_for(lambda: diags, 'diagnostics', node=node)
+    values = {kv.key: kv.value for kv in diags[-1].status[0].values}
+    # (Between two steps only the latest message per topic is kept: DDS drops the rest.)
+    assert int(values['rejected_non_finite']) >= 2 + 100
+    assert int(values['rejected_too_large']) == 2
+    assert int(values['rejected_unknown_frame']) == 2
+    assert int(values['rejected_unknown_body']) == 1
+    assert int(values['rejected_bad_constraint']) == 6
+    assert int(values['rejected_inconsistent_constraint']) == 1
+    assert int(values['rejected_unknown_constraint']) == 1
+    # Stepping while running is refused too.
+    reply = ros.client.call(Step, f'{NODE}/step', Step.Request(steps=1), node=node)
+    assert not reply.success and 'pause it first' in reply.message
+
+
+def test_a_divergence_pauses_reports_an_error_and_reset_recovers(ros, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    scene = _scene(tmp_path, FREE_BODY.replace('mass: 2.0', 'mass: 0.001'))
+    node = ros.start({'scene': scene, 'start_paused': True, 'max_force': 1.7e308})
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    pub = ros.client.node.create_publisher(WrenchStamped, f'{NODE}/bodies/box/wrench', 10)
+    ros.client.wait_for(lambda: pub.get_subscription_count() > 0, 'the wrench subscriber',
+                        node=node)
+    _step(ros, node, 10)
+    before = _state_at(ros, node, states, 0.01)['box']
+    pub.publish(_wrench('world', force=(1.6e308, 0.0, 0.0)))   # F/m overflows on 1 g
+    for _ in range(200):
+        reply = ros.client.call(Step, f'{NODE}/step', Step.Request(steps=1), node=node)
+        if not reply.success:
+            break
+    assert 'non-finite' in reply.message
+    t = time_seconds(reply.time)
+    last = _state_at(ros, node, states, t)['box']
+    assert all(np.all(np.isfinite(a)) for a in last)
+    ros.client.wait_for(lambda: any(d.status[0].level == DiagnosticStatus.ERROR
+                                    for d in diags), 'an ERROR diagnostic', node=node)
+    reply = ros.client.call(SetBool, f'{NODE}/pause', SetBool.Request(data=False), node=node)
+    assert not reply.success and 'reset' in reply.message
+    del states[:]
+    assert ros.client.call(Trigger, f'{NODE}/reset', Trigger.Request(), node=node).success
+    _step(ros, node, 10)
+    again = _state_at(ros, node, states, 0.01)
+    for a, b in zip(again['box'], before):
+        np.testing.assert_array_equal(a, b)
