@@ -3,8 +3,8 @@ The only code that converts between ROS messages and numpy arrays.
 
 Conventions: ROS quaternions are (x, y, z, w), the core's too (Hamilton,
 scalar last, body to world), so no reordering happens here; stamps are
-simulation time in seconds, split into whole seconds and nanoseconds by
-integer arithmetic on the step count where one is given (no rounding drift).
+simulation time, split into whole seconds and nanoseconds by integer
+arithmetic.
 """
 
 from __future__ import annotations
@@ -24,7 +24,11 @@ NANOSECONDS = 1_000_000_000
 
 def time_msg(seconds: float) -> Time:
     """Return a ``builtin_interfaces/Time`` for a non-negative time in seconds."""
-    ns = int(round(seconds * NANOSECONDS))
+    return time_msg_ns(int(round(seconds * NANOSECONDS)))
+
+
+def time_msg_ns(ns: int) -> Time:
+    """Return a ``builtin_interfaces/Time`` for a non-negative time in nanoseconds."""
     return Time(sec=ns // NANOSECONDS, nanosec=ns % NANOSECONDS)
 
 

@@ -103,6 +103,7 @@ class SimNode(Node):
         self._running = True
         self.totals = Totals()
         self._step_count = 0   # steps since the last reset
+        self._offset_ns = 0    # published time = this + the simulation's own time
         self._superseded = 0
         self._pacer = Pacer(self.sim.dt, s.real_time_factor)
         self._window = WindowStats()
@@ -192,19 +193,38 @@ class SimNode(Node):
 
     # -- services -------------------------------------------------------------------------
 
+    def _now_ns(self) -> int:
+        """Published simulation time (ns): monotonic across resets unless reset_time."""
+        return self._offset_ns + int(round(self.sim.time * conv.NANOSECONDS))
+
+    def _seconds(self) -> float:
+        """Published simulation time (s)."""
+        return self._now_ns() / conv.NANOSECONDS
+
+    def _stamp(self) -> Time:
+        return conv.time_msg_ns(self._now_ns())
+
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response):
+        if self.settings.reset_time:
+            self._offset_ns = 0
+        else:   # the initial state is stamped one step after the last state
+            self._offset_ns = self._now_ns() + int(round(self.sim.dt * conv.NANOSECONDS))
         self.sim.reset()   # keeps dt and the integrator
         self._pending_wrenches.clear()
         self._diverged = None
         self._step_count = 0
         self._energy0 = self.sim.diagnostics().total_energy
         self._sync_constraint_publishers()
-        self._pacer.restart(time.perf_counter())
+        now = time.perf_counter()
+        self._pacer.restart(now)
+        self.totals.overruns += self._window.overruns
+        self._window = WindowStats(wall_start=now, sim_start=self._seconds())
         self._publish_clock()
         self._publish_state()
         response.success = True
-        response.message = ('reset to the initial state of the scene at t = 0 s; applied '
-                            'wrenches cleared, constraints as in the scene'
+        response.message = (f'reset to the initial state of the scene, stamped t = '
+                            f'{self._now_ns() / conv.NANOSECONDS:.9g} s; applied wrenches '
+                            f'cleared, constraints as in the scene'
                             + (' (still paused)' if self._paused else ''))
         self.get_logger().info(response.message)
         return response
@@ -222,11 +242,11 @@ class SimNode(Node):
             self._pacer.restart(time.perf_counter())
         response.success = True
         response.message = f'{"paused" if self._paused else "running"} at t = ' \
-                           f'{self.sim.time:.9g} s'
+                           f'{self._seconds():.9g} s'
         return response
 
     def _on_step(self, request: Step.Request, response: Step.Response):
-        response.time = conv.time_msg(self.sim.time)
+        response.time = self._stamp()
         response.step_count = self._step_count
         if not self._paused:
             response.success = False
@@ -252,11 +272,11 @@ class SimNode(Node):
                 break
         if not published:
             self._publish_state()
-        response.time = conv.time_msg(self.sim.time)
+        response.time = self._stamp()
         response.step_count = self._step_count
         response.success = self._diverged is None
         response.message = self._diverged or f'{request.steps} steps to t = ' \
-                                             f'{self.sim.time:.9g} s'
+                                             f'{self._seconds():.9g} s'
         return response
 
     def _on_add_constraint(self, request: AddConstraint.Request,
@@ -283,7 +303,7 @@ class SimNode(Node):
         response.success = True
         response.rows_added = rows
         response.message = (f'added {spec.type.value} constraint {spec.name!r} '
-                            f'({rows} rows) at t = {self.sim.time:.9g} s')
+                            f'({rows} rows) at t = {self._seconds():.9g} s')
         self.get_logger().info(response.message)
         return response
 
@@ -302,7 +322,7 @@ class SimNode(Node):
         response.success = True
         response.rows_removed = rows
         response.message = f'removed constraint {name!r} ({rows} rows) at t = ' \
-                           f'{self.sim.time:.9g} s'
+                           f'{self._seconds():.9g} s'
         self.get_logger().info(response.message)
         return response
 
@@ -363,12 +383,12 @@ class SimNode(Node):
         return Header(stamp=stamp, frame_id=frame_id)
 
     def _publish_clock(self) -> None:
-        self._clock_pub.publish(Clock(clock=conv.time_msg(self.sim.time)))
+        self._clock_pub.publish(Clock(clock=self._stamp()))
 
     def _publish_state(self) -> None:
         t0 = time.perf_counter()
         sim = self.sim
-        stamp = conv.time_msg(sim.time)
+        stamp = self._stamp()
         world = self._header(self.settings.world_frame, stamp)
         pos, quat = sim.pose()
         vel, omega = sim.twist()
@@ -419,7 +439,7 @@ class SimNode(Node):
         sim = self.sim
         d = sim.diagnostics()
         work = sim.work()
-        rtf = (sim.time - w.sim_start) / wall
+        rtf = (self._seconds() - w.sim_start) / wall
         level = DiagnosticStatus.OK
         summary = 'running'
         if self._diverged:
@@ -429,7 +449,8 @@ class SimNode(Node):
         elif w.overruns or self._pacer.lag_resets:
             level, summary = DiagnosticStatus.WARN, f'{w.overruns} steps over budget'
         values = {
-            'sim_time_s': f'{sim.time:.9g}',
+            'sim_time_s': f'{self._now_ns() / conv.NANOSECONDS:.9g}',
+            'time_since_reset_s': f'{sim.time:.9g}',
             'steps': str(self.totals.steps),
             'paused': str(self._paused).lower(),
             'integrator': sim.integrator_name,
@@ -461,12 +482,12 @@ class SimNode(Node):
         stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(DiagnosticArray(header=Header(stamp=stamp), status=[status]))
         self.get_logger().info(
-            f't={sim.time:.3f} s  rtf={rtf:.2f}  {w.steps / wall:.0f} steps/s  '
+            f't={self._seconds():.3f} s  rtf={rtf:.2f}  {w.steps / wall:.0f} steps/s  '
             f'E={d.total_energy:.6g} J  dE={d.total_energy - self._energy0:+.1e} J  '
             f'violation={d.constraint_violation:.1e}'
             + (f'  overruns={w.overruns}' if w.overruns else '') + f'  [{summary}]')
         self.totals.overruns += w.overruns
-        self._window = WindowStats(wall_start=now, sim_start=sim.time)
+        self._window = WindowStats(wall_start=now, sim_start=self._seconds())
 
     # -- the loop -------------------------------------------------------------------------
 
@@ -478,7 +499,8 @@ class SimNode(Node):
         """Step at the physics rate, paced to the wall clock, until :meth:`stop`."""
         now = time.perf_counter()
         self._pacer.restart(now)
-        self._window = WindowStats(wall_start=now, sim_start=self.sim.time)
+        self.totals.overruns += self._window.overruns
+        self._window = WindowStats(wall_start=now, sim_start=self._seconds())
         self._publish_clock()
         self._publish_state()
         next_report = next_republish = now + REPORT_PERIOD

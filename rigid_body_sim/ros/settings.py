@@ -106,6 +106,9 @@ PARAMETERS = (
               'N: wrench messages with a larger force are rejected'),
     Parameter('max_torque', 1e8, _positive(1.7976931348623157e308),
               'N m: wrench messages with a larger torque are rejected'),
+    Parameter('reset_time', False, _boolean,
+              '~/reset also sets the simulation time back to 0 (default: time runs on, so '
+              'nodes on /clock see no jump back)'),
     Parameter('per_body_topics', True, _boolean,
               'pose, twist and wrench topics per body (off: ~/body_states only, for large '
               'scenes)', read_only=True),
@@ -129,6 +132,7 @@ class Settings:
     wrench_timeout: float = 0.0
     max_force: float = 1e8
     max_torque: float = 1e8
+    reset_time: bool = False
     per_body_topics: bool = True
 
     @classmethod
