@@ -8,7 +8,10 @@
 #      the ament_cmake interface package rigid_body_sim_interfaces in interfaces/.
 #
 # Usage:
-#   ./dev.sh run [SCENE.yaml] [options]   run a scene (default: config/default_scene.yaml)
+#   ./dev.sh run [SCENE.yaml] [--ros-args ...]   start the node (default scene:
+#                                         config/default_scene.yaml) until Ctrl-C
+#   ./dev.sh echo [BODY] [options]        print a body's state as the node publishes it
+#   ./dev.sh scene [SCENE.yaml] [options] step a scene without ROS and print a summary
 #   ./dev.sh test [pytest args]           run the whole test suite
 #   ./dev.sh bench [--quick]              run the benchmarks (tables and plots in bench/out/)
 #   ./dev.sh setup                        set up only
@@ -114,6 +117,19 @@ case "$cmd" in
     setup) setup ;;
     run)
         setup
+        if [ $# -gt 0 ] && [ "${1#-}" = "$1" ]; then
+            scene=$(realpath "$1")
+            shift
+            set -- --ros-args -p "scene:=$scene" "$@"
+        fi
+        exec "$ROOT/install/rigid_body_sim/lib/rigid_body_sim/sim_node" "$@"
+        ;;
+    echo)
+        setup
+        exec "$ROOT/install/rigid_body_sim/lib/rigid_body_sim/echo_body" "$@"
+        ;;
+    scene)
+        setup
         exec "$ROOT/install/rigid_body_sim/lib/rigid_body_sim/rigid_body_sim_run" "$@"
         ;;
     test)
@@ -125,7 +141,7 @@ case "$cmd" in
         exec python bench/run_all.py "$@"
         ;;
     *)
-        sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'
         exit 2
         ;;
 esac

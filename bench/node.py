@@ -142,7 +142,13 @@ def random_domain() -> int:
 
 def sim_node_command(params: dict, profile: Optional[Path] = None) -> list:
     """Return the command line of ``sim_node`` with ``params`` (under cProfile if asked)."""
-    exe = Path(get_package_prefix('rigid_body_sim')) / 'lib' / 'rigid_body_sim' / 'sim_node'
+    try:
+        prefix = Path(get_package_prefix('rigid_body_sim'))
+    except (OSError, LookupError):   # no ament index in the environment: this checkout's build
+        prefix = Path(__file__).resolve().parents[1] / 'install' / 'rigid_body_sim'
+    exe = prefix / 'lib' / 'rigid_body_sim' / 'sim_node'
+    if not exe.exists():
+        raise SystemExit(f'{exe} not found: build first (./dev.sh setup)')
     cmd = [str(exe)]
     if profile is not None:
         cmd = [sys.executable, '-m', 'cProfile', '-o', str(profile), str(exe)]
@@ -151,6 +157,15 @@ def sim_node_command(params: dict, profile: Optional[Path] = None) -> list:
         text = str(value).lower() if isinstance(value, bool) else str(value)
         cmd += ['-p', f'{key}:={text}']
     return cmd
+
+
+def busy_seconds() -> float:
+    """Return the CPU seconds of all processes of the machine since boot (from /proc/stat)."""
+    try:
+        ticks = [int(x) for x in Path('/proc/stat').read_text().split('\n', 1)[0].split()[1:]]
+    except OSError:
+        return float('nan')
+    return (ticks[0] + ticks[1] + ticks[2]) / os.sysconf('SC_CLK_TCK')   # user, nice, system
 
 
 def cpu_seconds(pid: int) -> float:
@@ -326,27 +341,38 @@ def run_scene(label: str, scene: dict, per_body: bool, body: Optional[str], mass
                               and flipper.twists > 0, f'wrench subscriber and twists of {body}',
                               STARTUP_DEADLINE, proc, log)
         ready = time.perf_counter() - t_launch
-        cpu0, t0 = cpu_seconds(proc.pid), time.perf_counter()
+        cpu0, own0, busy0 = cpu_seconds(proc.pid), time.process_time(), busy_seconds()
+        t0 = time.perf_counter()
         end = t0 + duration
-        next_flip, sign, first = t0, 1.0, True
+        # Flip k (k >= 1) at t0 + FLIP_PERIOD (k - 1/2) + u, u uniform in one publish period:
+        # flips land at random phases of the node's publish grid (a fixed period would lock
+        # to it and time one phase only).
+        jitter = random.Random(len(scene['bodies']))
+        flip, sign, next_flip = 0, 1.0, t0
         while True:
             now = time.perf_counter()
             if now >= end:
                 break
             if flipper is not None and now >= next_flip:
-                flipper.publish(sign, measured=not first)
-                next_flip += FLIP_PERIOD / 2 if first else FLIP_PERIOD
-                sign, first = -sign, False
+                flipper.publish(sign, measured=flip > 0)
+                flip += 1
+                sign = -sign
+                next_flip = t0 + FLIP_PERIOD * (flip - 0.5) + \
+                    jitter.uniform(0.0, 1.0 / PARAMS['publish_rate'])
             wake = min(end, next_flip) if flipper is not None else end
             client.executor.spin_once(timeout_sec=max(0.0, wake - time.perf_counter()))
             if proc.poll() is not None:
                 raise RuntimeError(f'the node exited ({proc.returncode}):\n{log.read_text()}')
-        cpu = (cpu_seconds(proc.pid) - cpu0) / (time.perf_counter() - t0)
+        wall = time.perf_counter() - t0
+        cpu = (cpu_seconds(proc.pid) - cpu0) / wall
+        own = (time.process_time() - own0) / wall
+        others = (busy_seconds() - busy0) / wall - cpu - own
         # Windows that end at least one report period into the measurement.
         result = summarize(_windows(diags, t0 + 1.0))
         result.update(label=label, bodies=len(scene['bodies']),
                       constraints=len(scene.get('constraints', [])), per_body=per_body,
-                      startup=startup, ready=ready, node_cpu=cpu)
+                      startup=startup, ready=ready, node_cpu=cpu, own_cpu=own,
+                      other_cpu=others)
         if flipper is not None:
             result.update(latency=np.array(flipper.samples) * 1e3, flips=flipper.sent,
                           missed=flipper.missed + (flipper.pending is not None))
@@ -442,12 +468,17 @@ def node_rows(results: list) -> list:
     for r in results:
         lat = r.get('latency')
         has = lat is not None and len(lat) > 0
+        if 'error' in r:
+            rows.append([r['label'], str(r['bodies']), f'failed: {r["error"]}']
+                        + ['-'] * (len(NODE_HEADER) - 3))
+            continue
         rows.append([
-            r['label'], str(r['bodies']), str(r['constraints']), _fmt(r['ready'], '.1f'),
+            r['label'], str(r['bodies']), _fmt(r['ready'], '.1f'),
             _fmt(r.get('rate'), '.0f'), _fmt(r.get('rtf'), '.3f'),
             _fmt(r.get('step_mean'), '.0f'), _fmt(r.get('step_max'), '.0f'),
             _fmt(r.get('publish_mean'), '.0f'), _fmt(100 * r.get('step_share', np.nan), '.0f'),
             _fmt(100 * r.get('publish_share', np.nan), '.0f'), _fmt(100 * r['node_cpu'], '.0f'),
+            _fmt(100 * r['own_cpu'], '.0f'), _fmt(100 * r['other_cpu'], '.0f'),
             _fmt(r.get('overruns_per_s'), '.1f'), _fmt(r.get('lag_resets'), 'd'),
             _fmt(float(np.percentile(lat, 50)) if has else None, '.1f'),
             _fmt(float(np.percentile(lat, 99)) if has else None, '.1f'),
@@ -455,9 +486,9 @@ def node_rows(results: list) -> list:
     return rows
 
 
-NODE_HEADER = ('scene', 'bodies', 'joints', 'up [s]', 'physics [Hz]', 'RTF',
-               'step mean [us]', 'step max [us]', 'publish mean [us]', 'step [% wall]',
-               'publish [% wall]', 'node CPU [%]', 'overruns / s', 'lag resets',
+NODE_HEADER = ('scene', 'bodies', 'up [s]', 'physics [Hz]', 'RTF', 'step mean [us]',
+               'step max [us]', 'publish mean [us]', 'step [% wall]', 'publish [% wall]',
+               'node CPU [%]', 'bench CPU [%]', 'other CPU [%]', 'overruns / s', 'lag resets',
                'latency p50 [ms]', 'latency p99 [ms]', 'flips seen')
 
 
@@ -541,10 +572,14 @@ def _plot(results: list, snaps: list) -> Optional[Path]:
     return path
 
 
+def _key(label: str, per_body: bool) -> str:
+    return label.split()[0] + ('' if per_body else '_states')
+
+
 def profile_scenes(labels: list, duration: float, top: int = 30) -> None:
     """Run scenes with the node under cProfile; write and print the top entries."""
     import pstats
-    known = {s[0].split()[0] + ('_states' if not s[2] else ''): s for s in scenes()}
+    known = {_key(s[0], s[2]): s for s in scenes()}
     with tempfile.TemporaryDirectory(prefix='bench_node_') as tmp:
         for label in labels:
             if label not in known:
@@ -564,11 +599,15 @@ def profile_scenes(labels: list, duration: float, top: int = 30) -> None:
 
 
 def _progress(r: dict) -> None:
+    if 'error' in r:
+        print(f'  {r["label"]:30s} FAILED: {r["error"]}', flush=True)
+        return
     lat = r.get('latency')
     text = (f'  {r["label"]:30s} up {r["ready"]:5.1f} s  {r.get("rate", np.nan):7.1f} Hz  '
             f'rtf {r.get("rtf", np.nan):5.3f}  step {r.get("step_mean", np.nan):7.0f} us '
             f'(max {r.get("step_max", np.nan):6.0f})  publish '
-            f'{r.get("publish_mean", np.nan):7.0f} us  cpu {100 * r["node_cpu"]:4.0f}%  '
+            f'{r.get("publish_mean", np.nan):7.0f} us  cpu node {100 * r["node_cpu"]:3.0f}% '
+            f'bench {100 * r["own_cpu"]:3.0f}% other {100 * r["other_cpu"]:3.0f}%  '
             f'overruns/s {r.get("overruns_per_s", np.nan):6.1f}  lag resets '
             f'{r.get("lag_resets", -1)}  retries {r.get("retries", -1)}  '
             f'violation {r.get("violation", np.nan):.1e}')
@@ -583,6 +622,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--quick', action='store_true', help='3 s per scene, fewer repeats')
     p.add_argument('--duration', type=float, help='s of wall time per scene (10; --quick 3)')
+    p.add_argument('--scenes', nargs='+', metavar='SCENE',
+                   help='only these node scenes (names as for --profile)')
     p.add_argument('--profile', nargs='+', metavar='SCENE',
                    help='run these scenes under cProfile instead (free_1, ..., free_1000, '
                         'chain_10, chain_100, free_1000_states)')
@@ -602,7 +643,14 @@ def main(argv=None) -> int:
     results = []
     with tempfile.TemporaryDirectory(prefix='bench_node_') as tmp:
         for label, scene, per_body, body, mass, axis in scenes():
-            r = run_scene(label, scene, per_body, body, mass, axis, duration, Path(tmp))
+            if args.scenes and _key(label, per_body) not in args.scenes:
+                continue
+            try:
+                r = run_scene(label, scene, per_body, body, mass, axis, duration, Path(tmp))
+            except RuntimeError as exc:   # a node that fails is a result too; go on
+                print(f'  {label}: {exc}', flush=True)
+                r = {'label': label, 'bodies': len(scene['bodies']),
+                     'error': str(exc).splitlines()[0]}
             results.append(r)
             _progress(r)
     print('\n== snapshot build + publish (in-process, no subscriber) ==', flush=True)
@@ -619,9 +667,12 @@ def main(argv=None) -> int:
         f'factor {PARAMS["real_time_factor"]:g}. Rates and costs from the node\'s /diagnostics '
         f'windows (1 s) that end at least 1 s into the measurement, aggregated over their '
         f'wall time; "step/publish [% wall]": share of wall time in steps / state publishes; '
-        f'"node CPU": the node process (all threads) from /proc. Latency: wall clock from '
+        f'CPU (from /proc, 100 % = one core of {len(os.sched_getaffinity(0))}): the node '
+        f'process (all threads), this benchmark process, and everything else on the machine '
+        f'(should be near 0). Latency: wall clock from '
         f'publishing a flipped WrenchStamped (F = {FLIP_WEIGHTS:g} x weight, every '
-        f'{FLIP_PERIOD * 1e3:g} ms) to receiving the first ~/bodies/<B>/twist whose velocity '
+        f'{FLIP_PERIOD * 1e3:g} ms on average, at random phases of the publish period) to '
+        f'receiving the first ~/bodies/<B>/twist whose velocity '
         f'change since the previous twist has the new sign (B: the first free body, force '
         f'along x; the last link of a chain, along y). **It includes waiting for the next '
         f'publish** (twists come every 10 ms of simulated time; the velocity change over an '

@@ -44,8 +44,8 @@ class NodeProcess:
     """The simulator node, ``sim_node``, running in a child process."""
 
     def __init__(self, domain: int, params: dict, namespace: Optional[str] = None,
-                 log_path: Optional[Path] = None) -> None:
-        args = [str(executable('sim_node')), '--ros-args']
+                 log_path: Optional[Path] = None, ros_args: tuple = ()) -> None:
+        args = [str(executable('sim_node')), '--ros-args', *ros_args]
         for key, value in params.items():
             text = str(value).lower() if isinstance(value, bool) else str(value)
             args += ['-p', f'{key}:={text}']
@@ -159,9 +159,10 @@ def ros_session(tmp_path):
         nodes: list = []
         client = Client(domain)
 
-        def start(self, params: dict, namespace: Optional[str] = None) -> NodeProcess:
+        def start(self, params: dict, namespace: Optional[str] = None,
+                  ros_args: tuple = ()) -> NodeProcess:
             log = tmp_path / f'node{len(self.nodes)}.log'
-            node = NodeProcess(domain, params, namespace, log)
+            node = NodeProcess(domain, params, namespace, log, ros_args)
             self.nodes.append(node)
             return node
 

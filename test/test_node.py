@@ -7,6 +7,7 @@ node and the core take the same steps) or against Newton's laws.
 
 import math
 import signal
+import time
 
 from geometry_msgs.msg import WrenchStamped
 import numpy as np
@@ -79,6 +80,48 @@ def test_executables_are_where_ros2_run_looks():
     for name in ('sim_node', 'echo_body', 'rigid_body_sim_run'):
         path = executable(name)
         assert path.is_file() and path.stat().st_mode & 0o111, path
+
+
+def _readme_table(heading):
+    """Return the first-column names and the types of the README table under ``heading``."""
+    text = (CONFIG.parent / 'README.md').read_text()
+    section = text.split(heading, 1)[1].split('\n#', 1)[0]
+    rows = [line.split('|') for line in section.splitlines() if line.startswith('| `')]
+    return {r[1].strip().strip('`'): r[2].strip().strip('`') for r in rows}
+
+
+def test_the_live_graph_is_the_one_the_readme_documents(ros):
+    node = ros.start({'start_paused': True})
+    graph = ros.client.node
+    sim = load_scene(CONFIG / 'default_scene.yaml').simulation
+    services = {}
+    for name, typ in _readme_table('### Services').items():
+        services[f'{NODE}/{name[2:]}'] = typ.replace('/', '/srv/')
+    topics = {}
+    for name, typ in _readme_table('### Topics').items():
+        full = name if name.startswith('/') else f'{NODE}/{name[2:]}'
+        typ = typ.replace('/', '/msg/')
+        if '/B/' in full:
+            topics.update({full.replace('/B/', f'/{b}/'): typ for b in sim.bodies.names})
+        elif '/C/' not in full:   # the default scene has no constraints
+            topics[full] = typ
+
+    def live_services():
+        found = dict(graph.get_service_names_and_types_by_node('rigid_body_sim', '/'))
+        return {n: t[0] for n, t in found.items()   # (not rclpy's own services)
+                if 'parameter' not in n and not n.endswith('/get_type_description')}
+
+    def live_topics():
+        pubs = graph.get_publisher_names_and_types_by_node('rigid_body_sim', '/')
+        subs = graph.get_subscriber_names_and_types_by_node('rigid_body_sim', '/')
+        return {n: t[0] for n, t in pubs + subs if n not in ('/rosout', '/parameter_events')}
+    ros.client.wait_for(lambda: 'rigid_body_sim' in graph.get_node_names(), 'the node',
+                        node=node)
+    end = time.monotonic() + 20.0   # discovery: wait for the graph, with a deadline
+    while (live_services(), live_topics()) != (services, topics) and time.monotonic() < end:
+        ros.client.executor.spin_once(timeout_sec=0.1)
+    assert live_services() == services
+    assert live_topics() == topics
 
 
 def test_wrench_moves_the_body_as_the_core_predicts(ros, tmp_path):
@@ -338,6 +381,18 @@ def _set_parameter(ros, node, name, value):
                            node=node).results[0]
 
 
+def test_the_shipped_params_file_configures_the_node(ros, tmp_path):
+    text = (CONFIG / 'sim_node_params.yaml').read_text()
+    text = text.replace("scene: ''", f"scene: '{_scene(tmp_path, FREE_BODY)}'")
+    text = text.replace('physics_rate: 1000.0', 'physics_rate: 400.0')
+    text = text.replace('start_paused: false', 'start_paused: true')
+    params = tmp_path / 'params.yaml'
+    params.write_text(text)
+    node = ros.start({}, namespace='/robot', ros_args=('--params-file', str(params)))
+    reply = _step(ros, node, 4, ns=f'/robot{NODE}')
+    assert time_seconds(reply.time) == pytest.approx(0.01, abs=1e-12)
+
+
 def test_run_time_parameters_are_checked_and_the_node_runs_on(ros, tmp_path):
     node = ros.start({'scene': _scene(tmp_path, FREE_BODY), 'start_paused': True})
     result = _set_parameter(ros, node, 'physics_rate', -1.0)
@@ -411,7 +466,6 @@ def test_bad_inputs_are_rejected_and_leave_the_state_unchanged(ros, tmp_path):
                            node=node).success
     del states[:]
     flood = _wrench('world', force=(math.nan, 0.0, 0.0))
-    import time
     start = time.monotonic()
     sent = 0
     while time.monotonic() - start < 1.0:
