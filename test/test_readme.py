@@ -22,7 +22,7 @@ def test_ci_runs_the_readme_test_command():
 
 
 def _examples():
-    """The README's `ros2 topic pub` and `ros2 service call` lines: (kind, name, type, yaml)."""
+    """Return the README's `ros2 topic pub` and `ros2 service call` lines."""
     pattern = r'^ros2 (topic pub --once|service call) (\S+) (\S+) "(.*)"$'
     return re.findall(pattern, README, flags=re.M)
 

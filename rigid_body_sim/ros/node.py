@@ -194,11 +194,11 @@ class SimNode(Node):
     # -- services -------------------------------------------------------------------------
 
     def _now_ns(self) -> int:
-        """Published simulation time (ns): monotonic across resets unless reset_time."""
+        """Return the published simulation time (ns): monotonic across resets unless reset_time."""
         return self._offset_ns + int(round(self.sim.time * conv.NANOSECONDS))
 
     def _seconds(self) -> float:
-        """Published simulation time (s)."""
+        """Return the published simulation time (s)."""
         return self._now_ns() / conv.NANOSECONDS
 
     def _stamp(self) -> Time:
