@@ -30,6 +30,7 @@ class Rejection(enum.Enum):
     NOT_PAUSED = 'not_paused'                  # ~/step while running
     BAD_STEP = 'bad_step'                      # ~/step with too many steps
     DIVERGED = 'diverged'                      # a request the diverged state cannot serve
+    INTERNAL_ERROR = 'internal_error'          # a request that raised unexpectedly (a bug)
 
 
 class Rejected(ValueError):

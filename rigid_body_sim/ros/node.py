@@ -20,9 +20,11 @@ See the README for the frames, points and conventions of every message.
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import time
+import traceback
 from typing import Optional
 
 from builtin_interfaces.msg import Time
@@ -142,11 +144,27 @@ class SimNode(Node):
         self._sync_constraint_publishers()
         self._clock_pub = self.create_publisher(Clock, '/clock', 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_service(Trigger, '~/reset', self._on_reset)
-        self.create_service(SetBool, '~/pause', self._on_pause)
-        self.create_service(Step, '~/step', self._on_step)
-        self.create_service(AddConstraint, '~/add_constraint', self._on_add_constraint)
-        self.create_service(RemoveConstraint, '~/remove_constraint', self._on_remove_constraint)
+        for srv_type, name, handler in (
+                (Trigger, 'reset', self._on_reset), (SetBool, 'pause', self._on_pause),
+                (Step, 'step', self._on_step),
+                (AddConstraint, 'add_constraint', self._on_add_constraint),
+                (RemoveConstraint, 'remove_constraint', self._on_remove_constraint)):
+            self.create_service(srv_type, f'~/{name}', self._guarded(name, handler))
+
+    def _guarded(self, name: str, handler):
+        """Wrap a service handler: an unexpected error is a refused request, not a crash."""
+        def serve(request, response):
+            try:
+                return handler(request, response)
+            except Exception as exc:  # noqa: B902 - no request may stop the node
+                self.totals.reject(Rejection.INTERNAL_ERROR.value)
+                self.get_logger().error(f'~/{name}: internal error: {exc!r}\n'
+                                        + traceback.format_exc())
+                response.success = False
+                response.message = f'internal error: {exc!r} (the node runs on; please ' \
+                                   f'report it)'
+                return response
+        return serve
 
     def _sync_constraint_publishers(self) -> None:
         """One ``~/constraints/<C>/wrench`` publisher per constraint present."""
@@ -187,8 +205,12 @@ class SimNode(Node):
         timeout = self.settings.wrench_timeout or None
         for body, (force, torque, frame) in self._pending_wrenches.items():
             # Applied at the body frame's origin; replaces this topic's previous wrench.
-            self.sim.apply_wrench(body, force, torque, frame=frame, point_body=(0.0, 0.0, 0.0),
-                                  duration=timeout, key=f'topic:{body}')
+            try:
+                self.sim.apply_wrench(body, force, torque, frame=frame,
+                                      point_body=(0.0, 0.0, 0.0), duration=timeout,
+                                      key=f'topic:{body}')
+            except SpecError as exc:   # (checked on arrival; kept as a last line of defence)
+                self._reject(Rejection.INTERNAL_ERROR, f'~/bodies/{body}/wrench', str(exc))
         self._pending_wrenches.clear()
 
     # -- services -------------------------------------------------------------------------
@@ -287,7 +309,6 @@ class SimNode(Node):
             if spec.name in self.sim.constraint_names:
                 raise Rejected(Rejection.BAD_CONSTRAINT,
                                f'name: a constraint {spec.name!r} exists already')
-            self._apply_pending()
             try:
                 self.sim.add_constraint(spec)
             except SpecError as exc:
@@ -524,7 +545,13 @@ class SimNode(Node):
                 continue
             next_republish = now + REPORT_PERIOD
             if self._pacer.due(now):
-                self._advance()
+                try:
+                    self._advance()
+                except Exception as exc:  # noqa: B902 - keep serving; pause and say why
+                    self._diverged = f'internal error in a step: {exc!r}'
+                    self._paused = True
+                    self.get_logger().error(f'paused: {self._diverged}\n'
+                                            + traceback.format_exc())
                 self._pacer.stepped()
                 # Events are served at least once a millisecond of wall time.
                 if time.perf_counter() - last_spin > 1e-3 or self._pacer.period:
@@ -535,8 +562,19 @@ class SimNode(Node):
                 last_spin = time.perf_counter()
 
 
+def _use_service_profile() -> None:
+    """Load config/fastdds_services.xml unless the user chose a Fast DDS profile file."""
+    if os.environ.get('FASTDDS_DEFAULT_PROFILES_FILE') or \
+            os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE'):
+        return
+    profile = default_scene_path().parent / 'fastdds_services.xml'
+    if profile.is_file():   # (Fast DDS 2.x, Jazzy's, reads the FASTRTPS_ name)
+        os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
+
+
 def main(args: Optional[list] = None) -> int:
     """Run the node until SIGINT or SIGTERM; exit code 0, or 2 for a bad parameter or scene."""
+    _use_service_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
