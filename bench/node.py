@@ -7,18 +7,22 @@ Node benchmark: the ROS 2 node as a user runs it, through DDS, in a child proces
    from the world at the origin, released horizontal) are written as scene YAML
    files; ``sim_node`` runs each one (physics_rate 1000, publish_rate 100,
    real_time_factor 1) on a fresh random ``ROS_DOMAIN_ID`` with localhost-only
-   discovery, for a fixed wall time once it is up. The node's own
+   discovery, for a fixed wall time once it is up, while this process subscribes
+   to ``~/body_states`` (the node publishes only topics that have subscribers),
+   ``/diagnostics`` and the twist of the body it pushes (2.). The node's own
    ``/diagnostics`` windows (1 s each; the windows that end in the first second of
    the measurement, and the node's first window, are dropped) give the achieved
    physics rate, real-time factor, step and publish costs, overruns and lag
-   resets; ``/proc`` gives the node's CPU use.
-2. Wrench-to-twist latency, wall clock: every 50 ms this process publishes a
-   WrenchStamped (world frame) on ``~/bodies/<B>/wrench`` whose force flips
-   between +F and -F (F = 50 x the body's weight; along x for the first free
-   body, along y, out of the swing plane, for the last link of a chain; the first
-   pulse lasts 25 ms so that the velocity oscillates about zero), and times each
-   flip from the publish to the receipt of the first ``~/bodies/<B>/twist`` whose
-   velocity change since the previous twist has the new sign.
+   resets, and adaptive substeps; ``/proc`` gives the CPU use of the node, of this
+   process and of everything else (a benchmark on a shared machine shows it).
+2. Wrench-to-twist latency, wall clock: every 50 ms on average (at random phases
+   of the node's publish period) this process publishes a WrenchStamped (world
+   frame) on ``~/bodies/<B>/wrench`` whose force flips between +F and -F (F = 50 x
+   the weight of the first free body, along x; 10 x the weight of the last link of
+   a chain, along y, out of the swing plane; the first pulse lasts half as long so
+   that the velocity oscillates about zero), and times each flip from the publish
+   to the receipt of the first ``~/bodies/<B>/twist`` whose velocity change since
+   the previous twist has the new sign.
 3. 1000 free bodies again with ``per_body_topics:=false`` (``~/body_states``
    only: rates and costs, no latency).
 4. In this process, without a node: the cost to build and publish one snapshot of
@@ -29,6 +33,13 @@ Node benchmark: the ROS 2 node as a user runs it, through DDS, in a child proces
    has no TwistArray; this is a real Twist[] field, other fields left empty), and
    (c) one PoseStamped and one TwistStamped per body (2n publishes on 2n
    publishers, as the node does).
+
+5. Where the time of a node with per-body topics goes besides steps and
+   publishes: one ``SingleThreadedExecutor.spin_once(timeout_sec=0)`` (the node's
+   loop calls it after every step) in this process, on a node with the node's
+   per-body entities (2 publishers and 1 subscription per body), with rclpy's
+   default QoS event handlers (each one a waitable the executor gathers in Python
+   on every call) and without them (``use_default_callbacks=False``).
 
 Writes ``bench/out/node.md`` and, with matplotlib, ``bench/out/node.png``.
 Run: ``python bench/node.py [--quick]`` in the environment of ``./dev.sh``
@@ -58,6 +69,7 @@ from geometry_msgs.msg import (Point, Pose, PoseArray, PoseStamped, Quaternion, 
                                TwistStamped, Vector3, WrenchStamped)
 import numpy as np
 import rclpy
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -75,9 +87,14 @@ G = 9.81
 PARAMS = {'physics_rate': 1000.0, 'publish_rate': 100.0, 'real_time_factor': 1.0}
 #: s: how long a node may take to come up (load the scene, create its topics, be discovered).
 STARTUP_DEADLINE = 120.0
-#: s between wrench flips, and the flip force in body weights.
+#: s between wrench flips (on average).
 FLIP_PERIOD = 0.05
-FLIP_WEIGHTS = 50.0
+#: The flip force in weights of the body pushed: a free box, the last link of a chain (50
+#: whips that link around so fast that the integrator takes adaptive substeps, which cost
+#: 2-3x a step; 10 still dwarfs what the swing of the chain does to that link's y velocity).
+FREE_WEIGHTS, CHAIN_WEIGHTS = 50.0, 10.0
+#: Fewer timed flips than this: latency percentiles in parentheses (table), not plotted.
+MIN_FLIPS = 20
 #: Free boxes: kg, side lengths in m.
 BOX_MASS, BOX_SIDES = 1.0, (0.3, 0.2, 0.1)
 
@@ -85,7 +102,7 @@ BOX_MASS, BOX_SIDES = 1.0, (0.3, 0.2, 0.1)
 # -- scenes ------------------------------------------------------------------------------
 
 def free_scene(n: int) -> dict:
-    """N anisotropic boxes on a 1 m grid under gravity, tumbling (seeded)."""
+    """Return a scene of n anisotropic boxes on a 1 m grid under gravity, tumbling (seeded)."""
     rng = np.random.default_rng(0)
     bodies = []
     for i in range(n):
@@ -98,7 +115,7 @@ def free_scene(n: int) -> dict:
 
 
 def chain_scene(n: int) -> dict:
-    """The scene of ``mechanisms.chain(n, 'lie_poisson2')``: rods along +x, ball joints."""
+    """Return the scene of ``mechanisms.chain(n, 'lie_poisson2')`` (rods along +x, ball joints)."""
     bodies, joints = [], []
     for i in range(n):
         start = np.array([i * ROD_LENGTH, 0.0, 0.0])
@@ -116,9 +133,11 @@ def chain_scene(n: int) -> dict:
 
 
 def scenes() -> list:
-    """(label, scene dict, per_body_topics, latency body, its mass, flip axis 0/1/2)."""
-    out = [(f'free_{n}', free_scene(n), True, 'b0', BOX_MASS, 0) for n in (1, 10, 100, 1000)]
-    out += [(f'chain_{n}', chain_scene(n), True, f'l{n - 1}', ROD_MASS, 1) for n in (10, 100)]
+    """Return (label, scene dict, per_body_topics, latency body, flip force N, axis) rows."""
+    out = [(f'free_{n}', free_scene(n), True, 'b0', FREE_WEIGHTS * BOX_MASS * G, 0)
+           for n in (1, 10, 100, 1000)]
+    out += [(f'chain_{n}', chain_scene(n), True, f'l{n - 1}', CHAIN_WEIGHTS * ROD_MASS * G, 1)
+            for n in (10, 100)]
     out.append(('free_1000 (body_states only)', free_scene(1000), False, None, 0.0, 0))
     return out
 
@@ -159,13 +178,55 @@ def sim_node_command(params: dict, profile: Optional[Path] = None) -> list:
     return cmd
 
 
-def busy_seconds() -> float:
-    """Return the CPU seconds of all processes of the machine since boot (from /proc/stat)."""
-    try:
-        ticks = [int(x) for x in Path('/proc/stat').read_text().split('\n', 1)[0].split()[1:]]
-    except OSError:
-        return float('nan')
-    return (ticks[0] + ticks[1] + ticks[2]) / os.sysconf('SC_CLK_TCK')   # user, nice, system
+def processes() -> dict:
+    """
+    Return ``{pid: (start time, CPU seconds)}`` of every process on the machine.
+
+    CPU seconds are user + system of all threads plus those of reaped children, from
+    ``/proc/<pid>/stat`` (exact run time; the machine-wide ``/proc/stat`` is sampled at
+    the kernel tick and misses or doubles a 1 kHz loop's busy time by aliasing).
+    """
+    out = {}
+    tick = os.sysconf('SC_CLK_TCK')
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
+        except OSError:   # gone meanwhile
+            continue
+        out[int(entry.name)] = (fields[19], sum(int(x) for x in fields[11:15]) / tick)
+    return out
+
+
+def others_cpu(before: dict, after: dict, exclude: tuple) -> float:
+    """Return the CPU seconds processes other than ``exclude`` used between two snapshots."""
+    total = 0.0
+    for pid, (start, cpu) in after.items():
+        if pid in exclude:
+            continue
+        old = before.get(pid)
+        total += cpu - old[1] if old is not None and old[0] == start else cpu
+    return total
+
+
+def wait_quiet(max_wait: float, limit: float = 0.25) -> None:
+    """Wait (up to ``max_wait`` s) until other processes use less than ``limit`` cores."""
+    t_end = time.monotonic() + max_wait
+    said = False
+    while max_wait > 0:
+        p0, t0 = processes(), time.perf_counter()
+        time.sleep(1.0)
+        others = others_cpu(p0, processes(), (os.getpid(),)) / (time.perf_counter() - t0)
+        if not others >= limit:
+            return
+        if time.monotonic() > t_end:
+            print(f'  (other processes still use {others:.1f} cores; going on)', flush=True)
+            return
+        if not said:
+            print(f'  (other processes use {others:.1f} cores: waiting up to {max_wait:g} s '
+                  f'for a quiet machine)', flush=True)
+            said = True
 
 
 def cpu_seconds(pid: int) -> float:
@@ -235,7 +296,6 @@ class Flipper:
         self.pending: Optional[float] = None   # publish time of the flip not yet seen
         self.samples: list = []
         self.sent = self.missed = 0
-        self.measuring = False
 
     def publish(self, sign: float, measured: bool) -> None:
         """Publish force ``sign * F``; time it if ``measured``."""
@@ -263,7 +323,7 @@ class Flipper:
 
 
 def _windows(diags: list, t_from: float) -> list:
-    """The diagnostics windows (dicts) received after ``t_from``, with steps and wall."""
+    """Return the diagnostics windows (dicts) received after ``t_from``, with steps and wall."""
     out = []
     prev = None
     for t, values in diags:
@@ -275,6 +335,7 @@ def _windows(diags: list, t_from: float) -> list:
             w['_wall'] = steps / rate if steps > 0 and rate > 0 else t - prev[0]
             w['_lag_before'] = int(prev[1]['lag_resets_total'])
             w['_retries_before'] = int(prev[1]['retries_total'])
+            w['_substeps_before'] = int(prev[1]['substeps_total'])
             out.append(w)
         prev = (t, values)
     return out
@@ -302,11 +363,13 @@ def summarize(windows: list) -> dict:
         'overruns_per_s': sum(int(w['overruns_window']) for w in windows) / wall,
         'lag_resets': int(windows[-1]['lag_resets_total']) - windows[0]['_lag_before'],
         'retries': int(windows[-1]['retries_total']) - windows[0]['_retries_before'],
+        'substeps': (int(windows[-1]['substeps_total']) - windows[0]['_substeps_before'])
+        / steps if steps else float('nan'),
         'violation': float(windows[-1]['constraint_violation']),
     }
 
 
-def run_scene(label: str, scene: dict, per_body: bool, body: Optional[str], mass: float,
+def run_scene(label: str, scene: dict, per_body: bool, body: Optional[str], force: float,
               axis: int, duration: float, workdir: Path,
               profile: Optional[Path] = None) -> dict:
     """Start the node on ``scene``, measure for ``duration`` s of wall time, stop it."""
@@ -331,17 +394,24 @@ def run_scene(label: str, scene: dict, per_body: bool, body: Optional[str], mass
 
         client.node.create_subscription(DiagnosticArray, '/diagnostics', on_diag,
                                         QoSProfile(depth=100))
+        # A consumer of the whole state (a recorder, a visualizer): the node publishes only
+        # topics with subscribers.
+        states = []
+        client.node.create_subscription(BodyStates, f'{NODE}/body_states',
+                                        lambda msg: states.append(time.perf_counter()),
+                                        QoSProfile(depth=10))
         flipper = None
         if body is not None:
-            flipper = Flipper(client, body, FLIP_WEIGHTS * mass * G, axis)
-        client.spin_until(lambda: len(diags) >= 1, 'diagnostics', STARTUP_DEADLINE, proc, log)
+            flipper = Flipper(client, body, force, axis)
+        client.spin_until(lambda: len(diags) >= 1 and len(states) >= 1,
+                          'diagnostics and body states', STARTUP_DEADLINE, proc, log)
         startup = time.perf_counter() - t_launch
         if flipper is not None:
             client.spin_until(lambda: flipper.pub.get_subscription_count() > 0
                               and flipper.twists > 0, f'wrench subscriber and twists of {body}',
                               STARTUP_DEADLINE, proc, log)
         ready = time.perf_counter() - t_launch
-        cpu0, own0, busy0 = cpu_seconds(proc.pid), time.process_time(), busy_seconds()
+        cpu0, own0, procs0 = cpu_seconds(proc.pid), time.process_time(), processes()
         t0 = time.perf_counter()
         end = t0 + duration
         # Flip k (k >= 1) at t0 + FLIP_PERIOD (k - 1/2) + u, u uniform in one publish period:
@@ -366,13 +436,14 @@ def run_scene(label: str, scene: dict, per_body: bool, body: Optional[str], mass
         wall = time.perf_counter() - t0
         cpu = (cpu_seconds(proc.pid) - cpu0) / wall
         own = (time.process_time() - own0) / wall
-        others = (busy_seconds() - busy0) / wall - cpu - own
+        others = others_cpu(procs0, processes(), (os.getpid(), proc.pid)) / wall
+        states_rate = sum(1 for t in states if t >= t0) / wall
         # Windows that end at least one report period into the measurement.
         result = summarize(_windows(diags, t0 + 1.0))
         result.update(label=label, bodies=len(scene['bodies']),
                       constraints=len(scene.get('constraints', [])), per_body=per_body,
                       startup=startup, ready=ready, node_cpu=cpu, own_cpu=own,
-                      other_cpu=others)
+                      other_cpu=others, states_rate=states_rate)
         if flipper is not None:
             result.update(latency=np.array(flipper.samples) * 1e3, flips=flipper.sent,
                           missed=flipper.missed + (flipper.pending is not None))
@@ -387,7 +458,7 @@ def run_scene(label: str, scene: dict, per_body: bool, body: Optional[str], mass
 # -- snapshot microbenchmark -------------------------------------------------------------
 
 def snapshot_costs(ns, budget: float, min_repeats: int) -> list:
-    """Rows (layout, n, median us per snapshot, us per body, ratio to (a))."""
+    """Return rows (layout, n, median us per snapshot, us per body, ratio to (a))."""
     client = Client(random_domain(), 'bench_snapshots')
     node = client.node
     rows = []
@@ -454,6 +525,43 @@ def snapshot_costs(ns, budget: float, min_repeats: int) -> list:
     return rows
 
 
+def spin_costs(ns, budget: float) -> list:
+    """Return rows (n, waitables, us per spin_once, the same without default event handlers)."""
+    rows = []
+    for n in ns:
+        row = [n]
+        for default in (True, False):
+            client = Client(random_domain(), 'bench_spin')
+            node = client.node
+            kwargs_pub = {} if default else {
+                'event_callbacks': PublisherEventCallbacks(use_default_callbacks=False)}
+            kwargs_sub = {} if default else {
+                'event_callbacks': SubscriptionEventCallbacks(use_default_callbacks=False)}
+            try:
+                for i in range(n):
+                    node.create_publisher(PoseStamped, f'bodies/b{i}/pose', 10, **kwargs_pub)
+                    node.create_publisher(TwistStamped, f'bodies/b{i}/twist', 10, **kwargs_pub)
+                    node.create_subscription(WrenchStamped, f'bodies/b{i}/wrench',
+                                             lambda msg: None, 10, **kwargs_sub)
+                spin = client.executor.spin_once
+                for _ in range(2):
+                    spin(timeout_sec=0.0)
+                times = []
+                t_end = time.perf_counter() + budget
+                while len(times) < 3 or time.perf_counter() < t_end:
+                    t0 = time.perf_counter()
+                    spin(timeout_sec=0.0)
+                    times.append(time.perf_counter() - t0)
+                row += [len(list(node.waitables)), float(np.median(times)) * 1e6]
+            finally:
+                client.close()
+        rows.append(tuple(row))
+        print(f'  bodies {n:5d}  default event handlers: {row[1]:5d} waitables, '
+              f'{row[2]:9.0f} us/spin_once   without: {row[3]:5d} waitables, '
+              f'{row[4]:8.0f} us/spin_once', flush=True)
+    return rows
+
+
 # -- output ------------------------------------------------------------------------------
 
 def _fmt(x, spec: str) -> str:
@@ -462,12 +570,18 @@ def _fmt(x, spec: str) -> str:
     return format(x, spec)
 
 
+def _fmt_latency(lat: Optional[np.ndarray], q: float) -> str:
+    if lat is None or not len(lat):
+        return '-'
+    text = f'{np.percentile(lat, q):.1f}'
+    return text if len(lat) >= MIN_FLIPS else f'({text})'
+
+
 def node_rows(results: list) -> list:
-    """Table rows of the node runs."""
+    """Return the table rows of the node runs."""
     rows = []
     for r in results:
         lat = r.get('latency')
-        has = lat is not None and len(lat) > 0
         if 'error' in r:
             rows.append([r['label'], str(r['bodies']), f'failed: {r["error"]}']
                         + ['-'] * (len(NODE_HEADER) - 3))
@@ -479,28 +593,29 @@ def node_rows(results: list) -> list:
             _fmt(r.get('publish_mean'), '.0f'), _fmt(100 * r.get('step_share', np.nan), '.0f'),
             _fmt(100 * r.get('publish_share', np.nan), '.0f'), _fmt(100 * r['node_cpu'], '.0f'),
             _fmt(100 * r['own_cpu'], '.0f'), _fmt(100 * r['other_cpu'], '.0f'),
-            _fmt(r.get('overruns_per_s'), '.1f'), _fmt(r.get('lag_resets'), 'd'),
-            _fmt(float(np.percentile(lat, 50)) if has else None, '.1f'),
-            _fmt(float(np.percentile(lat, 99)) if has else None, '.1f'),
+            _fmt(r.get('substeps'), '.2f'), _fmt(r.get('overruns_per_s'), '.1f'),
+            _fmt(r.get('lag_resets'), 'd'),
+            _fmt_latency(lat, 50), _fmt_latency(lat, 99),
             f'{len(lat)}/{r["flips"]}' if lat is not None else '-'])
     return rows
 
 
 NODE_HEADER = ('scene', 'bodies', 'up [s]', 'physics [Hz]', 'RTF', 'step mean [us]',
                'step max [us]', 'publish mean [us]', 'step [% wall]', 'publish [% wall]',
-               'node CPU [%]', 'bench CPU [%]', 'other CPU [%]', 'overruns / s', 'lag resets',
-               'latency p50 [ms]', 'latency p99 [ms]', 'flips seen')
+               'node CPU [%]', 'bench CPU [%]', 'other CPU [%]', 'substeps / step',
+               'overruns / s', 'lag resets', 'latency p50 [ms] (incl. wait for publish)',
+               'latency p99 [ms] (incl. wait for publish)', 'flips seen')
 
 
 def markdown(header, rows) -> str:
-    """A markdown table."""
+    """Return a markdown table."""
     lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
     lines += ['| ' + ' | '.join(str(c) for c in r) + ' |' for r in rows]
     return '\n'.join(lines) + '\n'
 
 
 def machine() -> str:
-    """Date, CPUs, CPU model, Python, rclpy and RMW versions."""
+    """Return the date, CPUs, CPU model, and the Python, rclpy and RMW versions."""
     model = platform.processor() or platform.machine()
     try:
         for line in Path('/proc/cpuinfo').read_text().splitlines():
@@ -519,7 +634,20 @@ def machine() -> str:
             f'{rclpy.get_rmw_implementation_identifier()}; numpy {np.__version__}')
 
 
-def _plot(results: list, snaps: list) -> Optional[Path]:
+def code_version() -> str:
+    """Return the commit of this checkout, and whether the package differs from it."""
+    root = Path(__file__).resolve().parents[1]
+    try:
+        commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=root,
+                                capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(['git', 'status', '--porcelain', 'rigid_body_sim'], cwd=root,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return 'commit unknown'
+    return f'commit {commit}' + (' (rigid_body_sim/ modified)' if dirty else '')
+
+
+def _plot(results: list, snaps: list, spins: list) -> Optional[Path]:
     try:
         import matplotlib
         matplotlib.use('Agg')
@@ -536,6 +664,7 @@ def _plot(results: list, snaps: list) -> Optional[Path]:
     ax.plot(x, [r.get('publish_mean', np.nan) for r in results], 'k^', label='publish mean')
     ax.axhline(1e6 / PARAMS['physics_rate'], color='r', ls='--', label='budget 1/rate')
     ax.set_yscale('log')
+    ax.set_ylim(bottom=10.0)
     ax.set_ylabel('wall time [us]')
     ax.set_title('cost per step and per publish (node /diagnostics)')
     ax = axes[0, 1]
@@ -545,13 +674,14 @@ def _plot(results: list, snaps: list) -> Optional[Path]:
     ax.set_title('achieved physics rate (= 1000 x real-time factor)')
     ax = axes[1, 0]
     lat = [r.get('latency') for r in results]
-    p50 = [np.percentile(v, 50) if v is not None and len(v) else np.nan for v in lat]
-    p99 = [np.percentile(v, 99) if v is not None and len(v) else np.nan for v in lat]
+    p50 = [np.percentile(v, 50) if v is not None and len(v) >= MIN_FLIPS else np.nan
+           for v in lat]
+    p99 = [np.percentile(v, 99) if v is not None and len(v) >= MIN_FLIPS else np.nan
+           for v in lat]
     ax.bar(x - 0.2, p50, 0.4, label='p50')
     ax.bar(x + 0.2, p99, 0.4, label='p99')
-    ax.set_yscale('log')
     ax.set_ylabel('wrench publish -> twist receipt [ms]')
-    ax.set_title('latency (includes up to 10-15 ms of waiting for a publish)')
+    ax.set_title('wrench -> twist latency (includes 5-15 ms of waiting for a publish)')
     for ax in axes[0, 0], axes[0, 1], axes[1, 0]:
         ax.set_xticks(x)
         ax.set_xticklabels(labels, rotation=30, ha='right', fontsize=8)
@@ -561,9 +691,14 @@ def _plot(results: list, snaps: list) -> Optional[Path]:
     for layout in dict.fromkeys(r[0] for r in snaps):
         rs = [r for r in snaps if r[0] == layout]
         ax.loglog([r[1] for r in rs], [r[2] for r in rs], 'o-', label=layout)
+    ax.loglog([r[0] for r in spins], [r[2] for r in spins], 'ks--',
+              label='executor spin_once, default event handlers')
+    ax.loglog([r[0] for r in spins], [r[4] for r in spins], 'kx:',
+              label='executor spin_once, without')
+    ax.axhline(1e6 / PARAMS['physics_rate'], color='r', ls='--', lw=0.8)
     ax.set_xlabel('bodies')
-    ax.set_ylabel('build + publish one snapshot [us]')
-    ax.set_title('snapshot layouts (in-process, no subscriber)')
+    ax.set_ylabel('wall time [us]')
+    ax.set_title('build + publish one snapshot; one executor spin (in-process)')
     ax.grid(True, which='both', alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -609,8 +744,10 @@ def _progress(r: dict) -> None:
             f'{r.get("publish_mean", np.nan):7.0f} us  cpu node {100 * r["node_cpu"]:3.0f}% '
             f'bench {100 * r["own_cpu"]:3.0f}% other {100 * r["other_cpu"]:3.0f}%  '
             f'overruns/s {r.get("overruns_per_s", np.nan):6.1f}  lag resets '
-            f'{r.get("lag_resets", -1)}  retries {r.get("retries", -1)}  '
-            f'violation {r.get("violation", np.nan):.1e}')
+            f'{r.get("lag_resets", -1)}  substeps/step {r.get("substeps", np.nan):.2f}  '
+            f'retries {r.get("retries", -1)}  '
+            f'violation {r.get("violation", np.nan):.1e}  body_states received '
+            f'{r["states_rate"]:.0f}/s')
     if lat is not None and len(lat):
         text += (f'  latency p50 {np.percentile(lat, 50):5.1f} p99 '
                  f'{np.percentile(lat, 99):5.1f} ms ({len(lat)}/{r["flips"]} flips)')
@@ -622,6 +759,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--quick', action='store_true', help='3 s per scene, fewer repeats')
     p.add_argument('--duration', type=float, help='s of wall time per scene (10; --quick 3)')
+    p.add_argument('--max-wait', type=float, default=120.0, metavar='S',
+                   help='before each part, wait up to S s while other processes keep a '
+                        'quarter of a core busy (0: never wait)')
     p.add_argument('--scenes', nargs='+', metavar='SCENE',
                    help='only these node scenes (names as for --profile)')
     p.add_argument('--profile', nargs='+', metavar='SCENE',
@@ -635,18 +775,19 @@ def main(argv=None) -> int:
     if args.profile:
         profile_scenes(args.profile, duration)
         return 0
-    info = machine()
+    info = f'{machine()}; {code_version()}'
     print(info)
     print(f'\n== node runs: physics {PARAMS["physics_rate"]:g} Hz, publish '
           f'{PARAMS["publish_rate"]:g} Hz, real-time factor {PARAMS["real_time_factor"]:g}, '
           f'{duration:g} s each ==', flush=True)
     results = []
     with tempfile.TemporaryDirectory(prefix='bench_node_') as tmp:
-        for label, scene, per_body, body, mass, axis in scenes():
+        for label, scene, per_body, body, force, axis in scenes():
             if args.scenes and _key(label, per_body) not in args.scenes:
                 continue
+            wait_quiet(args.max_wait)
             try:
-                r = run_scene(label, scene, per_body, body, mass, axis, duration, Path(tmp))
+                r = run_scene(label, scene, per_body, body, force, axis, duration, Path(tmp))
             except RuntimeError as exc:   # a node that fails is a result too; go on
                 print(f'  {label}: {exc}', flush=True)
                 r = {'label': label, 'bodies': len(scene['bodies']),
@@ -654,8 +795,13 @@ def main(argv=None) -> int:
             results.append(r)
             _progress(r)
     print('\n== snapshot build + publish (in-process, no subscriber) ==', flush=True)
+    wait_quiet(args.max_wait)
     snaps = snapshot_costs((1, 10, 100, 1000), 0.3 if args.quick else 1.0,
                            5 if args.quick else 20)
+    print('\n== executor: one spin_once(0) with the per-body entities of n bodies ==',
+          flush=True)
+    wait_quiet(args.max_wait)
+    spins = spin_costs((1, 10, 100, 1000), 0.3 if args.quick else 1.0)
     node_table = markdown(NODE_HEADER, node_rows(results))
     snap_table = markdown(('layout', 'bodies', 'us / snapshot', 'us / body', 'ratio to (a)'),
                           [(r[0], r[1], f'{r[2]:.1f}', f'{r[3]:.2f}', f'{r[4]:.2f}')
@@ -669,16 +815,23 @@ def main(argv=None) -> int:
         f'wall time; "step/publish [% wall]": share of wall time in steps / state publishes; '
         f'CPU (from /proc, 100 % = one core of {len(os.sched_getaffinity(0))}): the node '
         f'process (all threads), this benchmark process, and everything else on the machine '
-        f'(should be near 0). Latency: wall clock from '
-        f'publishing a flipped WrenchStamped (F = {FLIP_WEIGHTS:g} x weight, every '
+        f'(should be near 0). The benchmark subscribes to ~/body_states, /diagnostics and '
+        f'the twist of the body it pushes (the node publishes only topics that have '
+        f'subscribers). Latency: wall clock from '
+        f'publishing a flipped WrenchStamped (F = {FREE_WEIGHTS:g} x the weight of a free '
+        f'body, {CHAIN_WEIGHTS:g} x that of a chain link, every '
         f'{FLIP_PERIOD * 1e3:g} ms on average, at random phases of the publish period) to '
         f'receiving the first ~/bodies/<B>/twist whose velocity '
         f'change since the previous twist has the new sign (B: the first free body, force '
         f'along x; the last link of a chain, along y). **It includes waiting for the next '
         f'publish** (twists come every 10 ms of simulated time; the velocity change over an '
         f'interval takes the new sign once more than half of it ran with the new force, so '
-        f'5-15 ms, 10 ms on average, after the first step that applies it). '
-        f'"flips seen": flips timed / flips sent. '
+        f'5-15 ms, 10 ms on average, after the first step that applies it; at a real-time '
+        f'factor below 1 these are ms of simulated time, 1/RTF times longer in wall time). '
+        f'Percentiles of fewer than {MIN_FLIPS} timed flips are in parentheses. '
+        f'"flips seen": flips timed / flips sent (a flip the next one supersedes before a '
+        f'twist shows it is not timed). "substeps / step": the core\'s sub-step counter per '
+        f'step (sub-steps of the steps it splits for fast rotation; 0: none split). '
         f'"body_states only": per_body_topics:=false (no per-body topics, so no latency).')
     snap_note = (
         '(a) one rigid_body_sim_interfaces/BodyStates built by '
@@ -689,14 +842,28 @@ def main(argv=None) -> int:
         'per body on 2n publishers, built by conversions.pose_stamped/twist_stamped as the '
         'node does. Median of repeats; publishers with no subscriber (build, conversion to C '
         'and serialization; delivery to subscribers comes on top, per message).')
+    spin_table = markdown(('bodies', 'waitables (default event handlers)',
+                           'us / spin_once (default)', 'waitables (without)',
+                           'us / spin_once (without)'),
+                          [(r[0], r[1], f'{r[2]:.0f}', r[3], f'{r[4]:.0f}') for r in spins])
+    spin_note = (
+        'One SingleThreadedExecutor.spin_once(timeout_sec=0), median, on a node in this '
+        'process with 2 publishers (PoseStamped, TwistStamped) and 1 subscription '
+        '(WrenchStamped) per body, as sim_node has with per_body_topics (plus its few '
+        'services and its ~/body_states, /clock and /diagnostics publishers). "default": '
+        "rclpy's default QoS event handlers on every publisher and subscription (what "
+        'create_publisher / create_subscription make unless told otherwise); "without": '
+        'event_callbacks=...EventCallbacks(use_default_callbacks=False). The node spins once '
+        'after every step: at 1 kHz a spin must cost well under 1 ms on top of the step.')
     text = (f'# Node benchmark\n\n{info}\n\nCommand: `python bench/node.py'
             f'{" --quick" if args.quick else ""}'
             f'{f" --duration {args.duration:g}" if args.duration else ""}`\n\n'
             f'## The node as a user runs it\n\n{node_note}\n\n{node_table}\n'
-            f'## Building and publishing one snapshot\n\n{snap_note}\n\n{snap_table}')
+            f'## Building and publishing one snapshot\n\n{snap_note}\n\n{snap_table}\n'
+            f'## What one executor spin costs\n\n{spin_note}\n\n{spin_table}')
     (OUT / 'node.md').write_text(text)
-    print('\n' + node_table + '\n' + snap_table)
-    plot = _plot(results, snaps)
+    print('\n' + node_table + '\n' + snap_table + '\n' + spin_table)
+    plot = _plot(results, snaps, spins)
     print(f'table: {OUT / "node.md"}' + (f', plot: {plot}' if plot else ''))
     return 0
 

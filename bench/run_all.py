@@ -8,6 +8,9 @@ Benchmarks: what accuracy costs in time (not tests; timings are for reading, not
    effects a scene lists cost: gravity on/off, isotropic vs anisotropic bodies.
    Speeds are compared as ratios measured side by side in one run.
 
+Then ``bench/constraints.py`` (chains, trees, joints; ``--skip-constraints`` to skip) and
+``bench/node.py`` (the ROS node through DDS: rates, costs, latency; ``--skip-node`` to skip).
+
 Writes ``bench/out/*.md`` (the tables) and, when matplotlib is installed,
 ``bench/out/*.png`` (log-log plots). Run: ``./dev.sh bench`` (``--quick`` for a
 short run).
@@ -193,6 +196,8 @@ def main(argv=None) -> int:
     p.add_argument('--quick', action='store_true', help='fewer step sizes and bodies')
     p.add_argument('--skip-constraints', action='store_true',
                    help='free bodies only (bench/constraints.py runs the rest)')
+    p.add_argument('--skip-node', action='store_true',
+                   help='no ROS node benchmark (bench/node.py runs it)')
     args = p.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     print(f'python {platform.python_version()}, numpy {np.__version__}, '
@@ -223,6 +228,9 @@ def main(argv=None) -> int:
     if not args.skip_constraints:
         import constraints
         constraints.main(['--quick'] if args.quick else [])
+    if not args.skip_node:
+        import node
+        node.main(['--quick'] if args.quick else [])
     return 0
 
 
