@@ -36,7 +36,7 @@ Node benchmark: the ROS 2 node as a user runs it, through DDS, in a child proces
 
 5. Where the time of a node with per-body topics goes besides steps and
    publishes: one ``SingleThreadedExecutor.spin_once(timeout_sec=0)`` (the node's
-   loop calls it after every step) in this process, on a node with the node's
+   loop calls it between steps) in this process, on a node with the node's
    per-body entities (2 publishers and 1 subscription per body), with rclpy's
    default QoS event handlers (each one a waitable the executor gathers in Python
    on every call) and without them (``use_default_callbacks=False``).

@@ -53,7 +53,8 @@ class NodeProcess:
             args += ['-r', f'__ns:={namespace}']
         self.log_path = log_path
         self._log = open(log_path, 'w+') if log_path else subprocess.DEVNULL
-        self.proc = subprocess.Popen(args, env=ros_env(domain), stdout=self._log,
+        self.env = ros_env(domain)
+        self.proc = subprocess.Popen(args, env=self.env, stdout=self._log,
                                      stderr=subprocess.STDOUT, start_new_session=True)
 
     def log(self) -> str:

@@ -525,3 +525,19 @@ def test_a_divergence_pauses_reports_an_error_and_reset_recovers(ros, tmp_path):
     again = _state_at(ros, node, states, time_seconds(reply.time))
     for a, b in zip(again['box'], before):
         np.testing.assert_array_equal(a, b)
+
+
+def test_echo_prints_a_body_state_as_it_arrives(ros, tmp_path):
+    import subprocess
+    from ros_harness import ros_env
+    node = ros.start({'scene': _scene(tmp_path, FREE_BODY)}, namespace='/robot')
+    env = ros_env(int(node.env['ROS_DOMAIN_ID']))
+    done = subprocess.run([str(executable('echo_body')), 'box', '--node', f'/robot{NODE}',
+                           '--count', '3', '--every', '1'], env=env, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stdout.splitlines() if ' box ' in line]
+    assert len(lines) == 3
+    # The body starts at rest at (0, 0, 1) and no effect acts on it.
+    assert 'p=[+0.0000 +0.0000 +1.0000] m' in lines[0]
+    assert 'v=[+0.000 +0.000 +0.000] m/s' in lines[-1]

@@ -65,11 +65,11 @@ IDLE_WAIT = 0.05
 #: with 1000 wrench topics), so serving events after every step would cost more than the
 #: physics in large scenes; this keeps event handling below 1 / SPIN_SHARE of the wall time.
 SPIN_SHARE = 4.0
+#: s of wall time between looking up which per-body and reaction topics have subscribers.
+AUDIENCE_REFRESH = 0.25
 #: Per-body and per-constraint entities go without rclpy's default QoS-event handlers:
 #: each adds waitables that every spin walks (measured: 5.7 ms vs 0.32 ms per spin_once
 #: with 100 bodies).
-#: s of wall time between looking up which per-body and reaction topics have subscribers.
-AUDIENCE_REFRESH = 0.25
 QUIET_PUB = PublisherEventCallbacks(use_default_callbacks=False)
 QUIET_SUB = SubscriptionEventCallbacks(use_default_callbacks=False)
 
