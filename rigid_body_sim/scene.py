@@ -35,7 +35,7 @@ Shapes for ``inertia`` (uniform density, about the centre of mass):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 import re
 from typing import Any, Union
@@ -73,6 +73,10 @@ class Scene:
     simulation: Simulation
     duration: float
     source: str
+    #: body name -> (shape, dimensions) for bodies whose inertia is given as a shape:
+    #: ('box', [lx, ly, lz]), ('sphere', [r]) or ('cylinder', [r, length]), m, centred
+    #: on the centre of mass, in the body's axes.
+    shapes: dict = field(default_factory=dict)
 
 
 def load_scene(path: Union[str, Path]) -> Scene:
@@ -162,8 +166,15 @@ def _build(data: Any, source: str) -> Scene:
             rest = exc.field[exc.field.index(']') + 1:]
             raise SpecError(f'effects.{effects[i][0]}{rest}', exc.problem) from None
         raise
+    shapes = {}
+    for body in bodies_data:
+        inertia = body['inertia']
+        if isinstance(inertia, dict) and len(inertia) == 1 and \
+                next(iter(inertia)) in ('box', 'sphere', 'cylinder'):
+            kind, dims = next(iter(inertia.items()))
+            shapes[body['name']] = (kind, [float(d) for d in np.atleast_1d(dims)])
     return Scene(name=str(data.get('name', Path(source).stem)), simulation=sim,
-                 duration=duration, source=source)
+                 duration=duration, source=source, shapes=shapes)
 
 
 def _body(data: Any, field: str) -> RigidBody:

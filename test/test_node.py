@@ -541,3 +541,52 @@ def test_echo_prints_a_body_state_as_it_arrives(ros, tmp_path):
     # The body starts at rest at (0, 0, 1) and no effect acts on it.
     assert 'p=[+0.0000 +0.0000 +1.0000] m' in lines[0]
     assert 'v=[+0.000 +0.000 +0.000] m/s' in lines[-1]
+
+
+def test_metrics_and_markers_match_the_core(ros, tmp_path):
+    from rigid_body_sim.ros.outputs import equal_inertia_box
+    from rigid_body_sim_interfaces.msg import Metrics
+    from visualization_msgs.msg import Marker, MarkerArray
+    scene = str(CONFIG / 'default_scene.yaml')
+    node = ros.start({'scene': scene, 'start_paused': True})
+    metrics = ros.client.subscribe(Metrics, f'{NODE}/metrics')
+    markers = ros.client.subscribe(MarkerArray, f'{NODE}/markers')
+    ros.client.wait_for(lambda: metrics and markers, 'metrics and markers (paused)', node=node)
+    reply = _step(ros, node, 300)
+    t = time_seconds(reply.time)
+    ros.client.wait_for(lambda: any(time_seconds(m.header.stamp) == t for m in metrics)
+                        and any(time_seconds(m.markers[1].header.stamp) == t
+                                for m in markers), 'metrics and markers at t', node=node)
+    got = next(m for m in metrics if time_seconds(m.header.stamp) == t)
+    sim = load_scene(scene).simulation
+    e0 = sim.diagnostics().total_energy
+    sim.step(300)
+    d = sim.diagnostics()
+    assert got.step_count == 300
+    assert got.total_energy == pytest.approx(d.total_energy, rel=1e-15)
+    assert got.energy_change == pytest.approx(d.total_energy - e0, abs=1e-12)
+    assert got.kinetic_energy + got.potential_energy == pytest.approx(got.total_energy)
+    np.testing.assert_array_equal([got.linear_momentum.x, got.linear_momentum.y,
+                                   got.linear_momentum.z], d.linear_momentum_world)
+    array = next(m for m in markers if time_seconds(m.markers[1].header.stamp) == t).markers
+    assert array[0].action == Marker.DELETEALL
+    box, ball = array[1], array[2]
+    # The box from its scene shape, about its centre of mass, in its own axes.
+    assert (box.type, box.text) == (Marker.CUBE, 'tumbling_box')
+    np.testing.assert_allclose([box.scale.x, box.scale.y, box.scale.z], [0.3, 0.2, 0.1])
+    np.testing.assert_allclose([box.pose.position.x, box.pose.position.y,
+                                box.pose.position.z], sim.state.pos_com_world[0], rtol=1e-15)
+    q = sim.pose('tumbling_box')[1]
+    np.testing.assert_allclose([box.pose.orientation.x, box.pose.orientation.y,
+                                box.pose.orientation.z, box.pose.orientation.w], q, rtol=1e-15)
+    # The rugby ball (URDF inertia) as the box of equal inertia.
+    np.testing.assert_allclose([ball.scale.x, ball.scale.y, ball.scale.z],
+                               equal_inertia_box(0.43, sim.bodies.moments[1]), rtol=1e-12)
+
+
+def test_the_box_of_equal_inertia_has_that_inertia():
+    from rigid_body_sim.ros.outputs import equal_inertia_box
+    m, sides = 3.0, np.array([0.5, 0.2, 0.1])
+    a, b, c = sides
+    moments = m / 12 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
+    np.testing.assert_allclose(equal_inertia_box(m, moments), sides, rtol=1e-12)

@@ -492,6 +492,26 @@ class Simulation:
             out[name] = per_body
         return out
 
+    def joint_anchors(self) -> dict:
+        """
+        Where each constraint's anchor on its first body is now, world frame (m).
+
+        Returns
+        -------
+        dict
+            ``{name: ndarray (3,)}``, in the order the constraints were added.
+
+        """
+        s = self.state
+        constraints = self.dynamics.solver.constraints
+        out = {}
+        for name in constraints.names:
+            res = constraints._resolved[name]
+            lever = so3.rotate(s.quat_principal_world[res.a], np.asarray(res.anchor[0])) \
+                if len(res.anchor) else np.zeros(3)
+            out[name] = s.pos_com_world[res.a] + lever
+        return out
+
     def work(self) -> dict:
         """Work counters: integrator totals plus each effect's evaluations."""
         out = self.dynamics.counters.as_dict()

@@ -30,7 +30,6 @@ from typing import Optional
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
-import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
@@ -38,20 +37,22 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
-from rigid_body_sim_interfaces.msg import BodyStates
+from rigid_body_sim_interfaces.msg import BodyStates, Metrics
 from rigid_body_sim_interfaces.srv import AddConstraint, RemoveConstraint, Step
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Header
 from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
 from .inputs import check_name_token, check_wrench, constraint_from_request, Rejected, \
     Rejection
+from .outputs import body_topic, constraint_topic, MARKERS_TOPIC, METRICS_TOPIC, Outputs, \
+    STATES_TOPIC
 from .pacing import output_due, Pacer, Totals, WindowStats
 from .settings import PARAMETERS, Settings
 from ..cli import default_scene_path
 from ..core import DivergenceError, Simulation, SpecError
-from ..core import rotation as so3
 from ..scene import load_scene, SceneError
 
 #: The most steps one ~/step request may ask for (the node serves nothing else meanwhile).
@@ -127,6 +128,7 @@ class SimNode(Node):
         self._audience_expires = 0.0
         self._energy0 = self.sim.diagnostics().total_energy
 
+        self.outputs = Outputs(self.sim, self.scene.shapes, s.world_frame)
         self._make_interfaces()
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -145,19 +147,22 @@ class SimNode(Node):
 
     def _make_interfaces(self) -> None:
         s = self.settings
-        self._pose_pubs, self._twist_pubs, self._wrench_subs = {}, {}, {}
+        self._pubs: dict = {}   # private topic -> publisher, for every output topic
+        self._wrench_subs = {}
         if s.per_body_topics:
             for name in self.sim.bodies.names:
-                self._pose_pubs[name] = self.create_publisher(
-                    PoseStamped, f'~/bodies/{name}/pose', 10, event_callbacks=QUIET_PUB)
-                self._twist_pubs[name] = self.create_publisher(
-                    TwistStamped, f'~/bodies/{name}/twist', 10, event_callbacks=QUIET_PUB)
+                for kind, msg_type in (('pose', PoseStamped), ('twist', TwistStamped)):
+                    topic = body_topic(name, kind)
+                    self._pubs[topic] = self.create_publisher(msg_type, topic, 10,
+                                                              event_callbacks=QUIET_PUB)
                 self._wrench_subs[name] = self.create_subscription(
-                    WrenchStamped, f'~/bodies/{name}/wrench',
+                    WrenchStamped, body_topic(name, 'wrench'),
                     lambda msg, body=name: self._on_wrench(body, msg), QoSProfile(depth=10),
                     event_callbacks=QUIET_SUB)
-        self._states_pub = self.create_publisher(BodyStates, '~/body_states', 10)
-        self._constraint_pubs: dict = {}
+        for topic, msg_type in ((STATES_TOPIC, BodyStates), (METRICS_TOPIC, Metrics),
+                                (MARKERS_TOPIC, MarkerArray)):
+            self._pubs[topic] = self.create_publisher(msg_type, topic, 10)
+        self._constraint_topics: set = set()
         self._sync_constraint_publishers()
         self._clock_pub = self.create_publisher(Clock, '/clock', 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
@@ -187,14 +192,15 @@ class SimNode(Node):
         """One ``~/constraints/<C>/wrench`` publisher per constraint present."""
         self._audience_expires = 0.0
         names = set(self.sim.constraint_names)
-        for name in list(self._constraint_pubs):
+        for name in list(self._constraint_topics):
             if name not in names:
-                self.destroy_publisher(self._constraint_pubs.pop(name))
+                self.destroy_publisher(self._pubs.pop(constraint_topic(name)))
+                self._constraint_topics.discard(name)
         for name in self.sim.constraint_names:
-            if name not in self._constraint_pubs:
-                self._constraint_pubs[name] = self.create_publisher(
-                    WrenchStamped, f'~/constraints/{name}/wrench', 10,
-                    event_callbacks=QUIET_PUB)
+            if name not in self._constraint_topics:
+                self._pubs[constraint_topic(name)] = self.create_publisher(
+                    WrenchStamped, constraint_topic(name), 10, event_callbacks=QUIET_PUB)
+                self._constraint_topics.add(name)
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -379,6 +385,7 @@ class SimNode(Node):
     def _apply_parameters(self, params: list) -> None:
         s = self.settings
         s.update({p.name: p.value for p in params})
+        self.outputs.world_frame = s.world_frame
         names = {p.name for p in params}
         if names & {'physics_rate', 'integrator'}:
             self.sim.set_step(1.0 / s.physics_rate, s.integrator or self._scene_integrator)
@@ -427,7 +434,7 @@ class SimNode(Node):
 
     def _publish_state(self) -> None:
         """
-        Publish poses, twists, body states and reactions: only to topics with subscribers.
+        Publish poses, twists, body states, reactions, metrics, markers: where subscribed.
 
         A message nobody subscribes to is not built (per-body messages cost about
         35 us each from Python, a reaction solve more). Which per-body and reaction
@@ -435,69 +442,32 @@ class SimNode(Node):
         time (asking 2000 publishers each time cost 5 ms a publish).
         """
         t0 = time.perf_counter()
-        sim = self.sim
         if t0 >= self._audience_expires:
             self._refresh_audience(t0)
-        wanted, reactions = self._audience
-        states = self._states_pub.get_subscription_count()
-        if not (wanted or states or reactions):
+        bodies, reactions = self._audience
+        states, metrics, markers = (self._pubs[t].get_subscription_count() for t in
+                                    (STATES_TOPIC, METRICS_TOPIC, MARKERS_TOPIC))
+        if not (bodies or reactions or states or metrics or markers):
             return
-        stamp = self._stamp()
-        world = self._header(self.settings.world_frame, stamp)
-        pos, quat = sim.pose()
-        vel, omega = sim.twist()
-        if states:
-            self._states_pub.publish(conv.body_states(world, sim.bodies.names, pos, quat,
-                                                      vel, omega))
-        for i, name in wanted:
-            self._pose_pubs[name].publish(conv.pose_stamped(world, pos[i], quat[i]))
-            self._twist_pubs[name].publish(conv.twist_stamped(world, vel[i], omega[i]))
-        if reactions:
-            self._publish_reactions(stamp, pos, quat, reactions)
+        snapshot = self.outputs.snapshot(
+            self._stamp(), bodies=bodies, states=bool(states), reactions=reactions,
+            metrics=(self._step_count, self._energy0) if metrics else None,
+            markers=bool(markers))
+        for topic, msg in snapshot:
+            self._pubs[topic].publish(msg)
         self._window.record_publish(time.perf_counter() - t0)
 
     def _refresh_audience(self, now: float) -> None:
         """Find the per-body and reaction topics that have subscribers now."""
-        names = self.sim.bodies.names
+        pubs = self._pubs
         self._audience = (
-            [(i, name) for i, name in enumerate(names) if name in self._pose_pubs and (
-                self._pose_pubs[name].get_subscription_count()
-                or self._twist_pubs[name].get_subscription_count())],
-            [name for name, pub in self._constraint_pubs.items()
-             if pub.get_subscription_count()])
+            [i for i, name in enumerate(self.sim.bodies.names)
+             if body_topic(name, 'pose') in pubs and (
+                 pubs[body_topic(name, 'pose')].get_subscription_count()
+                 or pubs[body_topic(name, 'twist')].get_subscription_count())],
+            [name for name in self._constraint_topics
+             if pubs[constraint_topic(name)].get_subscription_count()])
         self._audience_expires = now + AUDIENCE_REFRESH
-
-    def _publish_reactions(self, stamp: Time, pos: np.ndarray, quat: np.ndarray,
-                           names: list) -> None:
-        """
-        Each constraint's wrench on each body it acts on, and on the world.
-
-        One WrenchStamped per body, with ``frame_id`` the body's name: force and
-        torque in the body's frame, the torque about the body frame's origin
-        (the point ``~/bodies/<B>/pose`` reports). For a constraint to the world,
-        one more with ``frame_id`` the world frame: the wrench on the world,
-        torque about the world origin (equal and opposite).
-        """
-        sim = self.sim
-        index = {n: i for i, n in enumerate(sim.bodies.names)}
-        com = sim.state.pos_com_world
-        for name, per_body in sim.reactions().items():
-            pub = self._constraint_pubs.get(name)
-            if name not in names or pub is None:
-                continue
-            on_world_f = np.zeros(3)
-            on_world_t = np.zeros(3)
-            for body, r in per_body.items():
-                i = index[body]
-                R = so3.quat_to_matrix(quat[i])
-                torque_origin = r.torque_com_world + so3.cross(com[i] - pos[i], r.force_world)
-                pub.publish(conv.wrench_stamped(self._header(body, stamp),
-                                                R.T @ r.force_world, R.T @ torque_origin))
-                on_world_f -= r.force_world
-                on_world_t -= r.torque_com_world + so3.cross(com[i], r.force_world)
-            if sim.dynamics.solver.constraints.spec(name).body_b is None:
-                pub.publish(conv.wrench_stamped(
-                    self._header(self.settings.world_frame, stamp), on_world_f, on_world_t))
 
     def _publish_diagnostics(self, now: float) -> None:
         w = self._window

@@ -1,0 +1,216 @@
+"""
+The messages the node publishes at one instant, built from a Simulation (no publishing).
+
+The node publishes them; the experiment runner writes the same messages into
+a bag, so a recorded run and a lockstep run hold the same data. Topics are
+private names (``~/...``): the node resolves them under its name, the runner
+under the node name it stands for (default ``/rigid_body_sim``).
+
+Frames and points (also in the README): poses are the body frame's origin
+and orientation in the world frame; twists the origin's velocity and the
+angular velocity, world axes; a constraint's wrench on a body is in that
+body's axes about its frame origin (``frame_id`` the body), on the world in
+world axes about the world origin.
+"""
+
+from __future__ import annotations
+
+from typing import Optional, Sequence
+
+from geometry_msgs.msg import Point, Pose, Quaternion
+import numpy as np
+from rigid_body_sim_interfaces.msg import Metrics
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from . import conversions as conv
+from ..core import rotation as so3
+from ..core import Simulation
+
+#: m: diameter of the sphere that marks a joint.
+JOINT_MARKER_SIZE = 0.04
+#: Body colours (RGBA), cycled.
+PALETTE = ((0.12, 0.47, 0.71, 0.9), (1.0, 0.5, 0.05, 0.9), (0.17, 0.63, 0.17, 0.9),
+           (0.58, 0.4, 0.74, 0.9), (0.55, 0.34, 0.29, 0.9), (0.89, 0.47, 0.76, 0.9))
+
+
+def body_topic(body: str, kind: str) -> str:
+    """Return ``~/bodies/<body>/<kind>`` (kind: pose, twist or wrench)."""
+    return f'~/bodies/{body}/{kind}'
+
+
+def constraint_topic(name: str) -> str:
+    """Return ``~/constraints/<name>/wrench``."""
+    return f'~/constraints/{name}/wrench'
+
+
+STATES_TOPIC = '~/body_states'
+METRICS_TOPIC = '~/metrics'
+MARKERS_TOPIC = '~/markers'
+
+
+class Outputs:
+    """
+    Build the node's output messages for one Simulation.
+
+    Parameters
+    ----------
+    sim : Simulation
+    shapes : dict
+        ``{body: (shape, dims)}`` of the scene (:attr:`rigid_body_sim.scene.Scene.shapes`);
+        other bodies are drawn as the box of equal inertia.
+    world_frame : str
+
+    """
+
+    def __init__(self, sim: Simulation, shapes: dict, world_frame: str) -> None:
+        self.sim = sim
+        self.shapes = dict(shapes)
+        self.world_frame = world_frame
+
+    def snapshot(self, stamp, bodies: Optional[Sequence[int]] = None,
+                 states: bool = True, reactions: Optional[Sequence[str]] = None,
+                 metrics: Optional[tuple] = None, markers: bool = True) -> list:
+        """
+        Return ``[(topic, message), ...]`` of one publish, in publish order.
+
+        Parameters
+        ----------
+        stamp : builtin_interfaces.msg.Time
+            Simulation time of the state.
+        bodies : sequence of int, optional
+            Indices of bodies whose pose and twist to include (None: all).
+        states : bool
+            Include ``~/body_states``.
+        reactions : sequence of str, optional
+            Constraints whose reaction wrenches to include (None: all).
+        metrics : (int, float), optional
+            ``(step_count, energy at the last reset)``: include ``~/metrics``.
+        markers : bool
+            Include ``~/markers``.
+
+        """
+        sim = self.sim
+        names = sim.bodies.names
+        world = Header(stamp=stamp, frame_id=self.world_frame)
+        out = []
+        pos, quat = sim.pose()
+        vel, omega = sim.twist()
+        if states:
+            out.append((STATES_TOPIC, conv.body_states(world, names, pos, quat, vel, omega)))
+        for i in range(len(names)) if bodies is None else bodies:
+            out.append((body_topic(names[i], 'pose'), conv.pose_stamped(world, pos[i], quat[i])))
+            out.append((body_topic(names[i], 'twist'),
+                        conv.twist_stamped(world, vel[i], omega[i])))
+        wanted = sim.constraint_names if reactions is None else reactions
+        if wanted:
+            out += self._reactions(stamp, pos, quat, set(wanted))
+        if metrics is not None:
+            out.append((METRICS_TOPIC, self.metrics(world, *metrics)))
+        if markers:
+            out.append((MARKERS_TOPIC, self.markers(world)))
+        return out
+
+    def _reactions(self, stamp, pos: np.ndarray, quat: np.ndarray, names: set) -> list:
+        """
+        Each constraint's wrench on each body it acts on, and on the world.
+
+        One WrenchStamped per body, with ``frame_id`` the body's name: force and
+        torque in the body's frame, the torque about the body frame's origin (the
+        point ``~/bodies/<B>/pose`` reports). For a constraint to the world, one
+        more with ``frame_id`` the world frame: the wrench on the world, torque
+        about the world origin (equal and opposite).
+        """
+        sim = self.sim
+        index = {n: i for i, n in enumerate(sim.bodies.names)}
+        com = sim.state.pos_com_world
+        out = []
+        for name, per_body in sim.reactions().items():
+            if name not in names:
+                continue
+            topic = constraint_topic(name)
+            on_world_f = np.zeros(3)
+            on_world_t = np.zeros(3)
+            for body, r in per_body.items():
+                i = index[body]
+                R = so3.quat_to_matrix(quat[i])
+                torque_origin = r.torque_com_world + so3.cross(com[i] - pos[i], r.force_world)
+                out.append((topic, conv.wrench_stamped(Header(stamp=stamp, frame_id=body),
+                                                       R.T @ r.force_world,
+                                                       R.T @ torque_origin)))
+                on_world_f -= r.force_world
+                on_world_t -= r.torque_com_world + so3.cross(com[i], r.force_world)
+            if sim.dynamics.solver.constraints.spec(name).body_b is None:
+                out.append((topic, conv.wrench_stamped(
+                    Header(stamp=stamp, frame_id=self.world_frame), on_world_f, on_world_t)))
+        return out
+
+    def metrics(self, header: Header, step_count: int, energy0: float) -> Metrics:
+        """Return the scene's energies, largest violation and momenta now."""
+        d = self.sim.diagnostics()
+        kinetic = float(np.sum(d.kinetic_energy))
+        potential = float(np.sum(d.potential_energy))
+        return Metrics(header=header, step_count=int(step_count),
+                       total_energy=kinetic + potential, kinetic_energy=kinetic,
+                       potential_energy=potential,
+                       energy_change=kinetic + potential - energy0,
+                       constraint_violation=float(d.constraint_violation),
+                       linear_momentum=conv.vector3(d.linear_momentum_world),
+                       angular_momentum=conv.vector3(d.angular_momentum_com_world))
+
+    def markers(self, header: Header) -> MarkerArray:
+        """
+        Return the bodies as their shapes and the joints as small spheres.
+
+        A body whose scene gives a shape (box, sphere, cylinder) is drawn as that
+        shape about its centre of mass in its own axes; any other as the uniform
+        box of equal mass and principal moments, in its principal axes. Each
+        array starts with a DELETEALL, so removed constraints disappear.
+        """
+        sim = self.sim
+        bodies = sim.bodies
+        state = sim.state
+        _, quat_body = sim.pose()
+        out = [Marker(header=header, action=Marker.DELETEALL)]
+        for i, name in enumerate(bodies.names):
+            kind, dims = self.shapes.get(name, (None, None))
+            if kind == 'box':
+                shape, scale, q = Marker.CUBE, dims, quat_body[i]
+            elif kind == 'sphere':
+                shape, scale, q = Marker.SPHERE, [2 * dims[0]] * 3, quat_body[i]
+            elif kind == 'cylinder':
+                shape, scale, q = Marker.CYLINDER, [2 * dims[0], 2 * dims[0], dims[1]], \
+                    quat_body[i]
+            else:
+                shape, scale = Marker.CUBE, equal_inertia_box(bodies.mass[i], bodies.moments[i])
+                q = state.quat_principal_world[i]
+            out.append(Marker(
+                header=header, ns='bodies', id=i, type=shape, action=Marker.ADD,
+                pose=_pose(state.pos_com_world[i], q), scale=conv.vector3(scale),
+                color=ColorRGBA(**dict(zip('rgba', PALETTE[i % len(PALETTE)]))), text=name))
+        for j, (name, point) in enumerate(sim.joint_anchors().items()):
+            out.append(Marker(
+                header=header, ns='joints', id=j, type=Marker.SPHERE, action=Marker.ADD,
+                pose=_pose(point, np.array([0.0, 0.0, 0.0, 1.0])),
+                scale=conv.vector3([JOINT_MARKER_SIZE] * 3),
+                color=ColorRGBA(r=0.84, g=0.15, b=0.16, a=1.0), text=name))
+        return MarkerArray(markers=out)
+
+
+def equal_inertia_box(mass: float, moments: np.ndarray) -> list:
+    """
+    Return the sides (m) of the uniform box with this mass and principal moments.
+
+    ``I1 = m (b² + c²) / 12`` and so on give ``a² = 6 (I2 + I3 - I1) / m``; a side
+    the triangle inequality makes zero (a thin plate or rod) is drawn 1 mm thick.
+    """
+    i1, i2, i3 = (float(x) for x in moments)
+    sq = 6.0 / mass * np.array([i2 + i3 - i1, i1 + i3 - i2, i1 + i2 - i3])
+    return np.sqrt(np.maximum(sq, 1e-6)).tolist()
+
+
+def _pose(position: np.ndarray, quat_xyzw: np.ndarray) -> Pose:
+    p = [float(x) for x in position]
+    q = [float(x) for x in quat_xyzw]
+    return Pose(position=Point(x=p[0], y=p[1], z=p[2]),
+                orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))
