@@ -6,13 +6,16 @@ step when the wall clock says one is due (see :mod:`.pacing`) and, between
 steps, lets the executor run callbacks. So a callback never runs during a
 step. Wrench messages are queued (the latest per topic) and applied just
 before the next step; services (reset, add/remove constraint, step) act
-between steps and reply when done.
+between steps and reply when done. What a step, an input or a reset does is
+:class:`.session.Session`'s, shared with the lockstep experiment runner; this
+module is the transport, the pacing and the diagnostics.
 
 Topics (private, ``~`` = ``/<namespace>/rigid_body_sim``):
 
 - in: ``~/bodies/<B>/wrench`` (geometry_msgs/WrenchStamped)
 - out: ``~/bodies/<B>/pose`` (PoseStamped), ``~/bodies/<B>/twist`` (TwistStamped),
-  ``~/body_states`` (rigid_body_sim_interfaces/BodyStates),
+  ``~/body_states`` (rigid_body_sim_interfaces/BodyStates), ``~/metrics``
+  (rigid_body_sim_interfaces/Metrics), ``~/markers`` (visualization_msgs/MarkerArray),
   ``~/constraints/<C>/wrench`` (WrenchStamped), ``/clock``, ``/diagnostics``.
 
 See the README for the frames, points and conventions of every message.
@@ -27,7 +30,6 @@ import time
 import traceback
 from typing import Optional
 
-from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
@@ -45,14 +47,14 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
-from .inputs import check_name_token, check_wrench, constraint_from_request, Rejected, \
-    Rejection
-from .outputs import body_topic, constraint_topic, MARKERS_TOPIC, METRICS_TOPIC, Outputs, \
+from .inputs import check_name_token, Rejected, Rejection
+from .outputs import body_topic, constraint_topic, MARKERS_TOPIC, METRICS_TOPIC, \
     STATES_TOPIC
-from .pacing import output_due, Pacer, Totals, WindowStats
+from .pacing import Pacer, WindowStats
+from .session import Session
 from .settings import PARAMETERS, Settings
 from ..cli import default_scene_path
-from ..core import DivergenceError, Simulation, SpecError
+from ..core import DivergenceError, SpecError
 from ..scene import load_scene, SceneError
 
 #: The most steps one ~/step request may ask for (the node serves nothing else meanwhile).
@@ -77,14 +79,14 @@ QUIET_SUB = SubscriptionEventCallbacks(use_default_callbacks=False)
 
 class SimNode(Node):
     """
-    The simulation node: parameters, topics and services over one Simulation.
+    The simulation node: parameters, topics and services over one :class:`.Session`.
 
     Parameters
     ----------
-    node_name, namespace : str
+    node_name : str
         As for :class:`rclpy.node.Node`.
     **kwargs
-        Passed to :class:`rclpy.node.Node` (e.g. ``parameter_overrides``).
+        Passed to :class:`rclpy.node.Node` (e.g. ``namespace``, ``parameter_overrides``).
 
     Raises
     ------
@@ -103,43 +105,34 @@ class SimNode(Node):
         self.settings = Settings.from_values(values)
         s = self.settings
         scene_path = s.scene or str(default_scene_path())
-        self.scene = load_scene(scene_path)
-        self.sim: Simulation = self.scene.simulation
-        for name in self.sim.bodies.names:
+        scene = load_scene(scene_path)
+        for name in scene.simulation.bodies.names:
             check_name_token(name, f'scene {scene_path}: body name')
-        for name in self.sim.constraint_names:
+        for name in scene.simulation.constraint_names:
             check_name_token(name, f'scene {scene_path}: constraint name')
-        self._initial_dt = self.sim.dt
-        self._scene_integrator = self.sim.integrator_name
-        self.sim.set_step(1.0 / s.physics_rate, s.integrator or None)
-
-        self._pending_wrenches: dict = {}   # body -> (force, torque, frame): latest message
+        self.session = Session(scene, s)
+        self.sim = scene.simulation
         self._paused = s.start_paused
-        self._diverged: Optional[str] = None
         self._running = True
-        self.totals = Totals()
-        self._step_count = 0   # steps since the last reset
-        self._offset_ns = 0    # published time = this + the simulation's own time
-        self._superseded = 0
         self._pacer = Pacer(self.sim.dt, s.real_time_factor)
         self._window = WindowStats()
-        self._spin_cost = 0.0   # s: running mean of a non-blocking executor spin
+        self._overruns = 0        # total, before the current window
+        self._spin_cost = 0.0     # s: running mean of a non-blocking executor spin
         self._audience: tuple = ([], [])   # per-body, reaction topics with subscribers
         self._audience_expires = 0.0
-        self._energy0 = self.sim.diagnostics().total_energy
 
-        self.outputs = Outputs(self.sim, self.scene.shapes, s.world_frame)
         self._make_interfaces()
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.executor_ = SingleThreadedExecutor(context=self.context)
         self.executor_.add_node(self)
+        scene_dt = self.session.scene_dt
         self.get_logger().info(
-            f'scene {self.scene.name!r} ({scene_path}): {len(self.sim.bodies)} bodies, '
+            f'scene {scene.name!r} ({scene_path}): {len(self.sim.bodies)} bodies, '
             f'{len(self.sim.constraint_names)} constraints, integrator '
             f'{self.sim.integrator_name}, physics {s.physics_rate:g} Hz (dt {self.sim.dt:g} s'
-            + ('' if self.sim.dt == self._initial_dt
-               else f"; the scene's dt {self._initial_dt:g} s is overridden") + '), publish '
+            + ('' if self.sim.dt == scene_dt
+               else f"; the scene's dt {scene_dt:g} s is overridden") + '), publish '
             f'{s.publish_rate:g} Hz, real-time factor {s.real_time_factor:g}'
             + (', paused' if self._paused else ''))
 
@@ -179,7 +172,7 @@ class SimNode(Node):
             try:
                 return handler(request, response)
             except Exception as exc:  # noqa: B902 - no request may stop the node
-                self.totals.reject(Rejection.INTERNAL_ERROR.value)
+                self.session.totals.reject(Rejection.INTERNAL_ERROR.value)
                 self.get_logger().error(f'~/{name}: internal error: {exc!r}\n'
                                         + traceback.format_exc())
                 response.success = False
@@ -204,84 +197,49 @@ class SimNode(Node):
 
     # -- inputs ---------------------------------------------------------------------------
 
-    def _reject(self, cause: Rejection, where: str, message: str) -> str:
-        self.totals.reject(cause.value)
+    def _rejected(self, cause: Rejection, where: str, message: str) -> str:
+        """Log a rejected input (throttled); return the text for a reply."""
         text = f'{where}: rejected ({cause.value}): {message}'
         self.get_logger().warning(text, throttle_duration_sec=1.0)
         return text
 
+    def _reject(self, cause: Rejection, where: str, message: str) -> str:
+        """Count and log a rejected service request; return the text for its reply."""
+        self.session.totals.reject(cause.value)
+        return self._rejected(cause, where, message)
+
     def _on_wrench(self, body: str, msg: WrenchStamped) -> None:
-        s = self.settings
         force, torque = conv.wrench_arrays(msg)
         try:
-            frame = check_wrench(force, torque, msg.header.frame_id, body, s.world_frame,
-                                 s.max_force, s.max_torque)
+            self.session.queue_wrench(body, force, torque, msg.header.frame_id)
         except Rejected as exc:
-            self._reject(exc.cause, f'~/bodies/{body}/wrench', str(exc))
-            return
-        if body in self._pending_wrenches:
-            self._superseded += 1   # two messages between steps: the later one wins
-        self._pending_wrenches[body] = (force, torque, frame)
-
-    def _apply_pending(self) -> None:
-        """Apply the queued wrench messages (between steps)."""
-        if not self._pending_wrenches:
-            return
-        timeout = self.settings.wrench_timeout or None
-        for body, (force, torque, frame) in self._pending_wrenches.items():
-            # Applied at the body frame's origin; replaces this topic's previous wrench.
-            try:
-                self.sim.apply_wrench(body, force, torque, frame=frame,
-                                      point_body=(0.0, 0.0, 0.0), duration=timeout,
-                                      key=f'topic:{body}')
-            except SpecError as exc:   # (checked on arrival; kept as a last line of defence)
-                self._reject(Rejection.INTERNAL_ERROR, f'~/bodies/{body}/wrench', str(exc))
-        self._pending_wrenches.clear()
+            self._rejected(exc.cause, body_topic(body, 'wrench'), str(exc))
 
     # -- services -------------------------------------------------------------------------
 
-    def _now_ns(self) -> int:
-        """Return the published simulation time (ns): monotonic across resets unless reset_time."""
-        return self._offset_ns + int(round(self.sim.time * conv.NANOSECONDS))
-
-    def _seconds(self) -> float:
-        """Return the published simulation time (s)."""
-        return self._now_ns() / conv.NANOSECONDS
-
-    def _stamp(self) -> Time:
-        return conv.time_msg_ns(self._now_ns())
-
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response):
-        if self.settings.reset_time:
-            self._offset_ns = 0
-        else:   # the initial state is stamped one step after the last state
-            self._offset_ns = self._now_ns() + int(round(self.sim.dt * conv.NANOSECONDS))
-        self.sim.reset()   # keeps dt and the integrator
-        self._pending_wrenches.clear()
-        self._diverged = None
-        self._step_count = 0
-        self._energy0 = self.sim.diagnostics().total_energy
+        self.session.reset()
         self._sync_constraint_publishers()
         now = time.perf_counter()
         self._pacer.restart(now)
-        self.totals.overruns += self._window.overruns
-        self._window = WindowStats(wall_start=now, sim_start=self._seconds())
+        self._new_window(now)
         self._publish_clock()
         self._publish_state()
         response.success = True
         response.message = (f'reset to the initial state of the scene, stamped t = '
-                            f'{self._now_ns() / conv.NANOSECONDS:.9g} s; applied wrenches '
-                            f'cleared, constraints as in the scene'
+                            f'{self.session.seconds():.9g} s; applied wrenches cleared, '
+                            f'constraints as in the scene'
                             + (' (still paused)' if self._paused else ''))
         self.get_logger().info(response.message)
         return response
 
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response):
-        if not request.data and self._diverged:
+        diverged = self.session.diverged
+        if not request.data and diverged:
             response.success = False
             response.message = self._reject(Rejection.DIVERGED, '~/pause',
                                             f'cannot resume after a divergence '
-                                            f'({self._diverged}); call ~/reset')
+                                            f'({diverged}); call ~/reset')
             return response
         was = self._paused
         self._paused = bool(request.data)
@@ -289,86 +247,70 @@ class SimNode(Node):
             self._pacer.restart(time.perf_counter())
         response.success = True
         response.message = f'{"paused" if self._paused else "running"} at t = ' \
-                           f'{self._seconds():.9g} s'
+                           f'{self.session.seconds():.9g} s'
         return response
 
     def _on_step(self, request: Step.Request, response: Step.Response):
-        response.time = self._stamp()
-        response.step_count = self._step_count
+        session = self.session
+        response.time = session.stamp()
+        response.step_count = session.step_count
+        problem = None
         if not self._paused:
+            problem = (Rejection.NOT_PAUSED, 'the simulation is running: pause it first '
+                                             '(~/pause true)')
+        elif session.diverged:
+            problem = (Rejection.DIVERGED, f'{session.diverged}; call ~/reset')
+        elif request.steps > MAX_STEPS_PER_REQUEST:
+            problem = (Rejection.BAD_STEP, f'steps: at most {MAX_STEPS_PER_REQUEST} per '
+                                           f'request, got {request.steps}')
+        if problem:
             response.success = False
-            response.message = self._reject(Rejection.NOT_PAUSED, '~/step',
-                                            'the simulation is running: pause it first '
-                                            '(~/pause true)')
-            return response
-        if self._diverged:
-            response.success = False
-            response.message = self._reject(Rejection.DIVERGED, '~/step',
-                                            f'{self._diverged}; call ~/reset')
-            return response
-        if request.steps > MAX_STEPS_PER_REQUEST:
-            response.success = False
-            response.message = self._reject(Rejection.BAD_STEP, '~/step',
-                                            f'steps: at most {MAX_STEPS_PER_REQUEST} per '
-                                            f'request, got {request.steps}')
+            response.message = self._reject(problem[0], '~/step', problem[1])
             return response
         published = True
         for _ in range(request.steps):
             published = self._advance()
-            if self._diverged:
+            if session.diverged:
                 break
         if not published:
             self._publish_state()
-        response.time = self._stamp()
-        response.step_count = self._step_count
-        response.success = self._diverged is None
-        response.message = self._diverged or f'{request.steps} steps to t = ' \
-                                             f'{self._seconds():.9g} s'
+        response.time = session.stamp()
+        response.step_count = session.step_count
+        response.success = session.diverged is None
+        response.message = session.diverged or f'{request.steps} steps to t = ' \
+                                               f'{session.seconds():.9g} s'
         return response
 
     def _on_add_constraint(self, request: AddConstraint.Request,
                            response: AddConstraint.Response):
-        where = f'~/add_constraint {request.name!r}'
         try:
-            spec = constraint_from_request(request, self.sim.bodies.names)
-            if spec.name in self.sim.constraint_names:
-                raise Rejected(Rejection.BAD_CONSTRAINT,
-                               f'name: a constraint {spec.name!r} exists already')
-            try:
-                self.sim.add_constraint(spec)
-            except SpecError as exc:
-                cause = Rejection.INCONSISTENT_CONSTRAINT if 'inconsistent' in str(exc) \
-                    else Rejection.BAD_CONSTRAINT
-                raise Rejected(cause, str(exc)) from None
+            rows = self.session.add_constraint(request)
         except Rejected as exc:
             response.success = False
-            response.message = self._reject(exc.cause, where, str(exc))
+            response.message = self._rejected(exc.cause, f'~/add_constraint {request.name!r}',
+                                              str(exc))
             return response
-        rows = len(self.sim.dynamics.solver.constraints.rows_of(spec.name))
         self._sync_constraint_publishers()
         response.success = True
         response.rows_added = rows
-        response.message = (f'added {spec.type.value} constraint {spec.name!r} '
-                            f'({rows} rows) at t = {self._seconds():.9g} s')
+        response.message = (f'added {request.type} constraint {request.name!r} ({rows} rows) '
+                            f'at t = {self.session.seconds():.9g} s')
         self.get_logger().info(response.message)
         return response
 
     def _on_remove_constraint(self, request: RemoveConstraint.Request,
                               response: RemoveConstraint.Response):
-        name = request.name
-        if name not in self.sim.constraint_names:
+        try:
+            rows = self.session.remove_constraint(request.name)
+        except Rejected as exc:
             response.success = False
-            response.message = self._reject(
-                Rejection.UNKNOWN_CONSTRAINT, '~/remove_constraint',
-                f'name: no constraint {name!r}; present: {self.sim.constraint_names}')
+            response.message = self._rejected(exc.cause, '~/remove_constraint', str(exc))
             return response
-        rows = len(self.sim.dynamics.solver.constraints.rows_of(name))
-        self.sim.remove_constraint(name)
         self._sync_constraint_publishers()
         response.success = True
         response.rows_removed = rows
-        response.message = f'removed constraint {name!r} ({rows} rows) at t = ' \
-                           f'{self._seconds():.9g} s'
+        response.message = f'removed constraint {request.name!r} ({rows} rows) at t = ' \
+                           f'{self.session.seconds():.9g} s'
         self.get_logger().info(response.message)
         return response
 
@@ -385,11 +327,8 @@ class SimNode(Node):
     def _apply_parameters(self, params: list) -> None:
         s = self.settings
         s.update({p.name: p.value for p in params})
-        self.outputs.world_frame = s.world_frame
-        names = {p.name for p in params}
-        if names & {'physics_rate', 'integrator'}:
-            self.sim.set_step(1.0 / s.physics_rate, s.integrator or self._scene_integrator)
-        if names & {'physics_rate', 'real_time_factor'}:
+        self.session.configure()
+        if {p.name for p in params} & {'physics_rate', 'real_time_factor'}:
             self._pacer.dt = self.sim.dt
             self._pacer.real_time_factor = s.real_time_factor
             self._pacer.restart(time.perf_counter())
@@ -399,38 +338,24 @@ class SimNode(Node):
     # -- stepping and output --------------------------------------------------------------
 
     def _advance(self) -> bool:
-        """Apply pending inputs, take one step, publish what is due; tell if state was."""
-        self._apply_pending()
-        t_before = self.sim.time
+        """Take one step and publish what is due; tell whether the state was published."""
         t0 = time.perf_counter()
         try:
-            self.sim.step()
+            clock_due, state_due = self.session.advance()
         except DivergenceError as exc:
-            self._diverge(exc)
+            self._paused = True
+            self.get_logger().error(f'paused: {exc}; ~/reset recovers')
+            self._publish_diagnostics(time.perf_counter())
             return False
         self._window.record_step(time.perf_counter() - t0, self._pacer.period)
-        self.totals.steps += 1
-        self._step_count += 1
-        s = self.settings
-        t_after = self.sim.time
-        if output_due(t_before, t_after, s.clock_rate):
+        if clock_due:
             self._publish_clock()
-        if output_due(t_before, t_after, s.publish_rate):
+        if state_due:
             self._publish_state()
-            return True
-        return False
-
-    def _diverge(self, exc: DivergenceError) -> None:
-        self._diverged = str(exc)
-        self._paused = True
-        self.get_logger().error(f'paused: {exc}; ~/reset recovers')
-        self._publish_diagnostics(time.perf_counter())
-
-    def _header(self, frame_id: str, stamp: Time) -> Header:
-        return Header(stamp=stamp, frame_id=frame_id)
+        return state_due
 
     def _publish_clock(self) -> None:
-        self._clock_pub.publish(Clock(clock=self._stamp()))
+        self._clock_pub.publish(Clock(clock=self.session.stamp()))
 
     def _publish_state(self) -> None:
         """
@@ -449,11 +374,9 @@ class SimNode(Node):
                                     (STATES_TOPIC, METRICS_TOPIC, MARKERS_TOPIC))
         if not (bodies or reactions or states or metrics or markers):
             return
-        snapshot = self.outputs.snapshot(
-            self._stamp(), bodies=bodies, states=bool(states), reactions=reactions,
-            metrics=(self._step_count, self._energy0) if metrics else None,
-            markers=bool(markers))
-        for topic, msg in snapshot:
+        for topic, msg in self.session.snapshot(bodies=bodies, states=bool(states),
+                                                reactions=reactions, metrics=bool(metrics),
+                                                markers=bool(markers)):
             self._pubs[topic].publish(msg)
         self._window.record_publish(time.perf_counter() - t0)
 
@@ -469,25 +392,30 @@ class SimNode(Node):
              if pubs[constraint_topic(name)].get_subscription_count()])
         self._audience_expires = now + AUDIENCE_REFRESH
 
+    def _new_window(self, now: float) -> None:
+        self._overruns += self._window.overruns
+        self._window = WindowStats(wall_start=now, sim_start=self.session.seconds())
+
     def _publish_diagnostics(self, now: float) -> None:
         w = self._window
         wall = max(now - w.wall_start, 1e-9)
-        sim = self.sim
+        session, sim = self.session, self.sim
         d = sim.diagnostics()
         work = sim.work()
-        rtf = (self._seconds() - w.sim_start) / wall
+        rtf = (session.seconds() - w.sim_start) / wall
         level = DiagnosticStatus.OK
         summary = 'running'
-        if self._diverged:
-            level, summary = DiagnosticStatus.ERROR, f'diverged: {self._diverged}'
+        if session.diverged:
+            level, summary = DiagnosticStatus.ERROR, f'diverged: {session.diverged}'
         elif self._paused:
             summary = 'paused'
         elif w.overruns or self._pacer.lag_resets:
             level, summary = DiagnosticStatus.WARN, f'{w.overruns} steps over budget'
+        energy_change = d.total_energy - session.energy0
         values = {
-            'sim_time_s': f'{self._now_ns() / conv.NANOSECONDS:.9g}',
+            'sim_time_s': f'{session.seconds():.9g}',
             'time_since_reset_s': f'{sim.time:.9g}',
-            'steps': str(self.totals.steps),
+            'steps': str(session.step_count),
             'paused': str(self._paused).lower(),
             'integrator': sim.integrator_name,
             'dt_s': f'{sim.dt:.9g}',
@@ -500,30 +428,30 @@ class SimNode(Node):
             'publish_cost_mean_us':
                 f'{(w.publish_cost_sum / w.publishes * 1e6) if w.publishes else 0:.4g}',
             'overruns_window': str(w.overruns),
-            'overruns_total': str(self.totals.overruns + w.overruns),
+            'overruns_total': str(self._overruns + w.overruns),
             'lag_resets_total': str(self._pacer.lag_resets),
             'lag_dropped_wall_s': f'{self._pacer.dropped_wall:.6g}',
             'energy_j': f'{d.total_energy:.12g}',
-            'energy_change_j': f'{d.total_energy - self._energy0:.6g}',
+            'energy_change_j': f'{energy_change:.6g}',
             'constraint_violation': f'{d.constraint_violation:.3g}',
             'substeps_total': str(work.get('substeps', 0)),
             'retries_total': str(work.get('retries', 0)),
-            'wrench_messages_superseded': str(self._superseded),
+            'wrench_messages_superseded': str(session.superseded),
         }
+        rejected = session.totals.rejected
         for cause in Rejection:
-            values[f'rejected_{cause.value}'] = str(self.totals.rejected.get(cause.value, 0))
+            values[f'rejected_{cause.value}'] = str(rejected.get(cause.value, 0))
         status = DiagnosticStatus(level=level, name=f'{self.get_name()}: physics',
                                   message=summary, hardware_id=self.get_fully_qualified_name(),
                                   values=[KeyValue(key=k, value=v) for k, v in values.items()])
         stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(DiagnosticArray(header=Header(stamp=stamp), status=[status]))
         self.get_logger().info(
-            f't={self._seconds():.3f} s  rtf={rtf:.2f}  {w.steps / wall:.0f} steps/s  '
-            f'E={d.total_energy:.6g} J  dE={d.total_energy - self._energy0:+.1e} J  '
+            f't={session.seconds():.3f} s  rtf={rtf:.2f}  {w.steps / wall:.0f} steps/s  '
+            f'E={d.total_energy:.6g} J  dE={energy_change:+.1e} J  '
             f'violation={d.constraint_violation:.1e}'
             + (f'  overruns={w.overruns}' if w.overruns else '') + f'  [{summary}]')
-        self.totals.overruns += w.overruns
-        self._window = WindowStats(wall_start=now, sim_start=self._seconds())
+        self._new_window(now)
 
     # -- the loop -------------------------------------------------------------------------
 
@@ -535,8 +463,7 @@ class SimNode(Node):
         """Step at the physics rate, paced to the wall clock, until :meth:`stop`."""
         now = time.perf_counter()
         self._pacer.restart(now)
-        self.totals.overruns += self._window.overruns
-        self._window = WindowStats(wall_start=now, sim_start=self._seconds())
+        self._new_window(now)
         self._publish_clock()
         self._publish_state()
         next_report = next_republish = now + REPORT_PERIOD
@@ -563,9 +490,9 @@ class SimNode(Node):
                 try:
                     self._advance()
                 except Exception as exc:  # noqa: B902 - keep serving; pause and say why
-                    self._diverged = f'internal error in a step: {exc!r}'
+                    self.session.diverged = f'internal error in a step: {exc!r}'
                     self._paused = True
-                    self.get_logger().error(f'paused: {self._diverged}\n'
+                    self.get_logger().error(f'paused: {self.session.diverged}\n'
                                             + traceback.format_exc())
                 self._pacer.stepped()
                 if events_due:

@@ -103,10 +103,8 @@ class WindowStats:
 
 @dataclass
 class Totals:
-    """Counts since the node started."""
+    """Rejected inputs by cause, since the node started."""
 
-    steps: int = 0
-    overruns: int = 0
     rejected: dict = field(default_factory=dict)   # cause -> count
 
     def reject(self, cause: str) -> None:

@@ -1,0 +1,189 @@
+"""
+One simulation as the node serves it, without the transport: shared by the node and the runner.
+
+It holds what the node adds to a :class:`~rigid_body_sim.core.Simulation`: the
+published clock (monotonic across resets unless ``reset_time``), the step count
+since the last reset, the energy at the last reset, the queue of wrench
+messages (the latest per body, applied before the next step), the checks of
+inputs with their rejection counts, and which outputs a step makes due. The
+node (:mod:`.node`) drives it from DDS and the wall clock; the experiment runner
+(:mod:`.experiment`) from a schedule, in lockstep. So both apply inputs and
+publish outputs the same way.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import numpy as np
+
+from . import conversions as conv
+from .inputs import check_wrench, constraint_from_request, Rejected, Rejection
+from .outputs import Outputs
+from .pacing import output_due, Totals
+from ..core import DivergenceError, SpecError
+from ..scene import Scene
+
+
+class Session:
+    """
+    A scene's simulation with the node's clock, input queue and output schedule.
+
+    Parameters
+    ----------
+    scene : Scene
+    settings : Settings
+        The node's parameters (physics_rate, integrator, world_frame, limits, ...).
+
+    """
+
+    def __init__(self, scene: Scene, settings: Any) -> None:
+        self.scene = scene
+        self.sim = scene.simulation
+        self.settings = settings
+        self.scene_dt = self.sim.dt
+        self.scene_integrator = self.sim.integrator_name
+        self.configure()
+        self.outputs = Outputs(self.sim, scene.shapes, settings.world_frame)
+        self.totals = Totals()
+        self.pending: dict = {}   # body -> (force, torque, frame): the latest message
+        self.superseded = 0       # wrench messages replaced before a step used them
+        self.offset_ns = 0        # published time = this + the simulation's own time
+        self.step_count = 0       # steps since the last reset
+        self.diverged: Optional[str] = None
+        self.energy0 = self.sim.diagnostics().total_energy
+
+    def configure(self) -> None:
+        """Apply physics_rate and integrator (between steps; time stays continuous)."""
+        s = self.settings
+        self.sim.set_step(1.0 / s.physics_rate, s.integrator or self.scene_integrator)
+        if hasattr(self, 'outputs'):
+            self.outputs.world_frame = s.world_frame
+
+    # -- time -----------------------------------------------------------------------------
+
+    def now_ns(self) -> int:
+        """Return the published simulation time (ns)."""
+        return self.offset_ns + int(round(self.sim.time * conv.NANOSECONDS))
+
+    def seconds(self) -> float:
+        """Return the published simulation time (s)."""
+        return self.now_ns() / conv.NANOSECONDS
+
+    def stamp(self):
+        """Return the published simulation time as a ``builtin_interfaces/Time``."""
+        return conv.time_msg_ns(self.now_ns())
+
+    # -- inputs ---------------------------------------------------------------------------
+
+    def queue_wrench(self, body: str, force: np.ndarray, torque: np.ndarray,
+                     frame_id: str) -> None:
+        """
+        Check a wrench message on ``~/bodies/<body>/wrench`` and queue it for the next step.
+
+        Raises
+        ------
+        Rejected
+            NaN, inf, beyond the limits, or an unknown frame (counted).
+
+        """
+        s = self.settings
+        try:
+            frame = check_wrench(force, torque, frame_id, body, s.world_frame, s.max_force,
+                                 s.max_torque)
+        except Rejected as exc:
+            self.totals.reject(exc.cause.value)
+            raise
+        if body in self.pending:
+            self.superseded += 1   # two messages between steps: the later one wins
+        self.pending[body] = (force, torque, frame)
+
+    def apply_pending(self) -> None:
+        """Apply the queued wrenches: each acts at its body frame's origin, held."""
+        timeout = self.settings.wrench_timeout or None
+        for body, (force, torque, frame) in self.pending.items():
+            self.sim.apply_wrench(body, force, torque, frame=frame, point_body=(0.0, 0.0, 0.0),
+                                  duration=timeout, key=f'topic:{body}')
+        self.pending.clear()
+
+    def reset(self) -> None:
+        """Back to the scene's initial state; time runs on unless ``reset_time``."""
+        if self.settings.reset_time:
+            self.offset_ns = 0
+        else:   # the initial state is stamped one step after the last state
+            self.offset_ns = self.now_ns() + int(round(self.sim.dt * conv.NANOSECONDS))
+        self.sim.reset()   # keeps dt and the integrator
+        self.pending.clear()
+        self.diverged = None
+        self.step_count = 0
+        self.energy0 = self.sim.diagnostics().total_energy
+
+    def add_constraint(self, request: Any) -> int:
+        """
+        Add a constraint from an ``AddConstraint`` request; return its rows.
+
+        Raises
+        ------
+        Rejected
+            Unknown body, malformed or inconsistent constraint (counted).
+
+        """
+        try:
+            spec = constraint_from_request(request, self.sim.bodies.names)
+            if spec.name in self.sim.constraint_names:
+                raise Rejected(Rejection.BAD_CONSTRAINT,
+                               f'name: a constraint {spec.name!r} exists already')
+            try:
+                self.sim.add_constraint(spec)
+            except SpecError as exc:
+                cause = Rejection.INCONSISTENT_CONSTRAINT if 'inconsistent' in str(exc) \
+                    else Rejection.BAD_CONSTRAINT
+                raise Rejected(cause, str(exc)) from None
+        except Rejected as exc:
+            self.totals.reject(exc.cause.value)
+            raise
+        return len(self.sim.dynamics.solver.constraints.rows_of(spec.name))
+
+    def remove_constraint(self, name: str) -> int:
+        """Remove a constraint; return its rows. Raises Rejected if there is none."""
+        if name not in self.sim.constraint_names:
+            self.totals.reject(Rejection.UNKNOWN_CONSTRAINT.value)
+            raise Rejected(Rejection.UNKNOWN_CONSTRAINT,
+                           f'name: no constraint {name!r}; present: '
+                           f'{self.sim.constraint_names}')
+        rows = len(self.sim.dynamics.solver.constraints.rows_of(name))
+        self.sim.remove_constraint(name)
+        return rows
+
+    # -- stepping -------------------------------------------------------------------------
+
+    def advance(self) -> tuple[bool, bool]:
+        """
+        Apply queued inputs and take one step; return (clock due, state due).
+
+        Raises
+        ------
+        DivergenceError
+            The step gave a non-finite state; the state stays at the last finite one
+            and :attr:`diverged` says why.
+
+        """
+        self.apply_pending()
+        t_before = self.sim.time
+        try:
+            self.sim.step()
+        except DivergenceError as exc:
+            self.diverged = str(exc)
+            raise
+        self.step_count += 1
+        t_after = self.sim.time
+        s = self.settings
+        return (output_due(t_before, t_after, s.clock_rate),
+                output_due(t_before, t_after, s.publish_rate))
+
+    def snapshot(self, **which) -> list:
+        """Return ``[(private topic, message)]`` of one publish (see Outputs.snapshot)."""
+        metrics = which.pop('metrics', True)
+        return self.outputs.snapshot(
+            self.stamp(), metrics=(self.step_count, self.energy0) if metrics else None,
+            **which)
