@@ -51,7 +51,8 @@ def typestore():
     Return the Jazzy type store with this package's messages and service events added.
 
     Service ``S`` gives ``S_Request``, ``S_Response`` and ``S_Event`` (its
-    ``service_msgs/ServiceEventInfo`` plus at most one request and one response).
+    ``service_msgs/ServiceEventInfo`` plus at most one request and one response):
+    those of this package's services, and of ``std_srvs/Trigger``.
     """
     store = get_typestore(Stores.ROS2_JAZZY)
     folder = _interface_dir()
@@ -60,15 +61,9 @@ def typestore():
         types.update(get_types_from_msg(path.read_text(), f'{INTERFACES}/msg/{path.stem}'))
     for path in sorted((folder / 'srv').glob('*.srv')):
         request, response = path.read_text().split('\n---', 1)
-        event = (f'service_msgs/ServiceEventInfo info\n{path.stem}_Request[<=1] request\n'
-                 f'{path.stem}_Response[<=1] response\n')
-        for suffix, text in (('Request', request), ('Response', response), ('Event', event)):
-            # Under their own names (pkg/srv/S_Event), to read them, and under msg twins
-            # (pkg/msg/S_Event), from which rosbags can write a definition (it writes
-            # definitions of msg types only).
-            parsed = get_types_from_msg(text, f'{INTERFACES}/srv/{path.stem}_{suffix}')
-            types.update(_renamed(parsed, f'{INTERFACES}/srv/msg/', f'{INTERFACES}/srv/'))
-            types.update(_renamed(parsed, f'{INTERFACES}/srv/msg/', f'{INTERFACES}/msg/'))
+        types.update(_service_types(INTERFACES, path.stem, request, response))
+    # std_srvs/Trigger (~/reset), which the Jazzy store lacks as a service.
+    types.update(_service_types('std_srvs', 'Trigger', '', 'bool success\nstring message\n'))
     store.register(types)
     return store
 
@@ -92,7 +87,8 @@ def _to_store(store: Any, msg: Any, msgtype: str) -> Any:
     _, fields = store.fielddefs[msgtype]
     values = {}
     for name, (kind, detail) in fields:
-        value = getattr(msg, name)
+        # (an empty ROS 2 message has a placeholder byte rclpy does not show)
+        value = getattr(msg, name, 0)
         if kind == Nodetype.NAME:
             values[name] = _to_store(store, value, detail)
         elif kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
@@ -119,6 +115,24 @@ def _definition(msgtype: str) -> tuple[str, str]:
     twin = msgtype.replace('/srv/', '/msg/')
     store = typestore()
     return store.generate_msgdef(twin, ros_version=2)[0], store.hash_rihs01(twin)
+
+
+def _service_types(package: str, name: str, request: str, response: str) -> dict:
+    """
+    Return the types ``S_Request``, ``S_Response`` and ``S_Event`` of service ``pkg/srv/S``.
+
+    Each under its own name, to read it, and under a msg twin (``pkg/msg/S_Event``)
+    from which rosbags can write a definition (it writes those of msg types only).
+    """
+    event = (f'service_msgs/ServiceEventInfo info\n{name}_Request[<=1] request\n'
+             f'{name}_Response[<=1] response\n')
+    types = {}
+    for suffix, text in (('Request', request), ('Response', response), ('Event', event)):
+        # (rosbags names the types of a srv folder pkg/srv/msg/Name: put them back.)
+        parsed = get_types_from_msg(text, f'{package}/srv/{name}_{suffix}')
+        types.update(_renamed(parsed, f'{package}/srv/msg/', f'{package}/srv/'))
+        types.update(_renamed(parsed, f'{package}/srv/msg/', f'{package}/msg/'))
+    return types
 
 
 def _renamed(value: Any, old: str, new: str) -> Any:

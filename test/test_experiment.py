@@ -1,0 +1,191 @@
+"""The lockstep experiment runner: its bag, read back two ways, against the core and Newton."""
+
+from pathlib import Path
+import re
+import subprocess
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+import numpy as np
+import pytest
+from rigid_body_sim.ros.bag import typestore
+from rigid_body_sim.ros.experiment import main
+from rigid_body_sim.scene import load_scene
+from rosbags.rosbag2 import Reader
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+SCENE = CONFIG / 'pendulum_kick.yaml'
+SCHEDULE = CONFIG / 'pendulum_kick_schedule.yaml'
+NODE = '/rigid_body_sim'
+G = 9.81
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory):
+    """Run the README's example experiment once; return the bag folder."""
+    out = tmp_path_factory.mktemp('run') / 'bag'
+    assert main([str(SCENE), '--schedule', str(SCHEDULE), '--bag', str(out)]) == 0
+    return out
+
+
+def _read(bag):
+    """Return {topic: [(bag time ns, message)]} read with rosbags."""
+    store = typestore()
+    out = {}
+    with Reader(bag) as reader:
+        for connection, t, raw in reader.messages():
+            out.setdefault(connection.topic, []).append(
+                (t, store.deserialize_cdr(raw, connection.msgtype)))
+    return out
+
+
+def _seconds(stamp):
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def test_the_bag_has_the_node_topics_counts_and_monotonic_stamps(bag):
+    msgs = _read(bag)
+    # 4 s at 1 kHz: /clock every step, the state every 10 ms; each also at the start and
+    # right after the reset at 2.5 s.
+    assert len(msgs['/clock']) == 4000 + 2
+    for topic in ('body_states', 'metrics', 'markers', 'bodies/bob/pose', 'bodies/bob/twist'):
+        assert len(msgs[f'{NODE}/{topic}']) == 400 + 2, topic
+    # The joint: 2 messages (bob, world) per publish while it exists (0-1.2 s, 2.5-4 s).
+    assert len(msgs[f'{NODE}/constraints/pivot/wrench']) == 2 * (121 + 151)
+    # Inputs: two pulses, each on and off; the removal and the reset, request and response.
+    assert len(msgs[f'{NODE}/bodies/bob/wrench']) == 4
+    assert len(msgs[f'{NODE}/remove_constraint/_service_event']) == 2
+    assert len(msgs[f'{NODE}/reset/_service_event']) == 2
+    for topic, items in msgs.items():
+        times = [t for t, _ in items]
+        assert times == sorted(times), topic
+    states = msgs[f'{NODE}/body_states']
+    stamps = [_seconds(m.header.stamp) for _, m in states]
+    assert all(b > a for a, b in zip(stamps, stamps[1:])), 'time runs on across the reset'
+    assert all(t == int(round(s * 1e9)) for (t, _), s in zip(states, stamps))
+    import yaml
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    custom = info['custom_data']
+    assert custom['rigid_body_sim.scene'] == SCENE.read_text()
+    assert custom['rigid_body_sim.schedule'] == SCHEDULE.read_text()
+
+
+def test_the_bag_holds_what_the_core_computes(bag):
+    msgs = _read(bag)
+    states = {round(_seconds(m.header.stamp) * 1000): m for _, m in msgs[f'{NODE}/body_states']}
+    sim = load_scene(SCENE).simulation
+    got = {}
+
+    def record(k):
+        pos, quat = sim.pose('bob')
+        vel, omega = sim.twist('bob')
+        got[k] = (pos, quat, vel, omega)
+    # The schedule, through the core's own API: a held wrench per topic at the body origin.
+    for k in range(2500):
+        if k == 200:
+            sim.apply_wrench('bob', [20.0, 0, 0], point_body=[0, 0, 0], key='topic:bob')
+        if k == 300:
+            sim.apply_wrench('bob', point_body=[0, 0, 0], key='topic:bob')
+        if k == 1200:
+            sim.remove_constraint('pivot')
+        sim.step()
+        if (k + 1) % 10 == 0:
+            record(k + 1)
+    for k, (pos, quat, vel, omega) in got.items():
+        m = states[k]
+        np.testing.assert_array_equal(m.position, pos)
+        np.testing.assert_array_equal(m.orientation, quat)
+        np.testing.assert_array_equal(m.linear_velocity, vel)
+        np.testing.assert_array_equal(m.angular_velocity, omega)
+    # After the reset (published one step after 2.5 s), the scene starts over.
+    sim.reset()
+    m = states[2501]
+    np.testing.assert_array_equal(m.position, sim.pose('bob')[0])
+
+
+def test_the_bob_flies_a_parabola_once_released(bag):
+    msgs = _read(bag)
+    fly = [m for _, m in msgs[f'{NODE}/body_states'] if 1.2 <= _seconds(m.header.stamp) < 2.5]
+    t0 = _seconds(fly[0].header.stamp)
+    p0 = np.array(fly[0].position)
+    v0 = np.array(fly[0].linear_velocity)
+    assert abs(v0[0]) > 0.5, 'the kick set it swinging'
+    for m in fly[1:]:
+        dt = _seconds(m.header.stamp) - t0
+        expected = p0 + v0 * dt + 0.5 * np.array([0.0, 0.0, -G]) * dt * dt
+        np.testing.assert_allclose(m.position, expected, rtol=0, atol=1e-12)
+    # Metrics: energy holds in flight and while swinging; the violation stays at rounding.
+    metrics = [m for _, m in msgs[f'{NODE}/metrics']]
+    assert max(m.constraint_violation for m in metrics) < 1e-12
+    flight = [m.total_energy for m in metrics if 1.3 <= _seconds(m.header.stamp) < 2.5]
+    assert np.ptp(flight) < 1e-9
+
+
+def test_the_mcap_reader_reads_the_same_bag(bag):
+    msgs = _read(bag)
+    counts = {}
+    decoded = 0
+    with open(next(bag.glob('*.mcap')), 'rb') as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message in reader.iter_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.topic == f'{NODE}/body_states':
+                # (mcap's own ROS 2 decoder, from the definitions stored in the file)
+                ros = DecoderFactory().decoder_for(channel.message_encoding, schema)(
+                    message.data)
+                ours = msgs[channel.topic][decoded][1]
+                assert list(ros.position) == list(ours.position)
+                assert ros.header.stamp.nanosec == ours.header.stamp.nanosec
+                decoded += 1
+    assert counts == {topic: len(items) for topic, items in msgs.items()}
+    assert decoded == 402
+
+
+def test_same_inputs_give_the_same_bag_bit_for_bit(tmp_path, bag):
+    again = tmp_path / 'bag'   # (the folder's name is written inside the bag)
+    assert main([str(SCENE), '--schedule', str(SCHEDULE), '--bag', str(again)]) == 0
+    for name in ('bag.mcap', 'metadata.yaml'):
+        assert (again / name).read_bytes() == (bag / name).read_bytes(), name
+
+
+@pytest.mark.parametrize('text, message', [
+    ('events: [{at: 0.1, wrench: {body: nobody, force: [1, 0, 0]}}]',
+     r"events\[0\]\.wrench\.body: unknown body 'nobody'"),
+    ('events: [{at: 0.1, wrench: {body: bob, force: [1, 0]}}]',
+     r'events\[0\]\.wrench\.force: expected shape \(3,\)'),
+    ('events: [{at: 0.1, wrench: {body: bob, force: [.nan, 0, 0]}}]',
+     r'events\[0\]\.wrench\.force: must be finite'),
+    ('events: [{at: 0.1, wrench: {body: bob, force: [1, 0, 0], frame: base}}]',
+     r"events\[0\]\.wrench\.frame: 'base' is neither the world frame"),
+    ('events: [{at: -1, reset: true}]', r'events\[0\]\.at: must be >= 0'),
+    ('events: [{reset: true}]', r'events\[0\]\.at: missing'),
+    ('events: [{at: 1, jump: true}]', r'events\[0\]\.jump: unknown key'),
+    ('events: [{at: 1, reset: true, remove_constraint: pivot}]',
+     r'events\[0\]: expected at and exactly one of'),
+    ('events: [{at: 1, remove_constraint: pivot}, {at: 2, remove_constraint: pivot}]',
+     r"events\[1\]\.remove_constraint: no constraint 'pivot' at t = 2 s"),
+    ('events: [{at: 1, add_constraint: {name: h, type: hinge, body_a: bob}}]',
+     r'events\[0\]\.add_constraint: axis_world: required'),
+    ('events: [{at: 1, add_constraint: {name: pivot, type: ball, body_a: bob}}]',
+     r"events\[0\]\.add_constraint: a constraint 'pivot' exists already"),
+    ('duration: 0\nevents: []', r'duration: must be positive'),
+    ('event: []', r'event: unknown key'),
+])
+def test_a_bad_schedule_is_refused_before_anything_runs(tmp_path, capsys, text, message):
+    schedule = tmp_path / 'bad_schedule.yaml'
+    schedule.write_text(text + '\n')
+    out = tmp_path / 'bag'
+    assert main([str(SCENE), '--schedule', str(schedule), '--bag', str(out)]) == 2
+    err = capsys.readouterr().err
+    assert not out.exists()
+    assert re.search(r'bad_schedule\.yaml: ' + message, err), err
+
+
+def test_the_readme_command_runs_through_the_console_script(tmp_path):
+    from ros_harness import executable
+    done = subprocess.run([str(executable('experiment')), str(SCENE), '--schedule',
+                           str(SCHEDULE), '--bag', str(tmp_path / 'bag'), '--duration', '0.5'],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert 'done: 500 steps' in done.stdout
+    assert (tmp_path / 'bag' / 'metadata.yaml').is_file()
