@@ -12,6 +12,9 @@
 #                                         config/default_scene.yaml) until Ctrl-C
 #   ./dev.sh echo [BODY] [options]        print a body's state as the node publishes it
 #   ./dev.sh scene [SCENE.yaml] [options] step a scene without ROS and print a summary
+#   ./dev.sh experiment SCENE --schedule S --bag OUT   a scripted run in lockstep, to a bag
+#   ./dev.sh record -o OUT [options]      record a running node's topics to a bag
+#   ./dev.sh plot BAG [-o out.png]        plot a bag
 #   ./dev.sh test [pytest args]           run the whole test suite
 #   ./dev.sh bench [--quick]              run the benchmarks (tables and plots in bench/out/)
 #   ./dev.sh setup                        set up only
@@ -132,6 +135,10 @@ case "$cmd" in
         setup
         exec "$ROOT/install/rigid_body_sim/lib/rigid_body_sim/rigid_body_sim_run" "$@"
         ;;
+    experiment|record|plot)
+        setup
+        exec "$ROOT/install/rigid_body_sim/lib/rigid_body_sim/$cmd" "$@"
+        ;;
     test)
         setup
         exec python -m pytest "$@"
@@ -141,7 +148,7 @@ case "$cmd" in
         exec python bench/run_all.py "$@"
         ;;
     *)
-        sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'
         exit 2
         ;;
 esac

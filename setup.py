@@ -27,6 +27,9 @@ setup(
             'rigid_body_sim_run = rigid_body_sim.cli:main',
             'sim_node = rigid_body_sim.ros.node:main',
             'echo_body = rigid_body_sim.ros.echo:main',
+            'experiment = rigid_body_sim.ros.experiment:main',
+            'record = rigid_body_sim.ros.record:main',
+            'plot = rigid_body_sim.ros.plot:main',
         ],
     },
 )

@@ -99,6 +99,8 @@ def _to_store(store: Any, msg: Any, msgtype: str) -> Any:
                 values[name] = list(value)
             else:
                 values[name] = np.asarray(value, dtype=_DTYPES[inner[0]])
+        elif isinstance(value, (bytes, bytearray)):   # rclpy's byte fields
+            values[name] = value[0]
         else:
             values[name] = value
     return cls(**values)

@@ -1,0 +1,368 @@
+"""
+The live recorder (``record``) through real DDS: the node and the recorder in their own processes.
+
+Each bag is read back twice, independently: with ``rosbags`` (as rosbag2 does)
+and with the ``mcap`` package's ROS 2 decoder (as Foxglove does). What it holds
+is checked against the recorder's own summary and against Newton: a body
+falling from rest, integrated by lie_poisson2, is at ``z = -g t^2 / 2`` at
+every stamp.
+"""
+
+from collections import Counter
+from pathlib import Path
+import re
+import signal
+import subprocess
+import threading
+import time
+
+from geometry_msgs.msg import WrenchStamped
+import pytest
+from rigid_body_sim.ros.bag import typestore
+from rigid_body_sim_interfaces.msg import BodyStates
+from rigid_body_sim_interfaces.srv import AddConstraint
+from ros_harness import DEADLINE, executable, random_domain, ros_env
+
+NODE = '/rigid_body_sim'
+G = 9.81
+DT = 1e-3
+
+FALLING_BOB = """
+name: falling_bob
+integrator: lie_poisson2
+dt: 0.001
+effects:
+  gravity: {g_world: [0.0, 0.0, -9.81]}
+bodies:
+  - {name: bob, mass: 1.0, inertia: [1.0e-6, 1.0e-6, 1.0e-6], position_world: [0.5, 0.0, 0.0]}
+"""
+
+#: A row of the recorder's summary: messages, dropped (or ?), topic.
+ROW = re.compile(r'^\s+(\d+)\s+(\d+|\?)\s+(/\S+)$')
+TOTAL = re.compile(r'^\s+(\d+)\s+(\d+)\s+total$')
+
+
+class Recorder:
+    """``record`` in a child process on the node's domain; its output collected line by line."""
+
+    def __init__(self, node, out: Path, *args: str) -> None:
+        self.out = out
+        self.lines: list = []
+        self.errors: list = []
+        env = ros_env(int(node.env['ROS_DOMAIN_ID']))
+        self.proc = subprocess.Popen([str(executable('record')), '-o', str(out), *args],
+                                     env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, start_new_session=True)
+        self._readers = [threading.Thread(target=self._read, args=(stream, into), daemon=True)
+                         for stream, into in ((self.proc.stdout, self.lines),
+                                              (self.proc.stderr, self.errors))]
+        for reader in self._readers:
+            reader.start()
+
+    @staticmethod
+    def _read(stream, into: list) -> None:
+        for line in stream:
+            into.append(line.rstrip('\n'))
+
+    def output(self) -> str:
+        """Return what the recorder printed so far (stdout, then stderr)."""
+        return '\n'.join(self.lines + ['-- stderr:'] + self.errors)
+
+    def said(self, line: str) -> bool:
+        """Tell whether the recorder printed ``line``; fail if it exited meanwhile."""
+        if line in self.lines:
+            return True
+        if self.proc.poll() is not None:
+            pytest.fail(f'the recorder exited ({self.proc.returncode}) before printing '
+                        f'{line!r}:\n{self.output()}')
+        return False
+
+    def stop(self, sig: int) -> int:
+        """Send ``sig``, wait for the exit and the last of its output; return the exit code."""
+        self.proc.send_signal(sig)
+        return self.wait()
+
+    def wait(self) -> int:
+        """Wait for the exit (kill after the deadline) and its output; return the exit code."""
+        try:
+            self.proc.wait(DEADLINE)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+            pytest.fail(f'the recorder did not exit within {DEADLINE} s:\n{self.output()}')
+        for reader in self._readers:
+            reader.join(DEADLINE)
+        return self.proc.returncode
+
+    def summary(self) -> dict:
+        """Return the summary's rows: topic -> (messages, dropped or None)."""
+        rows = {}
+        for line in self.lines:
+            m = ROW.match(line)
+            if m:
+                rows[m.group(3)] = (int(m.group(1)), None if m.group(2) == '?'
+                                    else int(m.group(2)))
+        return rows
+
+    def kill(self) -> None:
+        """Kill the process if it still runs."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+@pytest.fixture
+def recorders():
+    """Return a function starting a :class:`Recorder`; kill leftovers afterwards."""
+    started = []
+
+    def start(node, out, *args):
+        started.append(Recorder(node, out, *args))
+        return started[-1]
+    yield start
+    for rec in started:
+        rec.kill()
+
+
+def _scene(tmp_path, text=FALLING_BOB):
+    path = tmp_path / 'scene.yaml'
+    path.write_text(text)
+    return str(path)
+
+
+def _wait_said(ros, node, rec, lines, what):
+    ros.client.wait_for(lambda: all(rec.said(line) for line in lines), what, node=node)
+
+
+def _read_rosbags(out: Path) -> dict:
+    """Read a bag with rosbags: topic -> (msgtype, [(bag time ns, message)])."""
+    from rosbags.rosbag2 import Reader
+    store = typestore()
+    topics: dict = {}
+    with Reader(out) as reader:
+        for connection in reader.connections:
+            topics.setdefault(connection.topic, (connection.msgtype, []))
+        for connection, stamp, raw in reader.messages():
+            topics[connection.topic][1].append(
+                (stamp, store.deserialize_cdr(raw, connection.msgtype)))
+    return topics
+
+
+def _read_mcap(out: Path) -> dict:
+    """Read a bag's MCAP file with the mcap package: topic -> [(log time ns, message)]."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    files = list(out.glob('*.mcap'))
+    assert len(files) == 1, files
+    topics: dict = {}
+    with open(files[0], 'rb') as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, channel, message, decoded in reader.iter_decoded_messages():
+            topics.setdefault(channel.topic, []).append((message.log_time, decoded))
+    return topics
+
+
+def _ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def _step_time(stamp) -> float:
+    """Return the simulation time of a stamp as the node's step count times dt."""
+    ns = _ns(stamp)
+    k = round(ns / (DT * 1e9))
+    assert abs(ns - k * DT * 1e9) <= 1, f'stamp {ns} ns is not on the step grid'
+    return k * DT
+
+
+def _counts_agree(summary: dict, rosbags_topics: dict, mcap_topics: dict) -> None:
+    """Check that the summary, rosbags and mcap count the same messages per topic."""
+    written = {topic: n for topic, (n, _) in summary.items() if n}
+    assert {t: len(m) for t, (_, m) in rosbags_topics.items() if m} == written
+    assert {t: len(m) for t, m in mcap_topics.items()} == written
+    # Every topic the summary lists is declared in the bag, even one without messages.
+    assert set(summary) == set(rosbags_topics)
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_records_a_running_node_and_the_bag_reads_back(ros, tmp_path, recorders, sig):
+    node = ros.start({'scene': _scene(tmp_path)})
+    out = tmp_path / 'bag'
+    wall_start = time.time_ns()
+    rec = recorders(node, out)
+    topics = [f'{NODE}/body_states', '/clock', f'{NODE}/bodies/bob/pose',
+              f'{NODE}/bodies/bob/twist']
+    _wait_said(ros, node, rec, [f'recording {t} [{typ}]' for t, typ in zip(topics, (
+        'rigid_body_sim_interfaces/msg/BodyStates', 'rosgraph_msgs/msg/Clock',
+        'geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/TwistStamped'))],
+        'the recorder to subscribe')
+    _wait_said(ros, node, rec, [f'first message on {t}' for t in topics],
+               "the recorder's first messages")
+    # The node runs on; cut the recording while it does, after 50 more states.
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    ros.client.wait_for(lambda: len(states) >= 50, '50 body states', node=node)
+    assert rec.stop(sig) == 0, rec.output()
+    wall_end = time.time_ns()
+    assert 'Traceback' not in rec.output()
+    assert node.proc.poll() is None
+    summary = rec.summary()
+    assert rec.lines[-1] == f'bag: {out}'
+    assert (out / 'metadata.yaml').is_file()
+    for topic in topics:
+        assert summary[topic][0] > 0, rec.output()
+    total = next(TOTAL.match(line) for line in rec.lines if TOTAL.match(line))
+    assert int(total.group(1)) == sum(n for n, _ in summary.values())
+    assert int(total.group(2)) == sum(d for _, d in summary.values() if d)
+    # One publisher per topic of the node: drops are counted (checked below).
+    assert all(summary[t][1] is not None for t in topics)
+
+    got = _read_rosbags(out)
+    from_mcap = _read_mcap(out)
+    _counts_agree(summary, got, from_mcap)
+    assert got[f'{NODE}/body_states'][0] == 'rigid_body_sim_interfaces/msg/BodyStates'
+    # Bag time: when each message arrived (wall clock), within the recorder's run.
+    for _, messages in got.values():
+        assert all(wall_start <= stamp <= wall_end for stamp, _ in messages)
+
+    # Body states: simulation time strictly increases; the bob falls from rest exactly.
+    last = -1.0
+    for _, msg in got[f'{NODE}/body_states'][1]:
+        t = _step_time(msg.header.stamp)
+        assert t > last
+        last = t
+        assert list(msg.names) == ['bob']
+        assert msg.position[0] == 0.5 and msg.position[1] == 0.0
+        assert abs(msg.position[2] - (-G * t * t / 2)) <= 1e-9
+        assert abs(msg.linear_velocity[2] - (-G * t)) <= 1e-9
+    for _, msg in got[f'{NODE}/bodies/bob/pose'][1]:
+        t = _step_time(msg.header.stamp)
+        p, q = msg.pose.position, msg.pose.orientation
+        assert (p.x, p.y) == (0.5, 0.0) and (q.x, q.y, q.z, q.w) == (0.0, 0.0, 0.0, 1.0)
+        assert abs(p.z - (-G * t * t / 2)) <= 1e-9
+    for _, msg in got[f'{NODE}/bodies/bob/twist'][1]:
+        t = _step_time(msg.header.stamp)
+        assert abs(msg.twist.linear.z - (-G * t)) <= 1e-9
+    # The clock ticks in whole steps; the mcap reader decodes the same values.
+    clock = [_step_time(msg.clock) for _, msg in got['/clock'][1]]
+    assert all(b > a for a, b in zip(clock, clock[1:]))
+    assert [(s, m.pose.position.z) for s, m in got[f'{NODE}/bodies/bob/pose'][1]] == \
+        [(s, m.pose.position.z) for s, m in from_mcap[f'{NODE}/bodies/bob/pose']]
+    # Drops are whole messages missing between consecutive stamps (pose: 100 Hz).
+    poses = [round(_step_time(m.header.stamp) / 0.01) for _, m in
+             got[f'{NODE}/bodies/bob/pose'][1]]
+    assert sum(b - a - 1 for a, b in zip(poses, poses[1:])) == \
+        summary[f'{NODE}/bodies/bob/pose'][1]
+
+
+def test_a_stalled_recorder_counts_the_messages_it_missed(ros, tmp_path, recorders):
+    node = ros.start({'scene': _scene(tmp_path)})
+    rec = recorders(node, tmp_path / 'bag')
+    topics = {'/clock': DT, f'{NODE}/body_states': 0.01, f'{NODE}/bodies/bob/pose': 0.01}
+    _wait_said(ros, node, rec, [f'first message on {t}' for t in topics], 'the recording')
+    # Frozen (DDS's threads too) while the node publishes 1.5 s of clock: the node's
+    # queues (10 deep) overflow, and those messages never reach the bag.
+    from rosgraph_msgs.msg import Clock
+    clock = ros.client.subscribe(Clock, '/clock')
+    ros.client.wait_for(lambda: clock, 'the clock', node=node)
+    rec.proc.send_signal(signal.SIGSTOP)
+    try:
+        ros.client.wait_for(lambda: len(clock) > 1500, '1500 clock ticks', node=node)
+    finally:
+        rec.proc.send_signal(signal.SIGCONT)
+    n = len(clock)
+    ros.client.wait_for(lambda: len(clock) > n + 200, '200 more ticks', node=node)
+    assert rec.stop(signal.SIGINT) == 0, rec.output()
+    summary = rec.summary()
+    got = _read_rosbags(rec.out)
+    for topic, period in topics.items():
+        messages = got[topic][1]
+        stamps = [m.clock if topic == '/clock' else m.header.stamp for _, m in messages]
+        ticks = [round(_step_time(s) / period) for s in stamps]
+        missing = sum(b - a - 1 for a, b in zip(ticks, ticks[1:]))
+        assert summary[topic] == (len(messages), missing), (topic, rec.output())
+    assert summary['/clock'][1] >= 1000, rec.output()
+    assert re.search(r'^dropped: \d+ messages', '\n'.join(rec.lines), re.M), rec.output()
+
+
+def test_a_topic_that_appears_later_is_recorded(ros, tmp_path, recorders):
+    node = ros.start({'scene': _scene(tmp_path)})
+    out = tmp_path / 'bag'
+    rec = recorders(node, out)
+    _wait_said(ros, node, rec, [f'first message on {NODE}/body_states'],
+               'the recorder to record')
+    topic = f'{NODE}/constraints/rod/wrench'
+    assert not any(topic in line for line in rec.lines)
+    # A rod to the world, as long as the bob's distance from (0, 0, 1) is now.
+    request = AddConstraint.Request(name='rod', type='distance', body_a='bob',
+                                    body_b='world', anchor_b_body=[0.0, 0.0, 1.0])
+    reply = ros.client.call(AddConstraint, f'{NODE}/add_constraint', request, node=node)
+    assert reply.success, reply.message
+    _wait_said(ros, node, rec, [f'recording {topic} [geometry_msgs/msg/WrenchStamped]',
+                                f'first message on {topic}'], 'the new topic recorded')
+    reactions = ros.client.subscribe(WrenchStamped, topic)
+    ros.client.wait_for(lambda: len(reactions) >= 10, 'reactions', node=node)
+    assert rec.stop(signal.SIGINT) == 0, rec.output()
+    summary = rec.summary()
+    assert summary[topic][0] > 0
+    got = _read_rosbags(out)
+    _counts_agree(summary, got, _read_mcap(out))
+    msgtype, messages = got[topic]
+    assert msgtype == 'geometry_msgs/msg/WrenchStamped'
+    # On the bob (its frame) and on the world, equal and opposite, one of each per stamp.
+    frames = Counter(msg.header.frame_id for _, msg in messages)
+    assert set(frames) == {'bob', 'world'}
+    stamps = Counter(_ns(msg.header.stamp) for _, msg in messages)
+    assert sum(n == 2 for n in stamps.values()) >= len(stamps) - 2   # (ends may be cut)
+    # The reactions start after the body states did: the topic was subscribed later.
+    first_state = min(s for s, _ in got[f'{NODE}/body_states'][1])
+    assert min(s for s, _ in messages) > first_state
+
+
+def test_named_topics_only_and_a_duration(ros, tmp_path, recorders):
+    node = ros.start({'scene': _scene(tmp_path)})
+    named = [f'{NODE}/body_states', '/clock']
+    rec = recorders(node, tmp_path / 'bag', '--topics', '~/body_states', '/clock')
+    _wait_said(ros, node, rec, [f'first message on {t}' for t in named],
+               'the named topics recorded')
+    assert rec.stop(signal.SIGINT) == 0, rec.output()
+    summary = rec.summary()
+    assert sorted(summary) == sorted(named), rec.output()
+    _counts_agree(summary, _read_rosbags(rec.out), _read_mcap(rec.out))
+    # --duration ends the recording by itself, also when a topic never shows up.
+    rec = recorders(node, tmp_path / 'empty', '--topics', '/nothing', '--duration', '1')
+    assert rec.wait() == 0, rec.output()
+    assert 'never appeared in the graph: /nothing' in rec.lines
+    assert rec.summary() == {}
+    assert _read_rosbags(rec.out) == {} and _read_mcap(rec.out) == {}
+
+
+def test_bytes_rosbags_refuses_are_written_canonically():
+    from rclpy.serialization import serialize_message
+    from rigid_body_sim.ros.record import readable_cdr
+    from rosbags.serde import SerdeError
+    from rosgraph_msgs.msg import Clock
+    store = typestore()
+    msgtype = 'rigid_body_sim_interfaces/msg/BodyStates'
+    # rclpy's own serialization leaves slack at the end with empty float64 arrays.
+    raw = serialize_message(BodyStates(names=['bob']))
+    with pytest.raises(SerdeError, match='size mismatch'):
+        store.deserialize_cdr(raw, msgtype)
+    data = readable_cdr(raw, msgtype, BodyStates)
+    assert len(data) < len(raw)
+    assert list(store.deserialize_cdr(data, msgtype).names) == ['bob']
+    # Bytes that read back are kept as they are (as DDS delivers them: the tests above).
+    raw = serialize_message(Clock())
+    assert readable_cdr(raw, 'rosgraph_msgs/msg/Clock', Clock) is raw
+
+
+def test_an_existing_bag_folder_is_refused(tmp_path):
+    out = tmp_path / 'bag'
+    out.mkdir()
+    (out / 'keep.txt').write_text('mine')
+    done = subprocess.run([str(executable('record')), '-o', str(out)],
+                          env=ros_env(random_domain()), capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2
+    assert f'record: error: {out} exists already; choose a new bag folder' in done.stderr
+    assert 'Traceback' not in done.stderr
+    assert [p.name for p in out.iterdir()] == ['keep.txt']
+    assert (out / 'keep.txt').read_text() == 'mine'
