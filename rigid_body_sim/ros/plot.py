@@ -4,13 +4,16 @@ Plot a bag of the simulator node's topics: one PNG to look at rather than read.
 Usage: ``plot BAG [--node /rigid_body_sim] [--bodies B ...] [-o OUT.png]``.
 BAG is a rosbag2 folder (or one of its ``.mcap`` / ``.db3`` files) holding the
 node's ``<node>/body_states`` and, when recorded, ``<node>/metrics``,
-``<node>/constraints/<C>/wrench`` and ``<node>/bodies/<B>/wrench``. The
+``<node>/constraints/<C>/wrench``, ``<node>/bodies/<B>/wrench`` and the
+service events of ``reset``, ``add_constraint`` and ``remove_constraint``. The
 panels share the simulation time axis (header stamps, not the time the bag
 received a message): body positions x, y, z; how far each body has turned
 from its first orientation; energy; energy change; constraint violation (log
 scale); reaction force magnitude per constraint. Wrench inputs are shaded
-while they hold. A panel without data is left out, and the title says so.
-Without ``-o`` the picture goes next to the bag, ``BAG.png``.
+while they hold; resets and constraint changes are lines across all panels.
+A panel without data is left out, and the title says so. Without ``-o`` the
+picture goes next to the bag, ``BAG.png``. Exit code 2 for a missing or
+unreadable bag, one without body states, an unknown ``--node`` or body.
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ METRIC_FIELDS = ('total_energy', 'kinetic_energy', 'potential_energy', 'energy_c
                  'constraint_violation')
 #: Without ``--bodies``, at most this many bodies are drawn (the first ones of the bag).
 MAX_BODIES = 8
+#: The node's services whose calls are marked on the time axis (from their service events).
+SERVICES = ('reset', 'add_constraint', 'remove_constraint')
 
 
 class PlotError(Exception):
@@ -65,6 +70,17 @@ class WrenchInputs:
 
 
 @dataclass
+class ServiceEvent:
+    """A call of the node's reset, add_constraint or remove_constraint service."""
+
+    t: float                 # s, simulation time at which the bag received the reply
+    service: str             # 'reset', 'add_constraint' or 'remove_constraint'
+    name: str                # the constraint's name ('' for reset)
+    success: bool
+    message: str
+
+
+@dataclass
 class BagSeries:
     """Everything :func:`read_bag` extracted and :func:`draw` plots."""
 
@@ -80,24 +96,35 @@ class BagSeries:
     metrics: Optional[dict] = None              # 't' and METRIC_FIELDS -> (m,) arrays
     reactions: dict = field(default_factory=dict)    # constraint -> Reaction
     inputs: dict = field(default_factory=dict)       # body -> WrenchInputs
+    events: list = field(default_factory=list)       # ServiceEvent, in bag order
+    #: s: stamps of the first state after each reset (the reset state), in time order.
+    resets: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def restarts(self) -> np.ndarray:
+        """Return the indices into ``t`` where an episode starts anew (a reset, time back)."""
+        back = np.flatnonzero(np.diff(self.t) < 0) + 1
+        at = np.searchsorted(self.t, self.resets) if np.all(np.diff(self.t) >= 0) else []
+        at = [i for i in at if 0 < i < len(self.t)]
+        return np.unique(np.concatenate([back, at]).astype(int))
 
     def orientation_angle_deg(self, body: str) -> tuple[np.ndarray, Optional[np.ndarray]]:
         """Return the orientation panel's angle of a body: see :func:`orientation_angle_deg`."""
-        return orientation_angle_deg(self.orientation[body])
+        return orientation_angle_deg(self.orientation[body], self.restarts())
 
 
-#: rad: rotations whose axes all lie within this of one world axis are planar.
+#: rad: rotations whose axes all lie within this of one fixed axis are planar motion.
 AXIS_TOLERANCE = 1e-3
 #: rad: rotations smaller than this have too uncertain an axis to judge planarity.
 ANGLE_FOR_AXIS = 1e-2
 
 
-def orientation_angle_deg(quat_xyzw: np.ndarray) -> tuple[np.ndarray, Optional[np.ndarray]]:
+def orientation_angle_deg(quat_xyzw: np.ndarray,
+                          restarts: Sequence[int] = ()) -> tuple[np.ndarray, Optional[np.ndarray]]:
     """
     Return how far a body has turned from its first (finite) orientation, in degrees.
 
     The rotation since the start, ``q q0*`` (world axes), has an angle and an
-    axis. When every sample's axis is the same world axis (within
+    axis. When every sample's axis is one fixed axis (within
     :data:`AXIS_TOLERANCE`: planar motion, a hinge, a pendulum swinging in a
     plane) the angle is signed about that axis and unwrapped, so a swing reads
     as a swing and a spin as a steady climb; that axis (unit, its largest
@@ -109,6 +136,9 @@ def orientation_angle_deg(quat_xyzw: np.ndarray) -> tuple[np.ndarray, Optional[n
     ----------
     quat_xyzw : ndarray, shape (n, 4)
         Orientations (x, y, z, w), body to world; NaN rows where the body is absent.
+    restarts : sequence of int
+        Indices where the motion jumps (a reset): the signed angle is unwrapped
+        within each episode only, each one starting in (-180, 180] degrees.
 
     Returns
     -------
@@ -137,8 +167,11 @@ def orientation_angle_deg(quat_xyzw: np.ndarray) -> tuple[np.ndarray, Optional[n
         axes = v[turned] / s[turned, None]
         axis = axes[0] * np.sign(axes[0][np.argmax(np.abs(axes[0]))])
         if np.all(np.abs(axes @ axis) >= np.cos(AXIS_TOLERANCE)):
-            signed = 2.0 * np.arctan2(v[finite] @ axis, r[finite])
-            angle[finite] = np.degrees(np.unwrap(signed, period=2.0 * np.pi))
+            # q and -q are one rotation: the sign of r picks the angle in [-pi, pi].
+            signed = 2.0 * np.arctan2(np.sign(r + (r == 0)) * (v @ axis), np.abs(r))
+            for part in np.split(np.arange(len(q)), list(restarts)):
+                part = part[finite[part]]
+                angle[part] = np.degrees(np.unwrap(signed[part], period=2.0 * np.pi))
             return angle, axis
     angle[finite] = np.degrees(unsigned[finite])
     return angle, None
@@ -220,11 +253,13 @@ def _read(reader: Reader, path: Path, node: Optional[str],
     states_topic, metrics_topic = f'{node}/body_states', f'{node}/metrics'
     reaction_re = re.compile(re.escape(node) + r'/constraints/([^/]+)/wrench')
     input_re = re.compile(re.escape(node) + r'/bodies/([^/]+)/wrench')
+    service_re = re.compile(re.escape(node) + r'/(' + '|'.join(SERVICES) + ')/_service_event')
     wanted = [c for c in connections
               if (c.topic == states_topic and c.msgtype == BODY_STATES)
               or (c.topic == metrics_topic and c.msgtype == METRICS)
               or (c.msgtype == WRENCH and (reaction_re.fullmatch(c.topic)
-                                           or input_re.fullmatch(c.topic)))]
+                                           or input_re.fullmatch(c.topic)))
+              or (service_re.fullmatch(c.topic) and c.msgtype.endswith('_Event'))]
 
     stamps, logtimes = [], []
     position: dict = {}
@@ -234,10 +269,11 @@ def _read(reader: Reader, path: Path, node: Optional[str],
     world_frame = None
     index: dict = {}
     names_seen: list = []
-    metrics: dict = {'t': []}
+    metrics: dict = {'t': [], 'step_count': []}
     metrics.update((name, []) for name in METRIC_FIELDS)
-    reactions: dict = {}    # constraint -> [[stamp, force, frame], ...], one per stamp
+    reactions: dict = {}    # constraint -> [(stamp, [(force, frame), ...]), ...]
     inputs: dict = {}       # body -> [(logtime, stamp, force, torque, frame), ...]
+    calls: dict = {}        # (service, client, sequence) -> [request name, (logtime, reply)]
     nan3, nan4 = np.full(3, np.nan), np.full(4, np.nan)
     # One pass over the bag (reading it is most of the cost for large bags).
     for conn, logtime, raw in reader.messages(connections=wanted):
@@ -266,6 +302,7 @@ def _read(reader: Reader, path: Path, node: Optional[str],
                 orientation[body].append(nan4 if i is None else quat[i])
         elif topic == metrics_topic:
             metrics['t'].append(_seconds(msg.header.stamp))
+            metrics['step_count'].append(msg.step_count)
             for name in METRIC_FIELDS:
                 metrics[name].append(getattr(msg, name))
         elif reaction_re.fullmatch(topic):
@@ -275,14 +312,26 @@ def _read(reader: Reader, path: Path, node: Optional[str],
             if not groups or groups[-1][0] != stamp:
                 groups.append((stamp, []))
             groups[-1][1].append(((f.x, f.y, f.z), msg.header.frame_id))
-        else:
+        elif input_re.fullmatch(topic):
             w = msg.wrench
             inputs.setdefault(input_re.fullmatch(topic).group(1), []).append(
                 (logtime, _seconds(msg.header.stamp), (w.force.x, w.force.y, w.force.z),
                  (w.torque.x, w.torque.y, w.torque.z), msg.header.frame_id))
+        else:
+            # Server and client sides both record a call; one entry per call, its first
+            # reply (the server's, sent before the client receives it).
+            info = msg.info
+            call = calls.setdefault((service_re.fullmatch(topic).group(1),
+                                     bytes(info.client_gid), info.sequence_number), ['', None])
+            if msg.request:
+                call[0] = getattr(msg.request[0], 'name', '')
+            if msg.response and call[1] is None:
+                call[1] = (logtime, msg.response[0])
 
     if not stamps:
         raise PlotError(f'{path}: {states_topic} has no messages')
+    if not chosen:
+        raise PlotError(f'{path}: {states_topic} names no bodies')
     unknown = [b for b in chosen if b not in all_bodies]
     if unknown:
         raise PlotError(f'{path}: no body {", ".join(map(repr, unknown))} in '
@@ -301,48 +350,83 @@ def _read(reader: Reader, path: Path, node: Optional[str],
             t=np.array([sec + ns * 1e-9 for (sec, ns), _ in reactions[name]]),
             force=np.array([f for f, _ in picked], dtype=float),
             frames=[frame for _, frame in picked])
-    # Wrench inputs: the node ignores their stamps (ros2 topic pub leaves them 0) and
-    # applies them at the next step, so their time is the simulation time at which the
-    # bag received them, interpolated between the body states around it (their stamps
-    # only when the bag's receive times do not increase).
+    # Wrench inputs and service calls: the node ignores input stamps (ros2 topic pub
+    # leaves them 0) and acts on both before its next step, so their time is the
+    # simulation time at which the bag received them, interpolated between the body
+    # states around it (for inputs their stamps when the bag's receive times run back).
     logtimes = np.array(logtimes, dtype=np.int64)
-    monotonic = len(logtimes) > 1 and bool(np.all(np.diff(logtimes) > 0))
+    monotonic = bool(logtimes[-1] > logtimes[0] and np.all(np.diff(logtimes) >= 0))
+
+    def sim_time(received: Sequence[int]) -> np.ndarray:
+        return np.interp(np.array(received, dtype=np.int64) - logtimes[0],
+                         logtimes - logtimes[0], series.t)
+
     for body in sorted(inputs):
         if body not in chosen:
             continue
         rows = inputs[body]
-        received = np.array([r[0] for r in rows], dtype=np.int64) - logtimes[0]
         series.inputs[body] = WrenchInputs(
-            t=(np.interp(received, logtimes - logtimes[0], series.t) if monotonic
-               else np.array([r[1] for r in rows])),
+            t=sim_time([r[0] for r in rows]) if monotonic else np.array([r[1] for r in rows]),
             force=np.array([r[2] for r in rows], dtype=float),
             torque=np.array([r[3] for r in rows], dtype=float),
             frames=[r[4] for r in rows])
+    replies = sorted(((reply[0], service, name, reply[1])
+                      for (service, _, _), (name, reply) in calls.items() if reply),
+                     key=lambda r: r[0])
+    if monotonic or len(logtimes) == 1:
+        series.events = [ServiceEvent(t=float(sim_time([logtime])[0]), service=service,
+                                      name=name, success=bool(response.success),
+                                      message=response.message)
+                         for logtime, service, name, response in replies]
+    # Resets: where the step count since the last reset drops, else the reset calls.
+    if series.metrics is not None and len(series.metrics['t']) > 1:
+        m = series.metrics
+        series.resets = m['t'][1:][np.diff(m['step_count']) < 0]
+    else:
+        series.resets = np.array([e.t for e in series.events
+                                  if e.service == 'reset' and e.success])
     return series
 
 
-def _broken(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Insert NaN where time runs back (a reset) or skips (no messages), so no line spans it."""
-    if len(t) < 3:
+def _broken(t: np.ndarray, y: np.ndarray,
+            resets: Sequence[float] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Insert NaN where the motion is not continuous, so that no line spans the jump.
+
+    That is before each reset state (``resets``, stamps), where time runs back
+    (a reset to time 0) and across a gap of more than 5 typical sample periods
+    (a topic not published, e.g. a constraint removed for a while).
+    """
+    if len(t) < 2:
         return t, y
     dt = np.diff(t)
     positive = dt[dt > 0]
     limit = 5.0 * np.median(positive) if len(positive) else np.inf
-    cut = np.flatnonzero((dt <= 0) | (dt > limit)) + 1
-    if not len(cut):
+    cut = set((np.flatnonzero((dt < 0) | (dt > limit)) + 1).tolist())
+    if len(resets) and np.all(dt >= 0):
+        cut.update(i for i in np.searchsorted(t, resets).tolist() if 0 < i < len(t))
+    if not cut:
         return t, y
+    cut = sorted(cut)
     return (np.insert(t.astype(float), cut, np.nan),
             np.insert(y.astype(float), cut, np.nan, axis=0))
 
 
-def _spans(inputs: WrenchInputs, t_end: float) -> list:
-    """Return (start, end) of each non-zero wrench input, held until the next message."""
+def _spans(inputs: WrenchInputs, t_end: float, resets: Sequence[float] = ()) -> list:
+    """Return (start, end) of each non-zero wrench input: held until the next message or reset."""
     out = []
     ends = list(inputs.t[1:]) + [max(t_end, inputs.t[-1])]
     for start, end, f, tau in zip(inputs.t, ends, inputs.force, inputs.torque):
         if np.any(f) or np.any(tau):
+            end = min([end] + [r for r in resets if start < r])
             out.append((start, end))
     return out
+
+
+#: m: a coordinate that moves less than this for every body drawn gets no panel.
+STILL = 1e-9
+#: in: the figure's width, a panel's height (times its weight) and the gap between panels.
+WIDTH, PANEL_HEIGHT, GAP = 11.0, 1.6, 0.5
 
 
 def draw(series: BagSeries, out: Path) -> list:
@@ -352,132 +436,208 @@ def draw(series: BagSeries, out: Path) -> list:
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
+    from matplotlib.ticker import FormatStrFormatter, MaxNLocator
 
     body_colour = {b: colormaps['tab10'](i % 10) for i, b in enumerate(series.bodies)}
     notes = []
-    panels = [('x', 1.0), ('y', 1.0), ('z', 1.0), ('orientation', 1.1)]
+    if np.any(np.diff(series.t) < 0):
+        notes.append('time set back to 0 by resets: the episodes overlap')
+    # Position: one panel per coordinate that moves (a still one is named in the title).
+    spread = {axis: max(float(np.nanmax(p[:, k]) - np.nanmin(p[:, k]))
+                        if np.any(np.isfinite(p[:, k])) else 0.0
+                        for p in series.position.values())
+              for k, axis in enumerate('xyz')}
+    moving = [a for a in 'xyz' if spread[a] > STILL] or ['x', 'y', 'z']
+    still = [a for a in 'xyz' if a not in moving]
+    panels = [(a, 1.0) for a in moving] + [('orientation', 1.2)]
     m = series.metrics
     if m is None:
-        notes.append('no metrics topic: no energy or constraint violation panels')
+        notes.append('no metrics in the bag: no energy or constraint violation panels')
     else:
-        panels += [('energy', 1.3), ('energy change', 1.0)]
+        panels += [('energy', 1.2), ('energy change', 0.9)]
         if np.any(m['constraint_violation'] > 0):
             panels.append(('constraint violation', 1.1))
         else:
-            notes.append('constraint violation 0 throughout (no constraints)')
+            notes.append('constraint violation 0 throughout')
     if series.reactions:
         panels.append(('reaction forces', 1.3))
     else:
-        notes.append('no reaction wrenches recorded')
+        notes.append('no constraint reactions in the bag')
 
-    ratios = [h for _, h in panels]
-    fig = Figure(figsize=(11.0, 1.75 * sum(ratios) + 1.4), dpi=100, layout='constrained')
+    # Laid out in inches (faster than a layout engine, and every figure alike): panels
+    # stacked on the left, legends in the right margin, titles in the gaps.
+    heights = [PANEL_HEIGHT * h for _, h in panels]
+    head = 0.75 + (0.25 if notes else 0.0)
+    size = (WIDTH, head + sum(heights) + GAP * (len(panels) - 1) + 0.6)
+    fig = Figure(figsize=size, dpi=100)
     FigureCanvasAgg(fig)
-    axes = fig.subplots(len(panels), 1, sharex=True, height_ratios=ratios)
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False, gridspec_kw={
+        'height_ratios': heights, 'left': 0.9 / size[0], 'right': 1.0 - 2.45 / size[0],
+        'top': 1.0 - head / size[1], 'bottom': 0.6 / size[1],
+        'hspace': GAP / np.mean(heights)})[:, 0]
     ax_of = dict(zip((name for name, _ in panels), axes))
     t_end = float(np.nanmax(series.t))
+    side = {'loc': 'upper left', 'bbox_to_anchor': (1.005, 1.0), 'fontsize': 9,
+            'frameon': False, 'title_fontsize': 9}
 
-    for name, ax in ax_of.items():
+    def title(ax, text: str) -> None:
+        ax.set_title(text, loc='left', fontsize=10)
+
+    def broken(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return _broken(t, y, series.resets)
+
+    # Calls that change the scene: a line across every panel, named in the top one.
+    marks = [(float(r), 'reset', '--') for r in series.resets]
+    for e in series.events:
+        if e.service != 'reset':
+            sign = '+' if e.service == 'add_constraint' else '−'
+            marks.append((e.t, f'{sign} {e.name}' + ('' if e.success else ' (refused)'), ':'))
+    for ax in axes:
         ax.grid(True, alpha=0.3)
         for body, inputs in series.inputs.items():
-            for start, end in _spans(inputs, t_end):
-                ax.axvspan(start, end, color=body_colour[body], alpha=0.12, lw=0)
+            for start, end in _spans(inputs, t_end, series.resets):
+                ax.axvspan(start, end, color=body_colour[body], alpha=0.13, lw=0)
+        for t, _, style in marks:
+            ax.axvline(t, color='0.3', ls=style, lw=1.0, zorder=1)
 
-    for k, axis in enumerate('xyz'):
+    for axis in moving:
         ax = ax_of[axis]
+        k = 'xyz'.index(axis)
         for body in series.bodies:
-            ax.plot(*_broken(series.t, series.position[body][:, k]), color=body_colour[body],
-                    lw=1.4, label=body)
+            ax.plot(*broken(series.t, series.position[body][:, k]), color=body_colour[body],
+                    lw=1.4)
         ax.set_ylabel(f'{axis} [m]')
-    ax_of['x'].set_title(f'Position of the body frame origins, world frame '
-                         f'({series.world_frame})', loc='left', fontsize=10)
+    top = ax_of[moving[0]]
+    text = f'Position of each body frame origin in the world frame ({series.world_frame})'
+    if still:
+        values = sorted({float(np.nanmean(p[:, 'xyz'.index(a)]))
+                         for a in still for p in series.position.values()})
+        same = f' = {values[0]:.6g} m' if len(values) == 1 else ''
+        text += f'; {" and ".join(still)} constant{same} for every body'
+    title(top, text)
     handles = [Line2D([], [], color=body_colour[b], lw=2, label=b) for b in series.bodies]
     if series.inputs:
-        handles.append(Patch(color='0.5', alpha=0.25, label='wrench input held'))
-        top = ax_of['x']
         for body, inputs in series.inputs.items():
-            top.plot(inputs.t, np.full(len(inputs.t), 1.0), 'v', color=body_colour[body],
-                     ms=7, transform=top.get_xaxis_transform(), clip_on=False)
-        handles.append(Line2D([], [], color='0.3', marker='v', ls='', label='wrench message'))
-    ax_of['x'].legend(handles=handles, loc='upper left', bbox_to_anchor=(1.005, 1.0),
-                      fontsize=9, title='body', title_fontsize=9, frameon=False)
+            pushing = np.any(inputs.force != 0, axis=1) | np.any(inputs.torque != 0, axis=1)
+            for mask, face in ((pushing, body_colour[body]), (~pushing, 'white')):
+                top.plot(inputs.t[mask], np.full(int(mask.sum()), 0.95), 'v', ms=8, mfc=face,
+                         color=body_colour[body], transform=top.get_xaxis_transform(),
+                         clip_on=False, zorder=5)
+        handles += [Patch(color='0.5', alpha=0.3, label='wrench input held'),
+                    Line2D([], [], color='0.3', marker='v', ls='', label='wrench message'),
+                    Line2D([], [], color='0.3', mfc='white', marker='v', ls='',
+                           label='zero wrench (release)')]
+    for t, text, _ in marks:
+        top.text(t, 0.04, text, rotation=90, ha='right', va='bottom', fontsize=8,
+                 color='0.2', transform=top.get_xaxis_transform(), zorder=6,
+                 bbox={'facecolor': 'white', 'alpha': 0.75, 'lw': 0, 'pad': 1.0})
+    if marks:
+        handles.append(Line2D([], [], color='0.3', ls='--', lw=1, label='reset'))
+        if any(style == ':' for *_, style in marks):
+            handles.append(Line2D([], [], color='0.3', ls=':', lw=1,
+                                  label='constraint added (+)\nor removed (−)'))
+    top.legend(handles=handles, title='body', **side)
 
     ax = ax_of['orientation']
-    top_angle = 0.0
+    planar, turning = {}, []
+    low, high = 0.0, 0.0
     for body in series.bodies:
-        angle = series.rotation_angle_deg(body)
-        ax.plot(*_broken(series.t, angle), color=body_colour[body], lw=1.4, label=body)
-        top_angle = max(top_angle, float(np.nanmax(angle)) if np.any(np.isfinite(angle)) else 0)
+        angle, axis = series.orientation_angle_deg(body)
+        if axis is None:
+            turning.append(body)
+        else:
+            planar[body] = axis_name(axis)
+        ax.plot(*broken(series.t, angle), color=body_colour[body], lw=1.4,
+                label=body if axis is None else f'{body} (about {planar[body]})')
+        if np.any(np.isfinite(angle)):
+            low, high = min(low, float(np.nanmin(angle))), max(high, float(np.nanmax(angle)))
     ax.set_ylabel('angle [deg]')
-    ax.set_title('Orientation: angle turned from the first orientation (0 to 180 deg)',
-                 loc='left', fontsize=10)
-    if top_angle > 60.0:
-        ax.set_ylim(-5.0, 185.0)
-        ax.set_yticks([0, 45, 90, 135, 180])
+    if not planar:
+        title(ax, 'Orientation: angle turned from the first orientation (0 to 180 deg)')
+    elif not turning and len(set(planar.values())) == 1:
+        title(ax, f'Orientation: angle turned from the first orientation, about the world '
+                  f'{next(iter(planar.values()))} axis (planar motion; unwrapped)')
+    else:
+        title(ax, 'Orientation: angle turned from the first orientation (signed about the '
+                  "legend's axis: planar motion; else 0 to 180 deg)")
+        ax.legend(**side)
+    if high - low >= 90.0:
+        # Ticks on multiples of 45 or 90 degrees where they fit.
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 1.5, 3, 4.5, 9, 10]))
 
     if m is not None:
         ax = ax_of['energy']
-        ax.plot(*_broken(m['t'], m['total_energy']), color='black', lw=1.8, label='total')
-        ax.plot(*_broken(m['t'], m['kinetic_energy']), color='tab:red', lw=1.2,
+        ax.plot(*broken(m['t'], m['total_energy']), color='black', lw=1.8, label='total')
+        ax.plot(*broken(m['t'], m['kinetic_energy']), color='tab:red', lw=1.2,
                 label='kinetic')
-        ax.plot(*_broken(m['t'], m['potential_energy']), color='tab:blue', lw=1.2,
+        ax.plot(*broken(m['t'], m['potential_energy']), color='tab:blue', lw=1.2,
                 label='potential')
         ax.set_ylabel('energy [J]')
-        ax.set_title('Energy of the scene', loc='left', fontsize=10)
-        ax.legend(loc='upper left', bbox_to_anchor=(1.005, 1.0), fontsize=9, frameon=False)
+        title(ax, 'Energy of the scene')
+        ax.legend(**side)
 
         ax = ax_of['energy change']
         change = m['energy_change']
-        ax.plot(*_broken(m['t'], change), color='black', lw=1.2)
+        ax.plot(*broken(m['t'], change), color='black', lw=1.2)
         ax.axhline(0.0, color='0.5', lw=0.8)
         ax.set_ylabel('ΔE [J]')
-        worst = float(np.max(np.abs(change))) if len(change) else 0.0
-        scale = float(np.max(np.abs(m['total_energy'] - change)))
-        relative = f', {worst / scale:.2g} of |E0|' if scale > 0 else ''
-        ax.set_title(f'Energy change since the last reset (max |ΔE| = {worst:.3g} J'
-                     f'{relative}; only wrench inputs should change it)', loc='left',
-                     fontsize=10)
+        ax.yaxis.set_major_formatter(FormatStrFormatter('%.3g'))   # no offset text
+        worst = float(np.max(np.abs(change)))
+        start = float(np.max(np.abs(m['total_energy'] - change)))
+        relative = f', {100.0 * worst / start:.2g} % of |E0|' if start > 0 else ''
+        title(ax, f'Energy change since the last reset (largest |ΔE| {worst:.3g} J{relative})')
 
         if 'constraint violation' in ax_of:
             ax = ax_of['constraint violation']
             v = m['constraint_violation']
-            ax.semilogy(*_broken(m['t'], np.where(v > 0, v, np.nan)), color='tab:purple',
+            ax.semilogy(*broken(m['t'], np.where(v > 0, v, np.nan)), color='tab:purple',
                         lw=1.2)
             ax.set_ylabel('max |Φ| [m, rad]')
-            ax.set_title(f'Constraint violation, largest over all constraints (log scale; '
-                         f'max {np.max(v):.3g})', loc='left', fontsize=10)
+            title(ax, f'Constraint violation, the largest |Φ| of all constraints (log scale; '
+                      f'largest {np.max(v):.3g})')
 
     if series.reactions:
         ax = ax_of['reaction forces']
         colours = colormaps['Dark2']
         for i, (name, r) in enumerate(series.reactions.items()):
             frames = sorted(set(r.frames))
-            where = ('world frame' if frames == [series.world_frame]
-                     else f'on {", ".join(frames)}')
-            ax.plot(*_broken(r.t, r.magnitude), color=colours(i % 8), lw=1.3,
+            where = 'on the world' if frames == [series.world_frame] else \
+                f'on {", ".join(frames)}'
+            ax.plot(*broken(r.t, r.magnitude), color=colours(i % 8), lw=1.3,
                     label=f'{name} ({where})')
         ax.set_ylabel('|F| [N]')
-        ax.set_title('Reaction force magnitude per constraint', loc='left', fontsize=10)
-        ax.legend(loc='upper left', bbox_to_anchor=(1.005, 1.0), fontsize=9, frameon=False,
-                  title='constraint', title_fontsize=9)
+        title(ax, 'Reaction force magnitude of each constraint')
+        ax.legend(title='constraint', **side)
 
-    axes[-1].set_xlabel('simulation time [s] (header stamps)')
-    axes[-1].set_xlim(float(np.nanmin(series.t)), t_end)
+    axes[-1].set_xlabel('simulation time [s]')
+    t_start = float(np.nanmin(series.t))
+    axes[-1].set_xlim(t_start, t_end if t_end > t_start else t_start + 1.0)
     shown = (f'{len(series.bodies)} of {len(series.all_bodies)} bodies'
              if len(series.bodies) < len(series.all_bodies) else
-             f'{len(series.bodies)} bodies')
-    title = (f'{series.bag.name}: {series.node}, {shown}, '
-             f'{np.nanmin(series.t):.3g} to {t_end:.3g} s')
-    fig.suptitle(title + ('\n' + '; '.join(notes) if notes else ''), fontsize=12)
+             f'{len(series.bodies)} bod{"y" if len(series.bodies) == 1 else "ies"}')
+    heading = (f'{series.bag.name}: {series.node}, {shown}, '
+               f'{np.nanmin(series.t):.4g} to {t_end:.4g} s of simulation time')
+    fig.suptitle(heading + ('\n' + '; '.join(notes) if notes else ''), fontsize=12,
+                 y=1.0 - 0.12 / size[1], va='top')
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)
     return [name for name, _ in panels]
 
 
 def default_output(bag: Path) -> Path:
-    """Return ``BAG.png`` next to the bag folder (or the bag file, its suffix replaced)."""
+    """
+    Return ``BAG.png`` beside the bag folder.
+
+    For a storage file inside a bag folder (beside its ``metadata.yaml``), beside
+    that folder; for a lone ``.mcap`` file, the file's name with ``.png``.
+    """
     bag = Path(bag)
-    return bag.with_suffix('.png') if bag.is_file() else bag.parent / (bag.name + '.png')
+    if bag.is_file():
+        if not (bag.parent / 'metadata.yaml').is_file():
+            return bag.with_suffix('.png')
+        bag = bag.parent
+    bag = bag.resolve() if bag.name in ('', '.', '..') else bag
+    return bag.parent / (bag.name + '.png')
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -519,11 +679,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if len(series.bodies) < len(series.all_bodies) and not bodies:
         extra += f' (first {MAX_BODIES} of {len(series.all_bodies)} bodies; pick with --bodies)'
     n_inputs = sum(len(i.t) for i in series.inputs.values())
+    n_calls = sum(e.service != 'reset' for e in series.events)
+    n_resets = len(series.resets)
+    marked = [f'{n} {what}{"s" * (n != 1)}' for n, what in (
+        (n_inputs, 'wrench input'), (n_resets, 'reset'), (n_calls, 'constraint call')) if n]
+    reactions = f' ({", ".join(series.reactions)})' if series.reactions else ''
     print(f'plot: {out}: {series.node}{extra}, {len(series.t)} states '
           f'{np.nanmin(series.t):.6g}..{np.nanmax(series.t):.6g} s, '
-          f'bodies {", ".join(series.bodies)}; panels: {", ".join(panels)}'
-          + (f' ({", ".join(series.reactions)})' if series.reactions else '')
-          + (f'; {n_inputs} wrench inputs' if n_inputs else ''), flush=True)
+          f'bodies {", ".join(series.bodies)}; panels: {", ".join(panels)}{reactions}'
+          + (f'; {", ".join(marked)}' if marked else ''), flush=True)
     return 0
 
 
