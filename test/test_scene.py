@@ -10,7 +10,8 @@ from rigid_body_sim.scene import load_scene, scene_from_dict, SceneError
 import yaml
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
-SCENES = sorted(p for p in CONFIG.glob('*.yaml') if not p.stem.endswith('_params'))
+SCENES = sorted(p for p in CONFIG.glob('*.yaml')   # (not parameter or schedule files)
+                if not p.stem.endswith(('_params', '_schedule')))
 
 
 @pytest.mark.parametrize('path', SCENES, ids=[p.stem for p in SCENES])
