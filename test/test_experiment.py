@@ -12,6 +12,7 @@ from rigid_body_sim.ros.bag import typestore
 from rigid_body_sim.ros.experiment import main
 from rigid_body_sim.scene import load_scene
 from rosbags.rosbag2 import Reader
+from scipy.spatial.transform import Rotation
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 SCENE = CONFIG / 'pendulum_kick.yaml'
@@ -75,11 +76,15 @@ def test_the_bag_holds_what_the_core_computes(bag):
     states = {round(_seconds(m.header.stamp) * 1000): m for _, m in msgs[f'{NODE}/body_states']}
     sim = load_scene(SCENE).simulation
     got = {}
+    e0 = sim.diagnostics().total_energy
 
     def record(k):
         pos, quat = sim.pose('bob')
         vel, omega = sim.twist('bob')
         got[k] = (pos, quat, vel, omega)
+        if k == 1000:   # the rod's pull and the metrics, mid-swing
+            got['reaction'] = sim.reactions()['pivot']['bob'].force_world
+            got['energy'] = sim.diagnostics().total_energy
     # The schedule, through the core's own API: a held wrench per topic at the body origin.
     for k in range(2500):
         if k == 200:
@@ -91,16 +96,35 @@ def test_the_bag_holds_what_the_core_computes(bag):
         sim.step()
         if (k + 1) % 10 == 0:
             record(k + 1)
+    reaction = got.pop('reaction')
+    energy = got.pop('energy')
     for k, (pos, quat, vel, omega) in got.items():
         m = states[k]
         np.testing.assert_array_equal(m.position, pos)
         np.testing.assert_array_equal(m.orientation, quat)
         np.testing.assert_array_equal(m.linear_velocity, vel)
         np.testing.assert_array_equal(m.angular_velocity, omega)
-    # After the reset (published one step after 2.5 s), the scene starts over.
+    at_1s = [m for _, m in msgs[f'{NODE}/constraints/pivot/wrench']
+             if _seconds(m.header.stamp) == 1.0 and m.header.frame_id == 'bob'][0]
+    R = Rotation.from_quat(got[1000][1]).as_matrix()
+    np.testing.assert_allclose([at_1s.wrench.force.x, at_1s.wrench.force.y,
+                                at_1s.wrench.force.z], R.T @ reaction, rtol=1e-12, atol=1e-12)
+    metric = [m for _, m in msgs[f'{NODE}/metrics'] if _seconds(m.header.stamp) == 1.0][0]
+    assert metric.total_energy == energy and metric.energy_change == energy - e0
+    # After the reset (published one step after 2.5 s), the scene starts over; the push in
+    # the bob's own y axis from 3.0 s to 3.2 s is 499 and 699 steps after it.
     sim.reset()
     m = states[2501]
     np.testing.assert_array_equal(m.position, sim.pose('bob')[0])
+    sim.step(499)
+    sim.apply_wrench('bob', [0.0, 10.0, 0.0], frame='body', point_body=[0, 0, 0],
+                     key='topic:bob')
+    sim.step(200)
+    sim.apply_wrench('bob', frame='body', point_body=[0, 0, 0], key='topic:bob')
+    sim.step(801)
+    m = states[4001]
+    np.testing.assert_array_equal(m.position, sim.pose('bob')[0])
+    np.testing.assert_array_equal(m.linear_velocity, sim.twist('bob')[0])
 
 
 def test_the_bob_flies_a_parabola_once_released(bag):
@@ -189,3 +213,31 @@ def test_the_readme_command_runs_through_the_console_script(tmp_path):
     assert done.returncode == 0, done.stderr
     assert 'done: 500 steps' in done.stdout
     assert (tmp_path / 'bag' / 'metadata.yaml').is_file()
+
+
+def test_a_pulse_ending_when_the_next_begins_does_not_cancel_it(tmp_path):
+    # 0.2 + 0.1 is 0.30000000000000004: the release must not land after the new push.
+    schedule = tmp_path / 'pulses.yaml'
+    schedule.write_text('events:\n'
+                        '  - {at: 0.2, wrench: {body: bob, force: [20, 0, 0], duration: 0.1}}\n'
+                        '  - {at: 0.3, wrench: {body: bob, force: [0, 20, 0]}}\n')
+    out = tmp_path / 'bag'
+    assert main([str(SCENE), '--schedule', str(schedule), '--bag', str(out),
+                 '--duration', '0.5']) == 0
+    last = _read(out)[f'{NODE}/body_states'][-1][1]
+    assert abs(last.linear_velocity[1]) > 0.5, 'the push at 0.3 s acted'
+
+
+def test_a_removal_after_a_refused_add_is_recorded_not_fatal(tmp_path):
+    # Pinning the bob to a second point 1 m away cannot hold with the pivot: refused at run
+    # time (it depends on the state); removing it later is refused too, and the run goes on.
+    schedule = tmp_path / 'refused.yaml'
+    schedule.write_text('events:\n'
+                        '  - {at: 0.1, add_constraint: {name: pin, type: ball, body_a: bob,\n'
+                        '                               anchor_b_body: [3.0, 0.0, 1.0]}}\n'
+                        '  - {at: 0.2, remove_constraint: pin}\n')
+    out = tmp_path / 'bag'
+    assert main([str(SCENE), '--schedule', str(schedule), '--bag', str(out),
+                 '--duration', '0.3']) == 0
+    events = [m for _, m in _read(out)[f'{NODE}/remove_constraint/_service_event']]
+    assert not events[1].response[0].success

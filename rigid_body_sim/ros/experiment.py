@@ -15,7 +15,8 @@ the messages that would have carried them: wrenches on ``~/bodies/<B>/wrench``
 and the service calls as the service events ``ros2 bag record --all-services``
 records (``~/add_constraint/_service_event``, ...; request and response). Bag
 time is simulation time. ``/diagnostics`` (about the wall clock) is not
-written. The scene and schedule files go into the bag's ``metadata.yaml``
+written. The summary's largest violation is over the published states (every
+``1 / publish_rate``). The scene and schedule files go into the bag's ``metadata.yaml``
 (``custom_data``). Same inputs, same bag, bit for bit.
 
 A schedule file::
@@ -84,6 +85,16 @@ class Event:
     at: float
     kind: str
     payload: Any
+    release: bool = False   # the zero wrench that ends a pulse
+
+    def order(self) -> tuple:
+        """
+        Sort key: by time to 1 ns, a pulse's release before new inputs at that time.
+
+        (0.2 + 0.1 is 0.30000000000000004: without this the release of a pulse
+        would land after, and cancel, a new wrench scheduled at 0.3.)
+        """
+        return (round(self.at, 9), not self.release)
 
 
 def load_schedule(path: Path, body_names: Sequence[str], constraint_names: Sequence[str],
@@ -156,7 +167,7 @@ def _events(data: Any, bodies: Sequence[str], constraints: Sequence[str],
             raise SpecError(field, f'expected true, got {value!r}')
         else:
             events.append(Event(at, kind, None))
-    events.sort(key=lambda e: e.at)   # stable: events at one time keep their file order
+    events.sort(key=Event.order)   # stable: events at one time keep their file order
     _check_names(events, list(constraints), items)
     return events, duration
 
@@ -188,7 +199,8 @@ def _wrench_events(at: float, value: Any, field: str, bodies: Sequence[str],
     if 'duration' not in value:
         return [on]
     d = positive_scalar(value['duration'], f'{field}.duration')
-    return [on, Event(at + d, 'wrench', (body, np.zeros(3), np.zeros(3), frame_id))]
+    return [on, Event(at + d, 'wrench', (body, np.zeros(3), np.zeros(3), frame_id),
+                      release=True)]
 
 
 def _add_request(value: Any, field: str, bodies: Sequence[str]) -> AddConstraint.Request:
@@ -298,7 +310,7 @@ class Runner:
     def _apply_due_events(self) -> None:
         now = self.session.seconds()
         tolerance = 1e-9 * max(1.0, abs(now))
-        while self.events and self.events[0].at <= now + tolerance:
+        while self.events and round(self.events[0].at, 9) <= now + tolerance:
             event = self.events.pop(0)
             getattr(self, f'_do_{event.kind}')(event.payload)
 
@@ -326,9 +338,14 @@ class Runner:
     def _do_remove_constraint(self, name: str) -> None:
         request = RemoveConstraint.Request(name=name)
         response = RemoveConstraint.Response()
-        response.rows_removed = self.session.remove_constraint(name)   # (checked up front)
-        response.success = True
-        response.message = f'removed constraint {name!r} ({response.rows_removed} rows)'
+        try:   # (checked up front; absent only if its add was refused at run time)
+            response.rows_removed = self.session.remove_constraint(name)
+            response.success = True
+            response.message = f'removed constraint {name!r} ({response.rows_removed} rows)'
+        except Rejected as exc:
+            response.success, response.message = False, str(exc)
+            self.refused.append(f't = {self.session.seconds():g} s: remove_constraint '
+                                f'{name!r}: {exc}')
         self._service_events(RemoveConstraint, '~/remove_constraint', request, response)
 
     def _do_reset(self, _: Any) -> None:
@@ -389,7 +406,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         sim = scene.simulation
         dt = sim.dt if args.dt is None else args.dt
         settings = Settings.from_values({
-            'physics_rate': 1.0 / positive_scalar(dt, '--dt'),
+            'physics_rate': 1.0 / positive_scalar(dt, '--dt'),   # (the exact dt: Session)
             'publish_rate': positive_scalar(args.publish_rate, '--publish-rate'),
             'integrator': args.integrator or ''})
         events, schedule_duration = load_schedule(
@@ -401,7 +418,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except (SceneError, ScheduleError, SpecError) as exc:
         print(f'experiment: error: {exc}', file=sys.stderr)
         return 2
-    session = Session(scene, settings)
+    session = Session(scene, settings, dt=dt)
     metadata = {
         'rigid_body_sim.scene': Path(args.scene).read_text(),
         'rigid_body_sim.schedule': Path(args.schedule).read_text(),

@@ -32,12 +32,14 @@ from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import qos_profile_services_default, QoSProfile
+from rclpy.service_introspection import ServiceIntrospectionState
 from rclpy.signals import SignalHandlerOptions
 from rigid_body_sim_interfaces.msg import BodyStates, Metrics
 from rigid_body_sim_interfaces.srv import AddConstraint, RemoveConstraint, Step
@@ -47,12 +49,12 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
-from .inputs import check_name_token, Rejected, Rejection
+from .inputs import Rejected, Rejection
 from .outputs import body_topic, constraint_topic, MARKERS_TOPIC, METRICS_TOPIC, \
     STATES_TOPIC
 from .pacing import Pacer, WindowStats
 from .session import Session
-from .settings import PARAMETERS, Settings
+from .settings import BY_NAME, PARAMETERS, Settings
 from ..cli import default_scene_path
 from ..core import DivergenceError, SpecError
 from ..scene import load_scene, SceneError
@@ -106,10 +108,6 @@ class SimNode(Node):
         s = self.settings
         scene_path = s.scene or str(default_scene_path())
         scene = load_scene(scene_path)
-        for name in scene.simulation.bodies.names:
-            check_name_token(name, f'scene {scene_path}: body name')
-        for name in scene.simulation.constraint_names:
-            check_name_token(name, f'scene {scene_path}: constraint name')
         self.session = Session(scene, s)
         self.sim = scene.simulation
         self._paused = s.start_paused
@@ -120,6 +118,7 @@ class SimNode(Node):
         self._spin_cost = 0.0     # s: running mean of a non-blocking executor spin
         self._audience: tuple = ([], [])   # per-body, reaction topics with subscribers
         self._audience_expires = 0.0
+        self._last_logged: dict = {}   # Rejection -> monotonic time of its last log line
 
         self._make_interfaces()
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -164,7 +163,11 @@ class SimNode(Node):
                 (Step, 'step', self._on_step),
                 (AddConstraint, 'add_constraint', self._on_add_constraint),
                 (RemoveConstraint, 'remove_constraint', self._on_remove_constraint)):
-            self.create_service(srv_type, f'~/{name}', self._guarded(name, handler))
+            service = self.create_service(srv_type, f'~/{name}', self._guarded(name, handler))
+            # Calls appear on ~/<name>/_service_event (request and response), so that a
+            # recorded run holds its resets and constraint changes, as the runner's bags do.
+            service.configure_introspection(self.get_clock(), qos_profile_services_default,
+                                            ServiceIntrospectionState.CONTENTS)
 
     def _guarded(self, name: str, handler):
         """Wrap a service handler: an unexpected error is a refused request, not a crash."""
@@ -175,6 +178,7 @@ class SimNode(Node):
                 self.session.totals.reject(Rejection.INTERNAL_ERROR.value)
                 self.get_logger().error(f'~/{name}: internal error: {exc!r}\n'
                                         + traceback.format_exc())
+                self._sync_constraint_publishers()
                 response.success = False
                 response.message = f'internal error: {exc!r} (the node runs on; please ' \
                                    f'report it)'
@@ -198,9 +202,12 @@ class SimNode(Node):
     # -- inputs ---------------------------------------------------------------------------
 
     def _rejected(self, cause: Rejection, where: str, message: str) -> str:
-        """Log a rejected input (throttled); return the text for a reply."""
+        """Log a rejected input, at most once a second per cause; return the reply text."""
         text = f'{where}: rejected ({cause.value}): {message}'
-        self.get_logger().warning(text, throttle_duration_sec=1.0)
+        now = time.monotonic()
+        if now - self._last_logged.get(cause, -np.inf) >= 1.0:
+            self._last_logged[cause] = now
+            self.get_logger().warning(text)
         return text
 
     def _reject(self, cause: Rejection, where: str, message: str) -> str:
@@ -270,7 +277,7 @@ class SimNode(Node):
         published = True
         for _ in range(request.steps):
             published = self._advance()
-            if session.diverged:
+            if session.diverged or not self._running:   # (SIGTERM ends a long request)
                 break
         if not published:
             self._publish_state()
@@ -319,12 +326,15 @@ class SimNode(Node):
     def _check_parameters(self, params: list) -> SetParametersResult:
         try:
             trial = Settings(**vars(self.settings))
-            trial.update({p.name: p.value for p in params})
+            trial.update({p.name: p.value for p in params if p.name in BY_NAME})
         except SpecError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params: list) -> None:
+        params = [p for p in params if p.name in BY_NAME]   # (not rclpy's use_sim_time, ...)
+        if not params:
+            return
         s = self.settings
         s.update({p.name: p.value for p in params})
         self.session.configure()
@@ -347,7 +357,9 @@ class SimNode(Node):
             self.get_logger().error(f'paused: {exc}; ~/reset recovers')
             self._publish_diagnostics(time.perf_counter())
             return False
-        self._window.record_step(time.perf_counter() - t0, self._pacer.period)
+        # (steps of ~/step while paused have no real-time budget)
+        self._window.record_step(time.perf_counter() - t0,
+                                 0.0 if self._paused else self._pacer.period)
         if clock_due:
             self._publish_clock()
         if state_due:
@@ -394,7 +406,8 @@ class SimNode(Node):
 
     def _new_window(self, now: float) -> None:
         self._overruns += self._window.overruns
-        self._window = WindowStats(wall_start=now, sim_start=self.session.seconds())
+        self._window = WindowStats(wall_start=now, sim_start=self.session.seconds(),
+                                   lag_resets_before=self._pacer.lag_resets)
 
     def _publish_diagnostics(self, now: float) -> None:
         w = self._window
@@ -409,8 +422,9 @@ class SimNode(Node):
             level, summary = DiagnosticStatus.ERROR, f'diverged: {session.diverged}'
         elif self._paused:
             summary = 'paused'
-        elif w.overruns or self._pacer.lag_resets:
-            level, summary = DiagnosticStatus.WARN, f'{w.overruns} steps over budget'
+        elif w.overruns or self._pacer.lag_resets > w.lag_resets_before:
+            level, summary = DiagnosticStatus.WARN, f'{w.overruns} steps over budget, ' \
+                f'{self._pacer.lag_resets - w.lag_resets_before} backlogs dropped'
         energy_change = d.total_energy - session.energy0
         values = {
             'sim_time_s': f'{session.seconds():.9g}',
@@ -509,7 +523,11 @@ class SimNode(Node):
     def _spin(self, timeout: float) -> None:
         """Serve ready callbacks (one); learn what a spin costs from the non-blocking ones."""
         t0 = time.perf_counter()
-        self.executor_.spin_once(timeout_sec=timeout)
+        try:
+            self.executor_.spin_once(timeout_sec=timeout)
+        except Exception as exc:  # noqa: B902 - a message or parameter callback's bug
+            self.session.totals.reject(Rejection.INTERNAL_ERROR.value)
+            self.get_logger().error(f'a callback failed: {exc!r}\n' + traceback.format_exc())
         if timeout == 0.0:
             self._spin_cost = 0.8 * self._spin_cost + 0.2 * (time.perf_counter() - t0)
 

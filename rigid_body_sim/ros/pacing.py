@@ -86,6 +86,7 @@ class WindowStats:
     overruns: int = 0
     publish_cost_sum: float = 0.0
     publishes: int = 0
+    lag_resets_before: int = 0   # the pacer's lag resets when the window began
 
     def record_step(self, cost: float, budget: float) -> None:
         """Record one step that took ``cost`` wall seconds against ``budget``."""

@@ -18,7 +18,8 @@ from typing import Any, Optional
 import numpy as np
 
 from . import conversions as conv
-from .inputs import check_wrench, constraint_from_request, Rejected, Rejection
+from .inputs import check_name_token, check_wrench, constraint_from_request, Rejected, \
+    Rejection
 from .outputs import Outputs
 from .pacing import output_due, Totals
 from ..core import DivergenceError, SpecError
@@ -34,13 +35,25 @@ class Session:
     scene : Scene
     settings : Settings
         The node's parameters (physics_rate, integrator, world_frame, limits, ...).
+    dt : float, optional
+        s: the step, exactly (the runner's ``--dt``); default ``1 / physics_rate``.
+
+    Raises
+    ------
+    SpecError
+        A body or constraint name that cannot be part of a ROS topic name.
 
     """
 
-    def __init__(self, scene: Scene, settings: Any) -> None:
+    def __init__(self, scene: Scene, settings: Any, dt: Optional[float] = None) -> None:
+        for name in scene.simulation.bodies.names:
+            check_name_token(name, f'scene {scene.source}: body name')
+        for name in scene.simulation.constraint_names:
+            check_name_token(name, f'scene {scene.source}: constraint name')
         self.scene = scene
         self.sim = scene.simulation
         self.settings = settings
+        self.dt = dt
         self.scene_dt = self.sim.dt
         self.scene_integrator = self.sim.integrator_name
         self.configure()
@@ -56,7 +69,7 @@ class Session:
     def configure(self) -> None:
         """Apply physics_rate and integrator (between steps; time stays continuous)."""
         s = self.settings
-        self.sim.set_step(1.0 / s.physics_rate, s.integrator or self.scene_integrator)
+        self.sim.set_step(self.dt or 1.0 / s.physics_rate, s.integrator or self.scene_integrator)
         if hasattr(self, 'outputs'):
             self.outputs.world_frame = s.world_frame
 
@@ -139,6 +152,10 @@ class Session:
                 cause = Rejection.INCONSISTENT_CONSTRAINT if 'inconsistent' in str(exc) \
                     else Rejection.BAD_CONSTRAINT
                 raise Rejected(cause, str(exc)) from None
+            except BaseException:   # (a bug: leave no half-added constraint behind)
+                if spec.name in self.sim.constraint_names:
+                    self.sim.remove_constraint(spec.name)
+                raise
         except Rejected as exc:
             self.totals.reject(exc.cause.value)
             raise
