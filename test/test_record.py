@@ -155,10 +155,16 @@ def _read_mcap(out: Path) -> dict:
     files = list(out.glob('*.mcap'))
     assert len(files) == 1, files
     topics: dict = {}
+    factory, decoders = DecoderFactory(), {}
     with open(files[0], 'rb') as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for _, channel, message, decoded in reader.iter_decoded_messages():
-            topics.setdefault(channel.topic, []).append((message.log_time, decoded))
+        for schema, channel, message in make_reader(f).iter_messages():
+            # (mcap_ros2 refuses service event type names, S_Event: those are counted)
+            if schema.id not in decoders:
+                decoders[schema.id] = None if schema.name.endswith('_Event') else \
+                    factory.decoder_for(channel.message_encoding, schema)
+            decode = decoders[schema.id]
+            topics.setdefault(channel.topic, []).append(
+                (message.log_time, decode(message.data) if decode else None))
     return topics
 
 

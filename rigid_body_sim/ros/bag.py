@@ -3,10 +3,13 @@ rosbag2 bags with MCAP storage, without ``ros2 bag``: written with ``rosbags``.
 
 A bag here is what ``ros2 bag record -s mcap`` writes: a folder with
 ``metadata.yaml`` (version 9) and one ``.mcap`` file, messages in CDR under the
-type's full ROS name (``geometry_msgs/msg/PoseStamped``);
-the message definitions go into the bag, so any rosbag2 or MCAP reader (Foxglove,
-``ros2 bag``, ``rosbags``, ``mcap``) decodes them. This package's own types
-(``rigid_body_sim_interfaces``) and the service event types of its services
+type's full ROS name (``geometry_msgs/msg/PoseStamped``). The message
+definitions and type hashes go into the bag, so rosbag2 and MCAP readers
+(Foxglove, ``ros2 bag``, ``rosbags``, ``mcap``) decode them (except
+``mcap_ros2``'s decoder for service event types: it refuses the underscore in
+``AddConstraint_Event``, as it does in any rosbag2 service recording). This
+package's own types (``rigid_body_sim_interfaces``) and the service event types
+of its services
 (``<srv>_Event``, which ``ros2 bag record --all-services`` records on
 ``<service>/_service_event``) are registered from their definition files.
 """
@@ -14,6 +17,7 @@ the message definitions go into the bag, so any rosbag2 or MCAP reader (Foxglove
 from __future__ import annotations
 
 from functools import lru_cache
+import json
 from pathlib import Path
 from typing import Any, Optional
 
@@ -113,10 +117,30 @@ _DTYPES = {'bool': np.bool_, 'byte': np.uint8, 'char': np.uint8, 'octet': np.uin
 
 
 def _definition(msgtype: str) -> tuple[str, str]:
-    """Return the message definition text and RIHS01 hash stored in a bag for a type."""
-    twin = msgtype.replace('/srv/', '/msg/')
+    """
+    Return the message definition text and RIHS01 type hash stored in a bag for a type.
+
+    A service type's definition is written from its msg twin; its hash is the one
+    rosidl generated for the service (``share/<pkg>/srv/<S>.json``), which the
+    twin's would not match.
+    """
     store = typestore()
-    return store.generate_msgdef(twin, ros_version=2)[0], store.hash_rihs01(twin)
+    if '/srv/' not in msgtype:
+        return store.generate_msgdef(msgtype, ros_version=2)[0], store.hash_rihs01(msgtype)
+    twin = msgtype.replace('/srv/', '/msg/')
+    return store.generate_msgdef(twin, ros_version=2)[0], _service_hash(msgtype)
+
+
+def _service_hash(msgtype: str) -> str:
+    """Return rosidl's RIHS01 hash of a service's type (``pkg/srv/S_Event`` ...)."""
+    from ament_index_python.packages import get_package_share_directory
+    package, _, name = msgtype.split('/')
+    service = name.rsplit('_', 1)[0]
+    path = Path(get_package_share_directory(package)) / 'srv' / f'{service}.json'
+    for entry in json.loads(path.read_text())['type_hashes']:
+        if entry['type_name'] == msgtype:
+            return entry['hash_string']
+    raise KeyError(f'{path}: no type hash for {msgtype}')
 
 
 def _service_types(package: str, name: str, request: str, response: str) -> dict:
