@@ -187,13 +187,18 @@ class Recorder:
                 self._publishers(topic.name) <= 1
 
     def _publishers(self, name: str) -> int:
-        """Return how many publishers, other than this node's own, the graph has for a topic."""
+        """
+        Return how many publishers, other than this node's own, the graph has for a topic.
+
+        Counted by endpoint GID: while discovery settles the graph can list one
+        publisher twice, which must not turn a topic's drop count into '?'.
+        """
         count = self.node.count_publishers(name)
         if count <= 1:
             return count
         me = (self.node.get_name(), self.node.get_namespace())
-        return sum((i.node_name, i.node_namespace) != me
-                   for i in self.node.get_publishers_info_by_topic(name))
+        return len({bytes(i.endpoint_gid) for i in self.node.get_publishers_info_by_topic(name)
+                    if (i.node_name, i.node_namespace) != me})
 
     def _qos(self, name: str) -> QoSProfile:
         """Reliable and volatile, unless the publishers offer only best effort / all latch."""
