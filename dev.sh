@@ -16,7 +16,8 @@
 #   ./dev.sh record -o OUT [options]      record a running node's topics to a bag
 #   ./dev.sh plot BAG [-o out.png]        plot a bag
 #   ./dev.sh test [pytest args]           run the whole test suite
-#   ./dev.sh bench [--quick]              run the benchmarks (tables and plots in bench/out/)
+#   ./dev.sh bench [--quick]              run the benchmarks (installs bench/requirements.txt:
+#                                         MuJoCo; tables and plots in bench/out/)
 #   ./dev.sh setup                        set up only
 set -euo pipefail
 
@@ -95,6 +96,19 @@ build() {
     fi
 }
 
+bench_requirements() {
+    # Benchmark-only dependencies (MuJoCo, for bench/mujoco_peer.py): installed by
+    # ./dev.sh bench only, never by setup, run or test; again when either file changes.
+    local want have
+    want=$(hash_of requirements.txt bench/requirements.txt)
+    have=$(cat "$VENV/.bench-requirements.sha256" 2>/dev/null || true)
+    if [ "$want" != "$have" ]; then
+        say "installing bench/requirements.txt into .venv (MuJoCo, for bench/mujoco_peer.py)"
+        "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r bench/requirements.txt
+        echo "$want" > "$VENV/.bench-requirements.sha256"
+    fi
+}
+
 activate() {
     # shellcheck disable=SC1091
     source "$VENV/bin/activate"
@@ -145,10 +159,11 @@ case "$cmd" in
         ;;
     bench)
         setup
+        bench_requirements
         exec python bench/run_all.py "$@"
         ;;
     *)
-        sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'
         exit 2
         ;;
 esac

@@ -198,6 +198,8 @@ def main(argv=None) -> int:
                    help='free bodies only (bench/constraints.py runs the rest)')
     p.add_argument('--skip-node', action='store_true',
                    help='no ROS node benchmark (bench/node.py runs it)')
+    p.add_argument('--skip-mujoco', action='store_true',
+                   help='no side-by-side with MuJoCo (bench/mujoco_peer.py runs it)')
     args = p.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     print(f'python {platform.python_version()}, numpy {np.__version__}, '
@@ -228,6 +230,9 @@ def main(argv=None) -> int:
     if not args.skip_constraints:
         import constraints
         constraints.main(['--quick'] if args.quick else [])
+    if not args.skip_mujoco:
+        import mujoco_peer
+        mujoco_peer.main(['--quick'] if args.quick else [])
     if not args.skip_node:
         import node
         node.main(['--quick'] if args.quick else [])
