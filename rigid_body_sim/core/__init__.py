@@ -12,13 +12,13 @@ from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, JointType
 from .diagnostics import Diagnostics
 from .effects import AppliedWrenches, Damping, EFFECTS, Frame, Gravity
-from .errors import DivergenceError, SpecError
+from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import INTEGRATORS, Invariant
 from .simulation import Reaction, Simulation
 
 __all__ = [
     'AppliedWrenches', 'BodySet', 'Constraint', 'Damping', 'Diagnostics', 'DivergenceError',
-    'EFFECTS', 'Frame',
+    'EFFECTS', 'Frame', 'InconsistentConstraintError',
     'Gravity', 'INTEGRATORS', 'Invariant', 'JointType', 'Reaction', 'RigidBody', 'Simulation',
     'SpecError', 'State',
 ]

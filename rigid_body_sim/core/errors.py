@@ -25,6 +25,10 @@ class SpecError(ValueError):
         return SpecError(joined, self.problem)
 
 
+class InconsistentConstraintError(SpecError):
+    """A constraint that no configuration satisfies together with the others (refused)."""
+
+
 class DivergenceError(RuntimeError):
     """
     A step produced a non-finite state; the simulation stays at the last finite one.

@@ -31,7 +31,7 @@ from .constraints import Constraint, ConstraintSet
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
-from .errors import DivergenceError, SpecError
+from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .solver import ConstraintSolver
 from .validate import positive_scalar
@@ -258,11 +258,13 @@ class Simulation:
         """Tell whether the constraints can all hold."""
         return self._reach() <= self.CONSISTENCY_TOLERANCE
 
-    def _inconsistent(self, name: str, field: str, outcome: str, residual: float) -> SpecError:
+    def _inconsistent(self, name: str, field: str, outcome: str,
+                      residual: float) -> InconsistentConstraintError:
         others = [n for n in self.dynamics.solver.constraints.names if n != name]
-        return SpecError(field, f'constraint {name!r} is inconsistent with {others}: no '
-                                f'configuration satisfies them all (the closest leaves '
-                                f'max |Φ| = {residual:.3g} m or rad); {outcome}')
+        return InconsistentConstraintError(
+            field, f'constraint {name!r} is inconsistent with {others}: no configuration '
+                   f'satisfies them all (the closest leaves max |Φ| = {residual:.3g} m or '
+                   f'rad); {outcome}')
 
     def _name_first_inconsistent(self) -> None:
         """Raise for the first initial constraint that cannot hold with those before it."""

@@ -47,13 +47,17 @@ def array3(v) -> np.ndarray:
     return np.array([v.x, v.y, v.z], dtype=float)
 
 
+def pose(position: np.ndarray, quat_xyzw: np.ndarray) -> Pose:
+    """Return a Pose of a position (3,) and an (x, y, z, w) quaternion (4,)."""
+    p = np.asarray(position, dtype=float).tolist()
+    q = np.asarray(quat_xyzw, dtype=float).tolist()
+    return Pose(position=Point(x=p[0], y=p[1], z=p[2]),
+                orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))
+
+
 def pose_stamped(header: Header, position: np.ndarray, quat_xyzw: np.ndarray) -> PoseStamped:
     """Return a PoseStamped of a position (3,) and an (x, y, z, w) quaternion (4,)."""
-    p = position.tolist()
-    q = quat_xyzw.tolist()
-    return PoseStamped(header=header, pose=Pose(
-        position=Point(x=p[0], y=p[1], z=p[2]),
-        orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])))
+    return PoseStamped(header=header, pose=pose(position, quat_xyzw))
 
 
 def twist_stamped(header: Header, linear: np.ndarray, angular: np.ndarray) -> TwistStamped:

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from typing import Optional, Sequence
 
-from geometry_msgs.msg import Point, Pose, Quaternion
 import numpy as np
 from rigid_body_sim_interfaces.msg import Metrics
 from std_msgs.msg import ColorRGBA, Header
@@ -186,12 +185,12 @@ class Outputs:
                 q = state.quat_principal_world[i]
             out.append(Marker(
                 header=header, ns='bodies', id=i, type=shape, action=Marker.ADD,
-                pose=_pose(state.pos_com_world[i], q), scale=conv.vector3(scale),
+                pose=conv.pose(state.pos_com_world[i], q), scale=conv.vector3(scale),
                 color=ColorRGBA(**dict(zip('rgba', PALETTE[i % len(PALETTE)]))), text=name))
         for j, (name, point) in enumerate(sim.joint_anchors().items()):
             out.append(Marker(
                 header=header, ns='joints', id=j, type=Marker.SPHERE, action=Marker.ADD,
-                pose=_pose(point, np.array([0.0, 0.0, 0.0, 1.0])),
+                pose=conv.pose(point, [0.0, 0.0, 0.0, 1.0]),
                 scale=conv.vector3([JOINT_MARKER_SIZE] * 3),
                 color=ColorRGBA(r=0.84, g=0.15, b=0.16, a=1.0), text=name))
         return MarkerArray(markers=out)
@@ -207,10 +206,3 @@ def equal_inertia_box(mass: float, moments: np.ndarray) -> list:
     i1, i2, i3 = (float(x) for x in moments)
     sq = 6.0 / mass * np.array([i2 + i3 - i1, i1 + i3 - i2, i1 + i2 - i3])
     return np.sqrt(np.maximum(sq, 1e-6)).tolist()
-
-
-def _pose(position: np.ndarray, quat_xyzw: np.ndarray) -> Pose:
-    p = [float(x) for x in position]
-    q = [float(x) for x in quat_xyzw]
-    return Pose(position=Point(x=p[0], y=p[1], z=p[2]),
-                orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))

@@ -22,7 +22,7 @@ from .inputs import check_name_token, check_wrench, constraint_from_request, Rej
     Rejection
 from .outputs import Outputs
 from .pacing import output_due, Totals
-from ..core import DivergenceError, SpecError
+from ..core import DivergenceError, InconsistentConstraintError, SpecError
 from ..scene import Scene
 
 
@@ -149,8 +149,8 @@ class Session:
             try:
                 self.sim.add_constraint(spec)
             except SpecError as exc:
-                cause = Rejection.INCONSISTENT_CONSTRAINT if 'inconsistent' in str(exc) \
-                    else Rejection.BAD_CONSTRAINT
+                cause = Rejection.INCONSISTENT_CONSTRAINT \
+                    if isinstance(exc, InconsistentConstraintError) else Rejection.BAD_CONSTRAINT
                 raise Rejected(cause, str(exc)) from None
             except BaseException:   # (a bug: leave no half-added constraint behind)
                 if spec.name in self.sim.constraint_names:
