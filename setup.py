@@ -15,7 +15,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML', 'rosbags', 'mcap', 'matplotlib'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML', 'rosbags', 'mcap', 'matplotlib'],
     extras_require={'test': ['pytest', 'mcap-ros2-support']},
     zip_safe=True,
     maintainer='rigid_body_sim developers',

@@ -30,6 +30,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import rotation as so3
+from . import step_kernels
 from .errors import SpecError
 from .validate import finite_array, positive_scalar, unit_quaternion
 
@@ -229,6 +230,7 @@ class BodySet:
     com_body: np.ndarray
     anisotropic: np.ndarray
     index: dict[str, int] = field(default_factory=dict)
+    _outputs: Any = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_bodies(cls, bodies: Sequence[RigidBody]) -> 'BodySet':
@@ -286,24 +288,39 @@ class BodySet:
 
     # -- outputs in the user's body frame -------------------------------------------------
 
+    def outputs(self, state: State) -> np.ndarray:
+        """
+        Poses and twists of every body in its own frame, (n, 19); see ``step_kernels.outputs``.
+
+        Computed by one compiled call and kept for the state it was computed for
+        (a node reads pose and twist after every step).
+        """
+        c = self._outputs
+        if (c is not None and c[0] is state and c[1] is state.pos_com_world
+                and c[2] is state.quat_principal_world and c[3] is state.vel_com_world
+                and c[4] is state.ang_vel_principal):
+            return c[5]
+        out = np.empty((len(self), 19))
+        step_kernels.outputs(state.pos_com_world, state.quat_principal_world,
+                             state.vel_com_world, state.ang_vel_principal,
+                             self.quat_body_principal, self.com_body, out)
+        # Kept with the arrays it was computed from: a step replaces a state's arrays,
+        # it does not modify them.
+        self._outputs = (state, state.pos_com_world, state.quat_principal_world,
+                         state.vel_com_world, state.ang_vel_principal, out)
+        return out
+
     def pose_world(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Body-origin positions (n, 3) and body-frame orientations (n, 4, xyzw) in world."""
-        q_wb = so3.quat_multiply(state.quat_principal_world,
-                                 so3.quat_conjugate(self.quat_body_principal))
-        q_wb = np.where(q_wb[:, 3:4] < 0.0, -q_wb, q_wb)
-        offset = so3.rotate(q_wb, self.com_body)
-        return state.pos_com_world - offset, q_wb
+        out = self.outputs(state)
+        return out[:, 0:3].copy(), out[:, 3:7].copy()
 
     def twist_world(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Velocity of each body origin (n, 3) and angular velocity (n, 3), world frame."""
-        R_wp = so3.quat_to_matrix(state.quat_principal_world)
-        w_world = np.einsum('nij,nj->ni', R_wp, state.ang_vel_principal)
-        pos_origin, _ = self.pose_world(state)
-        return state.vel_com_world + so3.cross(w_world, pos_origin - state.pos_com_world), w_world
+        out = self.outputs(state)
+        return out[:, 7:10].copy(), out[:, 10:13].copy()
 
     def twist_body(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Origin velocity (n, 3) and angular velocity (n, 3), both in the body frame."""
-        v_world, w_world = self.twist_world(state)
-        _, q_wb = self.pose_world(state)
-        R_wb = so3.quat_to_matrix(q_wb)
-        return (np.einsum('nji,nj->ni', R_wb, v_world), np.einsum('nji,nj->ni', R_wb, w_world))
+        out = self.outputs(state)
+        return out[:, 13:16].copy(), out[:, 16:19].copy()

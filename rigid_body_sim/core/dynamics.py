@@ -15,13 +15,18 @@ counts its work in :class:`WorkCounters`.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
 from . import rotation as so3
 from .bodies import BodySet
-from .effects import Effect, Kinematics, WrenchAccumulator
+from .effects import AppliedWrenches, Damping, Effect, Gravity, Kinematics, WrenchAccumulator
+from .errors import SpecError
+from .step_kernels import HAS_DAMPING, HAS_POSITION_FORCES
+
+#: The effects the compiled kernels evaluate (see :mod:`.step_kernels`).
+KERNEL_EFFECTS = (Gravity, Damping, AppliedWrenches)
 
 
 @dataclass
@@ -77,6 +82,8 @@ class Dynamics:
 
     def __init__(self, bodies: BodySet, effects: Sequence[Effect]) -> None:
         self.bodies = bodies
+        for i, effect in enumerate(effects):
+            check_kernel_effect(effect, f'effects[{i}]')
         self.effects = list(effects)
         self.counters = WorkCounters()
         # Set by the Simulation: constraint rows and their solver (None: no constraints).
@@ -85,6 +92,7 @@ class Dynamics:
         # Incremented whenever the model changes between steps (a wrench is
         # applied, an effect added): integrators key cached evaluations on it.
         self.version = 0
+        self._kernel_model: Optional[tuple] = None
         self._refresh()
 
     def _refresh(self) -> None:
@@ -96,6 +104,7 @@ class Dynamics:
 
     def add_effect(self, effect: Effect) -> None:
         """Add an (already bound) effect between steps."""
+        check_kernel_effect(effect, 'effect')
         self.effects.append(effect)
         self._refresh()
         self.changed()
@@ -103,6 +112,59 @@ class Dynamics:
     def changed(self) -> None:
         """Mark the model as changed, which invalidates cached evaluations."""
         self.version += 1
+
+    def kernel_model(self, time_mid: float) -> tuple:
+        """
+        Return the effects as the arrays of :mod:`.step_kernels`: (body, gforce, wrench, flags).
+
+        Rebuilt only when the model changed (``version``); ``time_mid`` picks the
+        active wrenches of an AppliedWrenches table that no Simulation switched
+        (:meth:`.effects.AppliedWrenches.begin_step`).
+        """
+        cached = self._kernel_model
+        if cached is not None and cached[0] == self.version and cached[1] in (None, time_mid):
+            return cached[2]
+        bodies = self.bodies
+        n = len(bodies)
+        body = np.zeros((n, 8))
+        body[:, 0], body[:, 1], body[:, 2:5] = bodies.mass, bodies.inv_mass, bodies.moments
+        body[bodies.anisotropic, 7] = 1.0
+        gforce = np.zeros((n, 3))
+        wrench = [np.zeros((0, 11))]
+        flags = 0
+        time_dependent = False
+        for effect in self.effects:
+            if isinstance(effect, Gravity):
+                gforce += effect._force
+                flags |= HAS_POSITION_FORCES
+            elif isinstance(effect, Damping):
+                np.add.at(body[:, 5], effect.index, effect.linear)
+                np.add.at(body[:, 6], effect.index, effect.angular)
+                flags |= HAS_DAMPING
+            elif isinstance(effect, AppliedWrenches) and len(effect):
+                rows = effect.kernel_rows(time_mid)
+                time_dependent |= effect._active is None
+                if len(rows):
+                    wrench.append(rows)
+                    flags |= HAS_POSITION_FORCES
+        model = (body, gforce, np.concatenate(wrench), flags)
+        # Only a table no Simulation switches depends on the time (then not cached).
+        self._kernel_model = (self.version, time_mid if time_dependent else None, model)
+        return model
+
+    def count_effect_work(self, rhs: int, kicks: int, flows: int) -> None:
+        """Add compiled-kernel work to each effect's counters, as if evaluated one by one."""
+        for effect in self.effects:
+            if isinstance(effect, Damping):
+                calls = rhs + flows
+                bodies = len(effect.index)
+            elif isinstance(effect, Gravity):
+                calls, bodies = rhs + kicks, len(self.bodies)
+            else:
+                bodies = effect.active_count()
+                calls = rhs + kicks if bodies else 0
+            effect.evaluations += calls
+            effect.body_evaluations += calls * bodies
 
     @property
     def constrained(self) -> bool:
@@ -169,3 +231,11 @@ class Dynamics:
         m6 = 1.0 / self.solver.inv_mass_6.reshape(-1, 6)
         dforce = m6 * (a6c - a6)
         return force + dforce[:, :3], torque + dforce[:, 3:]
+
+
+def check_kernel_effect(effect: Effect, field_name: str) -> None:
+    """Raise SpecError unless ``effect`` is one the compiled step evaluates."""
+    if not isinstance(effect, KERNEL_EFFECTS):
+        raise SpecError(field_name, f'{type(effect).__name__} is not an effect the compiled '
+                                    f'step evaluates; known: '
+                                    f'{[cls.name for cls in KERNEL_EFFECTS]}')

@@ -372,6 +372,34 @@ class AppliedWrenches(Effect):
             }
         return self._arrays
 
+    def kernel_rows(self, time_mid: float) -> np.ndarray:
+        """
+        The entries active in this step as rows of the compiled kernels' wrench array.
+
+        Returns
+        -------
+        ndarray, shape (k, 11)
+            ``body, in_body, force (3), torque (3), point (3)`` (see
+            :mod:`.step_kernels`); ``time_mid`` decides which entries are active
+            when no :meth:`begin_step` did.
+        """
+        tab = self._table()
+        active = self._active
+        if active is None:
+            active = (tab['start'] <= time_mid) & (time_mid < tab['end'])
+        rows = np.empty((int(np.count_nonzero(active)), 11))
+        rows[:, 0] = tab['body'][active]
+        rows[:, 1] = tab['in_body'][active]
+        rows[:, 2:5] = tab['force'][active]
+        rows[:, 5:8] = tab['torque'][active]
+        rows[:, 8:11] = tab['point'][active]
+        self._kernel_active = len(rows)
+        return rows
+
+    def active_count(self) -> int:
+        """Entries active in the step the compiled kernels last took."""
+        return getattr(self, '_kernel_active', 0)
+
     def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
         """Add the wrenches active in this step (or at ``kin.time``, outside a simulation)."""
         if not self._rows:

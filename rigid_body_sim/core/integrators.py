@@ -70,6 +70,7 @@ from typing import ClassVar, Optional
 import numpy as np
 
 from . import rotation as so3
+from . import step_kernels as kern
 from .bodies import State
 from .dynamics import Dynamics
 from .errors import SpecError
@@ -112,6 +113,8 @@ class Integrator:
     name: ClassVar[str] = ''
     order: ClassVar[int] = 0
     conserves: ClassVar[frozenset] = frozenset()
+    #: The method's code in :mod:`.step_kernels`.
+    KERNEL: ClassVar[int] = -1
 
     #: Largest rotation (rad) of a constrained body in one (sub)step; a faster one
     #: makes the step split into equal sub-steps (None: never).
@@ -123,6 +126,10 @@ class Integrator:
 
     def __init__(self, dynamics: Dynamics) -> None:
         self.dynamics = dynamics
+        # The splittings' last kick, reused as the next step's first (first same as
+        # last) while the model and the configuration it was evaluated at are current.
+        self._kick_buffer = np.zeros((len(dynamics.bodies), 6))
+        self._kick_at: Optional[tuple] = None
 
     def substeps(self, state: State, dt: float) -> int:
         """
@@ -159,6 +166,8 @@ class Integrator:
         ``steps * dt`` (no rounding drift); default ``state.time + dt``.
         """
         t_end = state.time + dt if t_end is None else t_end
+        if not self.dynamics.constrained:
+            return self._free_step(state, dt, t_end)
         k = self.substeps(state, dt)
         while True:
             # At the finest split a step must finish: the projection then falls back.
@@ -175,6 +184,30 @@ class Integrator:
         q /= np.linalg.norm(q, axis=-1, keepdims=True)   # rounding only, in place
         self.dynamics.counters.steps += 1
         return new
+
+    def _free_step(self, state: State, dt: float, t_end: float) -> State:
+        """A step of bodies no constraint couples: one call of the compiled kernel."""
+        dyn = self.dynamics
+        body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
+        pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
+        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
+        at = self._kick_at
+        valid = (at is not None and at[0] == dyn.version and at[1] is state.pos_com_world
+                 and at[2] is state.quat_principal_world)
+        counts = np.zeros(5, dtype=np.int64)
+        valid = kern.free_step(self.KERNEL, pos, quat, vel, om, dt, body, gforce, wrench, flags,
+                               self._kick_buffer, valid, counts)
+        self._kick_at = (dyn.version, pos, quat) if valid else None
+        rhs, kicks, gyro, rot, flows = counts.tolist()
+        c = dyn.counters
+        c.rhs_evaluations += rhs
+        c.kick_evaluations += kicks
+        c.gyroscopic_body_evaluations += gyro
+        c.rotation_updates += rot
+        c.steps += 1
+        if dyn.effects:
+            dyn.count_effect_work(rhs, kicks, flows)
+        return State(t_end, pos, quat, vel, om)
 
     def _substepped(self, state: State, dt: float, t_end: float, k: int) -> State:
         """Advance by ``k`` equal sub-steps of ``dt / k``."""
@@ -280,6 +313,7 @@ class RKMK4(RungeKuttaMuntheKaas):
     """Fourth-order Runge–Kutta–Munthe-Kaas (classical RK4 tableau)."""
 
     name = 'rkmk4'
+    KERNEL = kern.RKMK4
     order = 4
     conserves = frozenset({Invariant.ORIENTATION_ON_SO3, Invariant.LINEAR_MOMENTUM})
     A = np.array([[0.0, 0.0, 0.0, 0.0],
@@ -491,6 +525,7 @@ class SymplecticEuler(Splitting):
     """First-order symplectic (semi-implicit) Euler: kick, then drift."""
 
     name = 'symplectic_euler'
+    KERNEL = kern.SYMPLECTIC_EULER
     order = 1
     conserves = frozenset({Invariant.ORIENTATION_ON_SO3, Invariant.LINEAR_MOMENTUM,
                            Invariant.ANGULAR_MOMENTUM, Invariant.SYMPLECTIC,
@@ -502,6 +537,7 @@ class LiePoisson2(Splitting):
     """Second-order symplectic Lie–Poisson splitting (Strang, rotor 1-2-3-2-1)."""
 
     name = 'lie_poisson2'
+    KERNEL = kern.LIE_POISSON2
     order = 2
     conserves = SymplecticEuler.conserves
 
@@ -513,6 +549,7 @@ class LiePoisson4(Splitting):
     """Fourth-order symplectic splitting: Yoshida's triple jump of lie_poisson2."""
 
     name = 'lie_poisson4'
+    KERNEL = kern.LIE_POISSON4
     order = 4
     conserves = SymplecticEuler.conserves
     COMPOSITION = (_W1, 1.0 - 2.0 * _W1, _W1)

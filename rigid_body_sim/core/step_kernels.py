@@ -1,0 +1,455 @@
+"""
+Compiled kernels: a whole step of bodies that no constraint couples, in one call.
+
+The integrators of :mod:`.integrators` take a step of an unconstrained scene
+here, compiled by numba (``@njit(cache=True)``: the first run compiles and
+caches to ``__pycache__``; ``NUMBA_DISABLE_JIT=1`` runs the same code as plain
+Python for debugging). The arithmetic is that of the methods documented in
+:mod:`.integrators`, written as loops over bodies instead of ~1,000 small numpy
+calls a step; the results agree with the former numpy code to rounding.
+
+Model arrays (built by :meth:`.dynamics.Dynamics.kernel_model` when the scene
+changes, never per step)
+---------------------------------------------------------------------------
+``body`` : (n, 8)
+    ``mass, 1/mass, J1, J2, J3, c_lin, c_ang, anisotropic`` per body (principal
+    moments J; damping coefficients summed over the scene's damping effects;
+    ``anisotropic`` 1.0 if the gyroscopic term is non-zero).
+``gforce`` : (n, 3)
+    N, world: the gravity force ``m g`` of each body (zeros without gravity).
+``wrench`` : (k, 11)
+    The applied wrenches active in this step, one row each: ``body index,
+    in_body (1.0 if force and torque are in the principal frame), force (3),
+    torque (3), point of application (3, principal frame, from the centre of
+    mass)``.
+``flags`` : int
+    Bit ``HAS_POSITION_FORCES``: a kick has something to add (gravity or an
+    active wrench); bit ``HAS_DAMPING``: damping acts.
+
+Work counts (``counts``, int64 (5,), incremented)
+-------------------------------------------------
+``RHS`` full right-hand sides, ``KICK`` kick evaluations (position-dependent
+wrenches), ``GYRO`` bodies whose gyroscopic term or free-rotor sub-flow was
+computed, ``ROT`` orientations updated by an exponential map, ``FLOW`` exact
+damping flows.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+import numpy as np
+
+SYMPLECTIC_EULER, LIE_POISSON2, LIE_POISSON4, RKMK4 = 0, 1, 2, 3
+HAS_POSITION_FORCES, HAS_DAMPING = 1, 2
+RHS, KICK, GYRO, ROT, FLOW = 0, 1, 2, 3, 4
+
+# Below this angle (rad) exp uses its series (as rotation.exp_quat).
+_SMALL_ANGLE = 1e-4
+_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+
+
+@njit(cache=True)
+def quat_exp_multiply(q: np.ndarray, u0: float, u1: float, u2: float, out: np.ndarray) -> None:
+    """``out = q ⊗ exp(u)`` for one body (q, out: (4,), may be the same array)."""
+    theta = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    half = 0.5 * theta
+    if theta < _SMALL_ANGLE:
+        t2 = theta * theta
+        coef = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
+    else:
+        coef = math.sin(half) / theta
+    bx, by, bz, bw = coef * u0, coef * u1, coef * u2, math.cos(half)
+    ax, ay, az, aw = q[0], q[1], q[2], q[3]
+    out[0] = aw * bx + ax * bw + ay * bz - az * by
+    out[1] = aw * by - ax * bz + ay * bw + az * bx
+    out[2] = aw * bz + ax * by - ay * bx + az * bw
+    out[3] = aw * bw - ax * bx - ay * by - az * bz
+
+
+@njit(cache=True)
+def quat_matrix(q: np.ndarray, R: np.ndarray) -> None:
+    """Rotation matrix ``R`` (3, 3) of the unit quaternion ``q`` (4,, xyzw)."""
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    R[0, 0] = 1.0 - 2.0 * (yy + zz)
+    R[0, 1] = 2.0 * (xy - wz)
+    R[0, 2] = 2.0 * (xz + wy)
+    R[1, 0] = 2.0 * (xy + wz)
+    R[1, 1] = 1.0 - 2.0 * (xx + zz)
+    R[1, 2] = 2.0 * (yz - wx)
+    R[2, 0] = 2.0 * (xz - wy)
+    R[2, 1] = 2.0 * (yz + wx)
+    R[2, 2] = 1.0 - 2.0 * (xx + yy)
+
+
+@njit(cache=True)
+def position_wrench(quat: np.ndarray, body: np.ndarray, gforce: np.ndarray,
+                    wrench: np.ndarray, force: np.ndarray, torque: np.ndarray) -> None:
+    """
+    Gravity and applied wrenches: force (n, 3) world and torque (n, 3) principal.
+
+    Overwrites ``force`` and ``torque``.
+    """
+    force[:] = gforce
+    torque[:] = 0.0
+    R = np.empty((3, 3))
+    for e in range(wrench.shape[0]):
+        i = int(wrench[e, 0])
+        quat_matrix(quat[i], R)
+        f0, f1, f2 = wrench[e, 2], wrench[e, 3], wrench[e, 4]
+        t0, t1, t2 = wrench[e, 5], wrench[e, 6], wrench[e, 7]
+        r0, r1, r2 = wrench[e, 8], wrench[e, 9], wrench[e, 10]
+        if wrench[e, 1] != 0.0:
+            # Principal-frame force at a principal-frame point: torque τ + r × f.
+            for a in range(3):
+                force[i, a] += R[a, 0] * f0 + R[a, 1] * f1 + R[a, 2] * f2
+            torque[i, 0] += t0 + (r1 * f2 - r2 * f1)
+            torque[i, 1] += t1 + (r2 * f0 - r0 * f2)
+            torque[i, 2] += t2 + (r0 * f1 - r1 * f0)
+        else:
+            force[i, 0] += f0
+            force[i, 1] += f1
+            force[i, 2] += f2
+            # World torque τ + (R r) × f, then into the principal frame.
+            w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
+            w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
+            w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
+            c0 = t0 + (w1 * f2 - w2 * f1)
+            c1 = t1 + (w2 * f0 - w0 * f2)
+            c2 = t2 + (w0 * f1 - w1 * f0)
+            for a in range(3):
+                torque[i, a] += R[0, a] * c0 + R[1, a] * c1 + R[2, a] * c2
+
+
+@njit(cache=True)
+def accelerations(quat: np.ndarray, vel: np.ndarray, om: np.ndarray, body: np.ndarray,
+                  gforce: np.ndarray, wrench: np.ndarray, flags: int, acc: np.ndarray,
+                  om_dot: np.ndarray, counts: np.ndarray) -> None:
+    """Free (unconstrained) linear acceleration (n, 3) and dΩ/dt (n, 3): every effect."""
+    n = quat.shape[0]
+    position_wrench(quat, body, gforce, wrench, acc, om_dot)
+    counts[RHS] += 1
+    for i in range(n):
+        if flags & HAS_DAMPING:
+            for a in range(3):
+                acc[i, a] -= body[i, 5] * vel[i, a]
+                om_dot[i, a] -= body[i, 6] * om[i, a]
+        if body[i, 7] != 0.0:
+            # The gyroscopic term Ω × JΩ.
+            w0, w1, w2 = om[i, 0], om[i, 1], om[i, 2]
+            l0, l1, l2 = body[i, 2] * w0, body[i, 3] * w1, body[i, 4] * w2
+            om_dot[i, 0] -= w1 * l2 - w2 * l1
+            om_dot[i, 1] -= w2 * l0 - w0 * l2
+            om_dot[i, 2] -= w0 * l1 - w1 * l0
+            counts[GYRO] += 1
+        for a in range(3):
+            acc[i, a] *= body[i, 1]
+            om_dot[i, a] /= body[i, 2 + a]
+
+
+@njit(cache=True)
+def _dexpinv(u: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
+    """``w + u × w / 2 + u × (u × w) / 12`` row by row (see integrators.dexpinv_right)."""
+    for i in range(u.shape[0]):
+        a0, a1, a2 = u[i, 0], u[i, 1], u[i, 2]
+        b0, b1, b2 = w[i, 0], w[i, 1], w[i, 2]
+        c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        d0, d1, d2 = a1 * c2 - a2 * c1, a2 * c0 - a0 * c2, a0 * c1 - a1 * c0
+        out[i, 0] = b0 + 0.5 * c0 + d0 / 12.0
+        out[i, 1] = b1 + 0.5 * c1 + d1 / 12.0
+        out[i, 2] = b2 + 0.5 * c2 + d2 / 12.0
+
+
+@njit(cache=True)
+def rkmk4_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, h: float,
+               body: np.ndarray, gforce: np.ndarray, wrench: np.ndarray, flags: int,
+               counts: np.ndarray) -> None:
+    """One classical RK4 Munthe-Kaas step of every body, in place."""
+    n = pos.shape[0]
+    kp = np.empty((4, n, 3))
+    kv = np.empty((4, n, 3))
+    kw = np.empty((4, n, 3))
+    kr = np.empty((4, n, 3))
+    v = np.empty((n, 3))
+    w = np.empty((n, 3))
+    u = np.empty((n, 3))
+    q = np.empty((n, 4))
+    a_stage = (0.0, 0.5, 0.5, 1.0)
+    for s in range(4):
+        a = h * a_stage[s]
+        for i in range(n):
+            for c in range(3):
+                if s == 0:
+                    v[i, c], w[i, c], u[i, c] = vel[i, c], om[i, c], 0.0
+                else:
+                    v[i, c] = vel[i, c] + a * kv[s - 1, i, c]
+                    w[i, c] = om[i, c] + a * kw[s - 1, i, c]
+                    u[i, c] = a * kr[s - 1, i, c]
+            if s == 0:
+                for c in range(4):
+                    q[i, c] = quat[i, c]
+            else:
+                quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], q[i])
+        if s:
+            counts[ROT] += n
+        accelerations(q, v, w, body, gforce, wrench, flags, kv[s], kw[s], counts)
+        kp[s] = v
+        if s:
+            _dexpinv(u, w, kr[s])
+        else:
+            kr[s] = w
+    b0, b1 = h / 6.0, h / 3.0
+    for i in range(n):
+        for c in range(3):
+            pos[i, c] += b0 * (kp[0, i, c] + kp[3, i, c]) + b1 * (kp[1, i, c] + kp[2, i, c])
+            vel[i, c] += b0 * (kv[0, i, c] + kv[3, i, c]) + b1 * (kv[1, i, c] + kv[2, i, c])
+            om[i, c] += b0 * (kw[0, i, c] + kw[3, i, c]) + b1 * (kw[1, i, c] + kw[2, i, c])
+            u[i, c] = b0 * (kr[0, i, c] + kr[3, i, c]) + b1 * (kr[1, i, c] + kr[2, i, c])
+        quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], quat[i])
+    counts[ROT] += n
+
+
+@njit(cache=True)
+def axis_flow(q: np.ndarray, mom: np.ndarray, moment: float, axis: int, dt: float) -> None:
+    """Exact flow of ``L_axis² / (2 J_axis)`` over ``dt`` for one body, in place."""
+    phi = dt * mom[axis] / moment
+    c, s = math.cos(phi), math.sin(phi)
+    j, k = (axis + 1) % 3, (axis + 2) % 3
+    lj, lk = mom[j], mom[k]
+    mom[j] = c * lj + s * lk
+    mom[k] = c * lk - s * lj
+    half = 0.5 * phi
+    c, s = math.cos(half), math.sin(half)
+    qi, qj, qk, qw = q[axis], q[j], q[k], q[3]
+    q[axis] = c * qi + s * qw
+    q[j] = c * qj + s * qk
+    q[k] = c * qk - s * qj
+    q[3] = c * qw - s * qi
+
+
+@njit(cache=True)
+def drift(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, mom: np.ndarray,
+          body: np.ndarray, tau: float, symmetric: bool, counts: np.ndarray) -> None:
+    """Free flight ``x += tau v`` and the free rotor of every body, in place."""
+    n = pos.shape[0]
+    for i in range(n):
+        for c in range(3):
+            pos[i, c] += tau * vel[i, c]
+        if body[i, 7] != 0.0:
+            if symmetric:
+                axis_flow(quat[i], mom[i], body[i, 2], 0, 0.5 * tau)
+                axis_flow(quat[i], mom[i], body[i, 3], 1, 0.5 * tau)
+                axis_flow(quat[i], mom[i], body[i, 4], 2, tau)
+                axis_flow(quat[i], mom[i], body[i, 3], 1, 0.5 * tau)
+                axis_flow(quat[i], mom[i], body[i, 2], 0, 0.5 * tau)
+                counts[GYRO] += 5
+                counts[ROT] += 5
+            else:
+                for a in range(3):
+                    axis_flow(quat[i], mom[i], body[i, 2 + a], a, tau)
+                counts[GYRO] += 3
+                counts[ROT] += 3
+        else:
+            # Isotropic: Ω is constant during the drift and exp is exact.
+            quat_exp_multiply(quat[i], tau * mom[i, 0] / body[i, 2],
+                              tau * mom[i, 1] / body[i, 3], tau * mom[i, 2] / body[i, 4],
+                              quat[i])
+            counts[ROT] += 1
+
+
+@njit(cache=True)
+def damping_flow(vel: np.ndarray, mom: np.ndarray, body: np.ndarray, tau: float,
+                 counts: np.ndarray) -> None:
+    """Exact flow of linear damping over ``tau``, in place (velocities and momenta)."""
+    for i in range(vel.shape[0]):
+        fv = math.exp(-body[i, 5] * body[i, 1] * tau)
+        for a in range(3):
+            vel[i, a] *= fv
+            mom[i, a] *= math.exp(-body[i, 6] * tau / body[i, 2 + a])
+    counts[FLOW] += 1
+
+
+@njit(cache=True)
+def splitting_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
+                   om: np.ndarray, dt: float, body: np.ndarray, gforce: np.ndarray,
+                   wrench: np.ndarray, flags: int, kick: np.ndarray, kick_valid: bool,
+                   counts: np.ndarray) -> bool:
+    """
+    One step of symplectic Euler or a Lie–Poisson splitting, in place.
+
+    ``kick`` (n, 6: force world, torque principal) holds the last kick's
+    wrench; ``kick_valid`` says it belongs to the configuration ``pos, quat`` it
+    starts from (first same as last). Returns whether ``kick`` is valid for the
+    configuration the step ends at.
+    """
+    n = pos.shape[0]
+    symmetric = method != SYMPLECTIC_EULER
+    if method == LIE_POISSON4:
+        weights = (_W1, 1.0 - 2.0 * _W1, _W1)
+    else:
+        weights = (1.0, 0.0, 0.0)
+    n_sub = 3 if method == LIE_POISSON4 else 1
+    mom = np.empty((n, 3))
+    for i in range(n):
+        for a in range(3):
+            mom[i, a] = om[i, a] * body[i, 2 + a]
+    force = kick[:, :3]
+    torque = kick[:, 3:]
+    forces = flags & HAS_POSITION_FORCES
+    damping = flags & HAS_DAMPING
+    for sub in range(n_sub):
+        h = weights[sub] * dt
+        first = 0.5 * h if symmetric else h
+        for half in range(2 if symmetric else 1):
+            tau = first if half == 0 else 0.5 * h
+            if half == 1:
+                drift(pos, quat, vel, mom, body, h, symmetric, counts)
+                kick_valid = False
+            if damping and half == 0:
+                damping_flow(vel, mom, body, tau, counts)
+            if forces:
+                if not kick_valid:
+                    position_wrench(quat, body, gforce, wrench, force, torque)
+                    counts[KICK] += 1
+                    kick_valid = True
+                for i in range(n):
+                    for a in range(3):
+                        vel[i, a] += tau * body[i, 1] * force[i, a]
+                        mom[i, a] += tau * torque[i, a]
+            if damping and half == 1:
+                damping_flow(vel, mom, body, tau, counts)
+        if not symmetric:
+            drift(pos, quat, vel, mom, body, h, symmetric, counts)
+            kick_valid = False
+    for i in range(n):
+        for a in range(3):
+            om[i, a] = mom[i, a] / body[i, 2 + a]
+    return kick_valid
+
+
+@njit(cache=True)
+def normalize_quaternions(quat: np.ndarray) -> None:
+    """Remove the rounding error of the unit quaternions (n, 4), in place."""
+    for i in range(quat.shape[0]):
+        s = math.sqrt(quat[i, 0] ** 2 + quat[i, 1] ** 2 + quat[i, 2] ** 2 + quat[i, 3] ** 2)
+        for c in range(4):
+            quat[i, c] /= s
+
+
+@njit(cache=True)
+def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
+              om: np.ndarray, dt: float, body: np.ndarray, gforce: np.ndarray,
+              wrench: np.ndarray, flags: int, kick: np.ndarray, kick_valid: bool,
+              counts: np.ndarray) -> bool:
+    """
+    One step of ``method`` for bodies no constraint couples; the arrays are updated.
+
+    Parameters
+    ----------
+    method : int
+        ``SYMPLECTIC_EULER``, ``LIE_POISSON2``, ``LIE_POISSON4`` or ``RKMK4``.
+    pos, vel : ndarray, shape (n, 3)
+        Centre-of-mass positions and velocities, world frame (m, m/s).
+    quat : ndarray, shape (n, 4)
+        Principal-frame orientations (xyzw).
+    om : ndarray, shape (n, 3)
+        Principal-frame angular velocities Ω (rad/s).
+    dt : float
+        s.
+    body, gforce, wrench, flags
+        The model (see the module docstring).
+    kick : ndarray, shape (n, 6)
+        The splittings' last kick (first same as last); unused by ``RKMK4``.
+    kick_valid : bool
+        ``kick`` was evaluated at ``pos, quat``.
+    counts : ndarray of int64, shape (5,)
+        Work counts, incremented.
+
+    Returns
+    -------
+    bool
+        ``kick`` is valid for the new configuration.
+
+    """
+    if method == RKMK4:
+        rkmk4_step(pos, quat, vel, om, dt, body, gforce, wrench, flags, counts)
+        valid = False
+    else:
+        valid = splitting_step(method, pos, quat, vel, om, dt, body, gforce, wrench, flags,
+                               kick, kick_valid, counts)
+    normalize_quaternions(quat)
+    return valid
+
+
+@njit(cache=True)
+def all_finite(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray) -> bool:
+    """Tell whether every entry of the four state arrays is finite."""
+    for arr in (pos, vel, om):
+        for x in arr.ravel():
+            if not math.isfinite(x):
+                return False
+    for x in quat.ravel():
+        if not math.isfinite(x):
+            return False
+    return True
+
+
+@njit(cache=True)
+def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
+            quat_bp: np.ndarray, com_body: np.ndarray, out: np.ndarray) -> None:
+    """
+    Poses and twists in the user's body frames, for every body.
+
+    Parameters
+    ----------
+    pos, vel, om, quat
+        The state (see :func:`free_step`).
+    quat_bp : ndarray, shape (n, 4)
+        Principal frame in the body frame.
+    com_body : ndarray, shape (n, 3)
+        Centre of mass in the body frame (m).
+    out : ndarray, shape (n, 19)
+        Written: body-origin position (3, world), body orientation (4, xyzw,
+        w >= 0), origin velocity (3, world), angular velocity (3, world),
+        origin velocity (3, body), angular velocity (3, body).
+
+    """
+    R = np.empty((3, 3))
+    Rp = np.empty((3, 3))
+    qb = np.empty(4)
+    off = np.empty(3)
+    w = np.empty(3)
+    for i in range(pos.shape[0]):
+        # q_wb = q_wp ⊗ conj(q_bp), sign fixed to w >= 0.
+        ax, ay, az, aw = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
+        bx, by, bz, bw = -quat_bp[i, 0], -quat_bp[i, 1], -quat_bp[i, 2], quat_bp[i, 3]
+        qb[0] = aw * bx + ax * bw + ay * bz - az * by
+        qb[1] = aw * by - ax * bz + ay * bw + az * bx
+        qb[2] = aw * bz + ax * by - ay * bx + az * bw
+        qb[3] = aw * bw - ax * bx - ay * by - az * bz
+        if qb[3] < 0.0:
+            for c in range(4):
+                qb[c] = -qb[c]
+        quat_matrix(qb, R)
+        for a in range(3):
+            off[a] = R[a, 0] * com_body[i, 0] + R[a, 1] * com_body[i, 1] \
+                + R[a, 2] * com_body[i, 2]
+            out[i, a] = pos[i, a] - off[a]
+        for c in range(4):
+            out[i, 3 + c] = qb[c]
+        # World angular velocity ω = R_wp Ω; origin velocity v − ω × offset.
+        quat_matrix(quat[i], Rp)
+        for a in range(3):
+            w[a] = Rp[a, 0] * om[i, 0] + Rp[a, 1] * om[i, 1] + Rp[a, 2] * om[i, 2]
+        out[i, 7] = vel[i, 0] + (w[1] * -off[2] - w[2] * -off[1])
+        out[i, 8] = vel[i, 1] + (w[2] * -off[0] - w[0] * -off[2])
+        out[i, 9] = vel[i, 2] + (w[0] * -off[1] - w[1] * -off[0])
+        for a in range(3):
+            out[i, 10 + a] = w[a]
+        for a in range(3):
+            out[i, 13 + a] = R[0, a] * out[i, 7] + R[1, a] * out[i, 8] + R[2, a] * out[i, 9]
+            out[i, 16 + a] = R[0, a] * w[0] + R[1, a] * w[1] + R[2, a] * w[2]
