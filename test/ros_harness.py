@@ -76,8 +76,15 @@ class NodeProcess:
         return self.proc.returncode
 
     def close(self) -> None:
-        """Stop the process if it still runs and close its log."""
-        self.stop(signal.SIGKILL)
+        """
+        Stop the process if it still runs (SIGTERM, SIGKILL after 10 s) and close its log.
+
+        A clean exit lets the node's DDS participant say goodbye: a peer that
+        vanishes (SIGKILL) leaves its shared-memory ports behind, and Fast DDS
+        then crashed the test process while destroying the client's participant
+        (SIGSEGV in ``destroy_node``, seen once in CI).
+        """
+        self.stop(signal.SIGTERM, timeout=10.0)
         if self.log_path:
             self._log.close()
 
@@ -172,9 +179,11 @@ def ros_session(tmp_path):
     try:
         yield r
     finally:
+        # The client's participant goes first, while its peers are alive and well
+        # (see NodeProcess.close), then the nodes, each with a clean exit.
+        r.client.close()
         for node in r.nodes:
             node.close()
-        r.client.close()
 
 
 def python() -> str:

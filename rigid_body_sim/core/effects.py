@@ -374,7 +374,7 @@ class AppliedWrenches(Effect):
 
     def kernel_rows(self, time_mid: float) -> np.ndarray:
         """
-        The entries active in this step as rows of the compiled kernels' wrench array.
+        Return the entries active in this step as rows of the kernels' wrench array.
 
         Returns
         -------
@@ -382,6 +382,7 @@ class AppliedWrenches(Effect):
             ``body, in_body, force (3), torque (3), point (3)`` (see
             :mod:`.step_kernels`); ``time_mid`` decides which entries are active
             when no :meth:`begin_step` did.
+
         """
         tab = self._table()
         active = self._active
