@@ -184,7 +184,7 @@ class RigidBody:
             object.__setattr__(self, key, value)
 
 
-@dataclass
+@dataclass(slots=True)
 class State:
     """Dynamic state of all bodies (see the module docstring for frames)."""
 

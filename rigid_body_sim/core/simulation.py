@@ -136,15 +136,15 @@ class Simulation:
         """Take ``n`` steps of size ``dt``."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise SpecError('n', f'must be a non-negative integer, got {n!r}')
-        solver = self.dynamics.solver
-        solver.dt = self.dt
-        effects = self.dynamics.effects
+        dyn = self.dynamics
+        dyn.solver.dt = self.dt
+        effects = dyn.effects
         for _ in range(int(n)):
-            mid = self._time_base + (self._steps + 0.5) * self.dt
-            # Every effect must see the new step: no short-circuit.
-            switched = [effect.begin_step(mid) for effect in effects]
-            if any(switched):
-                self.dynamics.changed()
+            if effects:
+                mid = self._time_base + (self._steps + 0.5) * self.dt
+                # Every effect must see the new step: no short-circuit.
+                if any([effect.begin_step(mid) for effect in effects]):
+                    dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
             try:
                 new = self.integrator.step(self.state, self.dt,
