@@ -1,0 +1,653 @@
+"""
+Linear-time solve of ``(G M⁻¹ Hᵀ + reg I) x = rhs`` for chains and trees (Baraff 1996).
+
+Conventions
+-----------
+There are ``n`` bodies with diagonal inverse masses ``minv6`` (shape (n, 6):
+``1/m`` three times, then ``1/J1, 1/J2, 1/J3``; zeros, i.e. immovable bodies,
+are allowed) and ``m`` constraint rows. Row ``r`` acts on body ``a[r]``
+(``0 <= a[r] < n``) with the Jacobian block ``Ga[r]`` (6,) and on body ``b[r]``
+(``0 <= b[r] <= n``) with ``Gb[r]`` (6,); ``b[r] == n`` is the fixed world,
+which has no columns, and ``Gb[r]`` is then ignored (``b[r] == a[r]`` is
+allowed: the row acts on one body with the block ``Ga[r] + Gb[r]``). A second
+Jacobian ``H`` has the same sparsity (blocks ``Ha``, ``Hb``); the matrix is
+``A = G M⁻¹ Hᵀ`` (m x m): symmetric positive semidefinite when ``H == G``,
+unsymmetric otherwise (a SHAKE projection).
+
+Graph
+-----
+Rows acting on the same unordered pair of distinct bodies form a *group* (a
+joint of up to 6 rows, or several joints on the same pair, possibly
+redundant); the rows of a body to the world (or to itself) form one group of
+that body. As in D. Baraff, "Linear-time dynamics using Lagrange multipliers",
+SIGGRAPH 1996, the graph has one node per body and one per group, with an edge
+between a group and each of its bodies. When it is a forest
+(:func:`tree_structure` returns ``None`` otherwise: a closed loop), each tree
+is rooted at a body, and every group gets a *parent* body (the one nearer the
+root, or its only body) and, between two bodies, a *child* body.
+
+Elimination
+-----------
+Baraff factorizes the KKT matrix ``[[M, Hᵀ], [G, 0]]`` by block elimination
+of the graph's nodes, leaves first, which creates no fill-in. The same
+elimination is done here directly on ``A + reg I`` (equivalently: the body
+nodes are eliminated in mobility form). The groups are eliminated in an order
+where every group comes after all other groups of its child body (the groups
+of the subtree below it and the world rows of that body). Then the Schur
+complement of the remaining groups keeps the form ``Σ_b G_b W_b H_bᵀ + reg I``
+(``G_b``: the columns of body ``b``), where ``W_b`` (6x6, initially
+``M_b⁻¹``) is the *articulated mobility* of body ``b``: eliminating group
+``x`` with child body ``c`` and parent body ``p`` couples only groups at
+``p``, and amounts to::
+
+    S_x = reg I + G_xc W_c H_xcᵀ + G_xp W_p H_xpᵀ        (k x k pivot block, LU with
+    P_x = W_p H_xpᵀ,   Q_x = S_x⁻¹ G_xp W_p                 partial pivoting)
+    W_p ← W_p − P_x Q_x
+
+The solve runs forward over the groups (``z_x = rhs_x − G_xc e_c − G_xp e_p``,
+``v_x = S_x⁻¹ z_x``, ``e_p += P_x v_x``) and backward (``x_x = v_x − Q_x f_p``,
+``f_p += H_xpᵀ x_x``, ``f_c += H_xcᵀ x_x``) with one 6-vector ``e_b``,
+``f_b`` per body. Factor and solve cost ``O(Σ_x k_x³ + 36 k_x)``: linear in the
+number of rows and bodies for any tree shape (a star included). There is no
+pivoting between blocks.
+
+Unlike the KKT order, every pivot block ``S_x`` is a true Schur complement of
+``A + reg I``: a group to the world (a leaf with a zero diagonal block in the
+KKT form) or a group hanging below a body welded to the world needs no
+special case, and for ``H == G`` the blocks are positive definite whenever
+``A`` is.
+
+Rank deficiency
+---------------
+Redundant rows (a joint added twice) make a pivot block singular.
+:func:`tree_factor` returns the smallest absolute pivot of the block LUs
+divided by ``max |diag A|``: about machine epsilon or zero for redundant rows,
+so the caller can test ``pivot < 1e-12`` and fall back, or refactor with a
+Tikhonov term ``reg = 1e-12 * max|diag A|`` that factors ``A + reg I``. An
+exactly zero pivot is replaced by ``eps * max|diag A|`` so that the
+factorization finishes (the solution is then meaningless; the returned pivot
+is 0).
+
+The kernels are compiled with numba (``@njit(cache=True)``), take only numpy
+arrays and scalars (callable from other compiled code), allocate nothing, and
+run unchanged as plain Python with ``NUMBA_DISABLE_JIT=1``.
+:class:`TreeSolver` is a thin convenience wrapper for Python callers.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Optional
+
+from numba import njit
+import numpy as np
+
+
+class TreeStructure(NamedTuple):
+    """
+    Elimination structure of a constraint forest (built by :func:`tree_structure`).
+
+    Groups are numbered in elimination order.
+
+    Attributes
+    ----------
+    group_ptr : ndarray of int64, shape (n_groups + 1,)
+        CSR pointer: the rows of group ``x`` are
+        ``group_rows[group_ptr[x]:group_ptr[x + 1]]``.
+    group_rows : ndarray of int64, shape (m,)
+        Row indices grouped by group (a permutation of ``0 .. m − 1``).
+    group_child : ndarray of int64, shape (n_groups,)
+        Child body of a group between two bodies (farther from the root),
+        ``-1`` for the group of a body's rows to the world (or to itself).
+    group_parent : ndarray of int64, shape (n_groups,)
+        Parent body (nearer the root), or the only body of a world group.
+    row_side : ndarray of int64, shape (m,)
+        Where the block of row ``r`` on its group's parent body is: 0 in
+        ``Ga``/``Ha`` (the block on the child body is then in ``Gb``/``Hb``),
+        1 in ``Gb``/``Hb`` (child block in ``Ga``/``Ha``), 2 in the sum
+        ``Ga + Gb`` (``a[r] == b[r]``, no child).
+    row_group : ndarray of int64, shape (m,)
+        Group of each row.
+    group_body_parent : ndarray of int64, shape (n_bodies,)
+        For information: the group linking each body to its parent body
+        (``-1`` for roots and bodies in no group).
+    block_size : int
+        ``K``: the largest group (at least 1); pivot blocks are padded to (K, K).
+    n_bodies : int
+        Number of bodies ``n``.
+
+    """
+
+    group_ptr: np.ndarray
+    group_rows: np.ndarray
+    group_child: np.ndarray
+    group_parent: np.ndarray
+    row_side: np.ndarray
+    row_group: np.ndarray
+    group_body_parent: np.ndarray
+    block_size: int
+    n_bodies: int
+
+    @property
+    def n_groups(self) -> int:
+        """Return the number of groups."""
+        return int(self.group_child.shape[0])
+
+    @property
+    def arrays(self) -> tuple:
+        """``(group_ptr, group_rows, group_child, group_parent, row_side)``: kernel arguments."""
+        return self.group_ptr, self.group_rows, self.group_child, self.group_parent, self.row_side
+
+
+def tree_structure(a, b, n_bodies: int) -> Optional[TreeStructure]:
+    """
+    Group the rows, build Baraff's body/group graph and order the groups leaves first.
+
+    Runs in plain Python when the constraint set changes (not per step).
+
+    Parameters
+    ----------
+    a : array_like of int, shape (m,)
+        First body of each row, ``0 <= a[r] < n_bodies``.
+    b : array_like of int, shape (m,)
+        Second body of each row, ``0 <= b[r] <= n_bodies`` (``n_bodies``: the world).
+    n_bodies : int
+        Number of bodies ``n``.
+
+    Returns
+    -------
+    TreeStructure or None
+        The structure, or ``None`` when the graph has a cycle (a closed loop of
+        groups between bodies): the caller must use a general sparse solver.
+
+    Raises
+    ------
+    ValueError
+        If ``a`` and ``b`` differ in shape or hold out-of-range bodies.
+
+    """
+    a = np.asarray(a, dtype=np.int64).ravel()
+    b = np.asarray(b, dtype=np.int64).ravel()
+    n = int(n_bodies)
+    if a.shape != b.shape:
+        raise ValueError(f'a and b must have the same length, got {a.size} and {b.size}')
+    if a.size and (a.min() < 0 or a.max() >= n or b.min() < 0 or b.max() > n):
+        raise ValueError('body indices out of range: need 0 <= a < n_bodies, 0 <= b <= n_bodies')
+    m = a.size
+    world_rows = [[] for _ in range(n)]   # rows to the world (or acting on one body)
+    group_of_pair = {}
+    pair_rows = []
+    pair_bodies = []
+    for r in range(m):
+        ar, br = int(a[r]), int(b[r])
+        if br == n or br == ar:
+            world_rows[ar].append(r)
+            continue
+        key = (min(ar, br), max(ar, br))
+        g = group_of_pair.get(key)
+        if g is None:
+            g = group_of_pair[key] = len(pair_rows)
+            pair_rows.append([])
+            pair_bodies.append(key)
+        pair_rows[g].append(r)
+    # A cycle of the bipartite body/group graph is a cycle of the graph of bodies with one edge
+    # per pair group (the pairs are distinct): detect it with union-find.
+    root_of = list(range(n))
+
+    def find(i):
+        while root_of[i] != i:
+            root_of[i] = root_of[root_of[i]]
+            i = root_of[i]
+        return i
+
+    adjacent = [[] for _ in range(n)]   # (pair group, other body) per body
+    for g, (i, j) in enumerate(pair_bodies):
+        ri, rj = find(i), find(j)
+        if ri == rj:
+            return None
+        root_of[ri] = rj
+        adjacent[i].append((g, j))
+        adjacent[j].append((g, i))
+    # Breadth-first from a root body per tree; reversed, the visit order has children first.
+    up_group = np.full(n, -1, dtype=np.int64)   # pair group to the parent body
+    up_body = np.full(n, -1, dtype=np.int64)
+    visited = np.zeros(n, dtype=bool)
+    bfs = []
+    for root in range(n):
+        if visited[root] or not (world_rows[root] or adjacent[root]):
+            continue
+        visited[root] = True
+        head = len(bfs)
+        bfs.append(root)
+        while head < len(bfs):
+            body = bfs[head]
+            head += 1
+            for g, other in adjacent[body]:
+                if not visited[other]:
+                    visited[other] = True
+                    up_group[other] = g
+                    up_body[other] = body
+                    bfs.append(other)
+    # Per body, leaves first: its world group, then the group to its parent body.
+    ptr, rows, child, parent, side = [0], [], [], [], np.zeros(m, dtype=np.int64)
+    group_body_parent = np.full(n, -1, dtype=np.int64)
+    for body in reversed(bfs):
+        if world_rows[body]:
+            for r in world_rows[body]:
+                side[r] = 2 if a[r] == b[r] else 0
+            rows.extend(world_rows[body])
+            ptr.append(len(rows))
+            child.append(-1)
+            parent.append(body)
+        if up_group[body] >= 0:
+            own = pair_rows[up_group[body]]
+            for r in own:
+                side[r] = 0 if a[r] == up_body[body] else 1
+            rows.extend(own)
+            ptr.append(len(rows))
+            group_body_parent[body] = len(child)
+            child.append(body)
+            parent.append(int(up_body[body]))
+    group_ptr = np.array(ptr, dtype=np.int64)
+    group_rows = np.array(rows, dtype=np.int64)
+    row_group = np.empty(m, dtype=np.int64)
+    row_group[group_rows] = np.repeat(np.arange(len(child), dtype=np.int64), np.diff(group_ptr))
+    block = int(np.diff(group_ptr).max()) if len(child) else 1
+    return TreeStructure(group_ptr, group_rows, np.array(child, dtype=np.int64),
+                         np.array(parent, dtype=np.int64), side, row_group, group_body_parent,
+                         block, n)
+
+
+def factor_arrays(structure: TreeStructure) -> tuple:
+    """
+    Allocate the factor and work arrays of a structure (once; reused every step).
+
+    Parameters
+    ----------
+    structure : TreeStructure
+        From :func:`tree_structure`.
+
+    Returns
+    -------
+    tuple
+        ``(S, piv, P, Q, B, W, E, tmp)``, all zeroed, with ``ng = n_groups``,
+        ``K = block_size``, ``n = n_bodies``:
+
+        * ``S`` (ng, K, K) float64: LU factors of the pivot blocks (unit lower part);
+        * ``piv`` (ng, K) int64: their row interchanges (row ``j`` swapped with ``piv[j]``);
+        * ``P`` (ng, 6, K) float64: ``W_p H_xpᵀ``;
+        * ``Q`` (ng, K, 6) float64: ``S_x⁻¹ G_xp W_p``;
+        * ``B`` (ng, 4, K, 6) float64: the blocks ``G_xc, G_xp, H_xc, H_xp`` of each group;
+        * ``W`` (n, 6, 6) float64: articulated mobilities (factor workspace);
+        * ``E`` (2, n, 6) float64: solve workspace (``e``, ``f``);
+        * ``tmp`` (K,) float64: solve workspace.
+
+    """
+    ng, k, n = structure.n_groups, structure.block_size, structure.n_bodies
+    return (np.zeros((ng, k, k)), np.zeros((ng, k), dtype=np.int64), np.zeros((ng, 6, k)),
+            np.zeros((ng, k, 6)), np.zeros((ng, 4, k, 6)), np.zeros((n, 6, 6)),
+            np.zeros((2, n, 6)), np.zeros(k))
+
+
+@njit(cache=True)
+def _lu(d, piv, s, floor):
+    """LU of ``d[:s, :s]`` in place with partial pivoting; return the smallest |pivot|."""
+    smallest = np.inf
+    for j in range(s):
+        p = j
+        best = abs(d[j, j])
+        for r in range(j + 1, s):
+            v = abs(d[r, j])
+            if v > best:
+                best = v
+                p = r
+        piv[j] = p
+        if p != j:
+            for c in range(s):
+                t = d[j, c]
+                d[j, c] = d[p, c]
+                d[p, c] = t
+        pivot = d[j, j]
+        if abs(pivot) < smallest:
+            smallest = abs(pivot)
+        if pivot == 0.0:
+            pivot = floor
+            d[j, j] = floor
+        for r in range(j + 1, s):
+            lrj = d[r, j] / pivot
+            d[r, j] = lrj
+            if lrj != 0.0:
+                for c in range(j + 1, s):
+                    d[r, c] -= lrj * d[j, c]
+    return smallest
+
+
+@njit(cache=True)
+def _lu_solve_vec(d, piv, s, x):
+    """Overwrite ``x[:s]`` with ``d⁻¹ x`` (factors from :func:`_lu`)."""
+    for j in range(s):
+        p = piv[j]
+        if p != j:
+            t = x[j]
+            x[j] = x[p]
+            x[p] = t
+    for j in range(s):
+        v = x[j]
+        for c in range(j):
+            v -= d[j, c] * x[c]
+        x[j] = v
+    for j in range(s - 1, -1, -1):
+        v = x[j]
+        for c in range(j + 1, s):
+            v -= d[j, c] * x[c]
+        x[j] = v / d[j, j]
+
+
+@njit(cache=True)
+def _lu_solve_col(d, piv, s, x, col):
+    """Overwrite column ``col`` of ``x[:s]`` with ``d⁻¹ x`` (factors from :func:`_lu`)."""
+    for j in range(s):
+        p = piv[j]
+        if p != j:
+            t = x[j, col]
+            x[j, col] = x[p, col]
+            x[p, col] = t
+    for j in range(s):
+        v = x[j, col]
+        for c in range(j):
+            v -= d[j, c] * x[c, col]
+        x[j, col] = v
+    for j in range(s - 1, -1, -1):
+        v = x[j, col]
+        for c in range(j + 1, s):
+            v -= d[j, c] * x[c, col]
+        x[j, col] = v / d[j, j]
+
+
+@njit(cache=True)
+def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, Gb, Ha, Hb,
+                minv6, reg, S, piv, P, Q, B, W):
+    """
+    Factorize ``A + reg I = G M⁻¹ Hᵀ + reg I`` along the tree (allocation-free).
+
+    Parameters
+    ----------
+    group_ptr, group_rows, group_child, group_parent, row_side : ndarray of int64
+        ``TreeStructure.arrays`` (see :class:`TreeStructure`).
+    Ga, Gb : ndarray of float64, shape (m, 6)
+        Blocks of ``G`` on bodies ``a[r]`` and ``b[r]``.
+    Ha, Hb : ndarray of float64, shape (m, 6)
+        Blocks of ``H`` (pass ``Ga, Gb`` again for the symmetric ``G M⁻¹ Gᵀ``).
+    minv6 : ndarray of float64, shape (n, 6)
+        Diagonal inverse masses (``>= 0``).
+    reg : float
+        Tikhonov term ``>= 0``: factorizes ``A + reg I``.
+    S, piv, P, Q, B, W : ndarray
+        The first six arrays of :func:`factor_arrays` (overwritten; ``S`` to ``B``
+        are the factors used by :func:`tree_solve`).
+
+    Returns
+    -------
+    float
+        Smallest absolute pivot of the block LUs over ``max |diag A|`` (about
+        1e-16 or 0 for redundant rows; ``inf`` without rows; 0 when ``A`` is zero).
+
+    """
+    ng = group_child.shape[0]
+    n = minv6.shape[0]
+    for i in range(n):
+        for r in range(6):
+            for c in range(6):
+                W[i, r, c] = 0.0
+            W[i, r, r] = minv6[i, r]
+    scale = 0.0
+    for x in range(ng):
+        r0 = group_ptr[x]
+        k = group_ptr[x + 1] - r0
+        c = group_child[x]
+        p = group_parent[x]
+        for j in range(k):
+            r = group_rows[r0 + j]
+            side = row_side[r]
+            diag = 0.0
+            for t in range(6):
+                if side == 0:
+                    gp, hp, gc, hc = Ga[r, t], Ha[r, t], Gb[r, t], Hb[r, t]
+                elif side == 1:
+                    gp, hp, gc, hc = Gb[r, t], Hb[r, t], Ga[r, t], Ha[r, t]
+                else:
+                    gp, hp, gc, hc = Ga[r, t] + Gb[r, t], Ha[r, t] + Hb[r, t], 0.0, 0.0
+                if c < 0:
+                    gc = 0.0
+                    hc = 0.0
+                else:
+                    diag += gc * minv6[c, t] * hc
+                diag += gp * minv6[p, t] * hp
+                B[x, 0, j, t] = gc
+                B[x, 1, j, t] = gp
+                B[x, 2, j, t] = hc
+                B[x, 3, j, t] = hp
+            if abs(diag) > scale:
+                scale = abs(diag)
+    floor = 2.220446049250313e-16 * scale if scale > 0.0 else 1e-300
+    smallest = np.inf
+    for x in range(ng):
+        k = group_ptr[x + 1] - group_ptr[x]
+        c = group_child[x]
+        p = group_parent[x]
+        # P = W_p H_xpᵀ (6 x k); Q temporarily W_c H_xcᵀ transposed (k x 6).
+        for i in range(6):
+            for j in range(k):
+                v = 0.0
+                for t in range(6):
+                    v += W[p, i, t] * B[x, 3, j, t]
+                P[x, i, j] = v
+        if c >= 0:
+            for j in range(k):
+                for i in range(6):
+                    v = 0.0
+                    for t in range(6):
+                        v += W[c, i, t] * B[x, 2, j, t]
+                    Q[x, j, i] = v
+        # Pivot block S = reg I + G_xp W_p H_xpᵀ + G_xc W_c H_xcᵀ.
+        for i in range(k):
+            for j in range(k):
+                v = reg if i == j else 0.0
+                for t in range(6):
+                    v += B[x, 1, i, t] * P[x, t, j]
+                if c >= 0:
+                    for t in range(6):
+                        v += B[x, 0, i, t] * Q[x, j, t]
+                S[x, i, j] = v
+        v = _lu(S[x], piv[x], k, floor)
+        if v < smallest:
+            smallest = v
+        # Q = S⁻¹ G_xp W_p (k x 6), then W_p −= P Q.
+        for i in range(k):
+            for j in range(6):
+                v = 0.0
+                for t in range(6):
+                    v += B[x, 1, i, t] * W[p, t, j]
+                Q[x, i, j] = v
+        for j in range(6):
+            _lu_solve_col(S[x], piv[x], k, Q[x], j)
+        for i in range(6):
+            for j in range(6):
+                v = 0.0
+                for t in range(k):
+                    v += P[x, i, t] * Q[x, t, j]
+                W[p, i, j] -= v
+    if ng == 0:
+        return np.inf
+    if scale == 0.0:
+        return 0.0
+    return smallest / scale
+
+
+@njit(cache=True)
+def tree_solve(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp, rhs,
+               out):
+    """
+    Solve ``(A + reg I) x = rhs`` with the factors of :func:`tree_factor` (allocation-free).
+
+    Parameters
+    ----------
+    group_ptr, group_rows, group_child, group_parent : ndarray of int64
+        The first four of ``TreeStructure.arrays``.
+    S, piv, P, Q, B : ndarray
+        Factors from :func:`tree_factor` (read only).
+    E : ndarray of float64, shape (2, n, 6)
+        Workspace from :func:`factor_arrays` (overwritten).
+    tmp : ndarray of float64, shape (K,)
+        Workspace from :func:`factor_arrays` (overwritten).
+    rhs : ndarray of float64, shape (m,)
+        Right-hand side.
+    out : ndarray of float64, shape (m,)
+        Receives ``x`` (may be the same array as ``rhs``).
+
+    """
+    ng = group_child.shape[0]
+    for i in range(E.shape[1]):
+        for t in range(6):
+            E[0, i, t] = 0.0
+            E[1, i, t] = 0.0
+    # Forward: z_x = rhs_x − G_xc e_c − G_xp e_p, v_x = S_x⁻¹ z_x, e_p += P_x v_x.
+    for x in range(ng):
+        r0 = group_ptr[x]
+        k = group_ptr[x + 1] - r0
+        c = group_child[x]
+        p = group_parent[x]
+        for j in range(k):
+            v = rhs[group_rows[r0 + j]]
+            for t in range(6):
+                v -= B[x, 1, j, t] * E[0, p, t]
+            if c >= 0:
+                for t in range(6):
+                    v -= B[x, 0, j, t] * E[0, c, t]
+            tmp[j] = v
+        _lu_solve_vec(S[x], piv[x], k, tmp)
+        for j in range(k):
+            out[group_rows[r0 + j]] = tmp[j]
+        for t in range(6):
+            v = 0.0
+            for j in range(k):
+                v += P[x, t, j] * tmp[j]
+            E[0, p, t] += v
+    # Backward: x_x = v_x − Q_x f_p, f_p += H_xpᵀ x_x, f_c += H_xcᵀ x_x.
+    for x in range(ng - 1, -1, -1):
+        r0 = group_ptr[x]
+        k = group_ptr[x + 1] - r0
+        c = group_child[x]
+        p = group_parent[x]
+        for j in range(k):
+            v = out[group_rows[r0 + j]]
+            for t in range(6):
+                v -= Q[x, j, t] * E[1, p, t]
+            tmp[j] = v
+        for j in range(k):
+            out[group_rows[r0 + j]] = tmp[j]
+        for t in range(6):
+            v = 0.0
+            for j in range(k):
+                v += B[x, 3, j, t] * tmp[j]
+            E[1, p, t] += v
+        if c >= 0:
+            for t in range(6):
+                v = 0.0
+                for j in range(k):
+                    v += B[x, 2, j, t] * tmp[j]
+                E[1, c, t] += v
+
+
+class TreeSolver:
+    """
+    Python wrapper: structure, preallocated factors, factor and solve.
+
+    Parameters
+    ----------
+    a, b : array_like of int, shape (m,)
+        Bodies of each row (``b == n_bodies``: the world), see :func:`tree_structure`.
+    n_bodies : int
+        Number of bodies.
+
+    Raises
+    ------
+    ValueError
+        If the body/group graph has a cycle (use a general sparse solver).
+
+    """
+
+    def __init__(self, a, b, n_bodies: int):
+        structure = tree_structure(a, b, n_bodies)
+        if structure is None:
+            raise ValueError('the constraint graph has a closed loop: not a tree')
+        self.structure = structure
+        self.m = int(np.size(a))
+        self.S, self.piv, self.P, self.Q, self.B, self.W, self.E, self.tmp = \
+            factor_arrays(structure)
+        self.pivot = np.nan
+
+    def factor(self, Ga, Gb, minv6, Ha=None, Hb=None, reg: float = 0.0) -> float:
+        """
+        Factorize ``G M⁻¹ Hᵀ + reg I`` (``H = G`` when ``Ha``/``Hb`` are omitted).
+
+        Parameters
+        ----------
+        Ga, Gb : array_like, shape (m, 6)
+            Blocks of ``G`` on bodies ``a`` and ``b``.
+        minv6 : array_like, shape (n_bodies, 6)
+            Diagonal inverse masses.
+        Ha, Hb : array_like, shape (m, 6), optional
+            Blocks of ``H``.
+        reg : float
+            Tikhonov term ``>= 0``.
+
+        Returns
+        -------
+        float
+            Smallest relative pivot (see :func:`tree_factor`).
+
+        """
+        Ga = np.ascontiguousarray(Ga, dtype=np.float64)
+        Gb = np.ascontiguousarray(Gb, dtype=np.float64)
+        Ha = Ga if Ha is None else np.ascontiguousarray(Ha, dtype=np.float64)
+        Hb = Gb if Hb is None else np.ascontiguousarray(Hb, dtype=np.float64)
+        minv6 = np.ascontiguousarray(minv6, dtype=np.float64)
+        m, n = self.m, self.structure.n_bodies
+        for name, x, shape in (('Ga', Ga, (m, 6)), ('Gb', Gb, (m, 6)), ('Ha', Ha, (m, 6)),
+                               ('Hb', Hb, (m, 6)), ('minv6', minv6, (n, 6))):
+            if x.shape != shape:
+                raise ValueError(f'{name} must have shape {shape}, got {x.shape}')
+        if not reg >= 0.0:
+            raise ValueError(f'reg must be >= 0, got {reg}')
+        self.pivot = tree_factor(*self.structure.arrays, Ga, Gb, Ha, Hb, minv6, float(reg),
+                                 self.S, self.piv, self.P, self.Q, self.B, self.W)
+        return self.pivot
+
+    def solve(self, rhs) -> np.ndarray:
+        """
+        Solve with the last factorization.
+
+        Parameters
+        ----------
+        rhs : array_like, shape (m,) or (m, q)
+            One or ``q`` right-hand sides.
+
+        Returns
+        -------
+        ndarray, shape of ``rhs``
+            ``x`` with ``(A + reg I) x = rhs``.
+
+        """
+        rhs = np.asarray(rhs, dtype=np.float64)
+        if rhs.ndim not in (1, 2) or rhs.shape[0] != self.m:
+            raise ValueError(f'rhs must have shape ({self.m},) or ({self.m}, q)')
+        args = (*self.structure.arrays[:4], self.S, self.piv, self.P, self.Q, self.B, self.E,
+                self.tmp)
+        if rhs.ndim == 1:
+            out = np.empty(self.m)
+            tree_solve(*args, np.ascontiguousarray(rhs), out)
+            return out
+        out = np.empty((rhs.shape[1], self.m))
+        for q in range(rhs.shape[1]):
+            tree_solve(*args, np.ascontiguousarray(rhs[:, q]), out[q])
+        return out.T.copy()
