@@ -1,9 +1,10 @@
 """
 Side by side with MuJoCo: the same scenes in one run, cost per step next to the error.
 
-Issue 8's comparison, of the core as it is today (pure Python and numpy, no compiled
-kernels). Each scene is built twice with the same masses, inertias, gravity, joint
-geometry and step size, and no contacts: as an MJCF string for MuJoCo (PyPI
+Issue 8's comparison: free bodies take a step in one compiled call (numba,
+``rigid_body_sim/core/step_kernels.py``); constrained scenes still step in Python and
+numpy around compiled pieces (constraint rows, tree solves). Each scene is built twice
+with the same masses, inertias, gravity, joint geometry and step size, and no contacts: as an MJCF string for MuJoCo (PyPI
 ``mujoco``, a benchmark-only dependency: ``bench/requirements.txt``) and as a
 :class:`Simulation` of this core. Both are stepped in a Python loop that takes one step
 and reads the state, as a node does: MuJoCo ``mj_step``, then copies of ``qpos`` and

@@ -12,8 +12,9 @@ in the principal frame). The generalized velocity of body i is
 Jacobian ``G``. Differentiating ``Φ`` twice gives ``G ν̇ + γ = Φ̈`` with the
 velocity-product term ``γ = Ġ ν``.
 
-Joint types are built from four vectorized row primitives (all instances of a
-primitive are evaluated at once, with no Python loop over constraints):
+Joint types are built from four row primitives, evaluated for all rows at once
+by the compiled kernels of :mod:`.row_kernels` (no Python loop over
+constraints):
 
 * ``point``: ``P_a − P_b`` (3 rows), anchor points ``P = x_g + R r``;
 * ``dot``: ``(R_b e) · (R_a s)`` for unit vectors ``s`` in a and ``e`` in b;
@@ -50,6 +51,8 @@ import scipy.sparse as sp
 from . import rotation as so3
 from .bodies import BodySet, State
 from .errors import SpecError
+from .row_kernels import (KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT, pack_rows,
+                          rows_geometry, rows_rates)
 from .validate import finite_array, positive_scalar
 
 
@@ -271,52 +274,71 @@ class RowJacobian:
 
 
 class Geometry:
-    """Φ and G of all constraints at one configuration, and what the rates need."""
+    """
+    Φ and G of all constraints at one configuration, and what the rates need.
 
-    point = dot = line = dist = None
+    Attributes
+    ----------
+    pos : ndarray, shape (n, 3)
+    quat : ndarray, shape (n, 4)
+        The configuration.
+    phi : ndarray, shape (m,)
+    jacobian : RowJacobian
+    g_builtin : ndarray, shape (2, m_builtin, 6)
+        Jacobian blocks of the built-in rows on body a (``[0]``) and body b
+        (``[1]``, also computed for the world), as :func:`.row_kernels.rows_geometry`
+        returns them.
+    g_generic : list of ndarray, shape (k, 12)
+        Jacobians of the generic constraints, in row order.
 
-    def __init__(self, owner: 'ConstraintSet', x: np.ndarray, R: np.ndarray) -> None:
-        self.owner, self.x, self.R = owner, x, R
+    """
+
+    def __init__(self, owner: 'ConstraintSet', pos: np.ndarray, quat: np.ndarray) -> None:
+        self.owner, self.pos, self.quat = owner, pos, quat
         self.phi: np.ndarray = np.zeros(0)
         self.jacobian: Optional[RowJacobian] = None
-        self.n = 0
+        self.g_builtin = np.zeros((2, 0, 6))
+        self.g_generic: list = []
+        self.n = len(pos)
+        self._frames: Optional[tuple] = None
+
+    @property
+    def frames(self) -> tuple:
+        """Positions (n+1, 3) and principal rotations (n+1, 3, 3), the world last."""
+        if self._frames is None:
+            x = np.vstack([self.pos, np.zeros((1, 3))])
+            R = np.concatenate([so3.quat_to_matrix(self.quat), np.eye(3)[None]])
+            self._frames = (x, R)
+        return self._frames
 
     def rates(self, vel: np.ndarray, omega: np.ndarray,
               need_gamma: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """``Φ̇ = G ν`` and ``γ = Ġ ν`` (zeros if not ``need_gamma``), each (m,)."""
-        n, R = self.n, self.R
-        phi_dot = self.jacobian.matvec(np.hstack([vel, omega]))
-        if not need_gamma:
-            return phi_dot, np.zeros_like(phi_dot)
+        cs = self.owner
+        mb = cs.n_builtin_rows
+        phi_dot, gamma = np.empty(cs.n_rows), np.zeros(cs.n_rows)
+        if mb:
+            rows_rates(self.pos, self.quat, np.ascontiguousarray(vel, dtype=float),
+                       np.ascontiguousarray(omega, dtype=float), cs.row_kind, cs.row_comp,
+                       cs.row_a, cs.row_b, cs.row_par, self.g_builtin[0], self.g_builtin[1],
+                       bool(need_gamma), phi_dot[:mb], gamma[:mb])
+        if not cs._gen:
+            return phi_dot, gamma
+        n = self.n
+        x, R = self.frames
         v = np.vstack([vel, np.zeros((1, 3))])
         w = np.vstack([np.einsum('nij,nj->ni', R[:n], omega), np.zeros((1, 3))])
-        gammas = []
-        if self.point is not None:
-            a, b, wa, wb = self.point
-            gammas.append((so3.cross(w[a], so3.cross(w[a], wa))
-                           - so3.cross(w[b], so3.cross(w[b], wb))).ravel())
-        if self.dot is not None:
-            a, b, u, e = self.dot
-            wbe, wau = so3.cross(w[b], e), so3.cross(w[a], u)
-            gammas.append(_dot(u, so3.cross(w[b], wbe)) + 2.0 * _dot(wbe, wau)
-                          + _dot(e, so3.cross(w[a], wau)))
-        if self.line is not None:
-            a, b, wa, wb, e, dd = self.line
-            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
-            ddot = v[a] + wva - v[b] - wvb
-            wbe = so3.cross(w[b], e)
-            gammas.append(_dot(dd, so3.cross(w[b], wbe)) + 2.0 * _dot(wbe, ddot)
-                          + _dot(e, so3.cross(w[a], wva) - so3.cross(w[b], wvb)))
-        if self.dist is not None:
-            a, b, wa, wb, nrm, length = self.dist
-            wva, wvb = so3.cross(w[a], wa), so3.cross(w[b], wb)
-            ddot = v[a] + wva - v[b] - wvb
-            nd = _dot(nrm, ddot)
-            gammas.append(_dot(nrm, so3.cross(w[a], wva) - so3.cross(w[b], wvb))
-                          + (_dot(ddot, ddot) - nd**2) / np.maximum(length, 1e-300))
-        for res in self.owner._gen:
-            gammas.append(self.owner._generic_rows(res, self.x, self.R, v, w, True)[2])
-        return phi_dot, (np.concatenate(gammas) if gammas else np.zeros(0))
+        start = mb
+        for res, g in zip(cs._gen, self.g_generic):
+            stop = start + res.n_rows
+            rate = g[:, :6] @ np.concatenate([vel[res.a], omega[res.a]])
+            if res.b < n:
+                rate += g[:, 6:] @ np.concatenate([vel[res.b], omega[res.b]])
+            phi_dot[start:stop] = rate
+            if need_gamma:
+                gamma[start:stop] = cs._generic_rows(res, x, R, v, w, True)[2]
+            start = stop
+        return phi_dot, gamma
 
 
 @dataclass
@@ -358,30 +380,23 @@ class _Resolved:
     rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
 
-def _cross_rows(r: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """Row-wise ``r × m[..., i, :]``: (k, 3), (k, 3, 3) -> (k, 3, 3)."""
-    return so3.cross(r[:, None, :], m)
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum('ki,ki->k', a, b)
-
-
-def _rot(R: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return np.einsum('kij,kj->ki', R, v)
-
-
-def _rot_t(R: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return np.einsum('kji,kj->ki', R, v)
-
-
 class ConstraintSet:
     """
-    The constraints of a simulation, resolved to arrays per row primitive.
+    The constraints of a simulation, resolved to flat arrays of rows.
 
     Parameters
     ----------
     bodies : BodySet
+
+    Attributes
+    ----------
+    n_rows : int
+        m, the rows of Φ: the built-in rows first, then the generic ones.
+    n_builtin_rows : int
+        The point, dot, line and distance rows (in this order).
+    row_kind, row_comp, row_a, row_b : ndarray, shape (n_builtin_rows,), int64
+    row_par : ndarray, shape (n_builtin_rows, row_kernels.PAR_WIDTH)
+        The built-in rows as :mod:`.row_kernels` takes them (layout there).
 
     """
 
@@ -491,7 +506,7 @@ class ConstraintSet:
         return res
 
     def _build(self) -> None:
-        """Rebuild the primitive arrays and row numbering (not on the hot path)."""
+        """Rebuild the flat row arrays and row numbering (not on the hot path)."""
         res = list(self._resolved.values())
         pts = [r for r in res if r.point is not None]
         dots = [(r, d) for r in res for d in r.dots]
@@ -499,24 +514,16 @@ class ConstraintSet:
         dists = [r for r in res if r.distance is not None]
         gens = [r for r in res if r.spec.type is JointType.GENERIC]
 
-        def arr(values: list, width: int = 3) -> np.ndarray:
-            return np.array(values, dtype=float).reshape(-1, width)
-
-        def idx(values: list) -> np.ndarray:
-            return np.array(values, dtype=int)
-
-        self._pt = {'a': idx([r.a for r in pts]), 'b': idx([r.b for r in pts]),
-                    'ra': arr([r.point[0] for r in pts]), 'rb': arr([r.point[1] for r in pts])}
-        self._dot = {'a': idx([r.a for r, _ in dots]), 'b': idx([r.b for r, _ in dots]),
-                     's': arr([d[0] for _, d in dots]), 'e': arr([d[1] for _, d in dots]),
-                     'c': np.array([d[2] for _, d in dots], dtype=float)}
-        self._line = {'a': idx([r.a for r, _ in lines]), 'b': idx([r.b for r, _ in lines]),
-                      'ra': arr([ln[0] for _, ln in lines]), 'rb': arr([ln[1] for _, ln in lines]),
-                      'e': arr([ln[2] for _, ln in lines])}
-        self._dist = {'a': idx([r.a for r in dists]), 'b': idx([r.b for r in dists]),
-                      'ra': arr([r.distance[0] for r in dists]),
-                      'rb': arr([r.distance[1] for r in dists]),
-                      'L': np.array([r.distance[2] for r in dists], dtype=float)}
+        # Built-in rows, one entry each: point block (x, y, z per point), dots, lines, distances.
+        table = [(KIND_POINT, c, r.a, r.b, r.point[0], r.point[1], None, None, 0.0)
+                 for r in pts for c in range(3)]
+        table += [(KIND_DOT, 0, r.a, r.b, None, None, d[0], d[1], d[2]) for r, d in dots]
+        table += [(KIND_LINE, 0, r.a, r.b, ln[0], ln[1], None, ln[2], 0.0) for r, ln in lines]
+        table += [(KIND_DISTANCE, 0, r.a, r.b, r.distance[0], r.distance[1], None, None,
+                   r.distance[2]) for r in dists]
+        # Flat row arrays for the kernels of .row_kernels (and a compiled step).
+        self.row_kind, self.row_comp, self.row_a, self.row_b, self.row_par = pack_rows(table)
+        self.n_builtin_rows = len(table)
         self._gen = gens
         # Row numbering: point block, dot block, line block, distance block, generic.
         rows: dict[str, list] = {r.spec.name: [] for r in res}
@@ -547,29 +554,46 @@ class ConstraintSet:
         self._pattern()
         self.version = getattr(self, 'version', 0) + 1
 
-    # -- evaluation (hot path: vectorized per primitive) -----------------------------------
+    # -- evaluation (hot path: compiled kernels over the built-in rows) --------------------
 
     def _pattern(self) -> None:
-        """Compute the fixed sparsity pattern of G, in the order values are produced."""
+        """
+        Compute the fixed sparsity pattern of G and where its values come from.
+
+        The pattern lists, per primitive block (points, dots, lines, distances,
+        then each generic constraint), the entries on body a then those on body
+        b, row by row, dropping the world's. ``_value_index`` maps each kept
+        entry into the flat buffer of :meth:`geometry`: the built-in blocks
+        ``Ga`` (m_builtin, 6) and ``Gb`` (m_builtin, 6) raveled one after the
+        other, then per generic constraint its (k, 6) blocks on a and on b.
+        """
         n = len(self.bodies)
-        rows, cols, keep = [], [], []
-        row0 = 0
-        blocks = [(np.repeat(self._pt['a'], 3), np.repeat(self._pt['b'], 3)),
-                  (self._dot['a'], self._dot['b']), (self._line['a'], self._line['b']),
-                  (self._dist['a'], self._dist['b'])]
-        blocks += [(np.full(r.n_rows, r.a), np.full(r.n_rows, r.b)) for r in self._gen]
-        for a, b in blocks:
-            r = row0 + np.arange(len(a))
-            for body in (a, b):
+        mb = self.n_builtin_rows
+        six = np.arange(6)
+        rows, cols, keep, src = [], [], [], []
+        # Built-in blocks: runs of equal kind (the rows are ordered by kind).
+        cuts = np.flatnonzero(np.diff(self.row_kind)) + 1
+        blocks = [(r, self.row_a[r], self.row_b[r], 6 * r[:, None] + six,
+                   6 * mb + 6 * r[:, None] + six)
+                  for r in np.split(np.arange(mb), cuts) if len(r)]
+        offset = 12 * mb
+        for res in self._gen:
+            r, k = res.rows, res.n_rows
+            blocks.append((r, np.full(k, res.a), np.full(k, res.b),
+                           offset + np.arange(6 * k), offset + 6 * k + np.arange(6 * k)))
+            offset += 12 * k
+        for r, a, b, src_a, src_b in blocks:
+            for body, origin in ((a, src_a), (b, src_b)):
                 rows.append(np.repeat(r, 6))
-                cols.append((6 * body[:, None] + np.arange(6)).ravel())
+                cols.append((6 * body[:, None] + six).ravel())
                 keep.append(np.repeat(body < n, 6))
-            row0 += len(a)
+                src.append(origin.ravel())
         cat = (lambda x, dt: np.concatenate(x).astype(dt) if x else np.zeros(0, dtype=dt))
         self._keep = cat(keep, bool)
         self._rows = cat(rows, int)[self._keep]
         self._cols = cat(cols, int)[self._keep]
-        self._structure = JacobianStructure(self._rows, self._cols, row0, n)
+        self._value_index = cat(src, int)[self._keep]
+        self._structure = JacobianStructure(self._rows, self._cols, self.n_rows, n)
 
     def geometry(self, pos: np.ndarray, quat: np.ndarray) -> 'Geometry':
         """
@@ -583,65 +607,29 @@ class ConstraintSet:
             Principal-frame orientations.
 
         """
-        n = len(self.bodies)
-        x = np.vstack([pos, np.zeros((1, 3))])
-        R = np.concatenate([so3.quat_to_matrix(quat), np.eye(3)[None]])
-        geo = Geometry(self, x, R)
-        phis, vals = [], []
-
-        def jac(ga: np.ndarray, gb: np.ndarray) -> None:
-            vals.append(ga.ravel())
-            vals.append(gb.ravel())
-
-        p = self._pt
-        if len(p['a']):
-            a, b = p['a'], p['b']
-            wa, wb = _rot(R[a], p['ra']), _rot(R[b], p['rb'])
-            phis.append((x[a] + wa - x[b] - wb).ravel())
-            k = len(a)
-            eye = np.broadcast_to(np.eye(3), (k, 3, 3))
-            jac(np.concatenate([eye, _cross_rows(p['ra'], R[a])], axis=2),
-                -np.concatenate([eye, _cross_rows(p['rb'], R[b])], axis=2))
-            geo.point = (a, b, wa, wb)
-        d = self._dot
-        if len(d['a']):
-            a, b = d['a'], d['b']
-            u, e = _rot(R[a], d['s']), _rot(R[b], d['e'])
-            ue = so3.cross(u, e)
-            phis.append(_dot(e, u) - d['c'])
-            z = np.zeros((len(a), 3))
-            jac(np.hstack([z, _rot_t(R[a], ue)]), np.hstack([z, -_rot_t(R[b], ue)]))
-            geo.dot = (a, b, u, e)
-        ln = self._line
-        if len(ln['a']):
-            a, b = ln['a'], ln['b']
-            wa, wb = _rot(R[a], ln['ra']), _rot(R[b], ln['rb'])
-            e = _rot(R[b], ln['e'])
-            dd = x[a] + wa - x[b] - wb
-            phis.append(_dot(e, dd))
-            jac(np.hstack([e, so3.cross(ln['ra'], _rot_t(R[a], e))]),
-                np.hstack([-e, -so3.cross(ln['rb'], _rot_t(R[b], e))
-                           + _rot_t(R[b], so3.cross(e, dd))]))
-            geo.line = (a, b, wa, wb, e, dd)
-        ds = self._dist
-        if len(ds['a']):
-            a, b = ds['a'], ds['b']
-            wa, wb = _rot(R[a], ds['ra']), _rot(R[b], ds['rb'])
-            dd = x[a] + wa - x[b] - wb
-            length = np.linalg.norm(dd, axis=1)
-            nrm = dd / np.maximum(length, 1e-300)[:, None]
-            phis.append(length - ds['L'])
-            jac(np.hstack([nrm, so3.cross(ds['ra'], _rot_t(R[a], nrm))]),
-                -np.hstack([nrm, so3.cross(ds['rb'], _rot_t(R[b], nrm))]))
-            geo.dist = (a, b, wa, wb, nrm, length)
-        for res in self._gen:
-            phi, g, _ = self._generic_rows(res, x, R)
-            phis.append(phi)
-            jac(g[:, :6], g[:, 6:])
-        values = np.concatenate(vals)[self._keep] if vals else np.zeros(0)
-        geo.phi = np.concatenate(phis) if phis else np.zeros(0)
-        geo.jacobian = RowJacobian(self._structure, values)
-        geo.n = n
+        # Copies: the Geometry keeps the configuration for ``rates``.
+        pos = np.array(pos, dtype=float, order='C')
+        quat = np.array(quat, dtype=float, order='C')
+        geo = Geometry(self, pos, quat)
+        mb = self.n_builtin_rows
+        phi = np.empty(self.n_rows)
+        g = np.empty((2, mb, 6))
+        if mb:
+            rows_geometry(pos, quat, self.row_kind, self.row_comp, self.row_a, self.row_b,
+                          self.row_par, phi[:mb], g[0], g[1])
+        flat = g.ravel()
+        if self._gen:
+            x, R = geo.frames
+            parts, start = [flat], mb
+            for res in self._gen:
+                phi_g, g_g, _ = self._generic_rows(res, x, R)
+                phi[start:start + res.n_rows] = phi_g
+                parts += [g_g[:, :6].ravel(), g_g[:, 6:].ravel()]
+                geo.g_generic.append(g_g)
+                start += res.n_rows
+            flat = np.concatenate(parts)
+        geo.phi, geo.g_builtin = phi, g
+        geo.jacobian = RowJacobian(self._structure, flat[self._value_index])
         return geo
 
     def evaluate(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
