@@ -229,6 +229,10 @@ class RowJacobian:
     def __init__(self, structure: JacobianStructure, values: np.ndarray) -> None:
         self.structure = st = structure
         self.m, self.n = st.m, st.n
+        #: Per-row blocks (Ga, Gb), each (m, 6), on bodies a and b of each row
+        #: (``ConstraintSet.all_row_a``/``all_row_b``); set by ``geometry`` for
+        #: sparse systems, None otherwise.
+        self.blocks: Optional[tuple] = None
         self.dense_mode = st.dense_mode
         if self.dense_mode:
             self.bodies_used = st.bodies_used
@@ -594,6 +598,11 @@ class ConstraintSet:
         self._cols = cat(cols, int)[self._keep]
         self._value_index = cat(src, int)[self._keep]
         self._structure = JacobianStructure(self._rows, self._cols, self.n_rows, n)
+        # Bodies of every row, generic ones included (the tree solve's graph).
+        self.all_row_a = np.concatenate(
+            [self.row_a] + [np.full(res.n_rows, res.a) for res in self._gen]).astype(np.int64)
+        self.all_row_b = np.concatenate(
+            [self.row_b] + [np.full(res.n_rows, res.b) for res in self._gen]).astype(np.int64)
 
     def geometry(self, pos: np.ndarray, quat: np.ndarray) -> 'Geometry':
         """
@@ -630,6 +639,12 @@ class ConstraintSet:
             flat = np.concatenate(parts)
         geo.phi, geo.g_builtin = phi, g
         geo.jacobian = RowJacobian(self._structure, flat[self._value_index])
+        if not geo.jacobian.dense_mode:
+            # The per-row blocks, for the tree solve (see solver.py).
+            geo.jacobian.blocks = (
+                (g[0], g[1]) if not self._gen else
+                (np.concatenate([g[0]] + [gg[:, :6] for gg in geo.g_generic]),
+                 np.concatenate([g[1]] + [gg[:, 6:] for gg in geo.g_generic])))
         return geo
 
     def evaluate(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,

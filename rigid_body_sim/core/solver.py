@@ -62,6 +62,7 @@ from . import rotation as so3
 from .bodies import BodySet, State
 from .constraints import ConstraintSet, Evaluation, Geometry, RowJacobian
 from .errors import SpecError
+from .tree_solve import TreeSolver
 from .validate import positive_scalar
 
 
@@ -117,6 +118,7 @@ class ConstraintSolver:
         self.counters = SolverCounters()
         self.dt: Optional[float] = None
         self._geometry_cache: Optional[tuple] = None
+        self._tree_cache: Optional[tuple] = None
         self.inv_mass_6 = np.hstack([np.repeat(bodies.inv_mass[:, None], 3, axis=1),
                                      1.0 / bodies.moments])
 
@@ -140,9 +142,13 @@ class ConstraintSolver:
         sparse ones with ``A + regularization · max|diag A| · I``.
         """
         self.counters.factorizations += 1
-        A = G.schur(self.inv_mass_6, H)
-        if A.shape[0] == 0:
+        if G.m == 0:
             return lambda b: np.zeros(0)
+        if not G.dense_mode and G.blocks is not None and (H is None or H.blocks is not None):
+            tree = self._tree()
+            if tree is not None:
+                return self._tree_factor(tree, G, H)
+        A = G.schur(self.inv_mass_6, H)
         diag = np.abs(A.diagonal())
         scale = float(diag.max()) if diag.max() > 0.0 else 1.0
         tiny = self.rank_rtol * scale
@@ -182,6 +188,45 @@ class ConstraintSolver:
             return spla.splu(A, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
                              options={'SymmetricMode': True}).solve
         return spla.splu(A, permc_spec='COLAMD').solve
+
+    def _tree(self) -> Optional[TreeSolver]:
+        """The tree solve of the constraint graph, or None if it has a closed loop."""
+        cs = self.constraints
+        c = self._tree_cache
+        if c is not None and c[0] is cs and c[1] == cs.version:
+            return c[2]
+        try:
+            tree = TreeSolver(cs.all_row_a, cs.all_row_b, len(self.bodies))
+        except ValueError:   # a closed loop: the general sparse path
+            tree = None
+        self._tree_cache = (cs, cs.version, tree)
+        return tree
+
+    def _tree_factor(self, tree: TreeSolver, G: RowJacobian,
+                     H: Optional[RowJacobian]) -> Callable:
+        """
+        Factorize ``G M⁻¹ Hᵀ`` of a chain or tree in linear time (:mod:`.tree_solve`).
+
+        Redundant rows (a joint added twice) show as a pivot below ``rank_rtol``;
+        the system is then solved with the Tikhonov term as the sparse path does.
+        The returned solve uses the solver's workspace: call it before the next
+        factorization.
+        """
+        Ga, Gb = G.blocks
+        Ha, Hb = (None, None) if H is None else H.blocks
+        minv = self.inv_mass_6
+        if not tree.factor(Ga, Gb, minv, Ha, Hb) > self.rank_rtol:
+            self.counters.rank_deficient_solves += 1
+            Ha, Hb = (Ga, Gb) if H is None else (Ha, Hb)
+            cs = self.constraints
+            a, b = cs.all_row_a, cs.all_row_b
+            on_b = b < len(self.bodies)
+            diag = np.sum(Ga * Ha * minv[a], axis=1)
+            diag[on_b] += np.sum(Gb[on_b] * Hb[on_b] * minv[b[on_b]], axis=1)
+            peak = float(np.max(np.abs(diag)))
+            scale = peak if peak > 0.0 else 1.0
+            tree.factor(Ga, Gb, minv, Ha, Hb, reg=self.regularization * scale)
+        return tree.solve
 
     # -- acceleration level ----------------------------------------------------------------
 
