@@ -121,11 +121,21 @@ activate() {
     set -u
 }
 
+compile_kernels() {
+    # numba compiles the core's kernels at their first call and caches them next to the
+    # sources: do it here, once (about 20 s), not in the node's first start or a test.
+    if ! ls "$ROOT"/rigid_body_sim/core/__pycache__/*.nbi >/dev/null 2>&1; then
+        say "compiling the step kernels (numba, about 20 s the first time)"
+    fi
+    python -m rigid_body_sim.core.warmup >&2
+}
+
 setup() {
     setup_venv
     fix_cmake_paths
     build
     activate
+    compile_kernels
 }
 
 cmd=${1:-}
