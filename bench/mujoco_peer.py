@@ -6,9 +6,9 @@ Issue 8's comparison: free bodies take a step in one compiled call (numba,
 numpy around compiled pieces (constraint rows, tree solves). Each scene is built twice
 with the same masses, inertias, gravity, joint geometry and step size, and no contacts:
 as an MJCF string for MuJoCo (PyPI ``mujoco``, a benchmark-only dependency:
-``bench/requirements.txt``) and as a :class:`Simulation` of this core. Both are stepped in a Python loop that takes one step
-and reads the state, as a node does: MuJoCo ``mj_step``, then copies of ``qpos`` and
-``qvel``; ours ``sim.step()``, then ``sim.pose()`` and ``sim.twist()``. The repetitions
+``bench/requirements.txt``) and as a :class:`Simulation` of this core. Both are stepped
+in a Python loop that takes one step and reads the state, as a node does: MuJoCo
+``mj_step``, then copies of ``qpos`` and ``qvel``; ours ``sim.step()``, then ``sim.pose()`` and ``sim.twist()``. The repetitions
 of all variants of a scene are interleaved (their order rotating), each variant reports
 the median wall time per step, and the errors come from the same runs, measured
 against references that neither simulator supplies:
