@@ -8,10 +8,11 @@ with the same masses, inertias, gravity, joint geometry and step size, and no co
 as an MJCF string for MuJoCo (PyPI ``mujoco``, a benchmark-only dependency:
 ``bench/requirements.txt``) and as a :class:`Simulation` of this core. Both are stepped
 in a Python loop that takes one step and reads the state, as a node does: MuJoCo
-``mj_step``, then copies of ``qpos`` and ``qvel``; ours ``sim.step()``, then ``sim.pose()`` and ``sim.twist()``. The repetitions
-of all variants of a scene are interleaved (their order rotating), each variant reports
-the median wall time per step, and the errors come from the same runs, measured
-against references that neither simulator supplies:
+``mj_step``, then copies of ``qpos`` and ``qvel``; ours ``sim.step()``, then
+``sim.pose()`` and ``sim.twist()``. The repetitions of all variants of a scene are
+interleaved (their order rotating), each variant reports the median wall time per step,
+and the errors come from the same runs, measured against references that neither
+simulator supplies:
 
 1. free body (moments 1, 2, 3 kg m², Ω0 = (0.01, 2, 0.01) rad/s, no gravity, 100 s,
    dt 1e-2): Ω(T) (body frame) and the orientation against DOP853 at rtol 1e-13;
