@@ -184,8 +184,8 @@ def perpendicular_frame(k: np.ndarray) -> np.ndarray:
 
 
 # Systems of at most this many rows use dense linear algebra over the bodies
-# they touch; larger ones use scipy.sparse (faster there, and linear in size
-# for chains and trees).
+# they touch; larger ones the linear-time tree solve (chains and trees, see
+# tree_solve.py) or, with a closed loop, scipy.sparse.
 DENSE_ROWS = 48
 
 
@@ -432,6 +432,22 @@ class ConstraintSet:
     def rows_of(self, name: str) -> np.ndarray:
         """Row indices of constraint ``name`` in Φ, G and λ."""
         return self._get(name).rows
+
+    def anchors(self, name: str) -> tuple:
+        """
+        Bodies of constraint ``name`` and where its anchor sits on each.
+
+        Returns
+        -------
+        tuple
+            ``((a, r_a), (b, r_b))``: body indices (``b == len(bodies)`` is the
+            world) and each anchor's lever arm, ndarray, shape (3,), m, from the
+            body's centre of mass in its principal frame (for the world, the
+            anchor's world position). Fixed when the constraint was added.
+
+        """
+        res = self._get(name)
+        return (res.a, res.anchor[0]), (res.b, res.anchor[1])
 
     def _get(self, name: str) -> _Resolved:
         try:

@@ -186,7 +186,7 @@ class Integrator:
         return new
 
     def _free_step(self, state: State, dt: float, t_end: float) -> State:
-        """A step of bodies no constraint couples: one call of the compiled kernel."""
+        """Take a step of bodies no constraint couples: one call of the compiled kernel."""
         dyn = self.dynamics
         body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
         pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()

@@ -143,7 +143,8 @@ class Simulation:
             if effects:
                 mid = self._time_base + (self._steps + 0.5) * self.dt
                 # Every effect must see the new step: no short-circuit.
-                if any([effect.begin_step(mid) for effect in effects]):
+                switched = [effect.begin_step(mid) for effect in effects]
+                if any(switched):
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
             try:
@@ -213,48 +214,12 @@ class Simulation:
                 solver.constraints.add(spec, self.state)
             except SpecError as exc:
                 raise exc.within(f'constraints[{i}]') from None
-        if not self._consistent():
-            self._name_first_inconsistent()
+        if not solver.consistent(self.state):
+            index, residual = solver.first_inconsistent(self._initial_constraints, self.state)
+            raise self._inconsistent(self._initial_constraints[index].name,
+                                     f'constraints[{index}]', 'no simulation was built', residual)
         self.dynamics.changed()
         self._reconcile_velocities()
-
-    #: m or rad: a constraint set is consistent if Gauss–Newton gets ``max |Φ|`` below this.
-    CONSISTENCY_TOLERANCE = 1e-8
-
-    def _reach(self) -> float:
-        """
-        Smallest ``max |Φ|`` Gauss–Newton reaches (see ``ConstraintSolver.closest_reach``).
-
-        From the current configuration and, if that stalls, from three random
-        re-orientations of growing size (0.3, 1 and 3 rad): a singular start,
-        such as a straight chain asked to fold, stalls where a solution exists,
-        and only a residual left from every start marks the set inconsistent.
-        Returns 0 when a generic constraint's function fails away from the
-        current configuration (the search cannot tell: the constraint is
-        accepted). Counts no work.
-        """
-        solver = self.dynamics.solver
-        s = self.state
-        tol = self.CONSISTENCY_TOLERANCE
-        rng = np.random.default_rng(0)   # the same verdict every time
-        best = np.inf
-        with self._uncounted():
-            try:
-                for scale in (0.0, 0.3, 1.0, 3.0):
-                    quat = s.quat_principal_world
-                    if scale:
-                        turn = so3.exp_quat(scale * rng.normal(size=(len(quat), 3)))
-                        quat = so3.quat_multiply(quat, turn)
-                    best = min(best, solver.closest_reach(s.pos_com_world, quat, tol))
-                    if best <= tol:
-                        break
-            except SpecError:
-                return 0.0
-        return best
-
-    def _consistent(self) -> bool:
-        """Tell whether the constraints can all hold."""
-        return self._reach() <= self.CONSISTENCY_TOLERANCE
 
     def _inconsistent(self, name: str, field: str, outcome: str,
                       residual: float) -> InconsistentConstraintError:
@@ -263,23 +228,6 @@ class Simulation:
             field, f'constraint {name!r} is inconsistent with {others}: no configuration '
                    f'satisfies them all (the closest leaves max |Φ| = {residual:.3g} m or '
                    f'rad); {outcome}')
-
-    def _name_first_inconsistent(self) -> None:
-        """Raise for the first initial constraint that cannot hold with those before it."""
-        solver = self.dynamics.solver
-        specs = self._initial_constraints
-        lo, hi = 0, len(specs)   # the first len(specs[:lo]) hold together, specs[:hi] do not
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            solver.constraints = ConstraintSet(self.bodies)
-            for spec in specs[:mid]:
-                solver.constraints.add(spec, self.state)
-            lo, hi = (mid, hi) if self._consistent() else (lo, mid)
-        solver.constraints = ConstraintSet(self.bodies)
-        for spec in specs[:hi]:
-            solver.constraints.add(spec, self.state)
-        raise self._inconsistent(specs[hi - 1].name, f'constraints[{hi - 1}]',
-                                 'no simulation was built', self._reach())
 
     @staticmethod
     def _wrench_rows(effect: Effect) -> Optional[list]:
@@ -342,14 +290,15 @@ class Simulation:
         refused with a :class:`SpecError`; a redundant but consistent one (a
         closed loop, the same joint twice) is accepted.
         """
-        constraints = self.dynamics.solver.constraints
+        solver = self.dynamics.solver
+        constraints = solver.constraints
         constraints.add(constraint, self.state)
         try:
-            residual = self._reach()
+            residual = solver.reach(self.state)
         except BaseException:
             constraints.remove(constraint.name)
             raise
-        if residual > self.CONSISTENCY_TOLERANCE:
+        if residual > solver.CONSISTENCY_TOLERANCE:
             constraints.remove(constraint.name)
             raise self._inconsistent(constraint.name, 'constraint', 'it was not added',
                                      residual)
@@ -436,7 +385,9 @@ class Simulation:
         if not self.dynamics.constrained:
             return {}
         with self._uncounted():
-            return self._reactions()
+            fields = self.dynamics.solver.reactions(self.dynamics, self.state)
+        return {name: {body: Reaction(**f) for body, f in per_body.items()}
+                for name, per_body in fields.items()}
 
     @contextlib.contextmanager
     def _uncounted(self) -> Iterator[None]:
@@ -461,37 +412,6 @@ class Simulation:
             for effect, (evaluations, body_evaluations) in zip(dyn.effects, saved[1]):
                 effect.evaluations, effect.body_evaluations = evaluations, body_evaluations
 
-    def _reactions(self) -> dict:
-        dyn = self.dynamics
-        solver = dyn.solver
-        s = self.state
-        kin = dyn.kinematics(s.time, s.pos_com_world, s.quat_principal_world, s.vel_com_world,
-                             s.ang_vel_principal)
-        force, torque = dyn.wrench(kin, dyn.effects)
-        torque = torque - dyn.gyroscopic(s.ang_vel_principal)
-        a6 = np.hstack([force * self.bodies.inv_mass[:, None], torque / self.bodies.moments])
-        ev = solver.constraints.evaluate(s.pos_com_world, s.quat_principal_world,
-                                         s.vel_com_world, s.ang_vel_principal)
-        lam = solver.multipliers(ev, a6)
-        gen = solver.generalized_forces(ev, lam)
-        R = kin.R_principal_world
-        out = {}
-        for i, name in enumerate(solver.constraints.names):
-            res = solver.constraints._resolved[name]
-            per_body = {}
-            for body, r_p in ((res.a, res.anchor[0]), (res.b, res.anchor[1])):
-                if body >= len(self.bodies):
-                    continue
-                f = gen[i, body, :3]
-                tau_com = R[body] @ gen[i, body, 3:]
-                lever = R[body] @ r_p
-                per_body[self.bodies.names[body]] = Reaction(
-                    force_world=f, torque_com_world=tau_com,
-                    torque_anchor_world=tau_com - so3.cross(lever, f),
-                    anchor_world=s.pos_com_world[body] + lever)
-            out[name] = per_body
-        return out
-
     def joint_anchors(self) -> dict:
         """
         Where each constraint's anchor on its first body is now, world frame (m).
@@ -506,10 +426,9 @@ class Simulation:
         constraints = self.dynamics.solver.constraints
         out = {}
         for name in constraints.names:
-            res = constraints._resolved[name]
-            lever = so3.rotate(s.quat_principal_world[res.a], np.asarray(res.anchor[0])) \
-                if len(res.anchor) else np.zeros(3)
-            out[name] = s.pos_com_world[res.a] + lever
+            (a, r_a), _ = constraints.anchors(name)
+            lever = so3.rotate(s.quat_principal_world[a], np.asarray(r_a))
+            out[name] = s.pos_com_world[a] + lever
         return out
 
     def work(self) -> dict:

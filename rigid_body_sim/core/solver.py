@@ -19,9 +19,10 @@ solved as it is: no regularization biases the reaction forces, however
 ill-conditioned the mass ratios make it (a point mass on a rod: 1e9).
 
 The matrix ``G M⁻¹ Gᵀ`` couples only constraints that share a body: block
-tridiagonal for chains, tree-shaped for trees. It is factorized by SuperLU with
-a minimum-degree ordering of ``A + Aᵀ`` (no fill-in for chains and trees, so the
-cost is linear in the number of links); systems of at most ``DENSE_ROWS`` rows
+tridiagonal for chains, tree-shaped for trees. Chains and trees are eliminated
+in tree order by :mod:`.tree_solve` (Baraff 1996; linear in the number of
+links, compiled); a graph with a closed loop is factorized by SuperLU with a
+minimum-degree ordering of ``A + Aᵀ``; systems of at most ``DENSE_ROWS`` rows
 use a dense Cholesky factorization, which is faster at that size
 (see :data:`.constraints.DENSE_ROWS`).
 
@@ -49,8 +50,8 @@ order of the gravity force of the body. Step sizes above
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable, Optional
+from dataclasses import dataclass, replace
+from typing import Callable, Optional, Sequence, TYPE_CHECKING
 import warnings
 
 import numpy as np
@@ -60,10 +61,13 @@ import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constraints import ConstraintSet, Evaluation, Geometry, RowJacobian
+from .constraints import Constraint, ConstraintSet, Evaluation, Geometry, RowJacobian
 from .errors import SpecError
 from .tree_solve import TreeSolver
 from .validate import positive_scalar
+
+if TYPE_CHECKING:
+    from .dynamics import Dynamics
 
 
 @dataclass
@@ -190,7 +194,7 @@ class ConstraintSolver:
         return spla.splu(A, permc_spec='COLAMD').solve
 
     def _tree(self) -> Optional[TreeSolver]:
-        """The tree solve of the constraint graph, or None if it has a closed loop."""
+        """Return the tree solve of the constraint graph, or None if it has a closed loop."""
         cs = self.constraints
         c = self._tree_cache
         if c is not None and c[0] is cs and c[1] == cs.version:
@@ -375,6 +379,100 @@ class ConstraintSolver:
             quat = so3.quat_normalize(so3.quat_multiply(quat, so3.exp_quat(d[:, 3:])))
         return min(best, norm)
 
+    # -- consistency -----------------------------------------------------------------------
+
+    #: m or rad: a constraint set is consistent if Gauss–Newton gets ``max |Φ|`` below this.
+    CONSISTENCY_TOLERANCE = 1e-8
+
+    def reach(self, state: State) -> float:
+        """
+        Smallest ``max |Φ|`` Gauss–Newton reaches (see :meth:`closest_reach`).
+
+        From the configuration of ``state`` and, if that stalls, from three random
+        re-orientations of growing size (0.3, 1 and 3 rad, the same every call):
+        a singular start, such as a straight chain asked to fold, stalls where a
+        solution exists, and only a residual left from every start marks the set
+        inconsistent. Counts no work (:attr:`counters` are left as they were).
+
+        Parameters
+        ----------
+        state : State
+            Its positions (n, 3) and orientations (n, 4) are the first start.
+
+        Returns
+        -------
+        float
+            m or rad; at most :attr:`CONSISTENCY_TOLERANCE` when the constraints
+            can all hold. 0 when a generic constraint's function fails away from
+            the configuration of ``state`` (the search cannot tell: the set is
+            taken as consistent).
+
+        """
+        tol = self.CONSISTENCY_TOLERANCE
+        rng = np.random.default_rng(0)   # the same verdict every time
+        best = np.inf
+        saved = replace(self.counters)
+        try:
+            for scale in (0.0, 0.3, 1.0, 3.0):
+                quat = state.quat_principal_world
+                if scale:
+                    turn = so3.exp_quat(scale * rng.normal(size=(len(quat), 3)))
+                    quat = so3.quat_multiply(quat, turn)
+                best = min(best, self.closest_reach(state.pos_com_world, quat, tol))
+                if best <= tol:
+                    break
+        except SpecError:
+            return 0.0
+        finally:
+            # In place: callers may hold a reference to the counter object.
+            self.counters.__dict__.update(saved.__dict__)
+        return best
+
+    def consistent(self, state: State) -> bool:
+        """Tell whether the constraints can all hold (:meth:`reach` from ``state``)."""
+        return self.reach(state) <= self.CONSISTENCY_TOLERANCE
+
+    def first_inconsistent(self, specs: Sequence[Constraint], state: State) -> tuple[int, float]:
+        """
+        Find the first of ``specs`` that cannot hold together with those before it.
+
+        Bisects on prefixes of ``specs`` (each added at ``state`` to a fresh
+        :class:`ConstraintSet`), assuming the whole of ``specs`` is inconsistent
+        (:meth:`consistent` is False for it). Replaces :attr:`constraints`: it is
+        left holding ``specs[:index + 1]``, the set ``residual`` is of. Counts no
+        work.
+
+        Parameters
+        ----------
+        specs : sequence of Constraint
+            In the order they are added; each valid at ``state`` on its own.
+        state : State
+            The configuration anchors and axes given in the world refer to.
+
+        Returns
+        -------
+        index : int
+            Of the first inconsistent constraint in ``specs``.
+        residual : float
+            m or rad: :meth:`reach` of ``specs[:index + 1]``.
+
+        """
+        specs = list(specs)
+        lo, hi = 0, len(specs)   # specs[:lo] hold together, specs[:hi] do not
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            self.constraints = self._constraint_set(specs[:mid], state)
+            lo, hi = (mid, hi) if self.consistent(state) else (lo, mid)
+        self.constraints = self._constraint_set(specs[:hi], state)
+        return hi - 1, self.reach(state)
+
+    def _constraint_set(self, specs: Sequence[Constraint], state: State) -> ConstraintSet:
+        """Build a new :class:`ConstraintSet` of ``specs``, added in order at ``state``."""
+        constraints = ConstraintSet(self.bodies)
+        for spec in specs:
+            constraints.add(spec, state)
+        return constraints
+
     def project_velocities(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                            omega: np.ndarray) -> tuple:
         """
@@ -401,4 +499,60 @@ class ConstraintSolver:
             rows = cs.rows_of(name)
             lam_c[rows] = lam[rows]
             out[i] = -ev.jacobian.rmatvec(lam_c)
+        return out
+
+    def reactions(self, dynamics: Dynamics, state: State) -> dict:
+        """
+        Wrench each constraint exerts on each of its bodies at ``state`` (world frame).
+
+        λ is solved from the full accelerations (every effect of ``dynamics``,
+        gyroscopic terms, applied wrenches, see :meth:`multipliers`), so these are
+        the forces the joints carry at this instant; each constraint's share is
+        :meth:`generalized_forces`. The work is counted as usual (in the counters
+        of ``dynamics``, its effects and this solver): a caller reading outputs
+        restores them.
+
+        Parameters
+        ----------
+        dynamics : Dynamics
+            The bodies' effects; its ``solver`` is this one.
+        state : State
+            Positions (n, 3), orientations (n, 4), velocities (n, 3), angular
+            velocities (n, 3, principal frames).
+
+        Returns
+        -------
+        dict
+            ``{name: {body_name: fields}}`` in the order the constraints were
+            added (the world is not listed), ``fields`` a dict of ndarrays of
+            shape (3,): ``force_world`` (N), ``torque_com_world`` (N m, about the
+            body's centre of mass), ``torque_anchor_world`` (N m, about the
+            anchor on the body) and ``anchor_world`` (m, where that anchor is).
+
+        """
+        s = state
+        kin = dynamics.kinematics(s.time, s.pos_com_world, s.quat_principal_world,
+                                  s.vel_com_world, s.ang_vel_principal)
+        force, torque = dynamics.wrench(kin, dynamics.effects)
+        torque = torque - dynamics.gyroscopic(s.ang_vel_principal)
+        a6 = np.hstack([force * self.bodies.inv_mass[:, None], torque / self.bodies.moments])
+        ev = self.constraints.evaluate(s.pos_com_world, s.quat_principal_world,
+                                       s.vel_com_world, s.ang_vel_principal)
+        lam = self.multipliers(ev, a6)
+        gen = self.generalized_forces(ev, lam)
+        R = kin.R_principal_world
+        out = {}
+        for i, name in enumerate(self.constraints.names):
+            per_body = {}
+            for body, r_p in self.constraints.anchors(name):
+                if body >= len(self.bodies):
+                    continue
+                f = gen[i, body, :3]
+                tau_com = R[body] @ gen[i, body, 3:]
+                lever = R[body] @ r_p
+                per_body[self.bodies.names[body]] = {
+                    'force_world': f, 'torque_com_world': tau_com,
+                    'torque_anchor_world': tau_com - so3.cross(lever, f),
+                    'anchor_world': s.pos_com_world[body] + lever}
+            out[name] = per_body
         return out

@@ -29,7 +29,8 @@ def warm_up() -> float:
     free.step(2)
     free.pose(), free.twist()
     for links in (2, 12):   # dense rows, then the tree solve
-        bodies = [RigidBody(f'l{i}', 1.0, (1e-4, 1e-3, 1e-3), position_world=(0.1 * i + 0.05, 0, 0))
+        bodies = [RigidBody(f'l{i}', 1.0, (1e-4, 1e-3, 1e-3),
+                            position_world=(0.1 * i + 0.05, 0, 0))
                   for i in range(links)]
         joints = [Constraint(f'j{i}', 'hinge', f'l{i}', f'l{i - 1}' if i else None,
                              anchor_world=(0.1 * i, 0, 0), axis_world=(0, 1, 0))
