@@ -69,6 +69,7 @@ from typing import ClassVar, Optional
 
 import numpy as np
 
+from . import constrained_kernels as ckern
 from . import rotation as so3
 from . import step_kernels as kern
 from .bodies import State
@@ -130,6 +131,7 @@ class Integrator:
         # last) while the model and the configuration it was evaluated at are current.
         self._kick_buffer = np.zeros((len(dynamics.bodies), 6))
         self._kick_at: Optional[tuple] = None
+        self._geometry_at: Optional[tuple] = None
 
     def substeps(self, state: State, dt: float) -> int:
         """
@@ -168,6 +170,10 @@ class Integrator:
         t_end = state.time + dt if t_end is None else t_end
         if not self.dynamics.constrained:
             return self._free_step(state, dt, t_end)
+        setup = self.dynamics.solver.kernel_setup()
+        if setup is not None:
+            return self._constrained_step(state, dt, t_end, setup)
+        # Generic rows (a user's Python function) or a large closed loop: in Python.
         k = self.substeps(state, dt)
         while True:
             # At the finest split a step must finish: the projection then falls back.
@@ -207,6 +213,49 @@ class Integrator:
         c.steps += 1
         if dyn.effects:
             dyn.count_effect_work(rhs, kicks, flows)
+        return State(t_end, pos, quat, vel, om)
+
+    def _constrained_step(self, state: State, dt: float, t_end: float, setup: tuple) -> State:
+        """Take a constrained step (sub-steps and retries included) in one compiled call."""
+        dyn = self.dynamics
+        solver = dyn.solver
+        rows, use_tree, tree, watch, ws, lam = setup
+        body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
+        pos, quat = np.empty_like(state.pos_com_world), np.empty_like(state.quat_principal_world)
+        vel, om = np.empty_like(state.vel_com_world), np.empty_like(state.ang_vel_principal)
+        at = self._geometry_at
+        valid = (at is not None and at[0] is ws and at[1] is state.pos_com_world
+                 and at[2] is state.quat_principal_world)
+        counts = np.zeros(ckern.N_COUNTS, dtype=np.int64)
+        par = solver.kernel_parameters(self.max_rotation, self.max_substeps,
+                                       getattr(self, 'CLOSING', 0.0))
+        ckern.constrained_step(self.KERNEL, state.pos_com_world, state.quat_principal_world,
+                               state.vel_com_world, state.ang_vel_principal, dt, body, gforce,
+                               wrench, flags, rows, watch, par, use_tree, tree, ws, pos, quat,
+                               vel, om, lam, valid, counts)
+        # The workspace now holds the geometry of the new configuration.
+        self._geometry_at = (ws, pos, quat)
+        dyn.last_multipliers = lam.copy()
+        n = counts.tolist()
+        c = dyn.counters
+        c.rhs_evaluations += n[kern.RHS]
+        c.kick_evaluations += n[kern.KICK]
+        c.gyroscopic_body_evaluations += n[kern.GYRO]
+        c.rotation_updates += n[kern.ROT]
+        c.substeps += n[ckern.SUBSTEPS]
+        c.retries += n[ckern.RETRIES]
+        c.steps += 1
+        sc = solver.counters
+        sc.geometry_evaluations += n[ckern.GEOMETRY]
+        sc.factorizations += n[ckern.FACTORIZATIONS]
+        sc.rank_deficient_solves += n[ckern.RANK_DEFICIENT]
+        sc.projection_fallbacks += n[ckern.FALLBACKS]
+        sc.acceleration_solves += n[ckern.ACC_SOLVES]
+        sc.position_iterations += n[ckern.POS_ITERATIONS]
+        sc.velocity_projections += n[ckern.VEL_PROJECTIONS]
+        if dyn.effects:
+            dyn.count_effect_work(n[kern.RHS], n[kern.KICK],
+                                  n[kern.FLOW] + n[ckern.DAMP_IN_KICK])
         return State(t_end, pos, quat, vel, om)
 
     def _substepped(self, state: State, dt: float, t_end: float, k: int) -> State:

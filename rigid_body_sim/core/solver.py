@@ -61,9 +61,11 @@ import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constraints import Constraint, ConstraintSet, Evaluation, Geometry, RowJacobian
+from .constrained_kernels import workspace
+from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geometry,
+                          RowJacobian)
 from .errors import SpecError
-from .tree_solve import TreeSolver
+from .tree_solve import factor_arrays, tree_structure, TreeSolver
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -123,6 +125,7 @@ class ConstraintSolver:
         self.dt: Optional[float] = None
         self._geometry_cache: Optional[tuple] = None
         self._tree_cache: Optional[tuple] = None
+        self._kernel_cache: Optional[tuple] = None
         self.inv_mass_6 = np.hstack([np.repeat(bodies.inv_mass[:, None], 3, axis=1),
                                      1.0 / bodies.moments])
 
@@ -205,6 +208,50 @@ class ConstraintSolver:
             tree = None
         self._tree_cache = (cs, cs.version, tree)
         return tree
+
+    def kernel_setup(self) -> Optional[tuple]:
+        """
+        Return the arrays the compiled constrained step works with, or None.
+
+        None when the constraint set has generic rows (a user's Python function)
+        or, beyond ``DENSE_ROWS`` rows, a closed loop (the sparse LU path): those
+        step in Python. Otherwise ``(rows, use_tree, tree, watch, workspace,
+        multipliers)`` (see :mod:`.constrained_kernels`), rebuilt only when the
+        constraint set changes.
+        """
+        cs = self.constraints
+        c = self._kernel_cache
+        if c is not None and c[0] is cs and c[1] == cs.version:
+            return c[2]
+        setup = None
+        n, m = len(self.bodies), cs.n_rows
+        if cs.n_builtin_rows == m:
+            use_tree = m > DENSE_ROWS
+            tree = self._tree() if use_tree else None
+            if not use_tree or tree is not None:
+                if tree is None:   # placeholders of the right types
+                    empty = np.zeros(0, dtype=np.int64)
+                    st = tree_structure(empty, empty, n)
+                    arrays = (*st.arrays, *factor_arrays(st))
+                else:
+                    arrays = (*tree.structure.arrays, tree.S, tree.piv, tree.P, tree.Q,
+                              tree.B, tree.W, tree.E, tree.tmp)
+                watch = np.zeros(n, dtype=bool)
+                watch[cs.touched] = True
+                body = np.zeros((n, 8))
+                body[:, 1], body[:, 2:5] = self.bodies.inv_mass, self.bodies.moments
+                rows = (cs.row_kind, cs.row_comp, cs.row_a, cs.row_b, cs.row_par)
+                setup = (rows, use_tree, arrays, watch, workspace(n, m, body), np.zeros(m))
+        self._kernel_cache = (cs, cs.version, setup)
+        return setup
+
+    def kernel_parameters(self, max_rotation: Optional[float], max_substeps: int,
+                          closing: float) -> np.ndarray:
+        """Return the ``par`` array of :mod:`.constrained_kernels` for the settings now."""
+        return np.array([self.time_constant, self.omega, self.position_tolerance,
+                         float(self.max_iterations), self.rank_rtol, self.regularization,
+                         closing, np.inf if max_rotation is None else float(max_rotation),
+                         float(max_substeps)])
 
     def _tree_factor(self, tree: TreeSolver, G: RowJacobian,
                      H: Optional[RowJacobian]) -> Callable:

@@ -1,0 +1,687 @@
+"""
+Compiled kernels: a whole step of a constrained scene in one call.
+
+The methods are those of :mod:`.integrators` (RATTLE with SHAKE's Newton
+iterations in the splittings, Baumgarte-stabilized multipliers at every stage
+and a velocity projection in ``rkmk4``) and the linear algebra that of
+:mod:`.solver`, written over flat arrays and compiled by numba
+(``@njit(cache=True)``; ``NUMBA_DISABLE_JIT=1`` runs it as Python). The
+constraint rows are those of :mod:`.row_kernels` (point, dot, line, distance);
+the systems ``G M⁻¹ Hᵀ`` are solved densely (Cholesky, LU, or a truncated SVD
+for redundant rows) up to ``DENSE_ROWS`` rows and by the tree solve of
+:mod:`.tree_solve` beyond.
+
+A step is split into sub-steps when a constrained body turns fast, and redone
+with twice as many when SHAKE stops converging (:class:`.integrators.NotConverged`
+in the Python description); both happen inside the call.
+
+Parameters array ``par`` (float64)
+----------------------------------
+``[time_constant, omega, position_tolerance, max_iterations, rank_rtol,
+regularization, closing, max_rotation, max_substeps]`` (see
+:class:`.solver.ConstraintSolver` and :class:`.integrators.Integrator`).
+
+Work counts (``counts``, int64, incremented): the slots below.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+import numpy as np
+
+from .row_kernels import rows_geometry, rows_rates
+from .step_kernels import (damping_flow, drift, GYRO, HAS_DAMPING, KICK, LIE_POISSON4,
+                           normalize_quaternions, position_wrench, quat_exp_multiply, RHS,
+                           RKMK4, ROT, SYMPLECTIC_EULER)
+from .tree_solve import tree_factor, tree_solve
+
+# Counter slots beyond step_kernels' five.
+DAMP_IN_KICK, GEOMETRY, FACTORIZATIONS, RANK_DEFICIENT, FALLBACKS = 5, 6, 7, 8, 9
+ACC_SOLVES, POS_ITERATIONS, VEL_PROJECTIONS, SUBSTEPS, RETRIES = 10, 11, 12, 13, 14
+N_COUNTS = 15
+
+# par slots
+P_TAU, P_OMEGA, P_POS_TOL, P_MAX_IT, P_RANK_RTOL, P_REG, P_CLOSING = 0, 1, 2, 3, 4, 5, 6
+P_MAX_ROT, P_MAX_SUB = 7, 8
+
+# Factorization modes.
+CHOLESKY, LU, SVD, TREE = 0, 1, 2, 3
+
+_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+
+
+@njit(cache=True)
+def _schur(Ga, Gb, Ha, Hb, a, b, minv6, A):
+    """Dense ``A = G M⁻¹ Hᵀ`` (m, m) from the row blocks (world: ``b == n``)."""
+    m = Ga.shape[0]
+    n = minv6.shape[0]
+    for i in range(m):
+        for j in range(m):
+            s = 0.0
+            ai, bi, aj, bj = a[i], b[i], a[j], b[j]
+            if ai == aj:
+                for c in range(6):
+                    s += Ga[i, c] * minv6[ai, c] * Ha[j, c]
+            if bj < n and ai == bj:
+                for c in range(6):
+                    s += Ga[i, c] * minv6[ai, c] * Hb[j, c]
+            if bi < n and bi == aj:
+                for c in range(6):
+                    s += Gb[i, c] * minv6[bi, c] * Ha[j, c]
+            if bi < n and bj < n and bi == bj:
+                for c in range(6):
+                    s += Gb[i, c] * minv6[bi, c] * Hb[j, c]
+            A[i, j] = s
+
+
+@njit(cache=True)
+def _factor(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, use_tree, tree, dense, counts):
+    """
+    Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``); returns the mode for :func:`_solve`.
+
+    Dense: Cholesky (symmetric) or LU with partial pivoting; a pivot below
+    ``rank_rtol`` times the largest diagonal entry marks redundant rows, which
+    get the truncated SVD (minimum-norm solution). Tree: the tree solve, with
+    the Tikhonov term for redundant rows.
+    """
+    counts[FACTORIZATIONS] += 1
+    m = Ga.shape[0]
+    rtol = par[P_RANK_RTOL]
+    tg_ptr, tg_rows, tg_child, tg_parent, t_side = tree[0], tree[1], tree[2], tree[3], tree[4]
+    tS, tpiv, tP, tQ, tB, tW = tree[5], tree[6], tree[7], tree[8], tree[9], tree[10]
+    F, dpiv, U, sv, Vt = dense
+    if use_tree:
+        pivot = tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
+                            minv6, 0.0, tS, tpiv, tP, tQ, tB, tW)
+        if not pivot > rtol:
+            counts[RANK_DEFICIENT] += 1
+            n = minv6.shape[0]
+            peak = 0.0
+            for i in range(m):
+                d = 0.0
+                for c in range(6):
+                    d += Ga[i, c] * Ha[i, c] * minv6[a[i], c]
+                    if b[i] < n:
+                        d += Gb[i, c] * Hb[i, c] * minv6[b[i], c]
+                peak = max(peak, abs(d))
+            scale = peak if peak > 0.0 else 1.0
+            tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
+                        minv6, par[P_REG] * scale, tS, tpiv, tP, tQ, tB, tW)
+        return TREE
+    _schur(Ga, Gb, Ha, Hb, a, b, minv6, F)
+    scale = 0.0
+    for i in range(m):
+        scale = max(scale, abs(F[i, i]))
+    if not scale > 0.0:
+        scale = 1.0
+    tiny = rtol * scale
+    A = F.copy()
+    ok = True
+    if symmetric:
+        # Cholesky, lower triangle in place.
+        for j in range(m):
+            d = F[j, j]
+            for k in range(j):
+                d -= F[j, k] * F[j, k]
+            if not d > tiny:
+                ok = False
+                break
+            d = math.sqrt(d)
+            F[j, j] = d
+            for i in range(j + 1, m):
+                s = F[i, j]
+                for k in range(j):
+                    s -= F[i, k] * F[j, k]
+                F[i, j] = s / d
+        if ok:
+            return CHOLESKY
+    else:
+        for j in range(m):
+            p = j
+            big = abs(F[j, j])
+            for i in range(j + 1, m):
+                if abs(F[i, j]) > big:
+                    big, p = abs(F[i, j]), i
+            dpiv[j] = p
+            if p != j:
+                for k in range(m):
+                    F[j, k], F[p, k] = F[p, k], F[j, k]
+            if not big > tiny:
+                ok = False
+                break
+            for i in range(j + 1, m):
+                f = F[i, j] / F[j, j]
+                F[i, j] = f
+                for k in range(j + 1, m):
+                    F[i, k] -= f * F[j, k]
+        if ok:
+            return LU
+    counts[RANK_DEFICIENT] += 1
+    u, s, vt = np.linalg.svd(A)
+    U[:, :] = u
+    Vt[:, :] = vt
+    for i in range(m):
+        sv[i] = s[i] if s[i] > 1e-13 * s[0] else 0.0
+    return SVD
+
+
+@njit(cache=True)
+def _solve(mode, rhs, out, tree, dense):
+    """Solve with the factors of :func:`_factor`; ``out`` (m,) may not alias ``rhs``."""
+    m = rhs.shape[0]
+    F, dpiv, U, sv, Vt = dense
+    if mode == TREE:
+        tree_solve(tree[0], tree[1], tree[2], tree[3], tree[5], tree[6], tree[7], tree[8],
+                   tree[9], tree[11], tree[12], rhs, out)
+        return
+    if mode == SVD:
+        y = np.zeros(m)
+        for k in range(m):
+            if sv[k] > 0.0:
+                s = 0.0
+                for i in range(m):
+                    s += U[i, k] * rhs[i]
+                y[k] = s / sv[k]
+        for i in range(m):
+            s = 0.0
+            for k in range(m):
+                s += Vt[k, i] * y[k]
+            out[i] = s
+        return
+    for i in range(m):
+        out[i] = rhs[i]
+    if mode == LU:
+        for j in range(m):
+            p = dpiv[j]
+            if p != j:
+                out[j], out[p] = out[p], out[j]
+        for i in range(m):
+            s = out[i]
+            for k in range(i):
+                s -= F[i, k] * out[k]
+            out[i] = s
+        for i in range(m - 1, -1, -1):
+            s = out[i]
+            for k in range(i + 1, m):
+                s -= F[i, k] * out[k]
+            out[i] = s / F[i, i]
+        return
+    # Cholesky: L y = rhs, Lᵀ x = y.
+    for i in range(m):
+        s = out[i]
+        for k in range(i):
+            s -= F[i, k] * out[k]
+        out[i] = s / F[i, i]
+    for i in range(m - 1, -1, -1):
+        s = out[i]
+        for k in range(i + 1, m):
+            s -= F[k, i] * out[k]
+        out[i] = s / F[i, i]
+
+
+@njit(cache=True)
+def _gt_lambda(Ga, Gb, a, b, lam, out):
+    """``out = Gᵀ λ`` as (n, 6) (overwritten)."""
+    n = out.shape[0]
+    out[:, :] = 0.0
+    for r in range(Ga.shape[0]):
+        for c in range(6):
+            out[a[r], c] += Ga[r, c] * lam[r]
+        if b[r] < n:
+            for c in range(6):
+                out[b[r], c] += Gb[r, c] * lam[r]
+
+
+@njit(cache=True)
+def _g_times(Ga, Gb, a, b, x6, out):
+    """``out = G x`` for generalized vectors ``x6`` (n, 6)."""
+    n = x6.shape[0]
+    for r in range(Ga.shape[0]):
+        s = 0.0
+        for c in range(6):
+            s += Ga[r, c] * x6[a[r], c]
+        if b[r] < n:
+            for c in range(6):
+                s += Gb[r, c] * x6[b[r], c]
+        out[r] = s
+
+
+# Workspace slots (a tuple of arrays, see constrained_step): which geometry.
+START, CURRENT, END = 0, 1, 2
+
+
+@njit(cache=True)
+def _geometry(pos, quat, rows, which, ws, counts):
+    """Φ and G of every row at ``pos, quat`` into slot ``which`` of the workspace."""
+    phi3, G3 = ws[0], ws[1]
+    rows_geometry(pos, quat, rows[0], rows[1], rows[2], rows[3], rows[4], phi3[which],
+                  G3[which, 0], G3[which, 1])
+    counts[GEOMETRY] += 1
+
+
+@njit(cache=True)
+def _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, counts):
+    """
+    λ of the acceleration-level solve at the current geometry; ``ws[3]`` gets ``Gᵀλ``.
+
+    ``ws[4]`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ``.
+    """
+    phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
+    vm, g6, a6, minv6 = ws[2], ws[3], ws[4], ws[7]
+    a, b = rows[2], rows[3]
+    rows_rates(pos, quat, vel, om, rows[0], rows[1], a, b, rows[4], Ga, Gb, True, vm[0],
+               vm[1])
+    w = par[P_OMEGA]
+    _g_times(Ga, Gb, a, b, a6, vm[2])
+    for r in range(phi.shape[0]):
+        vm[2, r] += vm[1, r] + 2.0 * w * vm[0, r] + w * w * phi[r]
+    mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree, dense, counts)
+    counts[ACC_SOLVES] += 1
+    _solve(mode, vm[2], lam, tree, dense)
+    _gt_lambda(Ga, Gb, a, b, lam, g6)
+
+
+@njit(cache=True)
+def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts):
+    """
+    Free accelerations (every effect and the gyroscopic term) into ``ws[4]`` (n, 6).
+
+    The force (world) and torque (principal) of gravity and the wrenches alone
+    go to ``ws[5]`` and ``ws[6]`` (the kick applies them).
+    """
+    force, torque, a6 = ws[5], ws[6], ws[4]
+    position_wrench(quat, body, gforce, wrench, force, torque)
+    damping = flags & HAS_DAMPING
+    for i in range(quat.shape[0]):
+        for c in range(3):
+            f = force[i, c]
+            t = torque[i, c]
+            if damping:
+                f -= body[i, 5] * vel[i, c]
+                t -= body[i, 6] * om[i, c]
+            a6[i, c] = f
+            a6[i, 3 + c] = t
+        if body[i, 7] != 0.0:
+            w0, w1, w2 = om[i, 0], om[i, 1], om[i, 2]
+            l0, l1, l2 = body[i, 2] * w0, body[i, 3] * w1, body[i, 4] * w2
+            a6[i, 3] -= w1 * l2 - w2 * l1
+            a6[i, 4] -= w2 * l0 - w0 * l2
+            a6[i, 5] -= w0 * l1 - w1 * l0
+            counts[GYRO] += 1
+        for c in range(3):
+            a6[i, c] *= body[i, 1]
+            a6[i, 3 + c] /= body[i, 2 + c]
+
+
+@njit(cache=True)
+def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, use_tree,
+          tree, dense, lam, c_valid, counts):
+    """
+    ``v += tau f/m`` and ``L += tau τ`` with the constraint force ``−Gᵀλ``, in place.
+
+    λ comes from the full accelerations (damping and the gyroscopic term
+    included), so the kick, the flows and the free rotor together follow the
+    constrained vector field. Returns True (the current geometry is valid).
+    """
+    n = pos.shape[0]
+    counts[KICK] += 1
+    if flags & HAS_DAMPING:
+        counts[DAMP_IN_KICK] += 1
+    om = np.empty((n, 3))
+    for i in range(n):
+        for c in range(3):
+            om[i, c] = mom[i, c] / body[i, 2 + c]
+    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts)
+    if not c_valid:
+        _geometry(pos, quat, rows, CURRENT, ws, counts)
+    _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, counts)
+    force, torque, g6 = ws[5], ws[6], ws[3]
+    for i in range(n):
+        for c in range(3):
+            vel[i, c] += tau * body[i, 1] * (force[i, c] - g6[i, c])
+            mom[i, c] += tau * (torque[i, c] - g6[i, 3 + c])
+    return True
+
+
+@njit(cache=True)
+def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree, dense,
+                        counts):
+    """Project velocities onto ``Φ̇ = −ωΦ`` at the current geometry, in place."""
+    n = pos.shape[0]
+    counts[VEL_PROJECTIONS] += 1
+    phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
+    vm, g6, x6, minv6 = ws[2], ws[3], ws[4], ws[7]
+    a, b = rows[2], rows[3]
+    for i in range(n):
+        for c in range(3):
+            x6[i, c] = vel[i, c]
+            x6[i, 3 + c] = mom[i, c] / body[i, 2 + c]
+    _g_times(Ga, Gb, a, b, x6, vm[2])
+    w = par[P_OMEGA]
+    for r in range(phi.shape[0]):
+        vm[2, r] += w * phi[r]
+    mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree, dense, counts)
+    _solve(mode, vm[2], vm[3], tree, dense)
+    _gt_lambda(Ga, Gb, a, b, vm[3], g6)
+    for i in range(n):
+        for c in range(3):
+            vel[i, c] = x6[i, c] - minv6[i, c] * g6[i, c]
+            mom[i, c] = (x6[i, 3 + c] - minv6[i, 3 + c] * g6[i, 3 + c]) * body[i, 2 + c]
+
+
+@njit(cache=True)
+def _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, counts):
+    """
+    Orthogonal projection of ``pos, quat`` onto ``Φ = target`` (SHAKE's last resort).
+
+    Newton steps ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁻¹ (Φ − target)`` at the current
+    configuration; ends with the current geometry at the returned configuration.
+    """
+    n = pos.shape[0]
+    max_it = int(par[P_MAX_IT])
+    vm, g6, minv6 = ws[2], ws[3], ws[7]
+    a, b = rows[2], rows[3]
+    for it in range(max_it + 1):
+        if it:
+            _geometry(pos, quat, rows, CURRENT, ws, counts)
+        phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
+        norm = 0.0
+        for r in range(phi.shape[0]):
+            vm[2, r] = phi[r] - target[r]
+            norm = max(norm, abs(vm[2, r]))
+        if norm <= par[P_POS_TOL] or it == max_it:
+            break
+        counts[POS_ITERATIONS] += 1
+        mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree, dense, counts)
+        _solve(mode, vm[2], vm[3], tree, dense)
+        _gt_lambda(Ga, Gb, a, b, vm[3], g6)
+        for i in range(n):
+            for c in range(3):
+                pos[i, c] -= minv6[i, c] * g6[i, c]
+            quat_exp_multiply(quat[i], -minv6[i, 3] * g6[i, 3], -minv6[i, 4] * g6[i, 4],
+                              -minv6[i, 5] * g6[i, 5], quat[i])
+            s = math.sqrt(quat[i, 0] ** 2 + quat[i, 1] ** 2 + quat[i, 2] ** 2 + quat[i, 3] ** 2)
+            for c in range(4):
+                quat[i, c] /= s
+
+
+@njit(cache=True)
+def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, use_tree,
+           tree, dense, counts):
+    """
+    Drift with the start impulse that lands on ``Φ = exp(−h/τ) Φ_start``, in place.
+
+    Returns False when the Newton iterations stop converging on joints that
+    hold (the step is then redone finer), True otherwise; on True the current
+    geometry is that of the new configuration.
+    """
+    n = pos.shape[0]
+    phiS, GaS, GbS = ws[0][START], ws[1][START, 0], ws[1][START, 1]
+    vm, g6, minv6 = ws[2], ws[3], ws[7]
+    a, b = rows[2], rows[3]
+    m = phiS.shape[0]
+    rho = math.exp(-h / par[P_TAU])
+    target = np.empty(m)
+    closing = False
+    for r in range(m):
+        target[r] = rho * phiS[r]
+        if abs(phiS[r]) > par[P_CLOSING]:
+            closing = True
+    max_it = int(par[P_MAX_IT])
+    pos_s, quat_s = pos.copy(), quat.copy()
+    mom_s = mom.copy()
+    previous = np.inf
+    for it in range(max_it + 1):
+        pos[:, :] = pos_s
+        quat[:, :] = quat_s
+        mom[:, :] = mom_s
+        drift(pos, quat, vel, mom, body, h, symmetric, counts)
+        _geometry(pos, quat, rows, CURRENT, ws, counts)
+        phiE, GaE, GbE = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
+        norm = 0.0
+        for r in range(m):
+            vm[2, r] = phiE[r] - target[r]
+            norm = max(norm, abs(vm[2, r]))
+        if norm <= par[P_POS_TOL] or it == max_it:
+            break
+        if norm > 0.5 * previous:
+            if not closing and not last_resort:
+                return False
+            counts[FALLBACKS] += 1
+            _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, counts)
+            break
+        previous = norm
+        counts[POS_ITERATIONS] += 1
+        # Φ(end) responds to a start impulse κ like h G_end M⁻¹ G_startᵀ κ.
+        mode = _factor(GaE, GbE, GaS, GbS, a, b, minv6, False, par, use_tree, tree, dense,
+                       counts)
+        _solve(mode, vm[2], vm[3], tree, dense)
+        _gt_lambda(GaS, GbS, a, b, vm[3], g6)
+        for i in range(n):
+            for c in range(3):
+                vel[i, c] += -minv6[i, c] * g6[i, c] / h
+                mom_s[i, c] += (-minv6[i, 3 + c] * g6[i, 3 + c] / h) * body[i, 2 + c]
+    return True
+
+
+@njit(cache=True)
+def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows, ws, par,
+               last_resort, use_tree, tree, dense, lam, c_valid, counts):
+    """One (sub)step of a splitting method with RATTLE; returns (converged, c_valid)."""
+    n = pos.shape[0]
+    symmetric = method != SYMPLECTIC_EULER
+    if method == LIE_POISSON4:
+        weights = (_W1, 1.0 - 2.0 * _W1, _W1)
+    else:
+        weights = (1.0, 0.0, 0.0)
+    n_sub = 3 if method == LIE_POISSON4 else 1
+    damping = flags & HAS_DAMPING
+    mom = np.empty((n, 3))
+    for i in range(n):
+        for c in range(3):
+            mom[i, c] = om[i, c] * body[i, 2 + c]
+    for sub in range(n_sub):
+        h = weights[sub] * dt
+        if not c_valid:
+            _geometry(pos, quat, rows, CURRENT, ws, counts)
+            c_valid = True
+        ws[0][START, :] = ws[0][CURRENT]
+        ws[1][START] = ws[1][CURRENT]
+        first = 0.5 * h if symmetric else h
+        if damping:
+            damping_flow(vel, mom, body, first, counts)
+        _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, rows, ws, par,
+              use_tree, tree, dense, lam, c_valid, counts)
+        if not _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort,
+                      use_tree, tree, dense, counts):
+            return False, False
+        if symmetric:
+            _kick(pos, quat, vel, mom, 0.5 * h, body, gforce, wrench, flags, rows, ws, par,
+                  use_tree, tree, dense, lam, True, counts)
+            if damping:
+                damping_flow(vel, mom, body, 0.5 * h, counts)
+        _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree, dense,
+                            counts)
+    for i in range(n):
+        for c in range(3):
+            om[i, c] = mom[i, c] / body[i, 2 + c]
+    return True, True
+
+
+@njit(cache=True)
+def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, use_tree,
+           tree, dense, lam, c_valid, counts):
+    """One RKMK4 (sub)step with constraint forces at every stage, then Φ̇ = −ωΦ."""
+    n = pos.shape[0]
+    kp = np.empty((4, n, 3))
+    kv = np.empty((4, n, 3))
+    kw = np.empty((4, n, 3))
+    kr = np.empty((4, n, 3))
+    p = np.empty((n, 3))
+    v = np.empty((n, 3))
+    w = np.empty((n, 3))
+    u = np.empty((n, 3))
+    q = np.empty((n, 4))
+    a6, g6, minv6 = ws[4], ws[3], ws[7]
+    a_stage = (0.0, 0.5, 0.5, 1.0)
+    for s in range(4):
+        a = h * a_stage[s]
+        for i in range(n):
+            for c in range(3):
+                if s == 0:
+                    p[i, c], v[i, c], w[i, c], u[i, c] = pos[i, c], vel[i, c], om[i, c], 0.0
+                else:
+                    p[i, c] = pos[i, c] + a * kp[s - 1, i, c]
+                    v[i, c] = vel[i, c] + a * kv[s - 1, i, c]
+                    w[i, c] = om[i, c] + a * kw[s - 1, i, c]
+                    u[i, c] = a * kr[s - 1, i, c]
+            if s == 0:
+                for c in range(4):
+                    q[i, c] = quat[i, c]
+            else:
+                quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], q[i])
+        if s:
+            counts[ROT] += n
+            c_valid = False
+        counts[RHS] += 1
+        _free_accelerations(q, v, w, body, gforce, wrench, flags, ws, counts)
+        if not c_valid:
+            _geometry(p, q, rows, CURRENT, ws, counts)
+        _multipliers(p, q, v, w, rows, ws, par, use_tree, tree, dense, lam, counts)
+        for i in range(n):
+            for c in range(3):
+                kv[s, i, c] = a6[i, c] - minv6[i, c] * g6[i, c]
+                kw[s, i, c] = a6[i, 3 + c] - minv6[i, 3 + c] * g6[i, 3 + c]
+                kp[s, i, c] = v[i, c]
+        if s:
+            for i in range(n):
+                a0, a1, a2 = u[i, 0], u[i, 1], u[i, 2]
+                b0, b1, b2 = w[i, 0], w[i, 1], w[i, 2]
+                c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+                d0, d1, d2 = a1 * c2 - a2 * c1, a2 * c0 - a0 * c2, a0 * c1 - a1 * c0
+                kr[s, i, 0] = b0 + 0.5 * c0 + d0 / 12.0
+                kr[s, i, 1] = b1 + 0.5 * c1 + d1 / 12.0
+                kr[s, i, 2] = b2 + 0.5 * c2 + d2 / 12.0
+        else:
+            kr[s] = w
+    b0, b1 = h / 6.0, h / 3.0
+    for i in range(n):
+        for c in range(3):
+            pos[i, c] += b0 * (kp[0, i, c] + kp[3, i, c]) + b1 * (kp[1, i, c] + kp[2, i, c])
+            vel[i, c] += b0 * (kv[0, i, c] + kv[3, i, c]) + b1 * (kv[1, i, c] + kv[2, i, c])
+            om[i, c] += b0 * (kw[0, i, c] + kw[3, i, c]) + b1 * (kw[1, i, c] + kw[2, i, c])
+            u[i, c] = b0 * (kr[0, i, c] + kr[3, i, c]) + b1 * (kr[1, i, c] + kr[2, i, c])
+        quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], quat[i])
+    counts[ROT] += n
+    # Velocities onto Φ̇ = −ωΦ at the end configuration: an internal impulse.
+    _geometry(pos, quat, rows, CURRENT, ws, counts)
+    mom = np.empty((n, 3))
+    for i in range(n):
+        for c in range(3):
+            mom[i, c] = om[i, c] * body[i, 2 + c]
+    _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree, dense,
+                        counts)
+    for i in range(n):
+        for c in range(3):
+            om[i, c] = mom[i, c] / body[i, 2 + c]
+    return True
+
+
+@njit(cache=True)
+def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, rows,
+                     watch, par, use_tree, tree, ws, pos, quat, vel, om, lam, c_valid, counts):
+    """
+    One step of ``method`` with constraints; the new state goes to ``pos, quat, vel, om``.
+
+    Parameters
+    ----------
+    method : int
+        A method code of :mod:`.step_kernels`.
+    pos0, quat0, vel0, om0 : ndarray
+        The state at the start (not modified); shapes (n, 3), (n, 4), (n, 3), (n, 3).
+    dt : float
+        s.
+    body, gforce, wrench, flags
+        The effects (see :mod:`.step_kernels`).
+    rows : tuple
+        ``(kind, comp, a, b, par)`` of the constraint rows (see :mod:`.row_kernels`).
+    watch : ndarray of bool, shape (n,)
+        Bodies some constraint touches (their rotation decides the sub-steps).
+    par : ndarray
+        Solver and sub-step parameters (see the module docstring).
+    use_tree : bool
+        Solve with the tree solve instead of densely.
+    tree : tuple
+        The arrays of :mod:`.tree_solve`: ``group_ptr, group_rows, group_child,
+        group_parent, row_side, S, piv, P, Q, B, W, E, tmp``.
+    ws : tuple
+        Workspace (see :func:`workspace`); its current geometry persists between calls.
+    pos, quat, vel, om : ndarray
+        Written: the state at the end.
+    lam : ndarray, shape (m,)
+        Written: the multipliers of the last acceleration-level solve.
+    c_valid : bool
+        The workspace's current geometry is that of ``pos0, quat0``.
+    counts : ndarray of int64, shape (N_COUNTS,)
+        Work counts, incremented.
+
+    """
+    n = pos0.shape[0]
+    m = rows[0].shape[0]
+    max_rot = par[P_MAX_ROT]
+    max_sub = int(par[P_MAX_SUB])
+    rate = 0.0
+    for i in range(n):
+        if watch[i]:
+            for c in range(3):
+                rate = max(rate, abs(om0[i, c]))
+    k = max(1, int(math.ceil(rate * abs(dt) / max_rot)))
+    d = m if not use_tree else 0
+    dense = (np.empty((d, d)), np.empty(d, dtype=np.int64), np.empty((d, d)), np.empty(d),
+             np.empty((d, d)))
+    valid0 = c_valid
+    while True:
+        last_resort = k >= max_sub
+        pos[:, :] = pos0
+        quat[:, :] = quat0
+        vel[:, :] = vel0
+        om[:, :] = om0
+        c_valid = valid0
+        ok = True
+        if k > 1:
+            counts[SUBSTEPS] += k
+        h = dt / k
+        for _ in range(k):
+            if method == RKMK4:
+                _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par,
+                       use_tree, tree, dense, lam, c_valid, counts)
+            else:
+                ok, c_valid = _splitting(method, pos, quat, vel, om, h, body, gforce, wrench,
+                                         flags, rows, ws, par, last_resort, use_tree, tree,
+                                         dense, lam, c_valid, counts)
+                if not ok:
+                    break
+            c_valid = True
+        if ok:
+            break
+        counts[RETRIES] += 1
+        k = min(2 * k, max_sub)
+        valid0 = False   # the failed attempt overwrote the workspace's geometry
+    normalize_quaternions(quat)
+
+
+def workspace(n: int, m: int, body: np.ndarray) -> tuple:
+    """
+    Arrays the constrained step works in (allocated once per constraint set).
+
+    ``(phi (3, m), G (3, 2, m, 6), vectors (4, m), Gᵀλ (n, 6), free
+    accelerations (n, 6), force (n, 3), torque (n, 3), M⁻¹ (n, 6))``; the
+    geometry slots are START, CURRENT and END.
+    """
+    minv6 = np.empty((n, 6))
+    minv6[:, :3] = body[:, 1:2]
+    minv6[:, 3:] = 1.0 / body[:, 2:5]
+    return (np.zeros((3, m)), np.zeros((3, 2, m, 6)), np.zeros((4, m)), np.zeros((n, 6)),
+            np.zeros((n, 6)), np.zeros((n, 3)), np.zeros((n, 3)), minv6)
