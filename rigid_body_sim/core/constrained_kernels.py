@@ -259,6 +259,27 @@ def _geometry(pos, quat, rows, which, ws, counts):
     rows_geometry(pos, quat, rows[0], rows[1], rows[2], rows[3], rows[4], phi3[which],
                   G3[which, 0], G3[which, 1])
     counts[GEOMETRY] += 1
+    if which == CURRENT:
+        ws[8][0] = 0   # the symmetric factor was of the geometry replaced
+
+
+@njit(cache=True)
+def _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts):
+    """
+    Factorize ``G M⁻¹ Gᵀ`` of the current geometry, or reuse its factors.
+
+    A splitting step's second kick and its velocity projection, and the next
+    step's first kick, all solve with the matrix of one configuration: it is
+    factorized once (into the second storage, ``tree[1]``, ``dense[1]``).
+    """
+    fs = ws[8]
+    if fs[0] == 1:
+        return fs[1]
+    mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree[1], dense[1],
+                   counts)
+    fs[0] = 1
+    fs[1] = mode
+    return mode
 
 
 @njit(cache=True)
@@ -277,9 +298,9 @@ def _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, 
     _g_times(Ga, Gb, a, b, a6, vm[2])
     for r in range(phi.shape[0]):
         vm[2, r] += vm[1, r] + 2.0 * w * vm[0, r] + w * w * phi[r]
-    mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree, dense, counts)
+    mode = _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts)
     counts[ACC_SOLVES] += 1
-    _solve(mode, vm[2], lam, tree, dense)
+    _solve(mode, vm[2], lam, tree[1], dense[1])
     _gt_lambda(Ga, Gb, a, b, lam, g6)
 
 
@@ -362,8 +383,8 @@ def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree
     w = par[P_OMEGA]
     for r in range(phi.shape[0]):
         vm[2, r] += w * phi[r]
-    mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree, dense, counts)
-    _solve(mode, vm[2], vm[3], tree, dense)
+    mode = _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts)
+    _solve(mode, vm[2], vm[3], tree[1], dense[1])
     _gt_lambda(Ga, Gb, a, b, vm[3], g6)
     for i in range(n):
         for c in range(3):
@@ -394,8 +415,9 @@ def _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, 
         if norm <= par[P_POS_TOL] or it == max_it:
             break
         counts[POS_ITERATIONS] += 1
-        mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree, dense, counts)
-        _solve(mode, vm[2], vm[3], tree, dense)
+        mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree[0], dense[0],
+                       counts)
+        _solve(mode, vm[2], vm[3], tree[0], dense[0])
         _gt_lambda(Ga, Gb, a, b, vm[3], g6)
         for i in range(n):
             for c in range(3):
@@ -455,9 +477,9 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
         previous = norm
         counts[POS_ITERATIONS] += 1
         # Φ(end) responds to a start impulse κ like h G_end M⁻¹ G_startᵀ κ.
-        mode = _factor(GaE, GbE, GaS, GbS, a, b, minv6, False, par, use_tree, tree, dense,
-                       counts)
-        _solve(mode, vm[2], vm[3], tree, dense)
+        mode = _factor(GaE, GbE, GaS, GbS, a, b, minv6, False, par, use_tree, tree[0],
+                       dense[0], counts)
+        _solve(mode, vm[2], vm[3], tree[0], dense[0])
         _gt_lambda(GaS, GbS, a, b, vm[3], g6)
         for i in range(n):
             for c in range(3):
@@ -591,7 +613,8 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
 
 @njit(cache=True)
 def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, rows,
-                     watch, par, use_tree, tree, ws, pos, quat, vel, om, lam, c_valid, counts):
+                     watch, par, use_tree, tree, dense, ws, pos, quat, vel, om, lam, c_valid,
+                     counts):
     """
     One step of ``method`` with constraints; the new state goes to ``pos, quat, vel, om``.
 
@@ -614,8 +637,11 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
     use_tree : bool
         Solve with the tree solve instead of densely.
     tree : tuple
-        The arrays of :mod:`.tree_solve`: ``group_ptr, group_rows, group_child,
-        group_parent, row_side, S, piv, P, Q, B, W, E, tmp``.
+        Two storages of :mod:`.tree_solve` (general, and the symmetric factor
+        kept for the current geometry), each ``group_ptr, group_rows,
+        group_child, group_parent, row_side, S, piv, P, Q, B, W, E, tmp``.
+    dense : tuple
+        Two dense storages ``(F, piv, U, s, Vt)`` (see :func:`dense_storage`).
     ws : tuple
         Workspace (see :func:`workspace`); its current geometry persists between calls.
     pos, quat, vel, om : ndarray
@@ -629,7 +655,6 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
 
     """
     n = pos0.shape[0]
-    m = rows[0].shape[0]
     max_rot = par[P_MAX_ROT]
     max_sub = int(par[P_MAX_SUB])
     rate = 0.0
@@ -638,9 +663,6 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
             for c in range(3):
                 rate = max(rate, abs(om0[i, c]))
     k = max(1, int(math.ceil(rate * abs(dt) / max_rot)))
-    d = m if not use_tree else 0
-    dense = (np.empty((d, d)), np.empty(d, dtype=np.int64), np.empty((d, d)), np.empty(d),
-             np.empty((d, d)))
     valid0 = c_valid
     while True:
         last_resort = k >= max_sub
@@ -677,11 +699,19 @@ def workspace(n: int, m: int, body: np.ndarray) -> tuple:
     Arrays the constrained step works in (allocated once per constraint set).
 
     ``(phi (3, m), G (3, 2, m, 6), vectors (4, m), Gᵀλ (n, 6), free
-    accelerations (n, 6), force (n, 3), torque (n, 3), M⁻¹ (n, 6))``; the
-    geometry slots are START, CURRENT and END.
+    accelerations (n, 6), force (n, 3), torque (n, 3), M⁻¹ (n, 6), factor
+    state (2,): [the symmetric factor is of the current geometry, its mode])``;
+    the geometry slots are START, CURRENT and END.
     """
     minv6 = np.empty((n, 6))
     minv6[:, :3] = body[:, 1:2]
     minv6[:, 3:] = 1.0 / body[:, 2:5]
     return (np.zeros((3, m)), np.zeros((3, 2, m, 6)), np.zeros((4, m)), np.zeros((n, 6)),
-            np.zeros((n, 6)), np.zeros((n, 3)), np.zeros((n, 3)), minv6)
+            np.zeros((n, 6)), np.zeros((n, 3)), np.zeros((n, 3)), minv6,
+            np.zeros(2, dtype=np.int64))
+
+
+def dense_storage(d: int) -> tuple:
+    """Dense factor storage ``(F (d, d), piv (d,), U (d, d), s (d,), Vt (d, d))``."""
+    return (np.zeros((d, d)), np.zeros(d, dtype=np.int64), np.zeros((d, d)), np.zeros(d),
+            np.zeros((d, d)))

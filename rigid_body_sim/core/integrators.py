@@ -219,7 +219,7 @@ class Integrator:
         """Take a constrained step (sub-steps and retries included) in one compiled call."""
         dyn = self.dynamics
         solver = dyn.solver
-        rows, use_tree, tree, watch, ws, lam = setup
+        rows, use_tree, tree, dense, watch, ws, lam = setup
         body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
         pos, quat = np.empty_like(state.pos_com_world), np.empty_like(state.quat_principal_world)
         vel, om = np.empty_like(state.vel_com_world), np.empty_like(state.ang_vel_principal)
@@ -231,8 +231,8 @@ class Integrator:
                                        getattr(self, 'CLOSING', 0.0))
         ckern.constrained_step(self.KERNEL, state.pos_com_world, state.quat_principal_world,
                                state.vel_com_world, state.ang_vel_principal, dt, body, gforce,
-                               wrench, flags, rows, watch, par, use_tree, tree, ws, pos, quat,
-                               vel, om, lam, valid, counts)
+                               wrench, flags, rows, watch, par, use_tree, tree, dense, ws, pos,
+                               quat, vel, om, lam, valid, counts)
         # The workspace now holds the geometry of the new configuration.
         self._geometry_at = (ws, pos, quat)
         dyn.last_multipliers = lam.copy()

@@ -61,7 +61,7 @@ import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constrained_kernels import workspace
+from .constrained_kernels import dense_storage, workspace
 from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geometry,
                           RowJacobian)
 from .errors import SpecError
@@ -215,7 +215,7 @@ class ConstraintSolver:
 
         None when the constraint set has generic rows (a user's Python function)
         or, beyond ``DENSE_ROWS`` rows, a closed loop (the sparse LU path): those
-        step in Python. Otherwise ``(rows, use_tree, tree, watch, workspace,
+        step in Python. Otherwise ``(rows, use_tree, trees, dense, watch, workspace,
         multipliers)`` (see :mod:`.constrained_kernels`), rebuilt only when the
         constraint set changes.
         """
@@ -232,16 +232,20 @@ class ConstraintSolver:
                 if tree is None:   # placeholders of the right types
                     empty = np.zeros(0, dtype=np.int64)
                     st = tree_structure(empty, empty, n)
-                    arrays = (*st.arrays, *factor_arrays(st))
                 else:
-                    arrays = (*tree.structure.arrays, tree.S, tree.piv, tree.P, tree.Q,
-                              tree.B, tree.W, tree.E, tree.tmp)
+                    st = tree.structure
+                # Two storages each: general, and the symmetric factor kept for the
+                # current geometry (see constrained_kernels._sym_factor).
+                trees = ((*st.arrays, *factor_arrays(st)), (*st.arrays, *factor_arrays(st)))
+                d = 0 if use_tree else m
+                dense = (dense_storage(d), dense_storage(d))
                 watch = np.zeros(n, dtype=bool)
                 watch[cs.touched] = True
                 body = np.zeros((n, 8))
                 body[:, 1], body[:, 2:5] = self.bodies.inv_mass, self.bodies.moments
                 rows = (cs.row_kind, cs.row_comp, cs.row_a, cs.row_b, cs.row_par)
-                setup = (rows, use_tree, arrays, watch, workspace(n, m, body), np.zeros(m))
+                setup = (rows, use_tree, trees, dense, watch, workspace(n, m, body),
+                         np.zeros(m))
         self._kernel_cache = (cs, cs.version, setup)
         return setup
 
