@@ -93,6 +93,7 @@ class Dynamics:
         # applied, an effect added): integrators key cached evaluations on it.
         self.version = 0
         self._kernel_model: Optional[tuple] = None
+        self._submodels: dict = {}
         self._refresh()
 
     def _refresh(self) -> None:
@@ -152,9 +153,51 @@ class Dynamics:
         self._kernel_model = (self.version, time_mid if time_dependent else None, model)
         return model
 
-    def count_effect_work(self, rhs: int, kicks: int, flows: int) -> None:
-        """Add compiled-kernel work to each effect's counters, as if evaluated one by one."""
+    def kernel_submodel(self, time_mid: float, bodies: np.ndarray) -> tuple:
+        """
+        Return :meth:`kernel_model` for the subset ``bodies`` (indices), renumbered.
+
+        Also returns, per effect, how many bodies (or wrench entries) it acts on
+        in the subset, for :meth:`count_effect_work`. Cached until the model changes.
+        """
+        body, gforce, wrench, flags = self.kernel_model(time_mid)
+        cache = self._submodels
+        if cache.get('model') is not body:
+            cache.clear()
+            cache['model'] = body
+        hit = cache.get(id(bodies))
+        if hit is not None and hit[0] is bodies:
+            return hit[1]
+        local = np.full(len(self.bodies), -1)
+        local[bodies] = np.arange(len(bodies))
+        keep = local[wrench[:, 0].astype(int)] >= 0
+        sub_wrench = wrench[keep]
+        sub_wrench[:, 0] = local[sub_wrench[:, 0].astype(int)]
+        sub_flags = flags
+        if not np.any(gforce[bodies]) and not len(sub_wrench):
+            sub_flags &= ~HAS_POSITION_FORCES
+        acting = []
         for effect in self.effects:
+            if isinstance(effect, Damping):
+                acting.append(int(np.count_nonzero(local[effect.index] >= 0)))
+            elif isinstance(effect, Gravity):
+                acting.append(len(bodies))
+            else:
+                acting.append(int(np.count_nonzero(keep)) if len(effect) else 0)
+        model = (np.ascontiguousarray(body[bodies]), np.ascontiguousarray(gforce[bodies]),
+                 np.ascontiguousarray(sub_wrench), sub_flags, acting)
+        cache[id(bodies)] = (bodies, model)
+        return model
+
+    def count_effect_work(self, rhs: int, kicks: int, flows: int,
+                          acting: Optional[list] = None) -> None:
+        """
+        Add compiled-kernel work to each effect's counters, as if evaluated one by one.
+
+        ``acting``: per effect, the bodies (wrench entries) it acts on in the
+        step's subset (see :meth:`kernel_submodel`); default all.
+        """
+        for i, effect in enumerate(self.effects):
             if isinstance(effect, Damping):
                 calls = rhs + flows
                 bodies = len(effect.index)
@@ -162,7 +205,11 @@ class Dynamics:
                 calls, bodies = rhs + kicks, len(self.bodies)
             else:
                 bodies = effect.active_count()
-                calls = rhs + kicks if bodies else 0
+                calls = rhs + kicks
+            if acting is not None:
+                bodies = acting[i]
+            if not bodies and not isinstance(effect, (Damping, Gravity)):
+                calls = 0
             effect.evaluations += calls
             effect.body_evaluations += calls * bodies
 

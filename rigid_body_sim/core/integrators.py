@@ -216,26 +216,54 @@ class Integrator:
         return State(t_end, pos, quat, vel, om)
 
     def _constrained_step(self, state: State, dt: float, t_end: float, setup: tuple) -> State:
-        """Take a constrained step (sub-steps and retries included) in one compiled call."""
+        """
+        Take a constrained step in compiled calls: one per component, one for free bodies.
+
+        Each connected component of the constraint graph is sub-stepped (and
+        retried) as its own motion needs; bodies no constraint touches take the
+        step of an unconstrained scene, whatever the components do.
+        """
         dyn = self.dynamics
         solver = dyn.solver
-        rows, use_tree, tree, dense, watch, ws, lam = setup
-        body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
-        pos, quat = np.empty_like(state.pos_com_world), np.empty_like(state.quat_principal_world)
-        vel, om = np.empty_like(state.vel_com_world), np.empty_like(state.ang_vel_principal)
-        at = self._geometry_at
-        valid = (at is not None and at[0] is ws and at[1] is state.pos_com_world
-                 and at[2] is state.quat_principal_world)
+        free, components = setup
+        mid = state.time + 0.5 * dt
+        pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
+        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
         counts = np.zeros(ckern.N_COUNTS, dtype=np.int64)
         par = solver.kernel_parameters(self.max_rotation, self.max_substeps,
                                        getattr(self, 'CLOSING', 0.0))
-        ckern.constrained_step(self.KERNEL, state.pos_com_world, state.quat_principal_world,
-                               state.vel_com_world, state.ang_vel_principal, dt, body, gforce,
-                               wrench, flags, rows, watch, par, use_tree, tree, dense, ws, pos,
-                               quat, vel, om, lam, valid, counts)
-        # The workspace now holds the geometry of the new configuration.
-        self._geometry_at = (ws, pos, quat)
-        dyn.last_multipliers = lam.copy()
+        if len(free):
+            body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, free)
+            p, q, v, o = pos[free], quat[free], vel[free], om[free]
+            part = np.zeros(5, dtype=np.int64)
+            kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
+                           np.zeros((len(free), 6)), False, part)
+            pos[free], quat[free], vel[free], om[free] = p, q, v, o
+            counts[:5] += part
+            dyn.count_effect_work(int(part[kern.RHS]), int(part[kern.KICK]),
+                                  int(part[kern.FLOW]), acting)
+        at = self._geometry_at
+        valid = (at is not None and at[0] is setup and at[1] is state.pos_com_world
+                 and at[2] is state.quat_principal_world)
+        lam = dyn.last_multipliers
+        if len(lam) != solver.constraints.n_rows:
+            lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)
+        for bodies, rows_global, rows, use_tree, tree, dense, ws, lam_c in components:
+            body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, bodies)
+            p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
+            p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
+                          np.empty_like(o0))
+            part = np.zeros(ckern.N_COUNTS, dtype=np.int64)
+            ckern.constrained_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
+                                   flags, rows, np.ones(len(bodies), dtype=bool), par,
+                                   use_tree, tree, dense, ws, p, q, v, o, lam_c, valid, part)
+            pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
+            lam[rows_global] = lam_c
+            counts += part
+            dyn.count_effect_work(int(part[kern.RHS]), int(part[kern.KICK]),
+                                  int(part[kern.FLOW] + part[ckern.DAMP_IN_KICK]), acting)
+        # Each component's workspace now holds the geometry of its new configuration.
+        self._geometry_at = (setup, pos, quat)
         n = counts.tolist()
         c = dyn.counters
         c.rhs_evaluations += n[kern.RHS]
@@ -253,9 +281,6 @@ class Integrator:
         sc.acceleration_solves += n[ckern.ACC_SOLVES]
         sc.position_iterations += n[ckern.POS_ITERATIONS]
         sc.velocity_projections += n[ckern.VEL_PROJECTIONS]
-        if dyn.effects:
-            dyn.count_effect_work(n[kern.RHS], n[kern.KICK],
-                                  n[kern.FLOW] + n[ckern.DAMP_IN_KICK])
         return State(t_end, pos, quat, vel, om)
 
     def _substepped(self, state: State, dt: float, t_end: float, k: int) -> State:

@@ -211,41 +211,73 @@ class ConstraintSolver:
 
     def kernel_setup(self) -> Optional[tuple]:
         """
-        Return the arrays the compiled constrained step works with, or None.
+        Return what the compiled constrained step works with, per component, or None.
 
-        None when the constraint set has generic rows (a user's Python function)
-        or, beyond ``DENSE_ROWS`` rows, a closed loop (the sparse LU path): those
-        step in Python. Otherwise ``(rows, use_tree, trees, dense, watch, workspace,
-        multipliers)`` (see :mod:`.constrained_kernels`), rebuilt only when the
+        The constraint graph's connected components (bodies joined through
+        constraints) are stepped separately, each with the sub-steps its own
+        motion needs, and the bodies no constraint touches as free bodies
+        (see :meth:`.integrators.Integrator.substeps`). None when the constraint
+        set has generic rows (a user's Python function) or a component has, beyond
+        ``DENSE_ROWS`` rows, a closed loop (the sparse LU path): those scenes step
+        in Python. Otherwise ``(free, components)``: the indices of the free
+        bodies, and per component ``(bodies, rows_global, rows, use_tree, trees,
+        dense, workspace, multipliers)`` with the rows in the component's own body
+        numbering (see :mod:`.constrained_kernels`). Rebuilt only when the
         constraint set changes.
         """
         cs = self.constraints
         c = self._kernel_cache
         if c is not None and c[0] is cs and c[1] == cs.version:
             return c[2]
-        setup = None
+        self._kernel_cache = (cs, cs.version, None)
         n, m = len(self.bodies), cs.n_rows
-        if cs.n_builtin_rows == m:
-            use_tree = m > DENSE_ROWS
-            tree = self._tree() if use_tree else None
-            if not use_tree or tree is not None:
-                if tree is None:   # placeholders of the right types
-                    empty = np.zeros(0, dtype=np.int64)
-                    st = tree_structure(empty, empty, n)
-                else:
-                    st = tree.structure
-                # Two storages each: general, and the symmetric factor kept for the
-                # current geometry (see constrained_kernels._sym_factor).
-                trees = ((*st.arrays, *factor_arrays(st)), (*st.arrays, *factor_arrays(st)))
-                d = 0 if use_tree else m
-                dense = (dense_storage(d), dense_storage(d))
-                watch = np.zeros(n, dtype=bool)
-                watch[cs.touched] = True
-                body = np.zeros((n, 8))
-                body[:, 1], body[:, 2:5] = self.bodies.inv_mass, self.bodies.moments
-                rows = (cs.row_kind, cs.row_comp, cs.row_a, cs.row_b, cs.row_par)
-                setup = (rows, use_tree, trees, dense, watch, workspace(n, m, body),
-                         np.zeros(m))
+        if cs.n_builtin_rows != m:
+            return None
+        a, b = cs.row_a, cs.row_b
+        # Connected components by union-find over the rows between two bodies.
+        root = np.arange(n)
+
+        def find(i: int) -> int:
+            while root[i] != i:
+                root[i] = root[root[i]]
+                i = root[i]
+            return i
+
+        for i, j in zip(a.tolist(), b.tolist()):
+            if j < n:
+                ri, rj = find(i), find(j)
+                if ri != rj:
+                    root[max(ri, rj)] = min(ri, rj)
+        label = np.array([find(i) for i in range(n)])
+        touched = np.zeros(n, dtype=bool)
+        touched[cs.touched] = True
+        components = []
+        for lab in np.unique(label[touched]):
+            bodies = np.flatnonzero(label == lab)
+            rows_global = np.flatnonzero(label[a] == lab)
+            local = np.full(n + 1, -1, dtype=np.int64)
+            local[bodies] = np.arange(len(bodies))
+            local[n] = len(bodies)   # the world
+            ra, rb = local[a[rows_global]], local[b[rows_global]]
+            mc = len(rows_global)
+            use_tree = mc > DENSE_ROWS
+            st = tree_structure(ra if use_tree else ra[:0], rb if use_tree else rb[:0],
+                                len(bodies))
+            if st is None:
+                return None   # a closed loop in a large component: the sparse LU path
+            # Two storages each: general, and the symmetric factor kept for the
+            # current geometry (see constrained_kernels._sym_factor).
+            trees = ((*st.arrays, *factor_arrays(st)), (*st.arrays, *factor_arrays(st)))
+            d = 0 if use_tree else mc
+            body = np.zeros((len(bodies), 8))
+            body[:, 1] = self.bodies.inv_mass[bodies]
+            body[:, 2:5] = self.bodies.moments[bodies]
+            rows = (cs.row_kind[rows_global], cs.row_comp[rows_global], ra, rb,
+                    np.ascontiguousarray(cs.row_par[rows_global]))
+            components.append((bodies, rows_global, rows, use_tree, trees,
+                               (dense_storage(d), dense_storage(d)),
+                               workspace(len(bodies), mc, body), np.zeros(mc)))
+        setup = (np.flatnonzero(~touched), components)
         self._kernel_cache = (cs, cs.version, setup)
         return setup
 
