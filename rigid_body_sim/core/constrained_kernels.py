@@ -77,39 +77,75 @@ def _schur(Ga, Gb, Ha, Hb, a, b, minv6, A):
 
 
 @njit(cache=True)
-def _factor(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, use_tree, tree, dense, counts):
-    """
-    Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``); returns the mode for :func:`_solve`.
-
-    Dense: Cholesky (symmetric) or LU with partial pivoting; a pivot below
-    ``rank_rtol`` times the largest diagonal entry marks redundant rows, which
-    get the truncated SVD (minimum-norm solution). Tree: the tree solve, with
-    the Tikhonov term for redundant rows.
-    """
+def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, par, tree, counts):
+    """Factorize ``G M⁻¹ Hᵀ`` by the tree solve (Tikhonov term for redundant rows)."""
     counts[FACTORIZATIONS] += 1
     m = Ga.shape[0]
     rtol = par[P_RANK_RTOL]
     tg_ptr, tg_rows, tg_child, tg_parent, t_side = tree[0], tree[1], tree[2], tree[3], tree[4]
     tS, tpiv, tP, tQ, tB, tW = tree[5], tree[6], tree[7], tree[8], tree[9], tree[10]
+    pivot = tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
+                        minv6, 0.0, tS, tpiv, tP, tQ, tB, tW)
+    if not pivot > rtol:
+        counts[RANK_DEFICIENT] += 1
+        n = minv6.shape[0]
+        peak = 0.0
+        for i in range(m):
+            d = 0.0
+            for c in range(6):
+                d += Ga[i, c] * Ha[i, c] * minv6[a[i], c]
+                if b[i] < n:
+                    d += Gb[i, c] * Hb[i, c] * minv6[b[i], c]
+            peak = max(peak, abs(d))
+        scale = peak if peak > 0.0 else 1.0
+        tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
+                    minv6, par[P_REG] * scale, tS, tpiv, tP, tQ, tB, tW)
+    return TREE
+
+
+@njit(cache=True)
+def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, which, counts):
+    """
+    Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``) into storage ``which``.
+
+    Exactly one of ``tree`` and ``dense`` is None: numba compiles each case
+    separately and drops the other branch, so only the storage in use is passed
+    from call to call. Returns the mode for :func:`_sol`.
+    """
+    mode = TREE
+    # Two tests on the arguments themselves: numba drops a branch whose argument is None.
+    if tree is not None:
+        mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, par, tree[which], counts)
+    if dense is not None:
+        mode = _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense[which],
+                             counts)
+    return mode
+
+
+@njit(cache=True)
+def _sol(mode, rhs, out, tree, dense, which):
+    """Solve with the factors in storage ``which`` (see :func:`_fac`)."""
+    if tree is not None:
+        t = tree[which]
+        tree_solve(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12], rhs,
+                   out)
+    if dense is not None:
+        _solve_dense(mode, rhs, out, dense[which])
+
+
+@njit(cache=True)
+def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense, counts):
+    """
+    Factorize ``G M⁻¹ Hᵀ`` densely; returns the mode for :func:`_solve_dense`.
+
+    Cholesky (symmetric) or LU with partial pivoting; a pivot below
+    ``rank_rtol`` times the largest diagonal entry marks redundant rows, which
+    get the truncated SVD (minimum-norm solution).
+    """
+    counts[FACTORIZATIONS] += 1
+    m = Ga.shape[0]
+    rtol = par[P_RANK_RTOL]
     F, dpiv, U, sv, Vt = dense
-    if use_tree:
-        pivot = tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
-                            minv6, 0.0, tS, tpiv, tP, tQ, tB, tW)
-        if not pivot > rtol:
-            counts[RANK_DEFICIENT] += 1
-            n = minv6.shape[0]
-            peak = 0.0
-            for i in range(m):
-                d = 0.0
-                for c in range(6):
-                    d += Ga[i, c] * Ha[i, c] * minv6[a[i], c]
-                    if b[i] < n:
-                        d += Gb[i, c] * Hb[i, c] * minv6[b[i], c]
-                peak = max(peak, abs(d))
-            scale = peak if peak > 0.0 else 1.0
-            tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
-                        minv6, par[P_REG] * scale, tS, tpiv, tP, tQ, tB, tW)
-        return TREE
     _schur(Ga, Gb, Ha, Hb, a, b, minv6, F)
     scale = 0.0
     for i in range(m):
@@ -168,14 +204,10 @@ def _factor(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, use_tree, tree, dense, 
 
 
 @njit(cache=True)
-def _solve(mode, rhs, out, tree, dense):
-    """Solve with the factors of :func:`_factor`; ``out`` (m,) may not alias ``rhs``."""
+def _solve_dense(mode, rhs, out, dense):
+    """Solve with the factors of :func:`_factor_dense`; ``out`` (m,) may not alias ``rhs``."""
     m = rhs.shape[0]
     F, dpiv, U, sv, Vt = dense
-    if mode == TREE:
-        tree_solve(tree[0], tree[1], tree[2], tree[3], tree[5], tree[6], tree[7], tree[8],
-                   tree[9], tree[11], tree[12], rhs, out)
-        return
     if mode == SVD:
         y = np.zeros(m)
         for k in range(m):
@@ -275,8 +307,7 @@ def _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts):
     fs = ws[8]
     if fs[0] == 1:
         return fs[1]
-    mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree[1], dense[1],
-                   counts)
+    mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, tree, dense, 1, counts)
     fs[0] = 1
     fs[1] = mode
     return mode
@@ -300,7 +331,7 @@ def _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, 
         vm[2, r] += vm[1, r] + 2.0 * w * vm[0, r] + w * w * phi[r]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts)
     counts[ACC_SOLVES] += 1
-    _solve(mode, vm[2], lam, tree[1], dense[1])
+    _sol(mode, vm[2], lam, tree, dense, 1)
     _gt_lambda(Ga, Gb, a, b, lam, g6)
 
 
@@ -384,7 +415,7 @@ def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree
     for r in range(phi.shape[0]):
         vm[2, r] += w * phi[r]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts)
-    _solve(mode, vm[2], vm[3], tree[1], dense[1])
+    _sol(mode, vm[2], vm[3], tree, dense, 1)
     _gt_lambda(Ga, Gb, a, b, vm[3], g6)
     for i in range(n):
         for c in range(3):
@@ -415,9 +446,8 @@ def _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, 
         if norm <= par[P_POS_TOL] or it == max_it:
             break
         counts[POS_ITERATIONS] += 1
-        mode = _factor(Ga, Gb, Ga, Gb, a, b, minv6, True, par, use_tree, tree[0], dense[0],
-                       counts)
-        _solve(mode, vm[2], vm[3], tree[0], dense[0])
+        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, tree, dense, 0, counts)
+        _sol(mode, vm[2], vm[3], tree, dense, 0)
         _gt_lambda(Ga, Gb, a, b, vm[3], g6)
         for i in range(n):
             for c in range(3):
@@ -477,9 +507,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
         previous = norm
         counts[POS_ITERATIONS] += 1
         # Φ(end) responds to a start impulse κ like h G_end M⁻¹ G_startᵀ κ.
-        mode = _factor(GaE, GbE, GaS, GbS, a, b, minv6, False, par, use_tree, tree[0],
-                       dense[0], counts)
-        _solve(mode, vm[2], vm[3], tree[0], dense[0])
+        mode = _fac(GaE, GbE, GaS, GbS, a, b, minv6, False, par, tree, dense, 0, counts)
+        _sol(mode, vm[2], vm[3], tree, dense, 0)
         _gt_lambda(GaS, GbS, a, b, vm[3], g6)
         for i in range(n):
             for c in range(3):
@@ -642,6 +671,7 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         group_child, group_parent, row_side, S, piv, P, Q, B, W, E, tmp``.
     dense : tuple
         Two dense storages ``(F, piv, U, s, Vt)`` (see :func:`dense_storage`).
+        Exactly one of ``tree`` and ``dense`` is given, the other is None.
     ws : tuple
         Workspace (see :func:`workspace`); its current geometry persists between calls.
     pos, quat, vel, om : ndarray
@@ -700,7 +730,8 @@ def workspace(n: int, m: int, body: np.ndarray) -> tuple:
 
     ``(phi (3, m), G (3, 2, m, 6), vectors (4, m), Gᵀλ (n, 6), free
     accelerations (n, 6), force (n, 3), torque (n, 3), M⁻¹ (n, 6), factor
-    state (2,): [the symmetric factor is of the current geometry, its mode])``;
+    state (2,): [the symmetric factor is of the current geometry, its mode],
+    watch (n,): every body of the component)``;
     the geometry slots are START, CURRENT and END.
     """
     minv6 = np.empty((n, 6))
@@ -708,7 +739,7 @@ def workspace(n: int, m: int, body: np.ndarray) -> tuple:
     minv6[:, 3:] = 1.0 / body[:, 2:5]
     return (np.zeros((3, m)), np.zeros((3, 2, m, 6)), np.zeros((4, m)), np.zeros((n, 6)),
             np.zeros((n, 6)), np.zeros((n, 3)), np.zeros((n, 3)), minv6,
-            np.zeros(2, dtype=np.int64))
+            np.zeros(2, dtype=np.int64), np.ones(n, dtype=bool))
 
 
 def dense_storage(d: int) -> tuple:

@@ -132,6 +132,7 @@ class Integrator:
         self._kick_buffer = np.zeros((len(dynamics.bodies), 6))
         self._kick_at: Optional[tuple] = None
         self._geometry_at: Optional[tuple] = None
+        self._parameters: Optional[tuple] = None
 
     def substeps(self, state: State, dt: float) -> int:
         """
@@ -227,11 +228,20 @@ class Integrator:
         solver = dyn.solver
         free, components = setup
         mid = state.time + 0.5 * dt
-        pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
-        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
+        whole = not len(free) and len(components) == 1   # one component, every body
+        pos, quat = state.pos_com_world, state.quat_principal_world
+        vel, om = state.vel_com_world, state.ang_vel_principal
+        if whole:
+            pos, quat, vel, om = (np.empty_like(pos), np.empty_like(quat), np.empty_like(vel),
+                                  np.empty_like(om))
+        else:
+            pos, quat, vel, om = pos.copy(), quat.copy(), vel.copy(), om.copy()
         counts = np.zeros(ckern.N_COUNTS, dtype=np.int64)
-        par = solver.kernel_parameters(self.max_rotation, self.max_substeps,
-                                       getattr(self, 'CLOSING', 0.0))
+        key = (solver.time_constant, solver.omega, self.max_rotation, self.max_substeps)
+        if self._parameters is None or self._parameters[0] != key:
+            self._parameters = (key, solver.kernel_parameters(
+                self.max_rotation, self.max_substeps, getattr(self, 'CLOSING', 0.0)))
+        par = self._parameters[1]
         if len(free):
             body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, free)
             p, q, v, o = pos[free], quat[free], vel[free], om[free]
@@ -246,20 +256,32 @@ class Integrator:
         valid = (at is not None and at[0] is setup and at[1] is state.pos_com_world
                  and at[2] is state.quat_principal_world)
         lam = dyn.last_multipliers
-        if len(lam) != solver.constraints.n_rows:
+        if not whole and (len(lam) != solver.constraints.n_rows or lam is components[0][7]):
             lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)
         for bodies, rows_global, rows, use_tree, tree, dense, ws, lam_c in components:
-            body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, bodies)
-            p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
-            p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
-                          np.empty_like(o0))
-            part = np.zeros(ckern.N_COUNTS, dtype=np.int64)
+            if whole:
+                body, gforce, wrench, flags = dyn.kernel_model(mid)
+                acting = None
+                p0, q0, v0, o0 = (state.pos_com_world, state.quat_principal_world,
+                                  state.vel_com_world, state.ang_vel_principal)
+                p, q, v, o = pos, quat, vel, om
+            else:
+                body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, bodies)
+                p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
+                p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
+                              np.empty_like(o0))
+            part = counts if whole else np.zeros(ckern.N_COUNTS, dtype=np.int64)
+            # Only the storage in use is passed (numba compiles each case).
             ckern.constrained_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
-                                   flags, rows, np.ones(len(bodies), dtype=bool), par,
-                                   use_tree, tree, dense, ws, p, q, v, o, lam_c, valid, part)
-            pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
-            lam[rows_global] = lam_c
-            counts += part
+                                   flags, rows, ws[9], par, use_tree,
+                                   tree if use_tree else None, None if use_tree else dense, ws,
+                                   p, q, v, o, lam_c, valid, part)
+            if whole:
+                dyn.last_multipliers = lam_c
+            else:
+                pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
+                lam[rows_global] = lam_c
+                counts += part
             dyn.count_effect_work(int(part[kern.RHS]), int(part[kern.KICK]),
                                   int(part[kern.FLOW] + part[ckern.DAMP_IN_KICK]), acting)
         # Each component's workspace now holds the geometry of its new configuration.
