@@ -212,40 +212,42 @@ def spinning_top(dt):
 
 
 def test_step_is_redone_finer_when_the_projection_cannot_converge():
-    # 100 rad/s at dt = 2e-2 turns the top 2 rad per step, too far for SHAKE's
-    # linearization. With the up-front sub-steps switched off, such steps are redone
-    # with twice the sub-steps instead of ending in the last-resort projection.
-    # Measured over 1 s: 50 retries, no fallback, energy error 3.0e-5 of the kinetic
-    # energy, violation 1.6e-8; without retries: 50 fallbacks and 3.6e-3 (at dt = 3e-2
-    # a blow-up).
-    sim = spinning_top(2e-2)
+    # 100 rad/s at dt = 3e-2 turns the top 3 rad per step, too far for SHAKE's Newton
+    # iterations in some steps (they converge in 2 iterations up to about 2 rad a
+    # step). With the up-front sub-steps switched off, such steps are redone with
+    # twice the sub-steps instead of ending in the last-resort projection. Measured
+    # over 1 s: 32 retries, no fallback, energy error 9.7e-3 of the kinetic energy
+    # (the steps taken whole at 3 rad are inaccurate, not unstable), violation 6e-14;
+    # without retries: 3 fallbacks and 0.68 (at dt = 4e-2 a blow-up).
+    sim = spinning_top(3e-2)
     sim.integrator.max_rotation = None
     worst_de, worst_violation, max_ke = run_and_watch(sim, 1.0, every=1)
     assert sim.work()['retries'] > 20
     assert sim.dynamics.solver.counters.projection_fallbacks == 0
-    assert worst_de < 1e-4 * max_ke
+    assert worst_de < 2e-2 * max_ke
     assert worst_violation < 1e-7
-    coarse = spinning_top(2e-2)
+    coarse = spinning_top(3e-2)
     coarse.integrator.max_rotation = None
     coarse.integrator.max_substeps = 1
-    coarse_de, _, coarse_ke = run_and_watch(coarse, 1.0, every=1)
+    with np.errstate(all='ignore'):
+        coarse_de, _, coarse_ke = run_and_watch(coarse, 1.0, every=1)
     assert coarse.dynamics.solver.counters.projection_fallbacks > 0
-    assert coarse_de > 1e-3 * coarse_ke
+    assert coarse_de > 0.2 * coarse_ke
 
 
 def test_a_step_that_diverges_raises_and_keeps_the_last_finite_state():
-    # The top at dt = 3e-2 with neither sub-steps nor retries overflows within a second.
-    sim = spinning_top(3e-2)
+    # The top at dt = 4e-2 with neither sub-steps nor retries overflows within a second.
+    sim = spinning_top(4e-2)
     sim.integrator.max_rotation = None
     sim.integrator.max_substeps = 1
     message = r"^the step from t = .* gave a non-finite state \(bodies \['top'\]\)"
     with np.errstate(all='ignore'), pytest.raises(DivergenceError, match=message):
         sim.step(100)
-    assert 0.0 < sim.time < 3.0
+    assert 0.0 < sim.time < 4.0
     pos, quat = sim.pose('top')
     assert np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))
     # The defaults (sub-steps up front, retries) take the same steps without trouble.
-    ok = spinning_top(3e-2)
-    ok.step(34)
+    ok = spinning_top(4e-2)
+    ok.step(25)
     assert ok.work()['substeps'] > 0
     assert np.all(np.isfinite(ok.pose('top')[0]))

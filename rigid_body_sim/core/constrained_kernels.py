@@ -460,6 +460,126 @@ def _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, 
 
 
 @njit(cache=True)
+def _right_jacobians(quat_s, quat_e, Jr):
+    """
+    ``J_r(u)`` (n, 3, 3) of each body's rotation ``u = log(q_s⁻¹ ⊗ q_e)``.
+
+    ``exp(u + δu) = exp(u) exp(J_r(u) δu)`` with ``J_r(u) = I − (1 − cos θ)/θ²
+    hat(u) + (θ − sin θ)/θ³ hat(u)²``, ``θ = |u|``.
+    """
+    for i in range(quat_s.shape[0]):
+        # q = conj(q_s) ⊗ q_e
+        ax, ay, az, aw = -quat_s[i, 0], -quat_s[i, 1], -quat_s[i, 2], quat_s[i, 3]
+        bx, by, bz, bw = quat_e[i, 0], quat_e[i, 1], quat_e[i, 2], quat_e[i, 3]
+        x = aw * bx + ax * bw + ay * bz - az * by
+        y = aw * by - ax * bz + ay * bw + az * bx
+        z = aw * bz + ax * by - ay * bx + az * bw
+        w = aw * bw - ax * bx - ay * by - az * bz
+        if w < 0.0:
+            x, y, z, w = -x, -y, -z, -w
+        s = math.sqrt(x * x + y * y + z * z)
+        theta = 2.0 * math.atan2(s, w)
+        k = theta / s if s > 0.0 else 2.0 / w
+        u0, u1, u2 = k * x, k * y, k * z
+        t2 = theta * theta
+        if theta < 1e-4:
+            ca, cb = 0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0
+        else:
+            ca = (1.0 - math.cos(theta)) / t2
+            cb = (theta - math.sin(theta)) / (t2 * theta)
+        # hat(u) and hat(u)² = u uᵀ − θ² I.
+        H = ((0.0, -u2, u1), (u2, 0.0, -u0), (-u1, u0, 0.0))
+        uu = (u0, u1, u2)
+        for r in range(3):
+            for c in range(3):
+                h2 = uu[r] * uu[c] - (t2 if r == c else 0.0)
+                Jr[i, r, c] = (1.0 if r == c else 0.0) - ca * H[r][c] + cb * h2
+
+
+@njit(cache=True)
+def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr):
+    """
+    Per body, how the end orientation of a drift responds to its start momentum.
+
+    ``Jr[i] = (∂Θ_end/∂L_start) J_i / h`` (3, 3), ``δΘ`` the body-frame rotation at
+    the end: for an isotropic body ``J_r(u)`` (see :func:`_right_jacobians`, which
+    fills every body first); for an anisotropic one, the derivative carried
+    through the drift's rotor flows about the principal axes, each a rotation by
+    ``φ = τ L_k / J_k`` that also turns ``L`` (see ``step_kernels.axis_flow``).
+    """
+    _right_jacobians(quat_s, quat_e, Jr)
+    dT = np.empty((3, 3))
+    dL = np.empty((3, 3))
+    L = np.empty(3)
+    row = np.empty(3)
+    if symmetric:
+        axes, weights = (0, 1, 2, 1, 0), (0.5, 0.5, 1.0, 0.5, 0.5)
+    else:
+        axes, weights = (0, 1, 2, 0, 0), (1.0, 1.0, 1.0, 0.0, 0.0)
+    for i in range(quat_s.shape[0]):
+        if body[i, 7] == 0.0:
+            continue
+        for r in range(3):
+            L[r] = mom_s[i, r]
+            for c in range(3):
+                dT[r, c] = 0.0
+                dL[r, c] = 1.0 if r == c else 0.0
+        for f in range(5 if symmetric else 3):
+            k = axes[f]
+            tau = weights[f] * h
+            gain = tau / body[i, 2 + k]
+            phi = gain * L[k]
+            cs, sn = math.cos(phi), math.sin(phi)
+            j, kk = (k + 1) % 3, (k + 2) % 3
+            for c in range(3):
+                row[c] = gain * dL[k, c]   # δφ per δL_start
+            # L <- Rot(e_k, -φ) L
+            lj, lk = L[j], L[kk]
+            L[j] = cs * lj + sn * lk
+            L[kk] = cs * lk - sn * lj
+            # e_k × L_new
+            ex = np.zeros(3)
+            ex[j] = -L[kk]
+            ex[kk] = L[j]
+            for c in range(3):
+                tj, tk = dT[j, c], dT[kk, c]
+                dT[j, c] = cs * tj + sn * tk
+                dT[kk, c] = cs * tk - sn * tj
+                dT[k, c] += row[c]
+                mj, mk = dL[j, c], dL[kk, c]
+                dL[j, c] = cs * mj + sn * mk
+                dL[kk, c] = cs * mk - sn * mj
+                for r in range(3):
+                    dL[r, c] -= ex[r] * row[c]
+        for r in range(3):
+            for c in range(3):
+                Jr[i, r, c] = dT[r, c] * body[i, 2 + c] / h
+
+
+@njit(cache=True)
+def _apply_jacobians(Ga, Gb, a, b, Jr, Ga2, Gb2):
+    """Rows' angular blocks times each body's ``J_r``: ``G2 = G diag(I, J_r)``."""
+    n = Jr.shape[0]
+    for r in range(Ga.shape[0]):
+        for c in range(3):
+            Ga2[r, c] = Ga[r, c]
+            Gb2[r, c] = Gb[r, c]
+        i, j = a[r], b[r]
+        for c in range(3):
+            s = 0.0
+            for k in range(3):
+                s += Ga[r, 3 + k] * Jr[i, k, c]
+            Ga2[r, 3 + c] = s
+            if j < n:
+                s = 0.0
+                for k in range(3):
+                    s += Gb[r, 3 + k] * Jr[j, k, c]
+                Gb2[r, 3 + c] = s
+            else:
+                Gb2[r, 3 + c] = Gb[r, 3 + c]
+
+
+@njit(cache=True)
 def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, use_tree,
            tree, dense, counts):
     """
@@ -484,6 +604,9 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
     max_it = int(par[P_MAX_IT])
     pos_s, quat_s = pos.copy(), quat.copy()
     mom_s = mom.copy()
+    Jr = np.empty((n, 3, 3))
+    Ga2 = np.empty((m, 6))
+    Gb2 = np.empty((m, 6))
     previous = np.inf
     for it in range(max_it + 1):
         pos[:, :] = pos_s
@@ -506,8 +629,14 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
             break
         previous = norm
         counts[POS_ITERATIONS] += 1
-        # Φ(end) responds to a start impulse κ like h G_end M⁻¹ G_startᵀ κ.
-        mode = _fac(GaE, GbE, GaS, GbS, a, b, minv6, False, par, tree, dense, 0, counts)
+        # Φ(end) responds to a start impulse κ like h G_end D M⁻¹ G_startᵀ κ, where D
+        # is, per body, the right Jacobian of exp at its rotation u over the drift: an
+        # impulse changes u by δu and the end orientation by J_r(u) δu, not by δu.
+        # For an anisotropic body D is carried through its rotor flows (which also
+        # turn L): with D the iteration is Newton's method, quadratic.
+        _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr)
+        _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
+        mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, tree, dense, 0, counts)
         _sol(mode, vm[2], vm[3], tree, dense, 0)
         _gt_lambda(GaS, GbS, a, b, vm[3], g6)
         for i in range(n):

@@ -57,8 +57,19 @@ Constraints (see :mod:`.solver`)
 A step in which a constrained body would turn by more than ``max_rotation``
 (0.25 rad) is split into equal sub-steps (see :meth:`Integrator.substeps`):
 a fixed step cannot resolve a whip. A splitting step whose SHAKE iterations
-still fail is redone with twice the sub-steps (:class:`NotConverged`). A scene
-without constraints is never sub-stepped.
+still fail is redone with twice the sub-steps (:class:`NotConverged`). Each
+connected component of the constraint graph gets the sub-steps its own motion
+needs; bodies no constraint touches, and scenes without constraints, are never
+sub-stepped.
+
+Compiled kernels
+----------------
+A step is one compiled call (numba): :mod:`.step_kernels` for bodies no
+constraint couples, :mod:`.constrained_kernels` for each component of the
+constraint graph (sub-steps and retries included). The Python code below is
+the readable description of the same methods and still runs the scenes the
+kernels do not take: a constraint set with a generic (user-function) row, or a
+closed loop of more than ``DENSE_ROWS`` rows (the sparse LU path).
 
 """
 
@@ -147,8 +158,9 @@ class Integrator:
         each body gets exactly the step the user asked for (the splittings'
         rotor flows are exact at any rate; ``rkmk4``'s accuracy at large
         ``|Ω| dt`` is what the work-precision benchmark shows), so its motion
-        does not depend on the other bodies. With constraints the count applies
-        to the whole scene, free bodies included.
+        does not depend on the other bodies. The compiled step applies the count
+        to each connected component of the constraint graph separately (see
+        :mod:`.constrained_kernels`); the Python step, to the whole scene.
         """
         if self.max_rotation is None:
             return 1
