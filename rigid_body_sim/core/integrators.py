@@ -606,8 +606,14 @@ class Splitting(Integrator):
                 break
             previous = norm
             solver.counters.position_iterations += 1
-            # Φ(end) responds to a start impulse κ like h G_end M⁻¹ G_startᵀ κ.
-            kappa = solver.solve(geo.jacobian, start.jacobian, r)
+            # Φ(end) responds to a start impulse κ like h G_end D M⁻¹ G_startᵀ κ, D the
+            # rotor's sensitivity (see constrained_kernels._rotor_jacobians): Newton.
+            body = np.zeros((len(moments), 8))
+            body[:, 2:5] = moments
+            body[self.dynamics.bodies.anisotropic, 7] = 1.0
+            jr = np.empty((len(moments), 3, 3))
+            ckern._rotor_jacobians(quat, quat_end, mom, body, h, self.SYMMETRIC, jr)
+            kappa = solver.solve(geo.jacobian.right_multiplied(jr), start.jacobian, r)
             d = -solver.inv_mass_6 * start.jacobian.rmatvec(kappa) / h
             vel = vel + d[:, :3]
             mom = mom + d[:, 3:] * moments
