@@ -12,8 +12,8 @@ for redundant rows) up to ``DENSE_ROWS`` rows and by the tree solve of
 :mod:`.tree_solve` beyond.
 
 A step is split into sub-steps when a constrained body turns fast, and redone
-with twice as many when SHAKE stops converging (:class:`.integrators.NotConverged`
-in the Python description); both happen inside the call.
+with twice as many when SHAKE stops converging (see :mod:`.integrators`); both
+happen inside the call.
 
 Parameters array ``par`` (float64)
 ----------------------------------
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from numba import njit, objmode
 import numpy as np
 
 from .row_kernels import rows_geometry, rows_rates
@@ -284,12 +284,40 @@ def _g_times(Ga, Gb, a, b, x6, out):
 START, CURRENT, END = 0, 1, 2
 
 
+# Generic rows (a user's Python function) are evaluated by Python from inside the
+# compiled step (numba's object mode): the kernel calls these with the key of its
+# component, registered by the solver (see ConstraintSolver.kernel_setup).
+GENERIC: dict = {}
+
+
+def generic_geometry(key: int, pos: np.ndarray, quat: np.ndarray, phi: np.ndarray,
+                     Ga: np.ndarray, Gb: np.ndarray) -> None:
+    """Fill Φ and the G blocks of a component's generic rows (after its built-in rows)."""
+    GENERIC[key].geometry(pos, quat, phi, Ga, Gb)
+
+
+def generic_gamma(key: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
+                  om: np.ndarray, gamma: np.ndarray) -> None:
+    """Fill γ of a component's generic rows (after its built-in rows)."""
+    GENERIC[key].gamma(pos, quat, vel, om, gamma)
+
+
 @njit(cache=True)
 def _geometry(pos, quat, rows, which, ws, counts):
-    """Φ and G of every row at ``pos, quat`` into slot ``which`` of the workspace."""
+    """
+    Φ and G of every row at ``pos, quat`` into slot ``which`` of the workspace.
+
+    ``rows`` is ``(kind, comp, a, b, par, key)``: the built-in rows are the first
+    ``len(kind)``; with ``key >= 0`` the generic rows after them are filled by
+    :func:`generic_geometry` (Python, in object mode).
+    """
     phi3, G3 = ws[0], ws[1]
-    rows_geometry(pos, quat, rows[0], rows[1], rows[2], rows[3], rows[4], phi3[which],
-                  G3[which, 0], G3[which, 1])
+    phi_w, Ga_w, Gb_w = phi3[which], G3[which, 0], G3[which, 1]
+    rows_geometry(pos, quat, rows[0], rows[1], rows[2], rows[3], rows[4], phi_w, Ga_w, Gb_w)
+    key = rows[5]
+    if key >= 0:
+        with objmode():
+            generic_geometry(key, pos, quat, phi_w, Ga_w, Gb_w)
     counts[GEOMETRY] += 1
     if which == CURRENT:
         ws[8][0] = 0   # the symmetric factor was of the geometry replaced
@@ -325,6 +353,20 @@ def _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, 
     a, b = rows[2], rows[3]
     rows_rates(pos, quat, vel, om, rows[0], rows[1], a, b, rows[4], Ga, Gb, True, vm[0],
                vm[1])
+    key = rows[5]
+    if key >= 0:
+        # Generic rows: Φ̇ = G ν here, γ from the user's function (object mode).
+        n = pos.shape[0]
+        for r in range(rows[0].shape[0], phi.shape[0]):
+            rate = 0.0
+            for c in range(3):
+                rate += Ga[r, c] * vel[a[r], c] + Ga[r, 3 + c] * om[a[r], c]
+                if b[r] < n:
+                    rate += Gb[r, c] * vel[b[r], c] + Gb[r, 3 + c] * om[b[r], c]
+            vm[0, r] = rate
+        gamma = vm[1]
+        with objmode():
+            generic_gamma(key, pos, quat, vel, om, gamma)
     w = par[P_OMEGA]
     _g_times(Ga, Gb, a, b, a6, vm[2])
     for r in range(phi.shape[0]):

@@ -41,7 +41,6 @@ frame fixed in each body when the constraint is added. The world is body index
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, field
 import enum
 from typing import Any, Callable, Optional
@@ -243,31 +242,6 @@ class RowJacobian:
         else:
             self.matrix = sp.csr_matrix((values[st.perm], st.indices, st.indptr),
                                         shape=(st.m, 6 * st.n))
-
-    def right_multiplied(self, maps: np.ndarray) -> 'RowJacobian':
-        """
-        Return ``G diag(I, maps_i)``: each body's angular columns times ``maps[i]``.
-
-        Parameters
-        ----------
-        maps : ndarray, shape (n, 3, 3)
-            Per body, applied to its angular (δΘ) columns from the right.
-
-        """
-        out = copy.copy(self)
-        out.blocks = None   # (the tree solve's per-row blocks are not transformed)
-        if self.dense_mode:
-            mat = self.matrix.reshape(self.m, -1, 6).copy()
-            mat[:, :, 3:] = np.einsum('mbk,bkc->mbc', mat[:, :, 3:], maps[self.bodies_used])
-            out.matrix = mat.reshape(self.m, -1)
-        else:
-            n = self.n
-            blocks = np.zeros((n, 6, 6))
-            blocks[:, :3, :3] = np.eye(3)
-            blocks[:, 3:, 3:] = maps
-            diag = sp.bsr_matrix((blocks, np.arange(n), np.arange(n + 1)), shape=(6 * n, 6 * n))
-            out.matrix = (self.matrix @ diag).tocsr()
-        return out
 
     def _cols(self, x6: np.ndarray) -> np.ndarray:
         return (x6[self.bodies_used] if self.dense_mode else x6).ravel()

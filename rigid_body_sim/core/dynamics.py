@@ -9,7 +9,10 @@ For body k (seed eq. 69 without constraints), in the principal frame::
 
 :class:`Dynamics` evaluates only what the scene contains: the effects it was
 given, and the gyroscopic term ``Ω × JΩ`` only for anisotropic bodies. It
-counts its work in :class:`WorkCounters`.
+counts its work in :class:`WorkCounters`. The steps evaluate it in compiled
+code, from the arrays of :meth:`Dynamics.kernel_model`; the numpy right-hand
+side here (:meth:`Dynamics.accelerations`) serves the references
+(:mod:`.reference`), the reactions and the tests.
 """
 
 from __future__ import annotations
@@ -94,20 +97,11 @@ class Dynamics:
         self.version = 0
         self._kernel_model: Optional[tuple] = None
         self._submodels: dict = {}
-        self._refresh()
-
-    def _refresh(self) -> None:
-        self.position_effects = [e for e in self.effects if not e.velocity_dependent]
-        self.flow_effects = [e for e in self.effects
-                             if e.velocity_dependent and hasattr(e, 'exact_flow')]
-        self.velocity_effects = [e for e in self.effects
-                                 if e.velocity_dependent and not hasattr(e, 'exact_flow')]
 
     def add_effect(self, effect: Effect) -> None:
         """Add an (already bound) effect between steps."""
         check_kernel_effect(effect, 'effect')
         self.effects.append(effect)
-        self._refresh()
         self.changed()
 
     def changed(self) -> None:
@@ -253,31 +247,6 @@ class Dynamics:
         a6, self.last_multipliers, _ = self.solver.constrained(
             pos, quat, vel, omega, np.hstack([acc, om_dot]))
         return a6[:, :3], a6[:, 3:]
-
-    def kick_wrench(self, time: float, pos: np.ndarray,
-                    quat: np.ndarray, vel: np.ndarray,
-                    omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """
-        Force (world) and torque (principal) of all effects but exact-flow ones.
-
-        With constraints, the constraint force ``−Gᵀλ`` is added, with λ solved
-        from the full accelerations (exact-flow effects and the gyroscopic term
-        included), so the kick, the flows and the free rotor together follow the
-        constrained vector field.
-        """
-        self.counters.kick_evaluations += 1
-        kin = self.kinematics(time, pos, quat, vel, omega)
-        force, torque = self.wrench(kin, self.position_effects + self.velocity_effects)
-        if not self.constrained:
-            return force, torque
-        f_flow, t_flow = self.wrench(kin, self.flow_effects)
-        a6 = np.hstack([(force + f_flow) * self.bodies.inv_mass[:, None],
-                        (torque + t_flow - self.gyroscopic(omega)) / self.bodies.moments])
-        a6c, self.last_multipliers, _ = self.solver.constrained(pos, quat, vel, omega, a6)
-        # Constraint force = M (a_constrained - a_free).
-        m6 = 1.0 / self.solver.inv_mass_6.reshape(-1, 6)
-        dforce = m6 * (a6c - a6)
-        return force + dforce[:, :3], torque + dforce[:, 3:]
 
 
 def check_kernel_effect(effect: Effect, field_name: str) -> None:

@@ -1,11 +1,12 @@
 """
 Fixed-step integrators on (R³ × SO(3) × R³ × R³)ⁿ behind one contract.
 
-Each integrator class is mostly data (name, order, what it conserves, a
-tableau) and implements ``_step``; the public :meth:`Integrator.step` does the
-bookkeeping and counts work. Orientation is always updated by the exponential
-map ``q <- q ⊗ exp(u)`` (see :mod:`.rotation`), so it stays on SO(3) by
-construction; quaternions are renormalized only to remove rounding error.
+Each integrator class is data (name, order, what it conserves, its code in
+the compiled kernels); the public :meth:`Integrator.step` calls the kernels,
+does the bookkeeping and counts work. Orientation is always updated by the
+exponential map ``q <- q ⊗ exp(u)`` (see :mod:`.rotation`), so it stays on
+SO(3) by construction; quaternions are renormalized only to remove rounding
+error.
 
 Methods
 -------
@@ -54,22 +55,32 @@ Constraints (see :mod:`.solver`)
     velocity target instead (measured violation ~1e-12 m at dt = 1e-3, 1e-3 m
     at dt = 0.2 s, where the capped ω still halves it every step).
 
+SHAKE's Newton matrix carries how each body's end orientation responds to its
+start momentum through the drift (the right Jacobian of exp, or the derivative
+through the rotor flows), so it converges quadratically: 1 to 2 iterations a
+(sub)step up to about 1 rad a step (``bench/shake_convergence.py``).
+
+Sub-steps
+---------
 A step in which a constrained body would turn by more than ``max_rotation``
-(0.25 rad) is split into equal sub-steps (see :meth:`Integrator.substeps`):
-a fixed step cannot resolve a whip. A splitting step whose SHAKE iterations
-still fail is redone with twice the sub-steps (:class:`NotConverged`). Each
-connected component of the constraint graph gets the sub-steps its own motion
-needs; bodies no constraint touches, and scenes without constraints, are never
-sub-stepped.
+(0.25 rad) is split into ``ceil(|Ω|max dt / max_rotation)`` equal sub-steps,
+counted in ``WorkCounters.substeps``; a splitting step whose SHAKE iterations
+stop converging on joints that hold (a whip that speeds up within the step) is
+redone from its start with twice the sub-steps, up to ``max_substeps``
+(``WorkCounters.retries``); only there does the position correction fall back
+to an orthogonal projection (``projection_fallbacks``). Each connected
+component of the constraint graph gets the sub-steps its own motion needs;
+bodies no constraint touches, and scenes without constraints, are never
+sub-stepped: each gets exactly the step the user asked for, so its motion does
+not depend on the other bodies.
 
 Compiled kernels
 ----------------
-A step is one compiled call (numba): :mod:`.step_kernels` for bodies no
-constraint couples, :mod:`.constrained_kernels` for each component of the
-constraint graph (sub-steps and retries included). The Python code below is
-the readable description of the same methods and still runs the scenes the
-kernels do not take: a constraint set with a generic (user-function) row, or a
-closed loop of more than ``DENSE_ROWS`` rows (the sparse LU path).
+A step is one compiled call (numba) per component of the constraint graph
+(:mod:`.constrained_kernels`) and one for the bodies no constraint couples
+(:mod:`.step_kernels`): these modules hold the arithmetic of the methods above.
+Generic constraint rows (a user's Python function) are evaluated by Python from
+inside the compiled step; closed loops are solved densely.
 
 """
 
@@ -81,25 +92,10 @@ from typing import ClassVar, Optional
 import numpy as np
 
 from . import constrained_kernels as ckern
-from . import rotation as so3
 from . import step_kernels as kern
 from .bodies import State
 from .dynamics import Dynamics
 from .errors import SpecError
-
-
-class NotConverged(Exception):
-    """
-    A (sub)step's position projection did not converge: redo the step finer.
-
-    Raised inside a splitting step when SHAKE's Newton iterations stop
-    halving the residual on joints that hold (a joint still closing a violation
-    is projected instead), which happens when a constrained body turned much
-    further within the step than at its start (a whip that accelerates). The
-    step is then retried from its start with twice the sub-steps, up to
-    ``Integrator.max_substeps``; only there does the projection fall back to an
-    orthogonal projection (not momentum-consistent: a last resort).
-    """
 
 
 class Invariant(enum.Enum):
@@ -114,7 +110,7 @@ class Invariant(enum.Enum):
 
 class Integrator:
     """
-    Base class. Subclasses set ``name``, ``order``, ``conserves`` and ``_step``.
+    Base class. Subclasses set ``name``, ``order``, ``conserves`` and ``KERNEL``.
 
     Parameters
     ----------
@@ -132,9 +128,8 @@ class Integrator:
     #: makes the step split into equal sub-steps (None: never).
     max_rotation: Optional[float] = 0.25
     #: Most sub-steps a step is split into when the position projection of a
-    #: constrained step does not converge (see :class:`NotConverged`).
+    #: constrained step does not converge (see "Sub-steps" above).
     max_substeps: int = 64
-    _last_resort: bool = True
 
     def __init__(self, dynamics: Dynamics) -> None:
         self.dynamics = dynamics
@@ -144,34 +139,6 @@ class Integrator:
         self._kick_at: Optional[tuple] = None
         self._geometry_at: Optional[tuple] = None
         self._parameters: Optional[tuple] = None
-
-    def substeps(self, state: State, dt: float) -> int:
-        """
-        Return the number of equal sub-steps for a step of ``dt`` from ``state``.
-
-        The position projection (SHAKE's Newton iterations) linearizes the
-        constraints over one step, which fails when a constrained body turns by
-        more than about a quarter radian in it (a whip, a fast spin under a
-        joint). Such a step is split into ``ceil(|Ω|max dt / max_rotation)``
-        sub-steps, counted in ``WorkCounters.substeps``. Only constrained bodies
-        are watched, and a scene without constraints is never sub-stepped:
-        each body gets exactly the step the user asked for (the splittings'
-        rotor flows are exact at any rate; ``rkmk4``'s accuracy at large
-        ``|Ω| dt`` is what the work-precision benchmark shows), so its motion
-        does not depend on the other bodies. The compiled step applies the count
-        to each connected component of the constraint graph separately (see
-        :mod:`.constrained_kernels`); the Python step, to the whole scene.
-        """
-        if self.max_rotation is None:
-            return 1
-        dyn = self.dynamics
-        if not dyn.constrained:
-            return 1
-        watch = dyn.solver.constraints.touched
-        if not len(watch):
-            return 1
-        rate = float(np.max(np.abs(state.ang_vel_principal[watch])))
-        return max(1, int(np.ceil(rate * abs(dt) / self.max_rotation)))
 
     def step(self, state: State, dt: float, t_end: Optional[float] = None) -> State:
         """
@@ -183,26 +150,7 @@ class Integrator:
         t_end = state.time + dt if t_end is None else t_end
         if not self.dynamics.constrained:
             return self._free_step(state, dt, t_end)
-        setup = self.dynamics.solver.kernel_setup()
-        if setup is not None:
-            return self._constrained_step(state, dt, t_end, setup)
-        # Generic rows (a user's Python function) or a large closed loop: in Python.
-        k = self.substeps(state, dt)
-        while True:
-            # At the finest split a step must finish: the projection then falls back.
-            self._last_resort = k >= self.max_substeps
-            try:
-                new = self._substepped(state, dt, t_end, k)
-                break
-            except NotConverged:
-                # A whip sped up within the step: redo it from the start, finer.
-                self.dynamics.counters.retries += 1
-                k = min(2 * k, self.max_substeps)
-        new.time = t_end
-        q = new.quat_principal_world
-        q /= np.linalg.norm(q, axis=-1, keepdims=True)   # rounding only, in place
-        self.dynamics.counters.steps += 1
-        return new
+        return self._constrained_step(state, dt, t_end, self.dynamics.solver.kernel_setup())
 
     def _free_step(self, state: State, dt: float, t_end: float) -> State:
         """Take a step of bodies no constraint couples: one call of the compiled kernel."""
@@ -317,108 +265,12 @@ class Integrator:
         sc.velocity_projections += n[ckern.VEL_PROJECTIONS]
         return State(t_end, pos, quat, vel, om)
 
-    def _substepped(self, state: State, dt: float, t_end: float, k: int) -> State:
-        """Advance by ``k`` equal sub-steps of ``dt / k``."""
-        if k == 1:
-            return self._step(state, dt, t_end)
-        self.dynamics.counters.substeps += k
-        new, h = state, dt / k
-        for i in range(k):
-            te = t_end if i == k - 1 else state.time + (i + 1) * h
-            new = self._step(new, h, te)
-            new.time = te
-        return new
-
-    def _step(self, state: State, dt: float, t_end: float) -> State:
-        raise NotImplementedError
-
-    def _rotate(self, quat: np.ndarray, rotvec_principal: np.ndarray) -> np.ndarray:
-        """``q ⊗ exp(u)`` for every body."""
-        self.dynamics.counters.rotation_updates += len(quat)
-        return so3.quat_multiply(quat, so3.exp_quat(rotvec_principal))
-
-
 # ----------------------------------------------------------------------------------------
-# Runge–Kutta–Munthe-Kaas
+# The methods (their arithmetic: step_kernels.py and constrained_kernels.py)
 
 
-def dexpinv_right(u: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """
-    Inverse right-trivialized derivative of exp on so(3), to second order in ``u``.
-
-    For ``R(t) = R0 exp(hat(u(t)))`` with ``dR/dt = R hat(w)``,
-    ``du/dt = w + u × w / 2 + u × (u × w) / 12 + O(|u|⁴)``.
-
-    Parameters
-    ----------
-    u, w : ndarray, shape (n, 3)
-        Rotation vectors of the step so far, and body angular velocities.
-
-    Returns
-    -------
-    ndarray, shape (n, 3)
-
-    """
-    uw = so3.cross(u, w)
-    return w + 0.5 * uw + so3.cross(u, uw) / 12.0
-
-
-class RungeKuttaMuntheKaas(Integrator):
-    """Explicit RKMK method from a Butcher tableau (class attributes A, B, C)."""
-
-    A: ClassVar[np.ndarray]
-    B: ClassVar[np.ndarray]
-    C: ClassVar[np.ndarray]
-
-    def _step(self, state: State, dt: float, t_end: float) -> State:
-        dyn = self.dynamics
-        if not dyn.constrained:
-            return rkmk_step(self, state, dt, self.A, self.B, self.C)
-        # Constraint forces at every stage (Baumgarte-stabilized); then the velocities
-        # are projected onto Φ̇ = −ωΦ at the end configuration, an internal impulse
-        # that conserves momenta and makes the O(dt⁵) position drift decay. A position
-        # projection would move bodies at fixed momenta and break angular momentum.
-        new = rkmk_step(self, state, dt, self.A, self.B, self.C)
-        pos, quat = new.pos_com_world, new.quat_principal_world
-        vel, om = dyn.solver.project_velocities(pos, quat, new.vel_com_world,
-                                                new.ang_vel_principal)
-        return State(new.time, pos, quat, vel, om)
-
-
-def rkmk_step(integrator: Integrator, s: State, h: float, A: np.ndarray, B: np.ndarray,
-              C: np.ndarray) -> State:
-    """One RKMK step; positions and velocities by the same tableau as plain RK."""
-    dyn = integrator.dynamics
-    n_stages = len(B)
-    k_pos, k_vel, k_om, k_rot = [], [], [], []
-    for i in range(n_stages):
-        pos, vel, om = s.pos_com_world.copy(), s.vel_com_world.copy(), s.ang_vel_principal.copy()
-        u = np.zeros_like(pos)
-        for j in range(i):
-            a = A[i, j]
-            if a:
-                pos += h * a * k_pos[j]
-                vel += h * a * k_vel[j]
-                om += h * a * k_om[j]
-                u += h * a * k_rot[j]
-        quat = integrator._rotate(s.quat_principal_world, u) if i else s.quat_principal_world
-        acc, om_dot = dyn.accelerations(s.time + C[i] * h, pos, quat, vel, om)
-        k_pos.append(vel)
-        k_vel.append(acc)
-        k_om.append(om_dot)
-        k_rot.append(dexpinv_right(u, om) if i else om)
-    u = h * sum(b * k for b, k in zip(B, k_rot))
-    return State(
-        s.time,
-        s.pos_com_world + h * sum(b * k for b, k in zip(B, k_pos)),
-        integrator._rotate(s.quat_principal_world, u),
-        s.vel_com_world + h * sum(b * k for b, k in zip(B, k_vel)),
-        s.ang_vel_principal + h * sum(b * k for b, k in zip(B, k_om)),
-    )
-
-
-class RKMK4(RungeKuttaMuntheKaas):
-    """Fourth-order Runge–Kutta–Munthe-Kaas (classical RK4 tableau)."""
+class RKMK4(Integrator):
+    """Fourth-order Runge–Kutta–Munthe-Kaas (classical RK4 tableau, below)."""
 
     name = 'rkmk4'
     KERNEL = kern.RKMK4
@@ -432,207 +284,20 @@ class RKMK4(RungeKuttaMuntheKaas):
     C = np.array([0.0, 0.5, 0.5, 1.0])
 
 
-# ----------------------------------------------------------------------------------------
-# Splitting methods
-
-
-def _axis_flow(quat: np.ndarray, mom: np.ndarray, moments: np.ndarray, axis: int,
-               dt: float) -> None:
-    """
-    Exact flow of ``H = L_axis² / (2 J_axis)`` over ``dt``, in place.
-
-    The body rotates by ``φ = dt L_axis / J_axis`` about its principal axis
-    ``axis``: ``q <- q ⊗ exp(φ e_axis)`` and ``L <- exp(-φ hat(e_axis)) L``,
-    so the world angular momentum ``R L`` is unchanged.
-    """
-    phi = dt * mom[:, axis] / moments[:, axis]
-    c, s = np.cos(phi), np.sin(phi)
-    j, k = (axis + 1) % 3, (axis + 2) % 3
-    lj, lk = mom[:, j].copy(), mom[:, k]
-    mom[:, j] = c * lj + s * lk
-    mom[:, k] = c * lk - s * lj
-    # q <- q ⊗ (sin(φ/2) e_axis, cos(φ/2)), written out for the one non-zero component.
-    half = 0.5 * phi
-    c, s = np.cos(half), np.sin(half)
-    qi, qj, qk, qw = quat[:, axis].copy(), quat[:, j].copy(), quat[:, k].copy(), quat[:, 3].copy()
-    quat[:, axis] = c * qi + s * qw
-    quat[:, j] = c * qj + s * qk
-    quat[:, k] = c * qk - s * qj
-    quat[:, 3] = c * qw - s * qi
-
-
 class Splitting(Integrator):
     """
     Kick–drift splitting with the free rotor split about principal axes.
 
     ``COMPOSITION`` lists the sub-step weights (fractions of ``dt``) of
     symmetric Strang steps composed into one step; ``SYMMETRIC`` False gives the
-    first-order Lie–Trotter kick-then-drift.
+    first-order Lie–Trotter kick-then-drift (the kernels implement these).
     """
 
     SYMMETRIC: ClassVar[bool] = True
     COMPOSITION: ClassVar[tuple] = (1.0,)
-    #: m or rad: a larger violation at the start of a (sub)step is still closing.
+    #: m or rad: a larger violation at the start of a (sub)step is still closing
+    #: (SHAKE then projects instead of redoing the step finer).
     CLOSING: ClassVar[float] = 1e-6
-
-    def __init__(self, dynamics: Dynamics) -> None:
-        super().__init__(dynamics)
-        self._cache: Optional[tuple] = None
-
-    def _kick(self, time: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-              mom: np.ndarray, tau: float) -> None:
-        """``v += tau f/m`` and ``L += tau τ`` in place, reusing the last evaluation if valid."""
-        dyn = self.dynamics
-        velocity_free = not dyn.velocity_effects and not dyn.constrained
-        c = self._cache
-        if (velocity_free and c is not None and c[0] == dyn.version and c[1] == time
-                and c[2] is pos and c[3] is quat):
-            force, torque = c[4], c[5]
-        else:
-            if not dyn.position_effects and velocity_free:
-                return
-            force, torque = dyn.kick_wrench(time, pos, quat, vel, mom / dyn.bodies.moments)
-            self._cache = (dyn.version, time, pos, quat, force, torque)
-        vel += (tau * dyn.bodies.inv_mass)[:, None] * force
-        mom += tau * torque
-
-    def _flows(self, vel: np.ndarray, mom: np.ndarray, tau: float) -> None:
-        for effect in self.dynamics.flow_effects:
-            effect.exact_flow(vel, mom, tau)
-
-    def _drift(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, mom: np.ndarray,
-               tau: float) -> tuple[np.ndarray, np.ndarray]:
-        """Free flight ``x += tau v`` and the free rotor; returns new (pos, quat)."""
-        bodies = self.dynamics.bodies
-        pos = pos + tau * vel
-        quat = quat.copy()
-        a = bodies.anisotropic
-        if len(a) == len(bodies):
-            quat_a, mom_a, j_a = quat, mom, bodies.moments
-        elif len(a):
-            quat_a, mom_a, j_a = quat[a], mom[a], bodies.moments[a]
-        if len(a):
-            counters = self.dynamics.counters
-            seq = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5)) if self.SYMMETRIC \
-                else ((0, 1.0), (1, 1.0), (2, 1.0))
-            for axis, w in seq:
-                _axis_flow(quat_a, mom_a, j_a, axis, w * tau)
-                counters.gyroscopic_body_evaluations += len(a)
-            counters.rotation_updates += len(a) * len(seq)
-            if len(a) < len(bodies):
-                quat[a], mom[a] = quat_a, mom_a
-        iso = self._isotropic
-        if len(iso):
-            # Isotropic body: Ω is constant during the drift, exp is exact.
-            self.dynamics.counters.rotation_updates += len(iso)
-            quat[iso] = so3.quat_multiply(
-                quat[iso], so3.exp_quat(tau * mom[iso] / bodies.moments[iso]))
-        return pos, quat
-
-    @property
-    def _isotropic(self) -> np.ndarray:
-        bodies = self.dynamics.bodies
-        mask = np.ones(len(bodies), dtype=bool)
-        mask[bodies.anisotropic] = False
-        return np.flatnonzero(mask)
-
-    def _strang(self, t: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-                mom: np.ndarray, h: float, t_next: float) -> tuple:
-        """
-        One symmetric (or, if not SYMMETRIC, Lie–Trotter) sub-step; RATTLE with constraints.
-
-        With constraints this is RATTLE: the half-step velocities get the
-        impulse ``M⁻¹ G_startᵀ κ`` for which the drift *from the start* lands on
-        the position constraint (SHAKE, solved by Newton iterations that redo
-        the drift), and the final velocities the impulse along ``G_endᵀ`` that
-        satisfies the velocity constraint. Both impulses act where their
-        Jacobian was taken, so internal constraint forces conserve linear and
-        angular momentum exactly, and the sub-step stays symmetric and
-        symplectic (a composition of sub-steps keeps its order).
-        """
-        dyn = self.dynamics
-        moments = dyn.bodies.moments
-        constrained = dyn.constrained
-        if constrained:
-            start = dyn.solver.evaluate(pos, quat, vel, mom / moments)
-        first = 0.5 * h if self.SYMMETRIC else h
-        self._flows(vel, mom, first)
-        self._kick(t, pos, quat, vel, mom, first)
-        if constrained:
-            pos, quat, vel, mom = self._shake(start, pos, quat, vel, mom, h)
-        else:
-            pos, quat = self._drift(pos, quat, vel, mom, h)
-        if self.SYMMETRIC:
-            self._kick(t_next, pos, quat, vel, mom, 0.5 * h)
-            self._flows(vel, mom, 0.5 * h)
-        if constrained:
-            vel, om = dyn.solver.project_velocities(pos, quat, vel, mom / moments)
-            mom = om * moments
-        return pos, quat, vel, mom
-
-    def _shake(self, start, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-               mom: np.ndarray, h: float) -> tuple:
-        """Drift with the half-step impulse that puts the end on the position constraint."""
-        solver = self.dynamics.solver
-        moments = self.dynamics.bodies.moments
-        target = np.exp(-h / solver.time_constant) * start.phi
-        closing = np.max(np.abs(start.phi), initial=0.0) > self.CLOSING
-        previous = np.inf
-        for it in range(solver.max_iterations + 1):
-            mom_end = mom.copy()
-            pos_end, quat_end = self._drift(pos, quat, vel, mom_end, h)
-            geo = solver.geometry(pos_end, quat_end)
-            r = geo.phi - target
-            norm = np.max(np.abs(r), initial=0.0)
-            if norm <= solver.position_tolerance:
-                break
-            if it == solver.max_iterations:
-                # Slow (linear) convergence: the residual left is corrected by the next
-                # step's projection (its target is relative to where this one ends).
-                break
-            if norm > 0.5 * previous and not closing and not self._last_resort:
-                # Not converging on joints that hold: a body turned too far within the
-                # step for the linearization (a whip that speeds up, a fast spin).
-                # Redo the step finer.
-                raise NotConverged
-            if norm > 0.5 * previous:
-                # Not converging while a violated joint closes (part of its violation is
-                # second order in the motion that closes it, out of reach of a
-                # first-order impulse; the closing is not physical motion anyway), or
-                # at the finest split: finish with a plain projection of the end.
-                solver.counters.projection_fallbacks += 1
-                pos_end, quat_end, _, _ = solver.project_positions(
-                    start, pos_end, quat_end, vel, mom_end / moments, h, orthogonal=True)
-                break
-            previous = norm
-            solver.counters.position_iterations += 1
-            # Φ(end) responds to a start impulse κ like h G_end D M⁻¹ G_startᵀ κ, D the
-            # rotor's sensitivity (see constrained_kernels._rotor_jacobians): Newton.
-            body = np.zeros((len(moments), 8))
-            body[:, 2:5] = moments
-            body[self.dynamics.bodies.anisotropic, 7] = 1.0
-            jr = np.empty((len(moments), 3, 3))
-            ckern._rotor_jacobians(quat, quat_end, mom, body, h, self.SYMMETRIC, jr)
-            kappa = solver.solve(geo.jacobian.right_multiplied(jr), start.jacobian, r)
-            d = -solver.inv_mass_6 * start.jacobian.rmatvec(kappa) / h
-            vel = vel + d[:, :3]
-            mom = mom + d[:, 3:] * moments
-        return pos_end, quat_end, vel, mom_end
-
-    def _step(self, s: State, dt: float, t_end: float) -> State:
-        moments = self.dynamics.bodies.moments
-        vel = s.vel_com_world.copy()
-        mom = s.ang_vel_principal * moments
-        pos, quat = s.pos_com_world, s.quat_principal_world
-        t = s.time
-        last = len(self.COMPOSITION) - 1
-        for i, w in enumerate(self.COMPOSITION):
-            # The last sub-step ends exactly at t_end, the time the next step starts
-            # from, so its final kick is reused there (first same as last).
-            t_next = t_end if i == last else t + w * dt
-            pos, quat, vel, mom = self._strang(t, pos, quat, vel, mom, w * dt, t_next)
-            t = t_next
-        return State(s.time, pos, quat, vel, mom / moments)
 
 
 class SymplecticEuler(Splitting):

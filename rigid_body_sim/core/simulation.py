@@ -200,7 +200,6 @@ class Simulation:
                 effect._active = None
         # Effects added at run time (a lazily created wrench table) are dropped.
         self.dynamics.effects = self.dynamics.effects[:len(self._initial_wrenches)]
-        self.dynamics._refresh()
         self._wrenches = next((e for e in self.dynamics.effects
                                if isinstance(e, AppliedWrenches)), None)
         for effect in self.dynamics.effects:

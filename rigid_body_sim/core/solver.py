@@ -21,16 +21,19 @@ ill-conditioned the mass ratios make it (a point mass on a rod: 1e9).
 The matrix ``G M⁻¹ Gᵀ`` couples only constraints that share a body: block
 tridiagonal for chains, tree-shaped for trees. Chains and trees are eliminated
 in tree order by :mod:`.tree_solve` (Baraff 1996; linear in the number of
-links, compiled); a graph with a closed loop is factorized by SuperLU with a
-minimum-degree ordering of ``A + Aᵀ``; systems of at most ``DENSE_ROWS`` rows
-use a dense Cholesky factorization, which is faster at that size
-(see :data:`.constraints.DENSE_ROWS`).
+links, compiled); systems of at most ``DENSE_ROWS`` rows use a dense Cholesky
+factorization, which is faster at that size (see
+:data:`.constraints.DENSE_ROWS`). A step does this in compiled code
+(:mod:`.constrained_kernels`, where a closed loop is solved densely); the
+solves of this class (reactions, consistency, velocity reconciliation when a
+constraint is added) factorize a closed loop by SuperLU with a minimum-degree
+ordering of ``A + Aᵀ``.
 
 Position and velocity level (every step)
 ----------------------------------------
 The integrators (see :mod:`.integrators`) correct positions onto
 ``Φ = ρ Φ_start`` with ``ρ = exp(−h / time_constant)`` (SHAKE in the splitting
-methods; :meth:`ConstraintSolver.project_positions` as a fallback) and
+methods, an orthogonal projection as the last resort) and
 velocities onto ``Φ̇ = −ω Φ``, ``ω = 1 / time_constant`` (at most ``1 / (2 dt)``)
 (:meth:`ConstraintSolver.project_velocities`, the mass-weighted minimum-norm
 impulse ``−M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁻¹ r``). For a satisfied constraint this is
@@ -51,8 +54,10 @@ order of the gravity force of the body. Step sizes above
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+import itertools
 from typing import Callable, Optional, Sequence, TYPE_CHECKING
 import warnings
+import weakref
 
 import numpy as np
 import scipy.linalg as sla
@@ -61,7 +66,7 @@ import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constrained_kernels import dense_storage, workspace
+from .constrained_kernels import dense_storage, GENERIC, workspace
 from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geometry,
                           RowJacobian)
 from .errors import SpecError
@@ -83,6 +88,64 @@ class SolverCounters:
     acceleration_solves: int = 0
     position_iterations: int = 0
     velocity_projections: int = 0
+
+
+_KEYS = itertools.count()
+
+
+def _drop_generic(keys: list) -> None:
+    for key in keys:
+        GENERIC.pop(key, None)
+
+
+class _GenericRows:
+    """
+    A component's generic rows, evaluated for the compiled step.
+
+    The constrained kernel calls :meth:`geometry` and :meth:`gamma` (through
+    ``constrained_kernels.generic_geometry`` and ``generic_gamma``) with the
+    component's own state arrays; rows are written after its built-in rows.
+    """
+
+    def __init__(self, constraints: ConstraintSet, bodies: np.ndarray, resolved: list,
+                 offset: int) -> None:
+        self.constraints, self.bodies, self.resolved = constraints, bodies, resolved
+        self.offset = offset
+
+    def _frames(self, pos: np.ndarray, quat: np.ndarray) -> tuple:
+        n = len(self.constraints.bodies)
+        x = np.zeros((n + 1, 3))
+        x[self.bodies] = pos
+        R = np.tile(np.eye(3), (n + 1, 1, 1))
+        R[self.bodies] = so3.quat_to_matrix(quat)
+        return x, R
+
+    def geometry(self, pos: np.ndarray, quat: np.ndarray, phi: np.ndarray, Ga: np.ndarray,
+                 Gb: np.ndarray) -> None:
+        """Fill Φ and the G blocks of the generic rows."""
+        x, R = self._frames(pos, quat)
+        r0 = self.offset
+        for res in self.resolved:
+            values, g, _ = self.constraints._generic_rows(res, x, R)
+            k = len(values)
+            phi[r0:r0 + k] = values
+            Ga[r0:r0 + k] = g[:, :6]
+            Gb[r0:r0 + k] = g[:, 6:]
+            r0 += k
+
+    def gamma(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
+              gamma: np.ndarray) -> None:
+        """Fill γ of the generic rows."""
+        x, R = self._frames(pos, quat)
+        v = np.zeros_like(x)
+        w = np.zeros_like(x)
+        v[self.bodies] = vel
+        w[self.bodies] = np.einsum('nij,nj->ni', R[self.bodies], om)
+        r0 = self.offset
+        for res in self.resolved:
+            values = self.constraints._generic_rows(res, x, R, v, w, True)[2]
+            gamma[r0:r0 + len(values)] = values
+            r0 += len(values)
 
 
 class ConstraintSolver:
@@ -126,6 +189,10 @@ class ConstraintSolver:
         self._geometry_cache: Optional[tuple] = None
         self._tree_cache: Optional[tuple] = None
         self._kernel_cache: Optional[tuple] = None
+        # Keys of this solver's generic rows in constrained_kernels.GENERIC, dropped
+        # when the setup is rebuilt or the solver is collected.
+        self._generic_keys: list = []
+        weakref.finalize(self, _drop_generic, self._generic_keys)
         self.inv_mass_6 = np.hstack([np.repeat(bodies.inv_mass[:, None], 3, axis=1),
                                      1.0 / bodies.moments])
 
@@ -209,31 +276,32 @@ class ConstraintSolver:
         self._tree_cache = (cs, cs.version, tree)
         return tree
 
-    def kernel_setup(self) -> Optional[tuple]:
+    def kernel_setup(self) -> tuple:
         """
-        Return what the compiled constrained step works with, per component, or None.
+        Return what the compiled constrained step works with, per component.
 
         The constraint graph's connected components (bodies joined through
         constraints) are stepped separately, each with the sub-steps its own
         motion needs, and the bodies no constraint touches as free bodies
-        (see :meth:`.integrators.Integrator.substeps`). None when the constraint
-        set has generic rows (a user's Python function) or a component has, beyond
-        ``DENSE_ROWS`` rows, a closed loop (the sparse LU path): those scenes step
-        in Python. Otherwise ``(free, components)``: the indices of the free
-        bodies, and per component ``(bodies, rows_global, rows, use_tree, trees,
-        dense, workspace, multipliers)`` with the rows in the component's own body
-        numbering (see :mod:`.constrained_kernels`). Rebuilt only when the
-        constraint set changes.
+        (see :meth:`.integrators.Integrator.substeps`). Generic rows (a user's
+        Python function) are evaluated by Python from inside the compiled step
+        (:data:`.constrained_kernels.GENERIC`); a component with a closed loop is
+        solved densely. Returns ``(free, components)``: the indices of the free
+        bodies, and per component ``(bodies, rows_global, rows,
+        use_tree, trees, dense, workspace, multipliers)`` with the rows in the
+        component's own body numbering (see :mod:`.constrained_kernels`). Rebuilt
+        only when the constraint set changes.
         """
         cs = self.constraints
         c = self._kernel_cache
         if c is not None and c[0] is cs and c[1] == cs.version:
             return c[2]
         self._kernel_cache = (cs, cs.version, None)
-        n, m = len(self.bodies), cs.n_rows
-        if cs.n_builtin_rows != m:
-            return None
-        a, b = cs.row_a, cs.row_b
+        for key in self._generic_keys:   # the previous setup's generic rows
+            GENERIC.pop(key, None)
+        self._generic_keys.clear()
+        n, mb = len(self.bodies), cs.n_builtin_rows
+        a, b = cs.all_row_a, cs.all_row_b
         # Connected components by union-find over the rows between two bodies.
         root = np.arange(n)
 
@@ -264,7 +332,10 @@ class ConstraintSolver:
             st = tree_structure(ra if use_tree else ra[:0], rb if use_tree else rb[:0],
                                 len(bodies))
             if st is None:
-                return None   # a closed loop in a large component: the sparse LU path
+                # A closed loop: solved densely (O(m³) per factorization; a loop
+                # beyond DENSE_ROWS rows costs more than a tree of its size).
+                use_tree = False
+                st = tree_structure(ra[:0], rb[:0], len(bodies))
             # Two storages each: general, and the symmetric factor kept for the
             # current geometry (see constrained_kernels._sym_factor).
             trees = ((*st.arrays, *factor_arrays(st)), (*st.arrays, *factor_arrays(st)))
@@ -272,8 +343,16 @@ class ConstraintSolver:
             body = np.zeros((len(bodies), 8))
             body[:, 1] = self.bodies.inv_mass[bodies]
             body[:, 2:5] = self.bodies.moments[bodies]
-            rows = (cs.row_kind[rows_global], cs.row_comp[rows_global], ra, rb,
-                    np.ascontiguousarray(cs.row_par[rows_global]))
+            # Built-in rows first (compiled), then generic ones (Python, object mode).
+            builtin = rows_global[rows_global < mb]
+            generic = [res for res in cs._gen if label[res.a] == lab]
+            key = -1
+            if generic:
+                key = next(_KEYS)
+                GENERIC[key] = _GenericRows(cs, bodies, generic, len(builtin))
+                self._generic_keys.append(key)
+            rows = (cs.row_kind[builtin], cs.row_comp[builtin], ra, rb,
+                    np.ascontiguousarray(cs.row_par[builtin]), key)
             components.append((bodies, rows_global, rows, use_tree, trees,
                                (dense_storage(d), dense_storage(d)),
                                workspace(len(bodies), mc, body), np.zeros(mc)))
@@ -364,57 +443,6 @@ class ConstraintSolver:
         """Φ (m,) at ``state``."""
         return self.evaluate(state.pos_com_world, state.quat_principal_world,
                              state.vel_com_world, state.ang_vel_principal).phi
-
-    def solve(self, G: RowJacobian, H: Optional[RowJacobian], rhs: np.ndarray) -> np.ndarray:
-        """Solve ``G M⁻¹ Hᵀ x = rhs`` (``H`` None: ``H = G``)."""
-        return self._factor(G, H)(rhs)
-
-    def project_positions(self, start: Evaluation, pos: np.ndarray, quat: np.ndarray,
-                          vel: np.ndarray, omega: np.ndarray, h: float,
-                          orthogonal: bool = False) -> tuple:
-        """
-        Correct the end of a (sub)step of size ``h`` onto ``Φ = exp(−h/τ) Φ_start``.
-
-        The correction ``δ = −M⁻¹ G_startᵀ μ`` is along the constraint forces at
-        the start of the step (as in SHAKE and RATTLE, which keeps splitting
-        methods symplectic), with μ from Newton's method on
-        ``Φ(q ⊕ δ) = target``; the same impulse changes the velocities by δ/h.
-        If Newton's method stops converging (the configuration moved too far in
-        one step), it continues with the orthogonal projection ``δ = −M⁻¹ Gᵀ μ``
-        at the current configuration, and counts a ``projection_fallback``;
-        ``orthogonal`` starts with it (a plain projection: velocities unchanged).
-
-        Returns
-        -------
-        pos, quat, vel, omega : ndarray
-            New arrays.
-
-        """
-        target = np.exp(-h / self.time_constant) * start.phi
-        delta = np.zeros_like(pos, shape=(len(pos), 6))
-        direction = None if orthogonal else start.jacobian
-        previous = np.inf
-        for it in range(self.max_iterations + 1):
-            ev = self.geometry(pos, quat)
-            r = ev.phi - target
-            norm = np.max(np.abs(r), initial=0.0)
-            if norm <= self.position_tolerance or it == self.max_iterations:
-                break
-            if norm > 0.5 * previous and direction is start.jacobian:
-                # Not converging: the configuration moved too far in the step for the
-                # start-of-step direction (a whip, a large dt). Project orthogonally.
-                self.counters.projection_fallbacks += 1
-                direction = None
-            previous = norm
-            self.counters.position_iterations += 1
-            H = ev.jacobian if direction is None else direction
-            d = -self.inv_mass_6 * H.rmatvec(
-                self._factor(ev.jacobian, None if direction is None else H)(r))
-            pos = pos + d[:, :3]
-            quat = so3.quat_normalize(so3.quat_multiply(quat, so3.exp_quat(d[:, 3:])))
-            if direction is not None:
-                delta += d   # an impulse of the step; an orthogonal projection is not
-        return pos, quat, vel + delta[:, :3] / h, omega + delta[:, 3:] / h
 
     def closest_reach(self, pos: np.ndarray, quat: np.ndarray, tolerance: float,
                       max_iterations: int = 50) -> float:

@@ -153,7 +153,13 @@ def accelerations(quat: np.ndarray, vel: np.ndarray, om: np.ndarray, body: np.nd
 
 @njit(cache=True)
 def _dexpinv(u: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
-    """``w + u × w / 2 + u × (u × w) / 12`` row by row (see integrators.dexpinv_right)."""
+    """
+    Inverse right-trivialized ``dexp`` to second order, row by row.
+
+    ``du/dt = w + u × w / 2 + u × (u × w) / 12 + O(|u|⁴)`` for ``R(t) = R0
+    exp(hat(u(t)))`` with ``dR/dt = R hat(w)``: enough for order 4 (Hairer,
+    Lubich & Wanner, Geometric Numerical Integration, IV.8.2).
+    """
     for i in range(u.shape[0]):
         a0, a1, a2 = u[i, 0], u[i, 1], u[i, 2]
         b0, b1, b2 = w[i, 0], w[i, 1], w[i, 2]
