@@ -686,8 +686,13 @@ class ConstraintSet:
 
     def _generic_rows(self, res: _Resolved, x: np.ndarray, R: np.ndarray,
                       v: Optional[np.ndarray] = None, w: Optional[np.ndarray] = None,
-                      need_gamma: bool = False) -> tuple:
-        """Φ (k,), G (k, 12) in principal coordinates and γ (k,) of a generic constraint."""
+                      need_gamma: bool = False, need_jacobian: bool = True) -> tuple:
+        """
+        Φ (k,), G (k, 12) in principal coordinates and γ (k,) of a generic constraint.
+
+        ``need_jacobian`` False skips the finite-difference G (returned as None)
+        when only γ is wanted and the user gave no Jacobian function.
+        """
         spec = res.spec
         n = len(self.bodies)
         a, b = res.a, res.b
@@ -723,9 +728,9 @@ class ConstraintSet:
             G = jac_at(xa, Ra, xb, Rb)
         else:
             jac_at = None
-            G = np.zeros((len(phi), 12))
+            G = np.zeros((len(phi), 12)) if need_jacobian else None
             for blk, (i, xi, Ri) in enumerate(((a, xa, Ra), (b, xb, Rb))):
-                if i >= n:
+                if i >= n or not need_jacobian:
                     continue
                 scale = max(1.0, float(np.linalg.norm(xi)))
                 for j in range(3):

@@ -143,7 +143,8 @@ class _GenericRows:
         w[self.bodies] = np.einsum('nij,nj->ni', R[self.bodies], om)
         r0 = self.offset
         for res in self.resolved:
-            values = self.constraints._generic_rows(res, x, R, v, w, True)[2]
+            values = self.constraints._generic_rows(res, x, R, v, w, True,
+                                                    need_jacobian=False)[2]
             gamma[r0:r0 + len(values)] = values
             r0 += len(values)
 
