@@ -28,6 +28,8 @@ A scene file::
       - {name: axle, type: hinge, body_a: wheel, body_b: box, anchor_world: [0, 0, 1],
          axis_world: [0, 1, 0]}
     constraint_time_constant: 0.05  # s, decay time of a violated constraint
+    tolerance: 1.0e-6               # optional: local error per unit time (the accuracy
+                                    # knob, see rigid_body_sim.core.accuracy)
 
 Shapes for ``inertia`` (uniform density, about the centre of mass):
 ``{box: [lx, ly, lz]}``, ``{sphere: r}``, ``{cylinder: [r, length]}`` (axis z).
@@ -50,7 +52,7 @@ from .core.integrators import INTEGRATORS
 from .core.validate import finite_array, positive_scalar
 
 TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constraints',
-            'constraint_time_constant')
+            'constraint_time_constant', 'tolerance')
 CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
                    'anchor_b_body', 'axis_world', 'length')
 BODY_KEYS = ('name', 'mass', 'inertia', 'com_body', 'position_world', 'orientation_xyzw',
@@ -158,7 +160,7 @@ def _build(data: Any, source: str) -> Scene:
                                     'constraint_time_constant')
     try:
         sim = Simulation(bodies, [e for _, e in effects], integrator, dt, constraints,
-                         time_constant)
+                         time_constant, tolerance=data.get('tolerance'))
     except SpecError as exc:
         # Map 'effects[i]...' from the core back to the scene's effect key.
         if exc.field.startswith('effects['):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -36,6 +36,8 @@ class Diagnostics:
         Largest entry of ``|RᵀR - I|`` for each body's rotation matrix.
     constraint_violation : float
         Largest ``|Φ|`` over all constraint rows (0 without constraints).
+    accuracy : AccuracyReport or None
+        What the accuracy knob did (see :mod:`.accuracy`); set by the Simulation.
 
     """
 
@@ -47,6 +49,7 @@ class Diagnostics:
     angular_momentum_com_world: np.ndarray
     orthonormality_error: np.ndarray
     constraint_violation: float = 0.0
+    accuracy: Optional[Any] = None
 
     @property
     def total_energy(self) -> float:

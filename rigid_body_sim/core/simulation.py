@@ -21,12 +21,14 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass, replace
+import math
 from typing import Any, Iterator, Optional, Sequence
 
 import numpy as np
 
 from . import rotation as so3
 from . import step_kernels
+from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, ConstraintSet
 from .diagnostics import diagnose, Diagnostics
@@ -93,14 +95,23 @@ class Simulation:
     constraint_time_constant : float
         s: a violated constraint returns to Φ = 0 along ``exp(-t / this)``
         (see :mod:`.solver`).
+    tolerance : float, optional
+        The accuracy knob: each step of ``dt`` is taken in as many sub-steps as
+        an error estimate says keep the local error per unit time below this
+        (SI units; see :mod:`.accuracy`). None: every step is one integrator step.
+    tolerance_budget : int
+        Most sub-steps a step may take under the knob (a power of two).
 
     """
 
     def __init__(self, bodies: Sequence[RigidBody], effects: Sequence[Effect] = (),
                  integrator: str = 'lie_poisson2', dt: float = 1e-3,
                  constraints: Sequence[Constraint] = (),
-                 constraint_time_constant: float = 0.05) -> None:
+                 constraint_time_constant: float = 0.05, tolerance: Optional[float] = None,
+                 tolerance_budget: int = DEFAULT_BUDGET) -> None:
         self.dt = positive_scalar(dt, 'dt')
+        self._control = (None if tolerance is None
+                         else ErrorControl(tolerance, tolerance_budget))
         self._specs = list(bodies)
         self.bodies = BodySet.from_bodies(self._specs)
         effects = list(effects)
@@ -148,8 +159,11 @@ class Simulation:
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
             try:
-                new = self.integrator.step(self.state, self.dt,
-                                           self._time_base + (self._steps + 1) * self.dt)
+                t_end = self._time_base + (self._steps + 1) * self.dt
+                if self._control is None:
+                    new = self.integrator.step(self.state, self.dt, t_end)
+                else:
+                    new = self._control.step(self.integrator, self.state, self.dt, t_end)
             except np.linalg.LinAlgError:
                 # A factorization met non-finite numbers: the step diverged on the way.
                 raise DivergenceError(self.time, self._moving_fastest()) from None
@@ -183,6 +197,26 @@ class Simulation:
         if cls is not None and cls is not type(self.integrator):
             self.integrator = cls(self.dynamics)
 
+    def set_tolerance(self, tolerance: Optional[float],
+                      budget: Optional[int] = None) -> None:
+        """Turn the accuracy knob on (a tolerance), change it, or off (None), between steps."""
+        if tolerance is None:
+            self._control = None
+            return
+        budget = budget if budget is not None else (
+            self._control.budget if self._control is not None else DEFAULT_BUDGET)
+        control = ErrorControl(tolerance, budget)
+        if self._control is not None:   # keep the sub-step count and the tallies
+            for key in ('k', 'estimate', 'last_k', 'misses', 'steps', 'worst'):
+                setattr(control, key, getattr(self._control, key))
+        self._control = control
+
+    def accuracy(self) -> AccuracyReport:
+        """Return what the accuracy knob did (tolerance None when it is off)."""
+        if self._control is None:
+            return AccuracyReport(None, math.nan, 1, 1, 0, 0, 0.0)
+        return self._control.report()
+
     def run(self, duration: float) -> None:
         """Step until ``duration`` (s) more has elapsed (rounded to whole steps)."""
         d = positive_scalar(duration, 'duration')
@@ -191,6 +225,8 @@ class Simulation:
     def reset(self) -> None:
         """Back to the initial state; applied wrenches return to the scene's own."""
         self.state: State = self.bodies.initial_state(self._specs)
+        if self._control is not None:
+            self._control.reset()
         self._steps = 0          # steps of the current dt since _time_base
         self._time_base = 0.0    # s: when dt was last changed
         for effect, rows in zip(self.dynamics.effects, self._initial_wrenches):
@@ -351,6 +387,7 @@ class Simulation:
     def diagnostics(self) -> Diagnostics:
         """Energies, world-frame momenta, orthonormality and constraint violation now."""
         d = diagnose(self.bodies, self.dynamics.effects, self.state)
+        d = replace(d, accuracy=self.accuracy())
         if self.dynamics.constrained:
             with self._uncounted():
                 phi = self.dynamics.solver.violation(self.state)
