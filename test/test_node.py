@@ -592,3 +592,45 @@ def test_the_box_of_equal_inertia_has_that_inertia():
     a, b, c = sides
     moments = m / 12 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
     np.testing.assert_allclose(equal_inertia_box(m, moments), sides, rtol=1e-12)
+
+
+def test_the_tolerance_parameter_turns_the_accuracy_knob_and_diagnostics_report_it(
+        ros, tmp_path):
+    # A pendulum through the node: rkmk4 at dt = 1e-2 with tolerance 1e-7 takes several
+    # sub-steps a step and meets it; the bob ends where the core, run directly with the
+    # same tolerance, puts it (bit for bit).
+    from diagnostic_msgs.msg import DiagnosticArray
+    scene = _scene(tmp_path, FALLING_BOB.replace('lie_poisson2', 'rkmk4')
+                   .replace('dt: 0.001', 'dt: 0.01')
+                   + 'constraints:\n  - {name: pivot, type: ball, body_a: bob, '
+                     'anchor_world: [0.0, 0.0, 0.0]}\n')
+    node = ros.start({'scene': scene, 'start_paused': True, 'physics_rate': 100.0,
+                      'tolerance': 1e-7})
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    reply = _step(ros, node, 20)
+    t = time_seconds(reply.time)
+    bodies = _state_at(ros, node, states, t)
+    sim = load_scene(scene).simulation
+    sim.set_tolerance(1e-7)
+    sim.step(20)
+    np.testing.assert_array_equal(bodies['bob'][0], sim.pose('bob')[0])
+
+    def reported():
+        return any({kv.key: kv.value for kv in d.status[0].values}.get('tolerance') == '1e-07'
+                   for d in diags)
+    ros.client.wait_for(reported, 'diagnostics with the tolerance', node=node)
+    values = next({kv.key: kv.value for kv in d.status[0].values} for d in reversed(diags)
+                  if {kv.key: kv.value for kv in d.status[0].values}.get('tolerance') == '1e-07')
+    assert float(values['error_estimate']) <= 1e-7
+    assert int(values['tolerance_substeps']) >= 4
+    assert values['tolerance_misses_total'] == '0'
+    # Off again at run time: 0 is the scene's (none).
+    request = SetParameters.Request(parameters=[Parameter(
+        name='tolerance', value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
+                                               double_value=0.0))])
+    result = ros.client.call(SetParameters, f'{NODE}/set_parameters', request, node=node)
+    assert result.results[0].successful
+    ros.client.wait_for(lambda: any({kv.key: kv.value for kv in d.status[0].values}
+                                    .get('tolerance') == 'off' for d in diags),
+                        'diagnostics with the knob off', node=node)

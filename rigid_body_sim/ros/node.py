@@ -407,7 +407,8 @@ class SimNode(Node):
     def _new_window(self, now: float) -> None:
         self._overruns += self._window.overruns
         self._window = WindowStats(wall_start=now, sim_start=self.session.seconds(),
-                                   lag_resets_before=self._pacer.lag_resets)
+                                   lag_resets_before=self._pacer.lag_resets,
+                                   accuracy_misses_before=self.sim.accuracy().misses)
 
     def _publish_diagnostics(self, now: float) -> None:
         w = self._window
@@ -415,6 +416,7 @@ class SimNode(Node):
         session, sim = self.session, self.sim
         d = sim.diagnostics()
         work = sim.work()
+        accuracy = d.accuracy
         rtf = (session.seconds() - w.sim_start) / wall
         level = DiagnosticStatus.OK
         summary = 'running'
@@ -422,6 +424,10 @@ class SimNode(Node):
             level, summary = DiagnosticStatus.ERROR, f'diverged: {session.diverged}'
         elif self._paused:
             summary = 'paused'
+        elif accuracy.misses > w.accuracy_misses_before:
+            level, summary = DiagnosticStatus.WARN, \
+                f'{accuracy.misses - w.accuracy_misses_before} steps missed the tolerance ' \
+                f'{accuracy.tolerance:g} within {accuracy.budget} sub-steps'
         elif w.overruns or self._pacer.lag_resets > w.lag_resets_before:
             level, summary = DiagnosticStatus.WARN, f'{w.overruns} steps over budget, ' \
                 f'{self._pacer.lag_resets - w.lag_resets_before} backlogs dropped'
@@ -450,6 +456,11 @@ class SimNode(Node):
             'constraint_violation': f'{d.constraint_violation:.3g}',
             'substeps_total': str(work.get('substeps', 0)),
             'retries_total': str(work.get('retries', 0)),
+            'tolerance': 'off' if accuracy.tolerance is None else f'{accuracy.tolerance:.3g}',
+            'error_estimate': f'{accuracy.error_estimate:.3g}',
+            'tolerance_substeps': str(accuracy.substeps),
+            'tolerance_budget': str(accuracy.budget),
+            'tolerance_misses_total': str(accuracy.misses),
             'wrench_messages_superseded': str(session.superseded),
         }
         rejected = session.totals.rejected

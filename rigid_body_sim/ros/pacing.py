@@ -87,6 +87,7 @@ class WindowStats:
     publish_cost_sum: float = 0.0
     publishes: int = 0
     lag_resets_before: int = 0   # the pacer's lag resets when the window began
+    accuracy_misses_before: int = 0   # steps that missed the tolerance, at the start
 
     def record_step(self, cost: float, budget: float) -> None:
         """Record one step that took ``cost`` wall seconds against ``budget``."""

@@ -56,6 +56,7 @@ class Session:
         self.dt = dt
         self.scene_dt = self.sim.dt
         self.scene_integrator = self.sim.integrator_name
+        self.scene_tolerance = self.sim.accuracy().tolerance
         self.configure()
         self.outputs = Outputs(self.sim, scene.shapes, settings.world_frame)
         self.totals = Totals()
@@ -67,9 +68,10 @@ class Session:
         self.energy0 = self.sim.diagnostics().total_energy
 
     def configure(self) -> None:
-        """Apply physics_rate and integrator (between steps; time stays continuous)."""
+        """Apply physics_rate, integrator and tolerance (between steps; time stays continuous)."""
         s = self.settings
         self.sim.set_step(self.dt or 1.0 / s.physics_rate, s.integrator or self.scene_integrator)
+        self.sim.set_tolerance(s.tolerance or self.scene_tolerance)
         if hasattr(self, 'outputs'):
             self.outputs.world_frame = s.world_frame
 

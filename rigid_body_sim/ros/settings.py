@@ -93,6 +93,10 @@ PARAMETERS = (
               'Hz of simulated time: /clock (every step if >= physics_rate)'),
     Parameter('integrator', '', _integrator,
               f"{', '.join(sorted(INTEGRATORS))}; '' for the scene's"),
+    Parameter('tolerance', 0.0, _non_negative,
+              "the accuracy knob: local error per unit time each step's sub-steps keep "
+              "below (SI units, see rigid_body_sim.core.accuracy); 0: the scene's (off "
+              'unless the scene sets one)'),
     Parameter('real_time_factor', 1.0, _non_negative,
               'simulated seconds per wall second; 0: as fast as possible'),
     Parameter('start_paused', False, _boolean,
@@ -127,6 +131,7 @@ class Settings:
     publish_rate: float = 100.0
     clock_rate: float = 1000.0
     integrator: str = ''
+    tolerance: float = 0.0
     real_time_factor: float = 1.0
     start_paused: bool = False
     world_frame: str = 'world'
