@@ -199,7 +199,8 @@ def main(argv=None) -> int:
     p.add_argument('--skip-node', action='store_true',
                    help='no ROS node benchmark (bench/node.py runs it)')
     p.add_argument('--skip-mujoco', action='store_true',
-                   help='no side-by-side with MuJoCo (bench/mujoco_peer.py runs it)')
+                   help='no side-by-side with MuJoCo (bench/mujoco_peer.py and '
+                        'bench/accuracy_study.py run it)')
     args = p.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     print(f'python {platform.python_version()}, numpy {np.__version__}, '
@@ -233,6 +234,8 @@ def main(argv=None) -> int:
     if not args.skip_mujoco:
         import mujoco_peer
         mujoco_peer.main(['--quick'] if args.quick else [])
+        import accuracy_study
+        accuracy_study.main(['--quick'] if args.quick else [])
     if not args.skip_node:
         import node
         node.main(['--quick'] if args.quick else [])

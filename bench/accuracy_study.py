@@ -1,0 +1,327 @@
+"""
+What accuracy costs, ours beside MuJoCo: work-precision lines and the cheapest set-up per target.
+
+Issue 9's study. The scenes of ``bench/mujoco_peer.py``, each built the same way in
+both simulators, swept over step sizes (and, for ours, the accuracy knob at a fixed
+dt), each run timed in a Python loop that steps once and reads the state, as a
+node does (median of ``--reps`` interleaved repetitions):
+
+1. free body (moments 1, 2, 3; Ω0 = (0.01, 2, 0.01): the intermediate-axis flip;
+   10 s): the relative error of Ω(T) against DOP853 at rtol 1e-13;
+2. ball-joint pendulum (rod 1 m) released at 60°, 90° and 120° (2.5 periods): the
+   relative error of the period against ``4 sqrt(L/g) K(sin²(θ0/2))``; MuJoCo with
+   its ``connect`` equality (soft) at its default and its stiffest settings, and
+   with a ``ball`` joint (joint coordinates);
+3. planar hinge chains of 2, 10 and 50 links (0.1 m, 1 kg, released horizontal;
+   2 s, 2 s and 1 s): the worst energy error over the run, over ``m g l N²/2``.
+   MuJoCo integrates joint coordinates, we integrate bodies under constraints.
+
+For each scene and accuracy target (1e-2, 1e-4, 1e-6, 1e-8) the table gives the
+cheapest set-up of each simulator that reaches it (wall time per simulated second)
+and the ratio of the two. Heavy top and four-bar are not in MuJoCo here yet.
+
+Run: ``python bench/accuracy_study.py [--quick]`` in the environment of ``./dev.sh``
+with ``bench/requirements.txt`` installed (``./dev.sh bench`` does both). Writes
+``docs/accuracy_study.md`` and ``docs/accuracy_study.png`` (committed: the README
+shows them) with the machine, versions and date (``--quick``: to ``bench/out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+from pathlib import Path
+import platform
+import subprocess
+import sys
+
+import numpy as np
+from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation
+from rigid_body_sim.core.mechanisms import rod
+from rigid_body_sim.core.reference import free_body_reference
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import mujoco_peer as peer  # noqa: E402, I100
+
+DOCS = Path(__file__).resolve().parents[1] / 'docs'
+TARGETS = (1e-2, 1e-4, 1e-6, 1e-8)
+OURS = ('symplectic_euler', 'lie_poisson2', 'lie_poisson4', 'rkmk4')
+
+
+def _knob(build, integrator: str, dt: float, tolerance: float):
+    def make():
+        sim = build(integrator, dt)
+        sim.set_tolerance(tolerance)
+        return sim
+    return make
+
+
+# -- scenes: each returns rows {scene, engine, label, family, dt, tol, cost, err} ------------
+
+
+def free_body(dts, tolerances, reps, duration=10.0) -> list:
+    moments = np.array(peer.FREE_MOMENTS)
+
+    def build(name, dt):
+        return Simulation([RigidBody('b', 1.0, peer.FREE_MOMENTS,
+                                     angular_velocity_body=peer.FREE_OMEGA0)], [], name, dt)
+
+    def init(model, data):
+        data.qvel[3:6] = peer.FREE_OMEGA0
+
+    body = ('    <body name="b">\n      <freejoint/>\n'
+            f'      <inertial pos="0 0 0" mass="1" diaginertia="{peer._nums(moments)}"/>'
+            '\n    </body>\n')
+    w_ref, _ = free_body_reference(moments, peer.FREE_OMEGA0, [0.0, 0.0, 0.0, 1.0],
+                                   [duration], rtol=1e-13, atol=1e-13)
+    rows = []
+
+    def error(v, rec):
+        if v.engine == 'ours':
+            R = peer._rot(rec['quat'][-1:])
+            w = np.einsum('nji,nj->ni', R, rec['omega'][-1:])[0]
+        else:
+            w = rec['qvel'][-1, 3:6]
+        return float(np.linalg.norm(w - w_ref[-1]) / np.linalg.norm(w_ref[-1]))
+
+    runs = []
+    for dt in dts:
+        n = int(round(duration / dt))
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
+            lambda name=name, dt=dt: build(name, dt), 'b')) for name in OURS]
+        vs += [peer.Variant('MuJoCo', f'{mj} dt {dt:g}', peer._mujoco(
+            peer._mjcf('free_body', dt, mj, 0.0, body), init)) for mj in ('RK4', 'Euler')]
+        runs.append((dt, None, n, vs))
+    dt0 = dts[0]
+    for tol in tolerances:
+        n = int(round(duration / dt0))
+        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
+            _knob(build, name, dt0, tol), 'b')) for name in ('rkmk4', 'lie_poisson4')]
+        runs.append((dt0, tol, n, vs))
+    for dt, tol, n, vs in runs:
+        knob = f', tolerance {tol:g}' if tol else ''
+        print(f'\n== free body, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
+        per_step, records = peer.measure(vs, n, reps)
+        for v, us, rec in zip(vs, per_step, records):
+            rows.append(_row('free body', v, dt, tol, us * n / duration, error(v, rec)))
+    return rows
+
+
+def pendulum(theta_deg: float, dts, tolerances, reps) -> list:
+    geo = peer._pendulum_geometry(np.radians(theta_deg))
+    duration = 2.5 * geo['period']
+    scene = f'pendulum {theta_deg:g}°'
+
+    def build(name, dt):
+        body = rod('rod', np.zeros(3), geo['direction'], peer.PEND_LENGTH, peer.PEND_MASS)
+        return Simulation([body], [Gravity((0.0, 0.0, -peer.G))], name, dt,
+                          [Constraint('pivot', 'ball', 'rod', None,
+                                      anchor_world=[0.0, 0.0, 0.0])])
+
+    rows = []
+    runs = []
+    for dt in dts:
+        stiff = peer._mj_stiffest(dt)
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}',
+                           peer._ours(lambda name=name, dt=dt: build(name, dt), 'rod'))
+              for name in OURS]
+        vs += [peer.Variant('MuJoCo', f'RK4, connect, default dt {dt:g}',
+                            peer._mujoco(peer._pendulum_connect_xml(geo, dt, 'RK4'))),
+               peer.Variant('MuJoCo', f'RK4, connect, stiffest dt {dt:g}',
+                            peer._mujoco(peer._pendulum_connect_xml(geo, dt, 'RK4', *stiff))),
+               peer.Variant('MuJoCo', f'implicitfast, connect, default dt {dt:g}',
+                            peer._mujoco(peer._pendulum_connect_xml(geo, dt, 'implicitfast'))),
+               peer.Variant('MuJoCo', f'RK4, ball joint dt {dt:g}',
+                            peer._mujoco(peer._pendulum_ball_xml(geo, dt, 'RK4')))]
+        runs.append((dt, None, vs))
+    # The knob at 100 Hz, a common node rate. (The period comes from linearly
+    # interpolated zero crossings of states dt apart: at dt = 3e-2 that floors the
+    # measured error near 1e-6, at 1e-2 near 1e-8, for both simulators.)
+    dt0 = 1e-2
+    for tol in tolerances:
+        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
+            _knob(build, name, dt0, tol), 'rod')) for name in ('rkmk4', 'lie_poisson4')]
+        runs.append((dt0, tol, vs))
+    for dt, tol, vs in runs:
+        n = int(round(duration / dt))
+        knob = f', tolerance {tol:g}' if tol else ''
+        print(f'\n== {scene}, {n * dt:.3g} s, dt {dt:g}{knob} ==', flush=True)
+        per_step, records = peer.measure(vs, n, reps)
+        for v, us, rec in zip(vs, per_step, records):
+            err = peer._pendulum_analysis(geo, dt, v, rec)['err']
+            rows.append(_row(scene, v, dt, tol, us / dt, err))
+    return rows
+
+
+def chain(n_links: int, duration: float, dts, reps) -> list:
+    scene = f'chain {n_links}'
+    scale = peer.CHAIN_MASS * peer.G * peer.CHAIN_LENGTH * n_links ** 2 / 2.0
+    inertia = peer._chain_inertia()
+    rows = []
+    for dt in dts:
+        n = int(round(duration / dt))
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
+            lambda name=name, dt=dt: peer._chain_sim(n_links, name, dt)))
+            for name in ('lie_poisson2', 'lie_poisson4', 'rkmk4')]
+        vs += [peer.Variant('MuJoCo', f'{mj} dt {dt:g}',
+                            peer._mujoco(peer._chain_xml(n_links, dt, mj)))
+               for mj in ('RK4', 'implicitfast')]
+        print(f'\n== {scene}, {duration:g} s, dt {dt:g} ==', flush=True)
+        per_step, records = peer.measure(vs, n, reps)
+        for v, us, rec in zip(vs, per_step, records):
+            if v.engine == 'ours':
+                energy = peer._energy(peer.CHAIN_MASS, inertia, rec['pos'], rec['quat'],
+                                      rec['vel'], rec['omega'])
+            else:
+                energy = peer._mj_replay(rec['model'], rec['qpos'], rec['qvel'],
+                                         n_links)['energy']
+            rel = np.abs(energy - energy[0]) / scale
+            err = float(np.max(rel)) if np.all(np.isfinite(rel)) and np.max(rel) < 1.0 \
+                else float('inf')
+            rows.append(_row(scene, v, dt, None, us / dt, err))
+    return rows
+
+
+def _row(scene: str, v, dt: float, tol, cost: float, err: float) -> dict:
+    family = v.label.split(' dt ')[0].split(' knob ')[0]
+    if tol is not None:
+        family += ' + knob'
+    return {'scene': scene, 'engine': v.engine, 'label': v.label, 'family': family,
+            'dt': dt, 'tol': tol, 'cost': cost, 'err': err}
+
+
+# -- analysis and output --------------------------------------------------------------------
+
+
+def cheapest(rows: list, scene: str, engine: str, target: float, only: str = ''):
+    ok = [r for r in rows if r['scene'] == scene and r['engine'] == engine
+          and r['err'] <= target and only in r['family']]
+    return min(ok, key=lambda r: r['cost']) if ok else None
+
+
+def _setup(r) -> str:
+    if r is None:
+        return 'not reached at any dt tried'
+    what = f'`{r["family"]}`' if r['engine'] == 'ours' else r['family']
+    how = f'dt {r["dt"]:g}' + (f', tolerance {r["tol"]:g}' if r['tol'] else '')
+    return f'{what}, {how}: {r["cost"] * 1e3:.3g} ms/s (error {r["err"]:.1e})'
+
+
+def targets_table(rows: list, only: str = '', scenes: str = '') -> str:
+    """Cheapest set-ups per target (MuJoCo's among those whose name contains ``only``)."""
+    lines = ['| scene | target | ours: cheapest | MuJoCo: cheapest | cost ratio ours / MuJoCo |',
+             '|---|---|---|---|---|']
+    for scene in dict.fromkeys(r['scene'] for r in rows if scenes in r['scene']):
+        for target in TARGETS:
+            a = cheapest(rows, scene, 'ours', target)
+            b = cheapest(rows, scene, 'MuJoCo', target, only)
+            ratio = f'{a["cost"] / b["cost"]:.2g}' if a and b else \
+                ('ours only' if a else ('MuJoCo only' if b else 'neither'))
+            lines.append(f'| {scene} | {target:g} | {_setup(a)} | {_setup(b)} | {ratio} |')
+    return '\n'.join(lines)
+
+
+def all_rows_table(rows: list) -> str:
+    lines = ['| scene | engine | set-up | dt | tolerance | wall ms / simulated s | error |',
+             '|---|---|---|---|---|---|---|']
+    for r in rows:
+        lines.append(f'| {r["scene"]} | {r["engine"]} | {r["family"]} | {r["dt"]:g} | '
+                     f'{r["tol"] if r["tol"] else "-"} | {r["cost"] * 1e3:.3g} | '
+                     f'{r["err"]:.1e} |')
+    return '\n'.join(lines)
+
+
+def plot(rows: list, path: Path) -> None:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    scenes = list(dict.fromkeys(r['scene'] for r in rows))
+    cols = 4
+    fig, axes = plt.subplots((len(scenes) + cols - 1) // cols, cols,
+                             figsize=(4.2 * cols, 3.6 * ((len(scenes) + cols - 1) // cols)),
+                             squeeze=False)
+    for ax, scene in zip(axes.ravel(), scenes):
+        fams = dict.fromkeys((r['engine'], r['family']) for r in rows if r['scene'] == scene)
+        for engine, fam in fams:
+            pts = sorted((r['cost'], r['err']) for r in rows if r['scene'] == scene
+                         and r['engine'] == engine and r['family'] == fam
+                         and np.isfinite(r['err']) and r['err'] > 0)
+            if not pts:
+                continue
+            x, y = zip(*pts)
+            ax.loglog(np.array(x) * 1e3, y, ('o-' if engine == 'ours' else 's--'),
+                      label=f'{engine}: {fam}', markersize=3)
+        for target in TARGETS:
+            ax.axhline(target, color='0.85', linewidth=0.6, zorder=0)
+        ax.set_title(scene)
+        ax.set_xlabel('wall ms per simulated s')
+        ax.set_ylabel('error')
+        ax.legend(fontsize=5)
+    for ax in axes.ravel()[len(scenes):]:
+        ax.axis('off')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def header() -> str:
+    import mujoco
+    import numba
+    import scipy
+    try:
+        commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
+                                text=True, cwd=DOCS.parent).stdout.strip()
+    except OSError:
+        commit = '?'
+    cpu = platform.processor() or platform.machine()
+    return (f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC; {cpu}, '
+            f'{os.cpu_count()} cores, {platform.system()} {platform.release()}; python '
+            f'{platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, '
+            f'numba {numba.__version__}, mujoco {mujoco.__version__}; rigid_body_sim {commit}')
+
+
+def main(argv=None) -> None:
+    """Run the study; ``--quick`` for a short check (written to bench/out, not docs/)."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    p.add_argument('--quick', action='store_true',
+                   help='fewer step sizes, 1 repetition; writes bench/out, not docs/')
+    p.add_argument('--reps', type=int, default=3)
+    args = p.parse_args(argv)
+    if peer.mujoco is None:
+        sys.exit('mujoco is not installed: pip install -r bench/requirements.txt '
+                 '(./dev.sh bench does it)')
+    reps = 1 if args.quick else args.reps
+    rows = []
+    rows += free_body((1e-1, 3e-2, 1e-2) if args.quick else (1e-1, 3e-2, 1e-2, 3e-3, 1e-3),
+                      (1e-6, 1e-9) if args.quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11), reps,
+                      duration=2.0 if args.quick else 10.0)
+    for theta in ((90.0,) if args.quick else (60.0, 90.0, 120.0)):
+        rows += pendulum(theta, (1e-2, 1e-3) if args.quick else (3e-2, 1e-2, 3e-3, 1e-3, 3e-4),
+                         (1e-6,) if args.quick else (1e-4, 1e-6, 1e-8, 1e-10), reps)
+    for links, duration in (((2, 0.5), (10, 0.5)) if args.quick else
+                            ((2, 2.0), (10, 2.0), (50, 1.0))):
+        rows += chain(links, duration, (2e-3, 1e-3) if args.quick
+                      else (1e-2, 5e-3, 2e-3, 1e-3, 5e-4), reps)
+    out = peer.OUT if args.quick else DOCS
+    out.mkdir(exist_ok=True)
+    md = ['# What accuracy costs: ours beside MuJoCo', '', header(), '',
+          'Generated by `python bench/accuracy_study.py` (see its docstring for the '
+          'scenes, the error measures and the method). Cost is wall time per simulated '
+          'second of a loop that steps once and reads the state; error is relative '
+          '(free body: Ω(T); pendulum: period; chains: worst energy error over '
+          'm g l N²/2).', '', '## Cheapest set-up per accuracy target', '',
+          targets_table(rows), '', "## The pendulum with MuJoCo's `connect` equality only",
+          '', "The same constraint as ours (MuJoCo's cheapest above is its `ball` joint in "
+          'joint coordinates, a different model with no constraint to violate):', '',
+          targets_table(rows, only='connect', scenes='pendulum'), '',
+          '## Every run', '', all_rows_table(rows), '',
+          '![work-precision](accuracy_study.png)', '']
+    (out / 'accuracy_study.md').write_text('\n'.join(md))
+    plot(rows, out / 'accuracy_study.png')
+    print('\n' + targets_table(rows))
+    print('\n' + targets_table(rows, only='connect', scenes='pendulum'))
+    print(f'\nwrote {out / "accuracy_study.md"}, {out / "accuracy_study.png"}')
+
+
+if __name__ == '__main__':
+    main()
