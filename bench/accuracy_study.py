@@ -14,11 +14,15 @@ node does (median of ``--reps`` interleaved repetitions):
    with a ``ball`` joint (joint coordinates);
 3. planar hinge chains of 2, 10 and 50 links (0.1 m, 1 kg, released horizontal;
    2 s, 2 s and 1 s): the worst energy error over the run, over ``m g l N²/2``.
-   MuJoCo integrates joint coordinates, we integrate bodies under constraints.
+   MuJoCo integrates joint coordinates, we integrate bodies under constraints;
+4. heavy top (0.5 kg, centre of mass 0.1 m from the tip, moments 2e-3, 2e-3, 3e-3,
+   tilted 20°, spinning at 50 rad/s; 1 s): the centre of mass at T against DOP853
+   of the same model at rtol 1e-13, over 0.1 m; MuJoCo with a ``ball`` joint and
+   with a ``connect`` equality at its default and stiffest settings.
 
 For each scene and accuracy target (1e-2, 1e-4, 1e-6, 1e-8) the table gives the
 cheapest set-up of each simulator that reaches it (wall time per simulated second)
-and the ratio of the two. Heavy top and four-bar are not in MuJoCo here yet.
+and the ratio of the two. The four-bar is not in MuJoCo here yet.
 
 Run: ``python bench/accuracy_study.py [--quick]`` in the environment of ``./dev.sh``
 with ``bench/requirements.txt`` installed (``./dev.sh bench`` does both). Writes
@@ -39,7 +43,7 @@ import sys
 import numpy as np
 from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation
 from rigid_body_sim.core.mechanisms import rod
-from rigid_body_sim.core.reference import free_body_reference
+from rigid_body_sim.core.reference import dop853_trajectory, free_body_reference
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import mujoco_peer as peer  # noqa: E402, I100
@@ -151,6 +155,87 @@ def pendulum(theta_deg: float, dts, tolerances, reps) -> list:
         for v, us, rec in zip(vs, per_step, records):
             err = peer._pendulum_analysis(geo, dt, v, rec)['err']
             rows.append(_row(scene, v, dt, tol, us / dt, err))
+    return rows
+
+
+# The heavy top: a symmetric top on a ball joint at its tip, tilted 20°, spinning.
+TOP_MASS, TOP_LENGTH, TOP_MOMENTS, TOP_SPIN = 0.5, 0.1, (2e-3, 2e-3, 3e-3), 50.0
+TOP_TILT = np.radians(20.0)
+
+
+def heavy_top(dts, tolerances, reps, duration=1.0) -> list:
+    """Centre-of-mass position at T against DOP853 of the same model, over the length."""
+    scene = 'heavy top'
+    axis = np.array([np.sin(TOP_TILT), 0.0, np.cos(TOP_TILT)])
+    quat_xyzw = np.array([0.0, np.sin(TOP_TILT / 2), 0.0, np.cos(TOP_TILT / 2)])
+    quat_wxyz = np.roll(quat_xyzw, 1)
+
+    def build(name, dt):
+        body = RigidBody('top', TOP_MASS, TOP_MOMENTS, position_world=TOP_LENGTH * axis,
+                         orientation_xyzw=quat_xyzw,
+                         angular_velocity_body=(0.0, 0.0, TOP_SPIN))
+        return Simulation([body], [Gravity((0.0, 0.0, -peer.G))], name, dt,
+                          [Constraint('tip', 'ball', 'top', None,
+                                      anchor_world=[0.0, 0.0, 0.0])])
+
+    reference = dop853_trajectory(build('rkmk4', dts[0]), [duration], rtol=1e-13,
+                                  atol=1e-13)[0].pos_com_world[0]
+    inertia = peer._nums(TOP_MOMENTS)
+    ball = (f'    <body name="top" pos="0 0 0" quat="{peer._nums(quat_wxyz)}">\n'
+            '      <joint type="ball" pos="0 0 0"/>\n'
+            f'      <inertial pos="0 0 {TOP_LENGTH!r}" mass="{TOP_MASS!r}" '
+            f'diaginertia="{inertia}"/>\n    </body>\n')
+    free = (f'    <body name="top" pos="{peer._nums(TOP_LENGTH * axis)}" '
+            f'quat="{peer._nums(quat_wxyz)}">\n      <freejoint/>\n'
+            f'      <inertial pos="0 0 0" mass="{TOP_MASS!r}" diaginertia="{inertia}"/>\n'
+            '    </body>\n')
+
+    def connect(dt, stiff):
+        params = ''
+        if stiff:
+            (tc, dr), imp = peer._mj_stiffest(dt)
+            params = f' solref="{tc!r} {dr!r}" solimp="{peer._nums(imp)}"'
+        return f'    <connect body1="top" anchor="0 0 {-TOP_LENGTH!r}"{params}/>\n'
+
+    def init_ball(model, data):
+        data.qvel[:] = (0.0, 0.0, TOP_SPIN)
+
+    def init_free(model, data):
+        data.qvel[3:6] = (0.0, 0.0, TOP_SPIN)   # body axes
+
+    def error(v, rec):
+        if v.engine == 'ours':
+            com = rec['pos'][-1]
+        else:
+            com = peer._mj_replay(rec['model'], rec['qpos'][-1:], rec['qvel'][-1:],
+                                  1)['xipos'][0]
+        return float(np.linalg.norm(com - reference) / TOP_LENGTH)
+
+    runs = []
+    for dt in dts:
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
+            lambda name=name, dt=dt: build(name, dt), 'top')) for name in OURS]
+        vs += [peer.Variant('MuJoCo', f'RK4, ball joint dt {dt:g}', peer._mujoco(
+                   peer._mjcf('top', dt, 'RK4', peer.G, ball), init_ball)),
+               peer.Variant('MuJoCo', f'RK4, connect, default dt {dt:g}', peer._mujoco(
+                   peer._mjcf('top', dt, 'RK4', peer.G, free, connect(dt, False)),
+                   init_free)),
+               peer.Variant('MuJoCo', f'RK4, connect, stiffest dt {dt:g}', peer._mujoco(
+                   peer._mjcf('top', dt, 'RK4', peer.G, free, connect(dt, True)),
+                   init_free))]
+        runs.append((dt, None, vs))
+    for tol in tolerances:
+        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
+            _knob(build, name, dts[0], tol), 'top')) for name in ('rkmk4', 'lie_poisson4')]
+        runs.append((dts[0], tol, vs))
+    rows = []
+    for dt, tol, vs in runs:
+        n = int(round(duration / dt))
+        knob = f', tolerance {tol:g}' if tol else ''
+        print(f'\n== {scene}, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
+        per_step, records = peer.measure(vs, n, reps)
+        for v, us, rec in zip(vs, per_step, records):
+            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec)))
     return rows
 
 
@@ -298,6 +383,8 @@ def main(argv=None) -> None:
     for theta in ((90.0,) if args.quick else (60.0, 90.0, 120.0)):
         rows += pendulum(theta, (1e-2, 1e-3) if args.quick else (3e-2, 1e-2, 3e-3, 1e-3, 3e-4),
                          (1e-6,) if args.quick else (1e-4, 1e-6, 1e-8, 1e-10), reps)
+    rows += heavy_top((1e-2, 3e-3) if args.quick else (1e-2, 3e-3, 1e-3, 3e-4),
+                      (1e-6,) if args.quick else (1e-4, 1e-6, 1e-8), reps)
     for links, duration in (((2, 0.5), (10, 0.5)) if args.quick else
                             ((2, 2.0), (10, 2.0), (50, 1.0))):
         rows += chain(links, duration, (2e-3, 1e-3) if args.quick
@@ -309,17 +396,21 @@ def main(argv=None) -> None:
           'scenes, the error measures and the method). Cost is wall time per simulated '
           'second of a loop that steps once and reads the state; error is relative '
           '(free body: Ω(T); pendulum: period; chains: worst energy error over '
-          'm g l N²/2).', '', '## Cheapest set-up per accuracy target', '',
-          targets_table(rows), '', "## The pendulum with MuJoCo's `connect` equality only",
+          'm g l N²/2; heavy top: centre of mass at T over its distance from the tip).',
+          '', '## Cheapest set-up per accuracy target', '',
+          targets_table(rows), '', "## Pendulum and heavy top with MuJoCo's `connect` only",
           '', "The same constraint as ours (MuJoCo's cheapest above is its `ball` joint in "
           'joint coordinates, a different model with no constraint to violate):', '',
-          targets_table(rows, only='connect', scenes='pendulum'), '',
+          targets_table(rows, only='connect', scenes='pendulum'),
+          '\n'.join(targets_table(rows, only='connect', scenes='heavy top').splitlines()[2:]),
+          '',
           '## Every run', '', all_rows_table(rows), '',
           '![work-precision](accuracy_study.png)', '']
     (out / 'accuracy_study.md').write_text('\n'.join(md))
     plot(rows, out / 'accuracy_study.png')
     print('\n' + targets_table(rows))
     print('\n' + targets_table(rows, only='connect', scenes='pendulum'))
+    print(targets_table(rows, only='connect', scenes='heavy top'))
     print(f'\nwrote {out / "accuracy_study.md"}, {out / "accuracy_study.png"}')
 
 
