@@ -18,11 +18,14 @@ node does (median of ``--reps`` interleaved repetitions):
 4. heavy top (0.5 kg, centre of mass 0.1 m from the tip, moments 2e-3, 2e-3, 3e-3,
    tilted 20°, spinning at 50 rad/s; 1 s): the centre of mass at T against DOP853
    of the same model at rtol 1e-13, over 0.1 m; MuJoCo with a ``ball`` joint and
-   with a ``connect`` equality at its default and stiffest settings.
+   with a ``connect`` equality at its default and stiffest settings;
+5. four-bar linkage (``mechanisms.four_bar``, released at rest; 1 s): the crank
+   angle at T against DOP853 of the same model (rad); MuJoCo with the crank and the
+   coupler nested on hinges, the rocker on its own, the loop closed by ``connect``.
 
 For each scene and accuracy target (1e-2, 1e-4, 1e-6, 1e-8) the table gives the
 cheapest set-up of each simulator that reaches it (wall time per simulated second)
-and the ratio of the two. The four-bar is not in MuJoCo here yet.
+and the ratio of the two.
 
 Run: ``python bench/accuracy_study.py [--quick]`` in the environment of ``./dev.sh``
 with ``bench/requirements.txt`` installed (``./dev.sh bench`` does both). Writes
@@ -239,6 +242,114 @@ def heavy_top(dts, tolerances, reps, duration=1.0) -> list:
     return rows
 
 
+def _rod_frame(direction: np.ndarray) -> np.ndarray:
+    """Return the rotation (3, 3) of ``mechanisms.rod``'s body frame: x along the rod."""
+    x = direction / np.linalg.norm(direction)
+    helper = np.eye(3)[np.argmin(np.abs(x))]
+    y = np.cross(x, helper)
+    y /= np.linalg.norm(y)
+    return np.column_stack([x, y, np.cross(x, y)])
+
+
+def _wxyz(R: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+    return np.roll(Rotation.from_matrix(R).as_quat(), 1)
+
+
+def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
+    """
+    Crank angle at T of the four-bar of ``mechanisms.four_bar``, over 1 rad.
+
+    MuJoCo: the crank and the coupler nested on hinges, the rocker on its own hinge
+    to the world, the loop closed by a ``connect`` equality at C (soft; 3 rows where
+    the planar loop needs 2, like our 3 redundant rows of 20).
+    """
+    from rigid_body_sim.core.mechanisms import four_bar, ROD_RADIUS
+    scene = 'four-bar'
+    base = four_bar('rkmk4', dts[0])
+    reference = dop853_trajectory(base, [duration], rtol=1e-13, atol=1e-13)[0]
+
+    def crank_angle_of_quat(q_xyzw):
+        x_axis = peer._rot(q_xyzw[None])[0][:, 0]
+        return float(np.arctan2(x_axis[2], x_axis[0]))
+
+    ends = {}
+    for name in ('crank', 'coupler', 'rocker'):   # the initial poses (body frames)
+        pos, quat = base.pose(name)
+        ends[name] = (pos, peer._rot(quat[None])[0])
+    # The reference crank angle, from its body frame at T.
+    base.state = reference
+    ref_angle = crank_angle_of_quat(base.pose('crank')[1])
+    lengths = {'crank': 0.1, 'coupler': 0.35, 'rocker': 0.3}
+    masses = {'crank': 0.2, 'coupler': 0.5, 'rocker': 0.4}
+
+    def inertial(name):
+        m, L = masses[name], lengths[name]
+        side = m * (3 * ROD_RADIUS ** 2 + L ** 2) / 12.0
+        return (f'<inertial pos="{0.5 * L!r} 0 0" mass="{m!r}" '
+                f'diaginertia="{peer._nums([0.5 * m * ROD_RADIUS ** 2, side, side])}"/>')
+
+    def start(name):
+        pos, R = ends[name]
+        return pos - 0.5 * lengths[name] * R[:, 0], R
+
+    a, Ra = start('crank')
+    b, Rb = start('coupler')
+    d, Rd = start('rocker')
+    y = np.array([0.0, 1.0, 0.0])
+    coupler_rel = Ra.T @ (b - a)
+    body = (f'    <body name="crank" pos="{peer._nums(a)}" quat="{peer._nums(_wxyz(Ra))}">\n'
+            f'      <joint type="hinge" pos="0 0 0" axis="{peer._nums(Ra.T @ y)}"/>\n'
+            f'      {inertial("crank")}\n'
+            f'      <body name="coupler" pos="{peer._nums(coupler_rel)}" '
+            f'quat="{peer._nums(_wxyz(Ra.T @ Rb))}">\n'
+            f'        <joint type="hinge" pos="0 0 0" axis="{peer._nums(Rb.T @ y)}"/>\n'
+            f'        {inertial("coupler")}\n      </body>\n    </body>\n'
+            f'    <body name="rocker" pos="{peer._nums(d)}" quat="{peer._nums(_wxyz(Rd))}">\n'
+            f'      <joint type="hinge" pos="0 0 0" axis="{peer._nums(Rd.T @ y)}"/>\n'
+            f'      {inertial("rocker")}\n    </body>\n')
+
+    def connect(dt, stiff):
+        params = ''
+        if stiff:
+            (tc, dr), imp = peer._mj_stiffest(dt)
+            params = f' solref="{tc!r} {dr!r}" solimp="{peer._nums(imp)}"'
+        return (f'    <connect body1="coupler" body2="rocker" '
+                f'anchor="{lengths["coupler"]!r} 0 0"{params}/>\n')
+
+    def error(v, rec):
+        if v.engine == 'ours':
+            angle = crank_angle_of_quat(rec['quat'][-1])
+        else:
+            replay = peer._mj_replay(rec['model'], rec['qpos'][-1:], rec['qvel'][-1:], 1)
+            x_axis = replay['xmat'][0][:, 0]
+            angle = float(np.arctan2(x_axis[2], x_axis[0]))
+        return abs(angle - ref_angle)
+
+    runs = []
+    for dt in dts:
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
+            lambda name=name, dt=dt: four_bar(name, dt), 'crank')) for name in OURS]
+        vs += [peer.Variant('MuJoCo', f'{mj}, connect, {which} dt {dt:g}', peer._mujoco(
+            peer._mjcf('four_bar', dt, mj, peer.G, body, connect(dt, which == 'stiffest'))))
+            for mj, which in (('RK4', 'default'), ('RK4', 'stiffest'),
+                              ('implicitfast', 'default'))]
+        runs.append((dt, None, vs))
+    for tol in tolerances:
+        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
+            _knob(four_bar, name, dts[0], tol), 'crank')) for name in ('rkmk4', 'lie_poisson4')]
+        runs.append((dts[0], tol, vs))
+    rows = []
+    for dt, tol, vs in runs:
+        n = int(round(duration / dt))
+        knob = f', tolerance {tol:g}' if tol else ''
+        print(f'\n== {scene}, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
+        per_step, records = peer.measure(vs, n, reps)
+        for v, us, rec in zip(vs, per_step, records):
+            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec)))
+    return rows
+
+
 def chain(n_links: int, duration: float, dts, reps) -> list:
     scene = f'chain {n_links}'
     scale = peer.CHAIN_MASS * peer.G * peer.CHAIN_LENGTH * n_links ** 2 / 2.0
@@ -385,6 +496,8 @@ def main(argv=None) -> None:
                          (1e-6,) if args.quick else (1e-4, 1e-6, 1e-8, 1e-10), reps)
     rows += heavy_top((1e-2, 3e-3) if args.quick else (1e-2, 3e-3, 1e-3, 3e-4),
                       (1e-6,) if args.quick else (1e-4, 1e-6, 1e-8), reps)
+    rows += four_bar_scene((1e-2, 1e-3) if args.quick else (1e-2, 3e-3, 1e-3, 3e-4),
+                           (1e-6,) if args.quick else (1e-4, 1e-6, 1e-8), reps)
     for links, duration in (((2, 0.5), (10, 0.5)) if args.quick else
                             ((2, 2.0), (10, 2.0), (50, 1.0))):
         rows += chain(links, duration, (2e-3, 1e-3) if args.quick
@@ -396,13 +509,15 @@ def main(argv=None) -> None:
           'scenes, the error measures and the method). Cost is wall time per simulated '
           'second of a loop that steps once and reads the state; error is relative '
           '(free body: Ω(T); pendulum: period; chains: worst energy error over '
-          'm g l N²/2; heavy top: centre of mass at T over its distance from the tip).',
+          'm g l N²/2; heavy top: centre of mass at T over its distance from the tip; '
+          'four-bar: crank angle at T, rad).',
           '', '## Cheapest set-up per accuracy target', '',
-          targets_table(rows), '', "## Pendulum and heavy top with MuJoCo's `connect` only",
+          targets_table(rows), '', "## With MuJoCo's `connect` equality only",
           '', "The same constraint as ours (MuJoCo's cheapest above is its `ball` joint in "
           'joint coordinates, a different model with no constraint to violate):', '',
           targets_table(rows, only='connect', scenes='pendulum'),
           '\n'.join(targets_table(rows, only='connect', scenes='heavy top').splitlines()[2:]),
+          '\n'.join(targets_table(rows, only='connect', scenes='four-bar').splitlines()[2:]),
           '',
           '## Every run', '', all_rows_table(rows), '',
           '![work-precision](accuracy_study.png)', '']
@@ -411,6 +526,7 @@ def main(argv=None) -> None:
     print('\n' + targets_table(rows))
     print('\n' + targets_table(rows, only='connect', scenes='pendulum'))
     print(targets_table(rows, only='connect', scenes='heavy top'))
+    print(targets_table(rows, only='connect', scenes='four-bar'))
     print(f'\nwrote {out / "accuracy_study.md"}, {out / "accuracy_study.png"}')
 
 
