@@ -80,19 +80,22 @@ def free_body(dts, tolerances, reps, duration=10.0) -> list:
     body = ('    <body name="b">\n      <freejoint/>\n'
             f'      <inertial pos="0 0 0" mass="1" diaginertia="{peer._nums(moments)}"/>'
             '\n    </body>\n')
-    w_ref, _ = free_body_reference(moments, peer.FREE_OMEGA0, [0.0, 0.0, 0.0, 1.0],
-                                   [duration], rtol=1e-13, atol=1e-13)
-    rows = []
+    refs: dict = {}
 
-    def error(v, rec):
+    def error(v, rec, t_end):
+        # The reference at the time the run ended (n dt, not always `duration`).
+        if t_end not in refs:
+            refs[t_end] = free_body_reference(moments, peer.FREE_OMEGA0, [0.0, 0.0, 0.0, 1.0],
+                                              [t_end], rtol=1e-13, atol=1e-13)[0][-1]
+        w_ref = refs[t_end]
         if v.engine == 'ours':
             R = peer._rot(rec['quat'][-1:])
             w = np.einsum('nji,nj->ni', R, rec['omega'][-1:])[0]
         else:
             w = rec['qvel'][-1, 3:6]
-        return float(np.linalg.norm(w - w_ref[-1]) / np.linalg.norm(w_ref[-1]))
+        return float(np.linalg.norm(w - w_ref) / np.linalg.norm(w_ref))
 
-    runs = []
+    rows, runs = [], []
     for dt in dts:
         n = int(round(duration / dt))
         vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
@@ -111,7 +114,7 @@ def free_body(dts, tolerances, reps, duration=10.0) -> list:
         print(f'\n== free body, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
         per_step, records = peer.measure(vs, n, reps)
         for v, us, rec in zip(vs, per_step, records):
-            rows.append(_row('free body', v, dt, tol, us * n / duration, error(v, rec)))
+            rows.append(_row('free body', v, dt, tol, us / dt, error(v, rec, n * dt)))
     return rows
 
 
@@ -181,8 +184,13 @@ def heavy_top(dts, tolerances, reps, duration=1.0) -> list:
                           [Constraint('tip', 'ball', 'top', None,
                                       anchor_world=[0.0, 0.0, 0.0])])
 
-    reference = dop853_trajectory(build('rkmk4', dts[0]), [duration], rtol=1e-13,
-                                  atol=1e-13)[0].pos_com_world[0]
+    refs: dict = {}
+
+    def reference(t_end):
+        if t_end not in refs:
+            refs[t_end] = dop853_trajectory(build('rkmk4', dts[0]), [t_end], rtol=1e-13,
+                                            atol=1e-13)[0].pos_com_world[0]
+        return refs[t_end]
     inertia = peer._nums(TOP_MOMENTS)
     ball = (f'    <body name="top" pos="0 0 0" quat="{peer._nums(quat_wxyz)}">\n'
             '      <joint type="ball" pos="0 0 0"/>\n'
@@ -206,13 +214,13 @@ def heavy_top(dts, tolerances, reps, duration=1.0) -> list:
     def init_free(model, data):
         data.qvel[3:6] = (0.0, 0.0, TOP_SPIN)   # body axes
 
-    def error(v, rec):
+    def error(v, rec, t_end):
         if v.engine == 'ours':
             com = rec['pos'][-1]
         else:
             com = peer._mj_replay(rec['model'], rec['qpos'][-1:], rec['qvel'][-1:],
                                   1)['xipos'][0]
-        return float(np.linalg.norm(com - reference) / TOP_LENGTH)
+        return float(np.linalg.norm(com - reference(t_end)) / TOP_LENGTH)
 
     runs = []
     for dt in dts:
@@ -238,7 +246,7 @@ def heavy_top(dts, tolerances, reps, duration=1.0) -> list:
         print(f'\n== {scene}, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
         per_step, records = peer.measure(vs, n, reps)
         for v, us, rec in zip(vs, per_step, records):
-            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec)))
+            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec, n * dt)))
     return rows
 
 
@@ -267,7 +275,6 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
     from rigid_body_sim.core.mechanisms import four_bar, ROD_RADIUS
     scene = 'four-bar'
     base = four_bar('rkmk4', dts[0])
-    reference = dop853_trajectory(base, [duration], rtol=1e-13, atol=1e-13)[0]
 
     def crank_angle_of_quat(q_xyzw):
         x_axis = peer._rot(q_xyzw[None])[0][:, 0]
@@ -277,9 +284,15 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
     for name in ('crank', 'coupler', 'rocker'):   # the initial poses (body frames)
         pos, quat = base.pose(name)
         ends[name] = (pos, peer._rot(quat[None])[0])
-    # The reference crank angle, from its body frame at T.
-    base.state = reference
-    ref_angle = crank_angle_of_quat(base.pose('crank')[1])
+    refs: dict = {}
+
+    def ref_angle(t_end):
+        # The reference crank angle at the time the run ended, from its body frame.
+        if t_end not in refs:
+            start = four_bar('rkmk4', dts[0])
+            start.state = dop853_trajectory(start, [t_end], rtol=1e-13, atol=1e-13)[0]
+            refs[t_end] = crank_angle_of_quat(start.pose('crank')[1])
+        return refs[t_end]
     lengths = {'crank': 0.1, 'coupler': 0.35, 'rocker': 0.3}
     masses = {'crank': 0.2, 'coupler': 0.5, 'rocker': 0.4}
 
@@ -317,14 +330,14 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
         return (f'    <connect body1="coupler" body2="rocker" '
                 f'anchor="{lengths["coupler"]!r} 0 0"{params}/>\n')
 
-    def error(v, rec):
+    def error(v, rec, t_end):
         if v.engine == 'ours':
             angle = crank_angle_of_quat(rec['quat'][-1])
         else:
             replay = peer._mj_replay(rec['model'], rec['qpos'][-1:], rec['qvel'][-1:], 1)
             x_axis = replay['xmat'][0][:, 0]
             angle = float(np.arctan2(x_axis[2], x_axis[0]))
-        return abs(angle - ref_angle)
+        return abs(angle - ref_angle(t_end))
 
     runs = []
     for dt in dts:
@@ -346,7 +359,7 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
         print(f'\n== {scene}, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
         per_step, records = peer.measure(vs, n, reps)
         for v, us, rec in zip(vs, per_step, records):
-            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec)))
+            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec, n * dt)))
     return rows
 
 
