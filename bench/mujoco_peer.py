@@ -1,14 +1,13 @@
 """
 Side by side with MuJoCo: the same scenes in one run, cost per step next to the error.
 
-Issue 8's comparison: free bodies take a step in one compiled call (numba,
-``rigid_body_sim/core/step_kernels.py``); constrained scenes still step in Python and
-numpy around compiled pieces (constraint rows, tree solves). Each scene is built twice
-with the same masses, inertias, gravity, joint geometry and step size, and no contacts:
-as an MJCF string for MuJoCo (PyPI ``mujoco``, a benchmark-only dependency:
-``bench/requirements.txt``) and as a :class:`Simulation` of this core. Both are stepped
-in a Python loop that takes one step and reads the state, as a node does: MuJoCo
-``mj_step``, then copies of ``qpos`` and ``qvel``; ours ``sim.step()``, then
+Issue 8's comparison: every step is compiled (numba: ``core/step_kernels.py`` for free
+bodies, ``core/constrained_kernels.py`` per component of the constraint graph). Each
+scene is built twice with the same masses, inertias, gravity, joint geometry and step
+size, and no contacts: as an MJCF string for MuJoCo (PyPI ``mujoco``, a benchmark-only
+dependency: ``bench/requirements.txt``) and as a :class:`Simulation` of this core. Both
+are stepped in a Python loop that takes one step and reads the state, as a node does:
+MuJoCo ``mj_step``, then copies of ``qpos`` and ``qvel``; ours ``sim.step()``, then
 ``sim.pose()`` and ``sim.twist()``. The repetitions of all variants of a scene are
 interleaved (their order rotating), each variant reports the median wall time per step,
 and the errors come from the same runs, measured against references that neither
@@ -28,7 +27,7 @@ simulator supplies:
    ``hinge`` constraints.
 
 Run: ``python bench/mujoco_peer.py [--quick]`` in the environment of ``./dev.sh``, with
-``pip install -r bench/requirements.txt`` (about 5 minutes; ``--quick``, under one: free
+``pip install -r bench/requirements.txt`` (about 40 s; ``--quick``, about 10 s: free
 body 5 s, pendulum 1.5 s with ``lie_poisson2`` and ``lie_poisson4`` only, chain 0.2 s).
 Prints the tables and writes ``bench/out/mujoco_peer.md`` and ``bench/out/mujoco_peer.png``.
 """
