@@ -58,7 +58,7 @@ def test_pendulum_meets_the_tolerance(tolerance):
     assert error <= 0.3 * tolerance * 1.0
 
 
-@pytest.mark.parametrize('tolerance', (1e-3, 1e-5, 1e-7))
+@pytest.mark.parametrize('tolerance', TOLERANCES)
 def test_four_bar_meets_the_tolerance_within_its_error_growth(tolerance):
     error, report = global_error(lambda name: four_bar(name, 1e-2), 'rkmk4', tolerance, 1.0)
     assert report.misses == 0
