@@ -95,27 +95,19 @@ def free_body(dts, tolerances, reps, duration=10.0) -> list:
             w = rec['qvel'][-1, 3:6]
         return float(np.linalg.norm(w - w_ref) / np.linalg.norm(w_ref))
 
-    rows, runs = [], []
+    runs = []
     for dt in dts:
-        n = int(round(duration / dt))
         vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
             lambda name=name, dt=dt: build(name, dt), 'b')) for name in OURS]
         vs += [peer.Variant('MuJoCo', f'{mj} dt {dt:g}', peer._mujoco(
             peer._mjcf('free_body', dt, mj, 0.0, body), init)) for mj in ('RK4', 'Euler')]
-        runs.append((dt, None, n, vs))
+        runs.append((dt, None, vs))
     dt0 = dts[0]
     for tol in tolerances:
-        n = int(round(duration / dt0))
         vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
             _knob(build, name, dt0, tol), 'b')) for name in ('rkmk4', 'lie_poisson4')]
-        runs.append((dt0, tol, n, vs))
-    for dt, tol, n, vs in runs:
-        knob = f', tolerance {tol:g}' if tol else ''
-        print(f'\n== free body, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
-        per_step, records = peer.measure(vs, n, reps)
-        for v, us, rec in zip(vs, per_step, records):
-            rows.append(_row('free body', v, dt, tol, us / dt, error(v, rec, n * dt)))
-    return rows
+        runs.append((dt0, tol, vs))
+    return _sweep('free body', runs, duration, reps, lambda v, rec, dt, t: error(v, rec, t))
 
 
 def pendulum(theta_deg: float, dts, tolerances, reps) -> list:
@@ -129,7 +121,6 @@ def pendulum(theta_deg: float, dts, tolerances, reps) -> list:
                           [Constraint('pivot', 'ball', 'rod', None,
                                       anchor_world=[0.0, 0.0, 0.0])])
 
-    rows = []
     runs = []
     for dt in dts:
         stiff = peer._mj_stiffest(dt)
@@ -153,15 +144,8 @@ def pendulum(theta_deg: float, dts, tolerances, reps) -> list:
         vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
             _knob(build, name, dt0, tol), 'rod')) for name in ('rkmk4', 'lie_poisson4')]
         runs.append((dt0, tol, vs))
-    for dt, tol, vs in runs:
-        n = int(round(duration / dt))
-        knob = f', tolerance {tol:g}' if tol else ''
-        print(f'\n== {scene}, {n * dt:.3g} s, dt {dt:g}{knob} ==', flush=True)
-        per_step, records = peer.measure(vs, n, reps)
-        for v, us, rec in zip(vs, per_step, records):
-            err = peer._pendulum_analysis(geo, dt, v, rec)['err']
-            rows.append(_row(scene, v, dt, tol, us / dt, err))
-    return rows
+    return _sweep(scene, runs, duration, reps,
+                  lambda v, rec, dt, t: peer._pendulum_analysis(geo, dt, v, rec)['err'])
 
 
 # The heavy top: a symmetric top on a ball joint at its tip, tilted 20°, spinning.
@@ -239,15 +223,7 @@ def heavy_top(dts, tolerances, reps, duration=1.0) -> list:
         vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
             _knob(build, name, dts[0], tol), 'top')) for name in ('rkmk4', 'lie_poisson4')]
         runs.append((dts[0], tol, vs))
-    rows = []
-    for dt, tol, vs in runs:
-        n = int(round(duration / dt))
-        knob = f', tolerance {tol:g}' if tol else ''
-        print(f'\n== {scene}, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
-        per_step, records = peer.measure(vs, n, reps)
-        for v, us, rec in zip(vs, per_step, records):
-            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec, n * dt)))
-    return rows
+    return _sweep(scene, runs, duration, reps, lambda v, rec, dt, t: error(v, rec, t))
 
 
 def _rod_frame(direction: np.ndarray) -> np.ndarray:
@@ -352,15 +328,7 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
         vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
             _knob(four_bar, name, dts[0], tol), 'crank')) for name in ('rkmk4', 'lie_poisson4')]
         runs.append((dts[0], tol, vs))
-    rows = []
-    for dt, tol, vs in runs:
-        n = int(round(duration / dt))
-        knob = f', tolerance {tol:g}' if tol else ''
-        print(f'\n== {scene}, {duration:g} s, dt {dt:g}{knob} ==', flush=True)
-        per_step, records = peer.measure(vs, n, reps)
-        for v, us, rec in zip(vs, per_step, records):
-            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec, n * dt)))
-    return rows
+    return _sweep(scene, runs, duration, reps, lambda v, rec, dt, t: error(v, rec, t))
 
 
 def chain(n_links: int, duration: float, dts, reps) -> list:
@@ -389,6 +357,24 @@ def chain(n_links: int, duration: float, dts, reps) -> list:
             err = float(np.max(rel)) if np.all(np.isfinite(rel)) and np.max(rel) < 1.0 \
                 else float('inf')
             rows.append(_row(scene, v, dt, None, us / dt, err))
+    return rows
+
+
+def _sweep(scene: str, runs: list, duration: float, reps: int, error) -> list:
+    """
+    Time every ``(dt, tolerance, variants)`` of ``runs`` over ``duration`` (s).
+
+    ``error(variant, records, dt, t_end)`` measures a run ending at ``t_end``
+    (``n dt``, which may differ from ``duration`` by a fraction of a step).
+    """
+    rows = []
+    for dt, tol, vs in runs:
+        n = int(round(duration / dt))
+        knob = f', tolerance {tol:g}' if tol else ''
+        print(f'\n== {scene}, {n * dt:.4g} s, dt {dt:g}{knob} ==', flush=True)
+        per_step, records = peer.measure(vs, n, reps)
+        for v, us, rec in zip(vs, per_step, records):
+            rows.append(_row(scene, v, dt, tol, us / dt, error(v, rec, dt, n * dt)))
     return rows
 
 

@@ -34,8 +34,8 @@ import numpy as np
 from .row_kernels import rows_geometry, rows_rates
 from .step_kernels import (damping_flow, drift, GYRO, HAS_DAMPING, KICK, LIE_POISSON4,
                            normalize_quaternions, position_wrench, quat_exp_multiply, RHS,
-                           RKMK4, ROT, SYMPLECTIC_EULER)
-from .tree_solve import tree_factor, tree_solve
+                           RKMK4, rkmk4_finish, rkmk4_slopes, rkmk4_stage, SYMPLECTIC_EULER)
+from .tree_solve import _lu, _lu_solve_vec, tree_factor, tree_solve
 
 # Counter slots beyond step_kernels' five.
 DAMP_IN_KICK, GEOMETRY, FACTORIZATIONS, RANK_DEFICIENT, FALLBACKS = 5, 6, 7, 8, 9
@@ -173,27 +173,8 @@ def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense, counts):
                 F[i, j] = s / d
         if ok:
             return CHOLESKY
-    else:
-        for j in range(m):
-            p = j
-            big = abs(F[j, j])
-            for i in range(j + 1, m):
-                if abs(F[i, j]) > big:
-                    big, p = abs(F[i, j]), i
-            dpiv[j] = p
-            if p != j:
-                for k in range(m):
-                    F[j, k], F[p, k] = F[p, k], F[j, k]
-            if not big > tiny:
-                ok = False
-                break
-            for i in range(j + 1, m):
-                f = F[i, j] / F[j, j]
-                F[i, j] = f
-                for k in range(j + 1, m):
-                    F[i, k] -= f * F[j, k]
-        if ok:
-            return LU
+    elif _lu(F, dpiv, m, tiny) > tiny:   # LU with partial pivoting (tree_solve's)
+        return LU
     counts[RANK_DEFICIENT] += 1
     u, s, vt = np.linalg.svd(A)
     U[:, :] = u
@@ -225,20 +206,7 @@ def _solve_dense(mode, rhs, out, dense):
     for i in range(m):
         out[i] = rhs[i]
     if mode == LU:
-        for j in range(m):
-            p = dpiv[j]
-            if p != j:
-                out[j], out[p] = out[p], out[j]
-        for i in range(m):
-            s = out[i]
-            for k in range(i):
-                s -= F[i, k] * out[k]
-            out[i] = s
-        for i in range(m - 1, -1, -1):
-            s = out[i]
-            for k in range(i + 1, m):
-                s -= F[i, k] * out[k]
-            out[i] = s / F[i, i]
+        _lu_solve_vec(F, dpiv, m, out)
         return
     # Cholesky: L y = rhs, Lᵀ x = y.
     for i in range(m):
@@ -747,25 +715,9 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
     u = np.empty((n, 3))
     q = np.empty((n, 4))
     a6, g6, minv6 = ws[4], ws[3], ws[7]
-    a_stage = (0.0, 0.5, 0.5, 1.0)
     for s in range(4):
-        a = h * a_stage[s]
-        for i in range(n):
-            for c in range(3):
-                if s == 0:
-                    p[i, c], v[i, c], w[i, c], u[i, c] = pos[i, c], vel[i, c], om[i, c], 0.0
-                else:
-                    p[i, c] = pos[i, c] + a * kp[s - 1, i, c]
-                    v[i, c] = vel[i, c] + a * kv[s - 1, i, c]
-                    w[i, c] = om[i, c] + a * kw[s - 1, i, c]
-                    u[i, c] = a * kr[s - 1, i, c]
-            if s == 0:
-                for c in range(4):
-                    q[i, c] = quat[i, c]
-            else:
-                quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], q[i])
+        rkmk4_stage(s, h, pos, quat, vel, om, kp, kv, kw, kr, p, q, v, w, u, counts)
         if s:
-            counts[ROT] += n
             c_valid = False
         counts[RHS] += 1
         _free_accelerations(q, v, w, body, gforce, wrench, flags, ws, counts)
@@ -776,27 +728,8 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
             for c in range(3):
                 kv[s, i, c] = a6[i, c] - minv6[i, c] * g6[i, c]
                 kw[s, i, c] = a6[i, 3 + c] - minv6[i, 3 + c] * g6[i, 3 + c]
-                kp[s, i, c] = v[i, c]
-        if s:
-            for i in range(n):
-                a0, a1, a2 = u[i, 0], u[i, 1], u[i, 2]
-                b0, b1, b2 = w[i, 0], w[i, 1], w[i, 2]
-                c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-                d0, d1, d2 = a1 * c2 - a2 * c1, a2 * c0 - a0 * c2, a0 * c1 - a1 * c0
-                kr[s, i, 0] = b0 + 0.5 * c0 + d0 / 12.0
-                kr[s, i, 1] = b1 + 0.5 * c1 + d1 / 12.0
-                kr[s, i, 2] = b2 + 0.5 * c2 + d2 / 12.0
-        else:
-            kr[s] = w
-    b0, b1 = h / 6.0, h / 3.0
-    for i in range(n):
-        for c in range(3):
-            pos[i, c] += b0 * (kp[0, i, c] + kp[3, i, c]) + b1 * (kp[1, i, c] + kp[2, i, c])
-            vel[i, c] += b0 * (kv[0, i, c] + kv[3, i, c]) + b1 * (kv[1, i, c] + kv[2, i, c])
-            om[i, c] += b0 * (kw[0, i, c] + kw[3, i, c]) + b1 * (kw[1, i, c] + kw[2, i, c])
-            u[i, c] = b0 * (kr[0, i, c] + kr[3, i, c]) + b1 * (kr[1, i, c] + kr[2, i, c])
-        quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], quat[i])
-    counts[ROT] += n
+        rkmk4_slopes(s, v, w, u, kp, kr)
+    rkmk4_finish(h, pos, quat, vel, om, kp, kv, kw, kr, u, counts)
     # Velocities onto Φ̇ = −ωΦ at the end configuration: an internal impulse.
     _geometry(pos, quat, rows, CURRENT, ws, counts)
     mom = np.empty((n, 3))

@@ -98,6 +98,19 @@ from .dynamics import Dynamics
 from .errors import SpecError
 
 
+#: The kernels' count slots and the counters they add to (constrained step).
+_WORK_SLOTS = ((kern.RHS, 'rhs_evaluations'), (kern.KICK, 'kick_evaluations'),
+               (kern.GYRO, 'gyroscopic_body_evaluations'), (kern.ROT, 'rotation_updates'),
+               (ckern.SUBSTEPS, 'substeps'), (ckern.RETRIES, 'retries'))
+_SOLVER_SLOTS = ((ckern.GEOMETRY, 'geometry_evaluations'),
+                 (ckern.FACTORIZATIONS, 'factorizations'),
+                 (ckern.RANK_DEFICIENT, 'rank_deficient_solves'),
+                 (ckern.FALLBACKS, 'projection_fallbacks'),
+                 (ckern.ACC_SOLVES, 'acceleration_solves'),
+                 (ckern.POS_ITERATIONS, 'position_iterations'),
+                 (ckern.VEL_PROJECTIONS, 'velocity_projections'))
+
+
 class Invariant(enum.Enum):
     """Quantities an integrator preserves (to rounding unless stated)."""
 
@@ -247,22 +260,10 @@ class Integrator:
         # Each component's workspace now holds the geometry of its new configuration.
         self._geometry_at = (setup, pos, quat)
         n = counts.tolist()
-        c = dyn.counters
-        c.rhs_evaluations += n[kern.RHS]
-        c.kick_evaluations += n[kern.KICK]
-        c.gyroscopic_body_evaluations += n[kern.GYRO]
-        c.rotation_updates += n[kern.ROT]
-        c.substeps += n[ckern.SUBSTEPS]
-        c.retries += n[ckern.RETRIES]
-        c.steps += 1
-        sc = solver.counters
-        sc.geometry_evaluations += n[ckern.GEOMETRY]
-        sc.factorizations += n[ckern.FACTORIZATIONS]
-        sc.rank_deficient_solves += n[ckern.RANK_DEFICIENT]
-        sc.projection_fallbacks += n[ckern.FALLBACKS]
-        sc.acceleration_solves += n[ckern.ACC_SOLVES]
-        sc.position_iterations += n[ckern.POS_ITERATIONS]
-        sc.velocity_projections += n[ckern.VEL_PROJECTIONS]
+        for counters, slots in ((dyn.counters, _WORK_SLOTS), (solver.counters, _SOLVER_SLOTS)):
+            for slot, name in slots:
+                setattr(counters, name, getattr(counters, name) + n[slot])
+        dyn.counters.steps += 1
         return State(t_end, pos, quat, vel, om)
 
 # ----------------------------------------------------------------------------------------

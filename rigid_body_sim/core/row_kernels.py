@@ -49,6 +49,8 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
+from .step_kernels import quat_matrix
+
 KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE = 0, 1, 2, 3
 PAR_RA, PAR_RB, PAR_S, PAR_E, PAR_SCALAR = 0, 3, 6, 9, 12
 PAR_WIDTH = 13
@@ -107,19 +109,7 @@ def frames(pos: np.ndarray, quat: np.ndarray, R: np.ndarray, x: np.ndarray) -> N
     """
     n = pos.shape[0]
     for i in range(n):
-        qx, qy, qz, qw = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
-        xx, yy, zz = qx * qx, qy * qy, qz * qz
-        xy, xz, yz = qx * qy, qx * qz, qy * qz
-        wx, wy, wz = qw * qx, qw * qy, qw * qz
-        R[i, 0, 0] = 1.0 - 2.0 * (yy + zz)
-        R[i, 0, 1] = 2.0 * (xy - wz)
-        R[i, 0, 2] = 2.0 * (xz + wy)
-        R[i, 1, 0] = 2.0 * (xy + wz)
-        R[i, 1, 1] = 1.0 - 2.0 * (xx + zz)
-        R[i, 1, 2] = 2.0 * (yz - wx)
-        R[i, 2, 0] = 2.0 * (xz - wy)
-        R[i, 2, 1] = 2.0 * (yz + wx)
-        R[i, 2, 2] = 1.0 - 2.0 * (xx + yy)
+        quat_matrix(quat[i], R[i])
         for j in range(3):
             x[i, j] = pos[i, j]
     for j in range(3):

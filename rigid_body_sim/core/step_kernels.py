@@ -152,7 +152,7 @@ def accelerations(quat: np.ndarray, vel: np.ndarray, om: np.ndarray, body: np.nd
 
 
 @njit(cache=True)
-def _dexpinv(u: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
+def dexpinv(u: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
     """
     Inverse right-trivialized ``dexp`` to second order, row by row.
 
@@ -171,44 +171,54 @@ def _dexpinv(u: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def rkmk4_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, h: float,
-               body: np.ndarray, gforce: np.ndarray, wrench: np.ndarray, flags: int,
-               counts: np.ndarray) -> None:
-    """One classical RK4 Munthe-Kaas step of every body, in place."""
+def rkmk4_stage(s: int, h: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
+                om: np.ndarray, kp: np.ndarray, kv: np.ndarray, kw: np.ndarray,
+                kr: np.ndarray, p: np.ndarray, q: np.ndarray, v: np.ndarray, w: np.ndarray,
+                u: np.ndarray, counts: np.ndarray) -> None:
+    """
+    Set ``p, q, v, w`` to the state of RKMK4 stage ``s`` (0..3), ``u`` to its rotation.
+
+    ``kp, kv, kw, kr`` (4, n, 3) hold the earlier stages' slopes of position,
+    velocity, Ω and the rotation vector (classical tableau: a = 1/2, 1/2, 1).
+    """
+    a = h * (0.0, 0.5, 0.5, 1.0)[s]
     n = pos.shape[0]
-    kp = np.empty((4, n, 3))
-    kv = np.empty((4, n, 3))
-    kw = np.empty((4, n, 3))
-    kr = np.empty((4, n, 3))
-    v = np.empty((n, 3))
-    w = np.empty((n, 3))
-    u = np.empty((n, 3))
-    q = np.empty((n, 4))
-    a_stage = (0.0, 0.5, 0.5, 1.0)
-    for s in range(4):
-        a = h * a_stage[s]
-        for i in range(n):
-            for c in range(3):
-                if s == 0:
-                    v[i, c], w[i, c], u[i, c] = vel[i, c], om[i, c], 0.0
-                else:
-                    v[i, c] = vel[i, c] + a * kv[s - 1, i, c]
-                    w[i, c] = om[i, c] + a * kw[s - 1, i, c]
-                    u[i, c] = a * kr[s - 1, i, c]
+    for i in range(n):
+        for c in range(3):
             if s == 0:
-                for c in range(4):
-                    q[i, c] = quat[i, c]
+                p[i, c], v[i, c], w[i, c], u[i, c] = pos[i, c], vel[i, c], om[i, c], 0.0
             else:
-                quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], q[i])
-        if s:
-            counts[ROT] += n
-        accelerations(q, v, w, body, gforce, wrench, flags, kv[s], kw[s], counts)
-        kp[s] = v
-        if s:
-            _dexpinv(u, w, kr[s])
+                p[i, c] = pos[i, c] + a * kp[s - 1, i, c]
+                v[i, c] = vel[i, c] + a * kv[s - 1, i, c]
+                w[i, c] = om[i, c] + a * kw[s - 1, i, c]
+                u[i, c] = a * kr[s - 1, i, c]
+        if s == 0:
+            for c in range(4):
+                q[i, c] = quat[i, c]
         else:
-            kr[s] = w
+            quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], q[i])
+    if s:
+        counts[ROT] += n
+
+
+@njit(cache=True)
+def rkmk4_slopes(s: int, v: np.ndarray, w: np.ndarray, u: np.ndarray, kp: np.ndarray,
+                 kr: np.ndarray) -> None:
+    """Stage ``s``'s position slope (its velocity) and rotation-vector slope."""
+    kp[s] = v
+    if s:
+        dexpinv(u, w, kr[s])
+    else:
+        kr[s] = w
+
+
+@njit(cache=True)
+def rkmk4_finish(h: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
+                 om: np.ndarray, kp: np.ndarray, kv: np.ndarray, kw: np.ndarray,
+                 kr: np.ndarray, u: np.ndarray, counts: np.ndarray) -> None:
+    """Combine the four stages (weights 1/6, 1/3, 1/3, 1/6) into the new state, in place."""
     b0, b1 = h / 6.0, h / 3.0
+    n = pos.shape[0]
     for i in range(n):
         for c in range(3):
             pos[i, c] += b0 * (kp[0, i, c] + kp[3, i, c]) + b1 * (kp[1, i, c] + kp[2, i, c])
@@ -217,6 +227,23 @@ def rkmk4_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarra
             u[i, c] = b0 * (kr[0, i, c] + kr[3, i, c]) + b1 * (kr[1, i, c] + kr[2, i, c])
         quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], quat[i])
     counts[ROT] += n
+
+
+@njit(cache=True)
+def rkmk4_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, h: float,
+               body: np.ndarray, gforce: np.ndarray, wrench: np.ndarray, flags: int,
+               counts: np.ndarray) -> None:
+    """One classical RK4 Munthe-Kaas step of every body, in place."""
+    n = pos.shape[0]
+    kp, kv = np.empty((4, n, 3)), np.empty((4, n, 3))
+    kw, kr = np.empty((4, n, 3)), np.empty((4, n, 3))
+    p, v, w, u = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    q = np.empty((n, 4))
+    for s in range(4):
+        rkmk4_stage(s, h, pos, quat, vel, om, kp, kv, kw, kr, p, q, v, w, u, counts)
+        accelerations(q, v, w, body, gforce, wrench, flags, kv[s], kw[s], counts)
+        rkmk4_slopes(s, v, w, u, kp, kr)
+    rkmk4_finish(h, pos, quat, vel, om, kp, kv, kw, kr, u, counts)
 
 
 @njit(cache=True)
