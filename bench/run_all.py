@@ -8,7 +8,8 @@ Benchmarks: what accuracy costs in time (not tests; timings are for reading, not
    effects a scene lists cost: gravity on/off, isotropic vs anisotropic bodies.
    Speeds are compared as ratios measured side by side in one run.
 
-Then ``bench/constraints.py`` (chains, trees, joints; ``--skip-constraints`` to skip) and
+Then ``bench/constraints.py`` (chains, trees, joints) and ``bench/knob_estimators.py`` (the
+accuracy knob's estimators; ``--skip-constraints`` skips both), and
 ``bench/node.py`` (the ROS node through DDS: rates, costs, latency; ``--skip-node`` to skip).
 
 Writes ``bench/out/*.md`` (the tables) and, when matplotlib is installed,
@@ -231,6 +232,8 @@ def main(argv=None) -> int:
     if not args.skip_constraints:
         import constraints
         constraints.main(['--quick'] if args.quick else [])
+        import knob_estimators
+        knob_estimators.main(['--quick'] if args.quick else [])
     if not args.skip_mujoco:
         import mujoco_peer
         mujoco_peer.main(['--quick'] if args.quick else [])

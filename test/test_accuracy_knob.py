@@ -17,6 +17,7 @@ import pytest
 from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation
 from rigid_body_sim.core.accuracy import ErrorControl, state_distance
 from rigid_body_sim.core.errors import SpecError
+from rigid_body_sim.core.integrators import RKMK4
 from rigid_body_sim.core.mechanisms import four_bar
 from rigid_body_sim.core.reference import dop853_trajectory
 from rigid_body_sim.scene import load_scene, SceneError
@@ -35,25 +36,28 @@ def pendulum(integrator, dt=1e-2):
                       [Constraint('pivot', 'ball', 'bob', None, anchor_world=(0.0, 0.0, 0.0))])
 
 
-def global_error(build, integrator, tolerance, duration):
+def global_error(build, integrator, tolerance, duration, estimator=None):
     reference = dop853_trajectory(build(integrator), [duration], rtol=1e-13, atol=1e-13)[0]
     sim = build(integrator)
-    sim.set_tolerance(tolerance)
+    sim.set_tolerance(tolerance, estimator=estimator)
     sim.run(duration)
     return state_distance(sim.state, reference), sim.accuracy()
 
 
-@pytest.mark.parametrize('integrator', ['rkmk4', 'lie_poisson2', 'lie_poisson4'])
+@pytest.mark.parametrize('integrator, estimator', [
+    ('rkmk4', None), ('rkmk4', 'embedded'), ('rkmk4', 'doubling'),
+    ('lie_poisson2', None), ('lie_poisson4', None)])
 @pytest.mark.parametrize('tolerance', TOLERANCES)
-def test_free_body_meets_the_tolerance(integrator, tolerance):
-    error, report = global_error(free_body, integrator, tolerance, 2.0)
+def test_free_body_meets_the_tolerance(integrator, estimator, tolerance):
+    error, report = global_error(free_body, integrator, tolerance, 2.0, estimator)
     assert report.misses == 0
     assert error <= tolerance * 2.0
 
 
+@pytest.mark.parametrize('estimator', [None, 'embedded', 'doubling'])
 @pytest.mark.parametrize('tolerance', TOLERANCES)
-def test_pendulum_meets_the_tolerance(tolerance):
-    error, report = global_error(pendulum, 'rkmk4', tolerance, 1.0)
+def test_pendulum_meets_the_tolerance(estimator, tolerance):
+    error, report = global_error(pendulum, 'rkmk4', tolerance, 1.0, estimator)
     assert report.misses == 0
     assert error <= 0.3 * tolerance * 1.0
 
@@ -72,17 +76,80 @@ def test_four_bar_meets_the_tolerance_within_its_error_growth(tolerance):
 @pytest.mark.parametrize('integrator', ['rkmk4', 'lie_poisson2', 'lie_poisson4',
                                         'symplectic_euler'])
 @pytest.mark.parametrize('k', [1, 4])
-def test_the_estimate_is_within_a_factor_of_two_of_the_true_local_error(build, integrator, k):
+def test_the_doubling_estimate_is_within_a_factor_of_two_of_the_true_local_error(
+        build, integrator, k):
     # Measured ratios estimate / true: 0.86 to 1.56.
     sim = build(integrator)
     sim.step(3)
     dt = sim.dt
     exact = dop853_trajectory(sim, [sim.time + dt], rtol=1e-13, atol=1e-14)[0]
-    control = ErrorControl(1e-30, budget=2 * k)
+    control = ErrorControl(1e-30, budget=2 * k, estimator='doubling')
     control.k = k
     fine = control.step(sim.integrator, sim.state, dt, sim.time + dt)
     true = state_distance(fine, exact) / dt
     assert 0.5 <= control.estimate / true <= 2.0
+
+
+def test_the_embedded_pair_is_third_order_and_differs_from_rk4_by_k4_minus_k5():
+    # Butcher's conditions for the tableau extended by the first-same-as-last stage.
+    rk = RKMK4
+    A = np.zeros((5, 5))
+    A[:4, :4] = rk.A
+    A[4, :4] = rk.B
+    c = np.append(rk.C, 1.0)
+    b = rk.B_HAT
+    assert np.allclose(A.sum(axis=1), c)
+    assert np.isclose(b.sum(), 1.0)
+    assert np.isclose(b @ c, 1 / 2)
+    assert np.isclose(b @ c ** 2, 1 / 3)
+    assert np.isclose(b @ A @ c, 1 / 6)
+    # Third order, not fourth: two of the four fourth-order conditions fail.
+    assert np.isclose(b @ c ** 3, 1 / 4) and np.isclose(b @ (c * (A @ c)), 1 / 8)
+    assert not np.isclose(b @ A @ c ** 2, 1 / 12)
+    assert not np.isclose(b @ A @ A @ c, 1 / 24)
+    # The kernels' estimate h/6 (k4 - k5) is the difference of the two solutions.
+    assert np.allclose(np.append(rk.B, 0.0) - b, [0, 0, 0, 1 / 6, -1 / 6])
+
+
+# Steps long enough that the local errors are far above rounding.
+@pytest.mark.parametrize('build', [lambda dt: free_body('rkmk4', 4 * dt),
+                                   lambda dt: pendulum('rkmk4', dt),
+                                   lambda dt: four_bar('rkmk4', dt)])
+def test_the_embedded_estimate_bounds_the_kept_error_and_goes_as_h_cubed(build):
+    # Measured: estimate / true local error of the kept (fourth-order) result 6.6
+    # to 27, about twice as large at h/2 (the margin goes as 1/h); the estimate's
+    # ratio between h and h/2 8.3 to 9.0 (third order: 2^3 = 8).
+    estimates = []
+    for dt in (2e-2, 1e-2):
+        sim, twin = build(dt), build(dt)
+        sim.step(round(0.06 / dt))
+        twin.step(round(0.06 / dt))
+        exact = dop853_trajectory(sim, [sim.time + sim.dt], rtol=1e-13, atol=1e-14)[0]
+        error = np.zeros(1)
+        kept = sim.integrator.step(sim.state, sim.dt, sim.time + sim.dt, error)
+        true = state_distance(kept, exact) / sim.dt
+        assert 2.0 * true <= error[0]
+        estimates.append(error[0])
+        # The estimate does not change the step.
+        plain = twin.integrator.step(twin.state, twin.dt, twin.time + twin.dt)
+        for name in ('pos_com_world', 'quat_principal_world', 'vel_com_world',
+                     'ang_vel_principal'):
+            assert np.array_equal(getattr(kept, name), getattr(plain, name))
+    assert 6.0 <= estimates[0] / estimates[1] <= 10.0
+
+
+def test_steps_of_one_sub_step_are_checked_by_the_embedded_pair():
+    # 5 right-hand sides a step where doubling's 1 + 2 sub-steps take 12.
+    sim = free_body('rkmk4')
+    sim.set_tolerance(1e-5)
+    sim.step(50)
+    assert sim.accuracy().substeps == 1 and sim.accuracy().misses == 0
+    assert sim.work()['rhs_evaluations'] == 5 * 50
+    sim.set_tolerance(1e-5, estimator='doubling')
+    sim.step(50)
+    assert sim.work()['rhs_evaluations'] == 5 * 50 + 12 * 50
+    with pytest.raises(SpecError, match='estimator'):
+        sim.set_tolerance(1e-5, estimator='richardson')
 
 
 def test_a_tolerance_out_of_reach_is_reported_never_silently_missed():

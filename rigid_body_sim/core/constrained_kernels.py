@@ -34,7 +34,8 @@ import numpy as np
 from .row_kernels import rows_geometry, rows_rates
 from .step_kernels import (damping_flow, drift, GYRO, HAS_DAMPING, KICK, LIE_POISSON4,
                            normalize_quaternions, position_wrench, quat_exp_multiply, RHS,
-                           RKMK4, rkmk4_finish, rkmk4_slopes, rkmk4_stage, SYMPLECTIC_EULER)
+                           RKMK4, rkmk4_embedded_error, rkmk4_finish, rkmk4_slopes,
+                           rkmk4_stage, SYMPLECTIC_EULER)
 from .tree_solve import _lu, _lu_solve_vec, tree_factor, tree_solve
 
 # Counter slots beyond step_kernels' five.
@@ -702,13 +703,21 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
 
 @njit(cache=True)
 def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, use_tree,
-           tree, dense, lam, c_valid, counts):
-    """One RKMK4 (sub)step with constraint forces at every stage, then Φ̇ = −ωΦ."""
+           tree, dense, lam, c_valid, counts, err):
+    """
+    One RKMK4 (sub)step with constraint forces at every stage, then Φ̇ = −ωΦ.
+
+    With ``err`` of length 1, the slopes at the end (constraint forces included,
+    before the velocity projection) give the embedded estimate
+    (:func:`.step_kernels.rkmk4_embedded_error`), raising ``err[0]``.
+    """
     n = pos.shape[0]
-    kp = np.empty((4, n, 3))
-    kv = np.empty((4, n, 3))
-    kw = np.empty((4, n, 3))
-    kr = np.empty((4, n, 3))
+    estimate = err.shape[0] > 0
+    slots = 5 if estimate else 4
+    kp = np.empty((slots, n, 3))
+    kv = np.empty((slots, n, 3))
+    kw = np.empty((slots, n, 3))
+    kr = np.empty((slots, n, 3))
     p = np.empty((n, 3))
     v = np.empty((n, 3))
     w = np.empty((n, 3))
@@ -732,6 +741,18 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
     rkmk4_finish(h, pos, quat, vel, om, kp, kv, kw, kr, u, counts)
     # Velocities onto Φ̇ = −ωΦ at the end configuration: an internal impulse.
     _geometry(pos, quat, rows, CURRENT, ws, counts)
+    if estimate:
+        # The fifth stage (its factorization is the projection's): λ to scratch, so
+        # the reported multipliers are those of the step without the estimate.
+        counts[RHS] += 1
+        _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts)
+        _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense,
+                     np.empty_like(lam), counts)
+        for i in range(n):
+            for c in range(3):
+                kv[4, i, c] = a6[i, c] - minv6[i, c] * g6[i, c]
+                kw[4, i, c] = a6[i, 3 + c] - minv6[i, 3 + c] * g6[i, 3 + c]
+        err[0] = max(err[0], rkmk4_embedded_error(vel, om, u, kp, kv, kw, kr))
     mom = np.empty((n, 3))
     for i in range(n):
         for c in range(3):
@@ -747,7 +768,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
 @njit(cache=True)
 def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, rows,
                      watch, par, use_tree, tree, dense, ws, pos, quat, vel, om, lam, c_valid,
-                     counts):
+                     counts, err):
     """
     One step of ``method`` with constraints; the new state goes to ``pos, quat, vel, om``.
 
@@ -786,6 +807,9 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         The workspace's current geometry is that of ``pos0, quat0``.
     counts : ndarray of int64, shape (N_COUNTS,)
         Work counts, incremented.
+    err : ndarray, shape (1,) or (0,)
+        ``RKMK4`` with length 1: ``err[0]`` is raised to the largest embedded error
+        estimate per unit time of the (sub)steps kept; ignored by the splittings.
 
     """
     n = pos0.shape[0]
@@ -812,7 +836,7 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         for _ in range(k):
             if method == RKMK4:
                 _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par,
-                       use_tree, tree, dense, lam, c_valid, counts)
+                       use_tree, tree, dense, lam, c_valid, counts, err)
             else:
                 ok, c_valid = _splitting(method, pos, quat, vel, om, h, body, gforce, wrench,
                                          flags, rows, ws, par, last_resort, use_tree, tree,

@@ -111,6 +111,10 @@ _SOLVER_SLOTS = ((ckern.GEOMETRY, 'geometry_evaluations'),
                  (ckern.VEL_PROJECTIONS, 'velocity_projections'))
 
 
+#: ``error`` argument of the kernels when no estimate is asked for.
+_NO_ESTIMATE = np.zeros(0)
+
+
 class Invariant(enum.Enum):
     """Quantities an integrator preserves (to rounding unless stated)."""
 
@@ -136,6 +140,9 @@ class Integrator:
     conserves: ClassVar[frozenset] = frozenset()
     #: The method's code in :mod:`.step_kernels`.
     KERNEL: ClassVar[int] = -1
+    #: Order of the embedded solution whose difference estimates the error (None:
+    #: no embedded pair; the accuracy knob then uses step doubling).
+    EMBEDDED_ORDER: ClassVar[Optional[int]] = None
 
     #: Largest rotation (rad) of a constrained body in one (sub)step; a faster one
     #: makes the step split into equal sub-steps (None: never).
@@ -153,19 +160,25 @@ class Integrator:
         self._geometry_at: Optional[tuple] = None
         self._parameters: Optional[tuple] = None
 
-    def step(self, state: State, dt: float, t_end: Optional[float] = None) -> State:
+    def step(self, state: State, dt: float, t_end: Optional[float] = None,
+             error: Optional[np.ndarray] = None) -> State:
         """
         Advance ``state`` by ``dt`` (s); returns a new State, ``state`` is not modified.
 
         ``t_end`` is the time of the new state when the caller keeps time as
-        ``steps * dt`` (no rounding drift); default ``state.time + dt``.
+        ``steps * dt`` (no rounding drift); default ``state.time + dt``. For a
+        method with an embedded pair (``EMBEDDED_ORDER``), ``error``, an array of
+        one float, is raised to the step's embedded error estimate per unit time
+        (the accuracy knob's); the step itself is the same with or without it.
         """
         t_end = state.time + dt if t_end is None else t_end
+        err = _NO_ESTIMATE if error is None else error
         if not self.dynamics.constrained:
-            return self._free_step(state, dt, t_end)
-        return self._constrained_step(state, dt, t_end, self.dynamics.solver.kernel_setup())
+            return self._free_step(state, dt, t_end, err)
+        return self._constrained_step(state, dt, t_end, self.dynamics.solver.kernel_setup(),
+                                      err)
 
-    def _free_step(self, state: State, dt: float, t_end: float) -> State:
+    def _free_step(self, state: State, dt: float, t_end: float, err: np.ndarray) -> State:
         """Take a step of bodies no constraint couples: one call of the compiled kernel."""
         dyn = self.dynamics
         body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
@@ -176,7 +189,7 @@ class Integrator:
                  and at[2] is state.quat_principal_world)
         counts = np.zeros(5, dtype=np.int64)
         valid = kern.free_step(self.KERNEL, pos, quat, vel, om, dt, body, gforce, wrench, flags,
-                               self._kick_buffer, valid, counts)
+                               self._kick_buffer, valid, counts, err)
         self._kick_at = (dyn.version, pos, quat) if valid else None
         rhs, kicks, gyro, rot, flows = counts.tolist()
         c = dyn.counters
@@ -189,7 +202,8 @@ class Integrator:
             dyn.count_effect_work(rhs, kicks, flows)
         return State(t_end, pos, quat, vel, om)
 
-    def _constrained_step(self, state: State, dt: float, t_end: float, setup: tuple) -> State:
+    def _constrained_step(self, state: State, dt: float, t_end: float, setup: tuple,
+                          err: np.ndarray) -> State:
         """
         Take a constrained step in compiled calls: one per component, one for free bodies.
 
@@ -220,7 +234,7 @@ class Integrator:
             p, q, v, o = pos[free], quat[free], vel[free], om[free]
             part = np.zeros(5, dtype=np.int64)
             kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
-                           np.zeros((len(free), 6)), False, part)
+                           np.zeros((len(free), 6)), False, part, err)
             pos[free], quat[free], vel[free], om[free] = p, q, v, o
             counts[:5] += part
             dyn.count_effect_work(int(part[kern.RHS]), int(part[kern.KICK]),
@@ -248,7 +262,7 @@ class Integrator:
             ckern.constrained_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
                                    flags, rows, ws[9], par, use_tree,
                                    tree if use_tree else None, None if use_tree else dense, ws,
-                                   p, q, v, o, lam_c, valid, part)
+                                   p, q, v, o, lam_c, valid, part, err)
             if whole:
                 dyn.last_multipliers = lam_c
             else:
@@ -271,11 +285,18 @@ class Integrator:
 
 
 class RKMK4(Integrator):
-    """Fourth-order Runge–Kutta–Munthe-Kaas (classical RK4 tableau, below)."""
+    """
+    Fourth-order Runge–Kutta–Munthe-Kaas (classical RK4 tableau, below).
+
+    Its embedded pair: the third-order weights ``B_HAT`` over the four stages and
+    the slopes at the new state (first same as last), for the accuracy knob.
+    """
 
     name = 'rkmk4'
     KERNEL = kern.RKMK4
     order = 4
+    EMBEDDED_ORDER = 3
+    B_HAT = np.array([1.0, 2.0, 2.0, 0.0, 1.0]) / 6.0
     conserves = frozenset({Invariant.ORIENTATION_ON_SO3, Invariant.LINEAR_MOMENTUM})
     A = np.array([[0.0, 0.0, 0.0, 0.0],
                   [0.5, 0.0, 0.0, 0.0],

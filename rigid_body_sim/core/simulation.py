@@ -197,17 +197,27 @@ class Simulation:
         if cls is not None and cls is not type(self.integrator):
             self.integrator = cls(self.dynamics)
 
-    def set_tolerance(self, tolerance: Optional[float],
-                      budget: Optional[int] = None) -> None:
-        """Turn the accuracy knob on (a tolerance), change it, or off (None), between steps."""
+    def set_tolerance(self, tolerance: Optional[float], budget: Optional[int] = None,
+                      estimator: Optional[str] = None) -> None:
+        """
+        Turn the accuracy knob on (a tolerance), change it, or off (None), between steps.
+
+        ``budget``: most sub-steps a step may take (default: as before, else
+        1024). ``estimator``: ``'embedded'`` or ``'doubling'`` (default: the
+        integrator's embedded pair where it has one, step doubling otherwise;
+        see :mod:`.accuracy`).
+        """
         if tolerance is None:
             self._control = None
             return
+        old = self._control
         budget = budget if budget is not None else (
-            self._control.budget if self._control is not None else DEFAULT_BUDGET)
-        control = ErrorControl(tolerance, budget)
+            old.budget if old is not None else DEFAULT_BUDGET)
+        estimator = estimator if estimator is not None else (
+            old.estimator if old is not None else None)
+        control = ErrorControl(tolerance, budget, estimator)
         if self._control is not None:   # keep the sub-step count and the tallies
-            for key in ('k', 'estimate', 'last_k', 'misses', 'steps', 'worst'):
+            for key in ('k', 'estimate', 'last_k', 'misses', 'steps', 'worst', 'redone'):
                 setattr(control, key, getattr(self._control, key))
         self._control = control
 

@@ -230,13 +230,48 @@ def rkmk4_finish(h: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
 
 
 @njit(cache=True)
+def rkmk4_embedded_error(vel: np.ndarray, om: np.ndarray, u: np.ndarray, kp: np.ndarray,
+                         kv: np.ndarray, kw: np.ndarray, kr: np.ndarray) -> float:
+    """
+    Return the embedded third-order estimate of a finished RKMK4 step, per unit time.
+
+    The pair (Hairer, Nørsett & Wanner, Solving ODEs I, II.4): the stages of the
+    classical tableau and a fifth, the slopes at the new state (first same as
+    last), with weights ``b̂ = (1/6, 1/3, 1/3, 0, 1/6)`` give a third-order
+    solution; the difference from the fourth-order one is ``h/6 (k4 − k5)``.
+    Its largest component over every body's position (m), velocity (m/s), Ω
+    (rad/s) and rotation vector (rad), divided by ``h``, is returned: the local
+    error per unit time of the third-order solution, an upper bound (by a factor
+    of order ``1/h``) of the fourth-order one's, which is kept. ``kv[4], kw[4]``
+    must hold the accelerations at the new state ``vel, om``; ``u`` is the step's
+    rotation vector (left by :func:`rkmk4_finish`).
+    """
+    kp[4] = vel
+    dexpinv(u, om, kr[4])
+    e = 0.0
+    for i in range(vel.shape[0]):
+        for c in range(3):
+            e = max(e, abs(kp[3, i, c] - kp[4, i, c]), abs(kv[3, i, c] - kv[4, i, c]),
+                    abs(kw[3, i, c] - kw[4, i, c]), abs(kr[3, i, c] - kr[4, i, c]))
+    return e / 6.0
+
+
+@njit(cache=True)
 def rkmk4_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, h: float,
                body: np.ndarray, gforce: np.ndarray, wrench: np.ndarray, flags: int,
-               counts: np.ndarray) -> None:
-    """One classical RK4 Munthe-Kaas step of every body, in place."""
+               counts: np.ndarray, err: np.ndarray) -> None:
+    """
+    One classical RK4 Munthe-Kaas step of every body, in place.
+
+    With ``err`` of length 1 the step also evaluates the slopes at its end and
+    raises ``err[0]`` to the embedded estimate (:func:`rkmk4_embedded_error`);
+    with length 0 it does not.
+    """
     n = pos.shape[0]
-    kp, kv = np.empty((4, n, 3)), np.empty((4, n, 3))
-    kw, kr = np.empty((4, n, 3)), np.empty((4, n, 3))
+    estimate = err.shape[0] > 0
+    slots = 5 if estimate else 4
+    kp, kv = np.empty((slots, n, 3)), np.empty((slots, n, 3))
+    kw, kr = np.empty((slots, n, 3)), np.empty((slots, n, 3))
     p, v, w, u = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
     q = np.empty((n, 4))
     for s in range(4):
@@ -244,6 +279,9 @@ def rkmk4_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarra
         accelerations(q, v, w, body, gforce, wrench, flags, kv[s], kw[s], counts)
         rkmk4_slopes(s, v, w, u, kp, kr)
     rkmk4_finish(h, pos, quat, vel, om, kp, kv, kw, kr, u, counts)
+    if estimate:
+        accelerations(quat, vel, om, body, gforce, wrench, flags, kv[4], kw[4], counts)
+        err[0] = max(err[0], rkmk4_embedded_error(vel, om, u, kp, kv, kw, kr))
 
 
 @njit(cache=True)
@@ -377,7 +415,7 @@ def normalize_quaternions(quat: np.ndarray) -> None:
 def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
               om: np.ndarray, dt: float, body: np.ndarray, gforce: np.ndarray,
               wrench: np.ndarray, flags: int, kick: np.ndarray, kick_valid: bool,
-              counts: np.ndarray) -> bool:
+              counts: np.ndarray, err: np.ndarray) -> bool:
     """
     One step of ``method`` for bodies no constraint couples; the arrays are updated.
 
@@ -401,6 +439,10 @@ def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
         ``kick`` was evaluated at ``pos, quat``.
     counts : ndarray of int64, shape (5,)
         Work counts, incremented.
+    err : ndarray, shape (1,) or (0,)
+        ``RKMK4`` with length 1: ``err[0]`` is raised to the step's embedded
+        error estimate per unit time (:func:`rkmk4_embedded_error`); ignored by
+        the splittings.
 
     Returns
     -------
@@ -409,7 +451,7 @@ def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
 
     """
     if method == RKMK4:
-        rkmk4_step(pos, quat, vel, om, dt, body, gforce, wrench, flags, counts)
+        rkmk4_step(pos, quat, vel, om, dt, body, gforce, wrench, flags, counts, err)
         valid = False
     else:
         valid = splitting_step(method, pos, quat, vel, om, dt, body, gforce, wrench, flags,
@@ -486,3 +528,30 @@ def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
         for a in range(3):
             out[i, 13 + a] = R[0, a] * out[i, 7] + R[1, a] * out[i, 8] + R[2, a] * out[i, 9]
             out[i, 16 + a] = R[0, a] * w[0] + R[1, a] * w[1] + R[2, a] * w[2]
+
+
+@njit(cache=True)
+def state_distance(pos_a: np.ndarray, quat_a: np.ndarray, vel_a: np.ndarray,
+                   om_a: np.ndarray, pos_b: np.ndarray, quat_b: np.ndarray,
+                   vel_b: np.ndarray, om_b: np.ndarray) -> float:
+    """
+    Largest difference between two states of the same bodies (see ``accuracy.state_distance``).
+
+    Position, velocity and Ω component by component; orientation as the angle
+    of ``q_a⁻¹ ⊗ q_b`` from atan2 (arccos of the dot product would floor at
+    about 3e-8 rad: it is ill-conditioned near 1).
+    """
+    d = 0.0
+    for i in range(pos_a.shape[0]):
+        for c in range(3):
+            d = max(d, abs(pos_a[i, c] - pos_b[i, c]), abs(vel_a[i, c] - vel_b[i, c]),
+                    abs(om_a[i, c] - om_b[i, c]))
+        ax, ay, az, aw = quat_a[i, 0], quat_a[i, 1], quat_a[i, 2], quat_a[i, 3]
+        bx, by, bz, bw = quat_b[i, 0], quat_b[i, 1], quat_b[i, 2], quat_b[i, 3]
+        # conj(a) ⊗ b (xyzw)
+        x = aw * bx - ax * bw - ay * bz + az * by
+        y = aw * by - ay * bw - az * bx + ax * bz
+        z = aw * bz - az * bw - ax * by + ay * bx
+        w = aw * bw + ax * bx + ay * by + az * bz
+        d = max(d, 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), abs(w)))
+    return d
