@@ -224,6 +224,13 @@ def test_kernels_directly(rng):
     out = np.empty_like(rhs)
     tree_solve(*st.arrays[:4], S, piv, P, Q, B, E, tmp, rhs, out)
     assert np.linalg.norm(out - np.linalg.solve(A, rhs)) < 1e-10 * np.linalg.norm(out)
+    # The symmetric path (H = G promised): half of each symmetric product, mirrored.
+    S, piv, P, Q, B, W, E, tmp = factor_arrays(st)
+    tree_factor(*st.arrays, Ga, Gb, Ga, Gb, minv6, 0.0, S, piv, P, Q, B, W, True)
+    assert np.array_equal(W, np.transpose(W, (0, 2, 1)))
+    sym = np.empty_like(rhs)
+    tree_solve(*st.arrays[:4], S, piv, P, Q, B, E, tmp, rhs, sym)
+    assert np.linalg.norm(sym - out) < 1e-12 * np.linalg.norm(out)
 
 
 @pytest.mark.parametrize('duplicate', ['between bodies', 'to the world'])

@@ -78,7 +78,7 @@ def _schur(Ga, Gb, Ha, Hb, a, b, minv6, A):
 
 
 @njit(cache=True)
-def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, par, tree, counts):
+def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, counts):
     """Factorize ``G M⁻¹ Hᵀ`` by the tree solve (Tikhonov term for redundant rows)."""
     counts[FACTORIZATIONS] += 1
     m = Ga.shape[0]
@@ -86,7 +86,7 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, par, tree, counts):
     tg_ptr, tg_rows, tg_child, tg_parent, t_side = tree[0], tree[1], tree[2], tree[3], tree[4]
     tS, tpiv, tP, tQ, tB, tW = tree[5], tree[6], tree[7], tree[8], tree[9], tree[10]
     pivot = tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
-                        minv6, 0.0, tS, tpiv, tP, tQ, tB, tW)
+                        minv6, 0.0, tS, tpiv, tP, tQ, tB, tW, symmetric)
     if not pivot > rtol:
         counts[RANK_DEFICIENT] += 1
         n = minv6.shape[0]
@@ -100,7 +100,7 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, par, tree, counts):
             peak = max(peak, abs(d))
         scale = peak if peak > 0.0 else 1.0
         tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
-                    minv6, par[P_REG] * scale, tS, tpiv, tP, tQ, tB, tW)
+                    minv6, par[P_REG] * scale, tS, tpiv, tP, tQ, tB, tW, symmetric)
     return TREE
 
 
@@ -116,7 +116,7 @@ def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, which, counts
     mode = TREE
     # Two tests on the arguments themselves: numba drops a branch whose argument is None.
     if tree is not None:
-        mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, par, tree[which], counts)
+        mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree[which], counts)
     if dense is not None:
         mode = _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense[which],
                              counts)
@@ -619,6 +619,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
     Ga2 = np.empty((m, 6))
     Gb2 = np.empty((m, 6))
     previous = np.inf
+    mode = -1
     for it in range(max_it + 1):
         pos[:, :] = pos_s
         quat[:, :] = quat_s
@@ -638,6 +639,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
             counts[FALLBACKS] += 1
             _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, counts)
             break
+        # Refactor unless the last iteration cut the residual a hundredfold.
+        refactor = mode < 0 or norm > 1e-2 * previous
         previous = norm
         counts[POS_ITERATIONS] += 1
         # Φ(end) responds to a start impulse κ like h G_end D M⁻¹ G_startᵀ κ, where D
@@ -645,9 +648,13 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
         # impulse changes u by δu and the end orientation by J_r(u) δu, not by δu.
         # For an anisotropic body D is carried through its rotor flows (which also
         # turn L): with D the iteration is Newton's method, quadratic.
-        _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr)
-        _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
-        mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, tree, dense, 0, counts)
+        # A factorization serves the later iterations while they converge fast: their
+        # matrices differ from it by as much as the configuration moved since (the
+        # size of the corrections), and the iteration stays Newton's to that order.
+        if refactor:
+            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr)
+            _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
+            mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, tree, dense, 0, counts)
         _sol(mode, vm[2], vm[3], tree, dense, 0)
         _gt_lambda(GaS, GbS, a, b, vm[3], g6)
         for i in range(n):

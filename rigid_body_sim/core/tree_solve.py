@@ -365,7 +365,7 @@ def _lu_solve_col(d, piv, s, x, col):
 
 @njit(cache=True)
 def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, Gb, Ha, Hb,
-                minv6, reg, S, piv, P, Q, B, W):
+                minv6, reg, S, piv, P, Q, B, W, symmetric=False):
     """
     Factorize ``A + reg I = G M⁻¹ Hᵀ + reg I`` along the tree (allocation-free).
 
@@ -384,6 +384,10 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
     S, piv, P, Q, B, W : ndarray
         The first six arrays of :func:`factor_arrays` (overwritten; ``S`` to ``B``
         are the factors used by :func:`tree_solve`).
+    symmetric : bool
+        ``H`` is ``G`` (the caller's promise): the pivot blocks and mobilities are
+        then symmetric, ``S_x⁻¹ G_xp W_p = S_x⁻¹ P_xᵀ``, and half of each symmetric
+        product is computed and mirrored (about a third less work).
 
     Returns
     -------
@@ -450,7 +454,7 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
                     Q[x, j, i] = v
         # Pivot block S = reg I + G_xp W_p H_xpᵀ + G_xc W_c H_xcᵀ.
         for i in range(k):
-            for j in range(k):
+            for j in range(i if symmetric else 0, k):
                 v = reg if i == j else 0.0
                 for t in range(6):
                     v += B[x, 1, i, t] * P[x, t, j]
@@ -458,24 +462,31 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
                     for t in range(6):
                         v += B[x, 0, i, t] * Q[x, j, t]
                 S[x, i, j] = v
+                if symmetric:
+                    S[x, j, i] = v
         v = _lu(S[x], piv[x], k, floor)
         if v < smallest:
             smallest = v
         # Q = S⁻¹ G_xp W_p (k x 6), then W_p −= P Q.
         for i in range(k):
             for j in range(6):
-                v = 0.0
-                for t in range(6):
-                    v += B[x, 1, i, t] * W[p, t, j]
-                Q[x, i, j] = v
+                if symmetric:
+                    Q[x, i, j] = P[x, j, i]   # G_xp W_p = (W_p G_xpᵀ)ᵀ, W_p symmetric
+                else:
+                    v = 0.0
+                    for t in range(6):
+                        v += B[x, 1, i, t] * W[p, t, j]
+                    Q[x, i, j] = v
         for j in range(6):
             _lu_solve_col(S[x], piv[x], k, Q[x], j)
         for i in range(6):
-            for j in range(6):
+            for j in range(i if symmetric else 0, 6):
                 v = 0.0
                 for t in range(k):
                     v += P[x, i, t] * Q[x, t, j]
                 W[p, i, j] -= v
+                if symmetric and j != i:
+                    W[p, j, i] -= v
     if ng == 0:
         return np.inf
     if scale == 0.0:
@@ -620,7 +631,8 @@ class TreeSolver:
         if not reg >= 0.0:
             raise ValueError(f'reg must be >= 0, got {reg}')
         self.pivot = tree_factor(*self.structure.arrays, Ga, Gb, Ha, Hb, minv6, float(reg),
-                                 self.S, self.piv, self.P, self.Q, self.B, self.W)
+                                 self.S, self.piv, self.P, self.Q, self.B, self.W,
+                                 Ha is Ga and Hb is Gb)
         return self.pivot
 
     def solve(self, rhs) -> np.ndarray:
