@@ -881,3 +881,116 @@ def dense_storage(d: int) -> tuple:
     """Dense factor storage ``(F (d, d), piv (d,), U (d, d), s (d,), Vt (d, d))``."""
     return (np.zeros((d, d)), np.zeros(d, dtype=np.int64), np.zeros((d, d)), np.zeros(d),
             np.zeros((d, d)))
+
+
+# ----------------------------------------------------------------------------------------
+# Packed arguments. A compiled call from Python pays for every array it is passed (each is
+# unboxed, typed and released: about 70 ns): a component's rows, workspace and two dense
+# and two tree storages, 50 arrays, live in one float64 and one int64 buffer described by a
+# layout table, and :func:`packed_step` rebuilds the tuples as views into them.
+
+_SLOTS = (
+    # rows: kind, comp, a, b, par
+    'i1', 'i1', 'i1', 'i1', 'f2',
+    # workspace (see workspace())
+    'f2', 'f4', 'f2', 'f2', 'f2', 'f2', 'f2', 'f2', 'i1', 'i1',
+    # two dense storages (F, piv, U, s, Vt)
+    'f2', 'i1', 'f2', 'f1', 'f2', 'f2', 'i1', 'f2', 'f1', 'f2',
+    # two tree storages (group_ptr, group_rows, group_child, group_parent, row_side, S, piv,
+    # P, Q, B, W, E, tmp)
+    'i1', 'i1', 'i1', 'i1', 'i1', 'f3', 'i2', 'f3', 'f3', 'f4', 'f3', 'f3', 'f1',
+    'i1', 'i1', 'i1', 'i1', 'i1', 'f3', 'i2', 'f3', 'f3', 'f4', 'f3', 'f3', 'f1')
+
+
+def pack(rows: tuple, ws: tuple, dense: tuple, trees: tuple) -> tuple:
+    """
+    Copy a component's arrays into two buffers; return ``(packed, views)``.
+
+    ``packed`` is ``(key, floats, ints, layout)``, the arguments of
+    :func:`packed_step`; ``views`` the same nested tuples as given, as views into
+    the buffers (what the compiled step reads and writes). Boolean arrays become
+    int64 (the workspace's ``watch``).
+    """
+    arrays = [*rows[:5], *ws, *dense[0], *dense[1], *trees[0], *trees[1]]
+    if len(arrays) != len(_SLOTS):
+        raise ValueError(f'expected {len(_SLOTS)} arrays, got {len(arrays)}')
+    layout = np.zeros((len(arrays), 6), dtype=np.int64)
+    sizes = {'f': 0, 'i': 0}
+    for k, (x, slot) in enumerate(zip(arrays, _SLOTS)):
+        if x.ndim != int(slot[1]):
+            raise ValueError(f'slot {k}: expected {slot[1]} dimensions, got {x.ndim}')
+        layout[k, 0] = sizes[slot[0]]
+        layout[k, 1:1 + x.ndim] = x.shape
+        sizes[slot[0]] += x.size
+    floats, ints = np.zeros(sizes['f']), np.zeros(sizes['i'], dtype=np.int64)
+    views = []
+    for k, (x, slot) in enumerate(zip(arrays, _SLOTS)):
+        buf = floats if slot[0] == 'f' else ints
+        v = buf[layout[k, 0]:layout[k, 0] + x.size].reshape(x.shape)
+        v[...] = x
+        views.append(v)
+    rows_v = (*views[:5], rows[5])
+    ws_v = tuple(views[5:15])
+    dense_v = (tuple(views[15:20]), tuple(views[20:25]))
+    trees_v = (tuple(views[25:38]), tuple(views[38:51]))
+    return (rows[5], floats, ints, layout), (rows_v, ws_v, dense_v, trees_v)
+
+
+@njit(cache=True)
+def _v1(buf, L, k):
+    o = L[k, 0]
+    return buf[o:o + L[k, 1]]
+
+
+@njit(cache=True)
+def _v2(buf, L, k):
+    o = L[k, 0]
+    return buf[o:o + L[k, 1] * L[k, 2]].reshape((L[k, 1], L[k, 2]))
+
+
+@njit(cache=True)
+def _v3(buf, L, k):
+    o = L[k, 0]
+    return buf[o:o + L[k, 1] * L[k, 2] * L[k, 3]].reshape((L[k, 1], L[k, 2], L[k, 3]))
+
+
+@njit(cache=True)
+def _v4(buf, L, k):
+    o = L[k, 0]
+    size = L[k, 1] * L[k, 2] * L[k, 3] * L[k, 4]
+    return buf[o:o + size].reshape((L[k, 1], L[k, 2], L[k, 3], L[k, 4]))
+
+
+@njit(cache=True)
+def _tree_views(f, i, L, k):
+    return (_v1(i, L, k), _v1(i, L, k + 1), _v1(i, L, k + 2), _v1(i, L, k + 3),
+            _v1(i, L, k + 4), _v3(f, L, k + 5), _v2(i, L, k + 6), _v3(f, L, k + 7),
+            _v3(f, L, k + 8), _v4(f, L, k + 9), _v3(f, L, k + 10), _v3(f, L, k + 11),
+            _v1(f, L, k + 12))
+
+
+@njit(cache=True)
+def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, par,
+                use_tree, key, floats, ints, layout, pos, quat, vel, om, lam, c_valid, counts,
+                err):
+    """
+    :func:`constrained_step` with a component's arrays packed by :func:`pack`.
+
+    ``key, floats, ints, layout`` replace ``rows, watch, tree, dense, ws``.
+    """
+    f, i, L = floats, ints, layout
+    rows = (_v1(i, L, 0), _v1(i, L, 1), _v1(i, L, 2), _v1(i, L, 3), _v2(f, L, 4), key)
+    ws = (_v2(f, L, 5), _v4(f, L, 6), _v2(f, L, 7), _v2(f, L, 8), _v2(f, L, 9),
+          _v2(f, L, 10), _v2(f, L, 11), _v2(f, L, 12), _v1(i, L, 13), _v1(i, L, 14))
+    if use_tree:
+        tree = (_tree_views(f, i, L, 25), _tree_views(f, i, L, 38))
+        constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
+                         rows, ws[9], par, True, tree, None, ws, pos, quat, vel, om, lam,
+                         c_valid, counts, err)
+    else:
+        dense = ((_v2(f, L, 15), _v1(i, L, 16), _v2(f, L, 17), _v1(f, L, 18), _v2(f, L, 19)),
+                 (_v2(f, L, 20), _v1(i, L, 21), _v2(f, L, 22), _v1(f, L, 23),
+                  _v2(f, L, 24)))
+        constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
+                         rows, ws[9], par, False, None, dense, ws, pos, quat, vel, om, lam,
+                         c_valid, counts, err)

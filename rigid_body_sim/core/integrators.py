@@ -246,9 +246,9 @@ class Integrator:
         valid = (at is not None and at[0] is setup and at[1] is state.pos_com_world
                  and at[2] is state.quat_principal_world)
         lam = dyn.last_multipliers
-        if not whole and (len(lam) != solver.constraints.n_rows or lam is components[0][7]):
+        if not whole and (len(lam) != solver.constraints.n_rows or lam is components[0][4]):
             lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)
-        for bodies, rows_global, rows, use_tree, tree, dense, ws, lam_c in components:
+        for bodies, rows_global, packed, use_tree, lam_c in components:
             if whole:
                 body, gforce, wrench, flags = dyn.kernel_model(mid)
                 acting = None
@@ -262,10 +262,8 @@ class Integrator:
                               np.empty_like(o0))
             part = counts if whole else np.zeros(ckern.N_COUNTS, dtype=np.int64)
             # Only the storage in use is passed (numba compiles each case).
-            ckern.constrained_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
-                                   flags, rows, ws[9], par, use_tree,
-                                   tree if use_tree else None, None if use_tree else dense, ws,
-                                   p, q, v, o, lam_c, valid, part, err)
+            ckern.packed_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench, flags,
+                              par, use_tree, *packed, p, q, v, o, lam_c, valid, part, err)
             if whole:
                 dyn.last_multipliers = lam_c
             else:

@@ -66,7 +66,7 @@ import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constrained_kernels import dense_storage, GENERIC, workspace
+from .constrained_kernels import dense_storage, GENERIC, pack, workspace
 from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geometry,
                           RowJacobian)
 from .errors import SpecError
@@ -288,10 +288,11 @@ class ConstraintSolver:
         Python function) are evaluated by Python from inside the compiled step
         (:data:`.constrained_kernels.GENERIC`); a component with a closed loop is
         solved densely. Returns ``(free, components)``: the indices of the free
-        bodies, and per component ``(bodies, rows_global, rows,
-        use_tree, trees, dense, workspace, multipliers)`` with the rows in the
-        component's own body numbering (see :mod:`.constrained_kernels`). Rebuilt
-        only when the constraint set changes.
+        bodies, and per component ``(bodies, rows_global, packed, use_tree,
+        multipliers)``, ``packed`` the arguments of
+        :func:`.constrained_kernels.packed_step` (its rows in the component's own
+        body numbering, workspace and factor storages). Rebuilt only when the
+        constraint set changes.
         """
         cs = self.constraints
         c = self._kernel_cache
@@ -354,9 +355,10 @@ class ConstraintSolver:
                 self._generic_keys.append(key)
             rows = (cs.row_kind[builtin], cs.row_comp[builtin], ra, rb,
                     np.ascontiguousarray(cs.row_par[builtin]), key)
-            components.append((bodies, rows_global, rows, use_tree, trees,
-                               (dense_storage(d), dense_storage(d)),
-                               workspace(len(bodies), mc, body), np.zeros(mc)))
+            ws = workspace(len(bodies), mc, body)
+            packed, _ = pack(rows, (*ws[:9], ws[9].astype(np.int64)),
+                             (dense_storage(d), dense_storage(d)), trees)
+            components.append((bodies, rows_global, packed, use_tree, np.zeros(mc)))
         setup = (np.flatnonzero(~touched), components)
         self._kernel_cache = (cs, cs.version, setup)
         return setup
