@@ -361,8 +361,9 @@ class Simulation:
 
     # -- outputs --------------------------------------------------------------------------
 
-    def _select(self, arr: np.ndarray, body: Optional[str]) -> np.ndarray:
-        return arr if body is None else arr[self.bodies.lookup(body)]
+    def _outputs(self, body: Optional[str]) -> tuple:
+        return self.bodies.outputs(self.state, None if body is None
+                                   else self.bodies.lookup(body))
 
     def pose(self, body: Optional[str] = None) -> tuple[np.ndarray, np.ndarray]:
         """
@@ -370,19 +371,19 @@ class Simulation:
 
         With ``body`` None, arrays of all bodies, (n, 3) and (n, 4).
         """
-        pos, quat = self.bodies.pose_world(self.state)
-        return self._select(pos, body), self._select(quat, body)
+        out = self._outputs(body)
+        return out[0].copy(), out[1].copy()
 
     def twist(self, body: Optional[str] = None,
               frame: str = 'world') -> tuple[np.ndarray, np.ndarray]:
         """Velocity of the body origin and angular velocity, in ``frame`` ('world' or 'body')."""
         if frame == 'world':
-            v, w = self.bodies.twist_world(self.state)
-        elif frame == 'body':
-            v, w = self.bodies.twist_body(self.state)
-        else:
-            raise SpecError('frame', f"must be 'world' or 'body', got {frame!r}")
-        return self._select(v, body), self._select(w, body)
+            out = self._outputs(body)
+            return out[2].copy(), out[3].copy()
+        if frame == 'body':
+            out = self._outputs(body)
+            return out[4].copy(), out[5].copy()
+        raise SpecError('frame', f"must be 'world' or 'body', got {frame!r}")
 
     def diagnostics(self) -> Diagnostics:
         """Energies, world-frame momenta, orthonormality and constraint violation now."""
