@@ -94,21 +94,8 @@ import numpy as np
 from . import constrained_kernels as ckern
 from . import step_kernels as kern
 from .bodies import State
-from .dynamics import Dynamics
+from .dynamics import Dynamics, STEPS
 from .errors import SpecError
-
-
-#: The kernels' count slots and the counters they add to (constrained step).
-_WORK_SLOTS = ((kern.RHS, 'rhs_evaluations'), (kern.KICK, 'kick_evaluations'),
-               (kern.GYRO, 'gyroscopic_body_evaluations'), (kern.ROT, 'rotation_updates'),
-               (ckern.SUBSTEPS, 'substeps'), (ckern.RETRIES, 'retries'))
-_SOLVER_SLOTS = ((ckern.GEOMETRY, 'geometry_evaluations'),
-                 (ckern.FACTORIZATIONS, 'factorizations'),
-                 (ckern.RANK_DEFICIENT, 'rank_deficient_solves'),
-                 (ckern.FALLBACKS, 'projection_fallbacks'),
-                 (ckern.ACC_SOLVES, 'acceleration_solves'),
-                 (ckern.POS_ITERATIONS, 'position_iterations'),
-                 (ckern.VEL_PROJECTIONS, 'velocity_projections'))
 
 
 class Invariant(enum.Enum):
@@ -174,19 +161,15 @@ class Integrator:
         at = self._kick_at
         valid = (at is not None and at[0] == dyn.version and at[1] is state.pos_com_world
                  and at[2] is state.quat_principal_world)
-        counts = np.zeros(5, dtype=np.int64)
+        # The kernel adds its work to the tally that holds the work counters.
+        tally = dyn.tally
+        before = tally.tolist() if dyn.effects else None
         valid = kern.free_step(self.KERNEL, pos, quat, vel, om, dt, body, gforce, wrench, flags,
-                               self._kick_buffer, valid, counts)
+                               self._kick_buffer, valid, tally)
         self._kick_at = (dyn.version, pos, quat) if valid else None
-        rhs, kicks, gyro, rot, flows = counts.tolist()
-        c = dyn.counters
-        c.rhs_evaluations += rhs
-        c.kick_evaluations += kicks
-        c.gyroscopic_body_evaluations += gyro
-        c.rotation_updates += rot
-        c.steps += 1
-        if dyn.effects:
-            dyn.count_effect_work(rhs, kicks, flows)
+        tally[STEPS] += 1
+        if before is not None:
+            dyn.count_effect_work_since(before)
         return State(t_end, pos, quat, vel, om)
 
     def _constrained_step(self, state: State, dt: float, t_end: float, setup: tuple) -> State:
@@ -209,7 +192,9 @@ class Integrator:
                                   np.empty_like(om))
         else:
             pos, quat, vel, om = pos.copy(), quat.copy(), vel.copy(), om.copy()
-        counts = np.zeros(ckern.N_COUNTS, dtype=np.int64)
+        # The kernels add their work to the tally that holds the work counters.
+        tally = dyn.tally
+        counting = bool(dyn.effects)
         key = (solver.time_constant, solver.omega, self.max_rotation, self.max_substeps)
         if self._parameters is None or self._parameters[0] != key:
             self._parameters = (key, solver.kernel_parameters(
@@ -218,13 +203,12 @@ class Integrator:
         if len(free):
             body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, free)
             p, q, v, o = pos[free], quat[free], vel[free], om[free]
-            part = np.zeros(5, dtype=np.int64)
+            before = tally.tolist() if counting else None
             kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
-                           np.zeros((len(free), 6)), False, part)
+                           np.zeros((len(free), 6)), False, tally)
             pos[free], quat[free], vel[free], om[free] = p, q, v, o
-            counts[:5] += part
-            dyn.count_effect_work(int(part[kern.RHS]), int(part[kern.KICK]),
-                                  int(part[kern.FLOW]), acting)
+            if counting:
+                dyn.count_effect_work_since(before, acting)
         at = self._geometry_at
         valid = (at is not None and at[0] is setup and at[1] is state.pos_com_world
                  and at[2] is state.quat_principal_world)
@@ -243,27 +227,22 @@ class Integrator:
                 p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
                 p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
                               np.empty_like(o0))
-            part = counts if whole else np.zeros(ckern.N_COUNTS, dtype=np.int64)
+            before = tally.tolist() if counting else None
             # Only the storage in use is passed (numba compiles each case).
             ckern.constrained_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
                                    flags, rows, ws[9], par, use_tree,
                                    tree if use_tree else None, None if use_tree else dense, ws,
-                                   p, q, v, o, lam_c, valid, part)
+                                   p, q, v, o, lam_c, valid, tally)
             if whole:
                 dyn.last_multipliers = lam_c
             else:
                 pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
                 lam[rows_global] = lam_c
-                counts += part
-            dyn.count_effect_work(int(part[kern.RHS]), int(part[kern.KICK]),
-                                  int(part[kern.FLOW] + part[ckern.DAMP_IN_KICK]), acting)
+            if counting:
+                dyn.count_effect_work_since(before, acting)
         # Each component's workspace now holds the geometry of its new configuration.
         self._geometry_at = (setup, pos, quat)
-        n = counts.tolist()
-        for counters, slots in ((dyn.counters, _WORK_SLOTS), (solver.counters, _SOLVER_SLOTS)):
-            for slot, name in slots:
-                setattr(counters, name, getattr(counters, name) + n[slot])
-        dyn.counters.steps += 1
+        tally[STEPS] += 1
         return State(t_end, pos, quat, vel, om)
 
 # ----------------------------------------------------------------------------------------

@@ -126,7 +126,8 @@ class Simulation:
         self.integrator = integrator_class(integrator)(self.dynamics)
         self._initial_wrenches = [self._wrench_rows(e) for e in effects]
         self.dynamics.solver = ConstraintSolver(self.bodies, ConstraintSet(self.bodies),
-                                                time_constant=constraint_time_constant)
+                                                time_constant=constraint_time_constant,
+                                                tally=self.dynamics.tally)
         self.dynamics.solver.dt = self.dt
         self._initial_constraints = list(constraints)
         self.reset()
@@ -436,7 +437,7 @@ class Simulation:
         """
         dyn = self.dynamics
         counters = (dyn.counters, dyn.solver.counters)
-        saved = ([replace(c) for c in counters],
+        saved = ([c.as_dict() for c in counters],
                  [(e.evaluations, e.body_evaluations) for e in dyn.effects],
                  dyn.solver._geometry_cache)
         try:
@@ -444,7 +445,7 @@ class Simulation:
         finally:
             # In place: callers may hold references to the counter objects.
             for live, old in zip(counters, saved[0]):
-                live.__dict__.update(old.__dict__)
+                live.__init__(**old)
             dyn.solver._geometry_cache = saved[2]
             for effect, (evaluations, body_evaluations) in zip(dyn.effects, saved[1]):
                 effect.evaluations, effect.body_evaluations = evaluations, body_evaluations
