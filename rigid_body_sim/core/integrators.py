@@ -185,17 +185,14 @@ class Integrator:
         free, components = setup
         mid = state.time + 0.5 * dt
         whole = not len(free) and len(components) == 1   # one component, every body
-        pos, quat = state.pos_com_world, state.quat_principal_world
-        vel, om = state.vel_com_world, state.ang_vel_principal
-        if whole:
-            pos, quat, vel, om = (np.empty_like(pos), np.empty_like(quat), np.empty_like(vel),
-                                  np.empty_like(om))
-        else:
-            pos, quat, vel, om = pos.copy(), quat.copy(), vel.copy(), om.copy()
+        # New arrays (copies: the cheapest fresh arrays; a whole-scene kernel overwrites them).
+        pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
+        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
         # The kernels add their work to the tally that holds the work counters.
         tally = dyn.tally
         counting = bool(dyn.effects)
-        key = (solver.time_constant, solver.omega, self.max_rotation, self.max_substeps)
+        # What par depends on (solver.omega is a function of time_constant and dt).
+        key = (solver.time_constant, solver.dt, self.max_rotation, self.max_substeps)
         if self._parameters is None or self._parameters[0] != key:
             self._parameters = (key, solver.kernel_parameters(
                 self.max_rotation, self.max_substeps, getattr(self, 'CLOSING', 0.0)))

@@ -146,25 +146,27 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """Take ``n`` steps of size ``dt``."""
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        if type(n) is not int and (isinstance(n, bool) or not isinstance(n, np.integer)) \
+                or n < 0:
             raise SpecError('n', f'must be a non-negative integer, got {n!r}')
         dyn = self.dynamics
-        dyn.solver.dt = self.dt
+        dt = dyn.solver.dt = self.dt
         effects = dyn.effects
+        integrator, control = self.integrator, self._control
         for _ in range(int(n)):
             if effects:
-                mid = self._time_base + (self._steps + 0.5) * self.dt
+                mid = self._time_base + (self._steps + 0.5) * dt
                 # Every effect must see the new step: no short-circuit.
                 switched = [effect.begin_step(mid) for effect in effects]
                 if any(switched):
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
             try:
-                t_end = self._time_base + (self._steps + 1) * self.dt
-                if self._control is None:
-                    new = self.integrator.step(self.state, self.dt, t_end)
+                t_end = self._time_base + (self._steps + 1) * dt
+                if control is None:
+                    new = integrator.step(self.state, dt, t_end)
                 else:
-                    new = self._control.step(self.integrator, self.state, self.dt, t_end)
+                    new = control.step(integrator, self.state, dt, t_end)
             except np.linalg.LinAlgError:
                 # A factorization met non-finite numbers: the step diverged on the way.
                 raise DivergenceError(self.time, self._moving_fastest()) from None
@@ -174,7 +176,7 @@ class Simulation:
             self.state = new
             self._steps += 1
             if self._wrenches is not None and len(self._wrenches):
-                self._wrenches.remove_expired(self.state.time)
+                self._wrenches.remove_expired(new.time)
 
     def _moving_fastest(self) -> list:
         """Name the body turning fastest (where a divergence most likely began)."""
