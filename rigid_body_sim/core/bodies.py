@@ -25,7 +25,7 @@ convention.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -288,39 +288,48 @@ class BodySet:
 
     # -- outputs in the user's body frame -------------------------------------------------
 
-    def outputs(self, state: State) -> np.ndarray:
+    def outputs(self, state: State, body: Optional[int] = None) -> tuple:
         """
-        Poses and twists of every body in its own frame, (n, 19); see ``step_kernels.outputs``.
+        Poses and twists in the user's body frames; see ``step_kernels.outputs``.
 
-        Computed by one compiled call and kept for the state it was computed for
-        (a node reads pose and twist after every step).
+        Returns views (into one (n, 19) array) of the body-origin positions,
+        orientations (xyzw), world origin velocities, world angular velocities,
+        body-frame origin velocities and body-frame angular velocities: of every
+        body, or of body index ``body`` alone. Computed by one compiled call and
+        kept for the state it was computed for (a node reads pose and twist after
+        every step); read-only to callers, who copy what they keep.
         """
         c = self._outputs
-        if (c is not None and c[0] is state and c[1] is state.pos_com_world
-                and c[2] is state.quat_principal_world and c[3] is state.vel_com_world
-                and c[4] is state.ang_vel_principal):
-            return c[5]
-        out = np.empty((len(self), 19))
+        if c is None:
+            out = np.empty((len(self), 19))
+            parts = ((0, 3), (3, 7), (7, 10), (10, 13), (13, 16), (16, 19))
+            views = [tuple(out[i, a:b] for a, b in parts) for i in range(len(self))]
+            views.append(tuple(out[:, a:b] for a, b in parts))
+            c = self._outputs = [None, None, None, None, None, out, views]
+        elif (c[0] is state and c[1] is state.pos_com_world
+              and c[2] is state.quat_principal_world and c[3] is state.vel_com_world
+              and c[4] is state.ang_vel_principal):
+            return c[6][-1 if body is None else body]
         step_kernels.outputs(state.pos_com_world, state.quat_principal_world,
                              state.vel_com_world, state.ang_vel_principal,
-                             self.quat_body_principal, self.com_body, out)
+                             self.quat_body_principal, self.com_body, c[5])
         # Kept with the arrays it was computed from: a step replaces a state's arrays,
         # it does not modify them.
-        self._outputs = (state, state.pos_com_world, state.quat_principal_world,
-                         state.vel_com_world, state.ang_vel_principal, out)
-        return out
+        c[0:5] = (state, state.pos_com_world, state.quat_principal_world,
+                  state.vel_com_world, state.ang_vel_principal)
+        return c[6][-1 if body is None else body]
 
     def pose_world(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Body-origin positions (n, 3) and body-frame orientations (n, 4, xyzw) in world."""
         out = self.outputs(state)
-        return out[:, 0:3].copy(), out[:, 3:7].copy()
+        return out[0].copy(), out[1].copy()
 
     def twist_world(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Velocity of each body origin (n, 3) and angular velocity (n, 3), world frame."""
         out = self.outputs(state)
-        return out[:, 7:10].copy(), out[:, 10:13].copy()
+        return out[2].copy(), out[3].copy()
 
     def twist_body(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Origin velocity (n, 3) and angular velocity (n, 3), both in the body frame."""
         out = self.outputs(state)
-        return out[:, 13:16].copy(), out[:, 16:19].copy()
+        return out[4].copy(), out[5].copy()

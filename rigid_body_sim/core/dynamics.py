@@ -17,23 +17,80 @@ side here (:meth:`Dynamics.accelerations`) serves the references
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Optional, Sequence
+from typing import ClassVar, Optional, Sequence
 
 import numpy as np
 
 from . import rotation as so3
 from .bodies import BodySet
+from .constrained_kernels import (ACC_SOLVES, DAMP_IN_KICK, FACTORIZATIONS, FALLBACKS,
+                                  GEOMETRY, N_COUNTS, POS_ITERATIONS, RANK_DEFICIENT, RETRIES,
+                                  SUBSTEPS, VEL_PROJECTIONS)
 from .effects import AppliedWrenches, Damping, Effect, Gravity, Kinematics, WrenchAccumulator
 from .errors import SpecError
-from .step_kernels import HAS_DAMPING, HAS_POSITION_FORCES
+from .step_kernels import FLOW, GYRO, HAS_DAMPING, HAS_POSITION_FORCES, KICK, RHS, ROT
 
 #: The effects the compiled kernels evaluate (see :mod:`.step_kernels`).
 KERNEL_EFFECTS = (Gravity, Damping, AppliedWrenches)
 
 
-@dataclass
-class WorkCounters:
+#: Slot of the steps in a work tally; the slots before it are the compiled kernels'
+#: count slots (:mod:`.step_kernels`, :mod:`.constrained_kernels`).
+STEPS = N_COUNTS
+#: Length of a work tally.
+N_TALLY = N_COUNTS + 1
+
+
+class TalliedCounters:
+    """
+    Counters kept in slots of one int64 array, the tally, that the compiled steps add to.
+
+    Subclasses name their slots in ``SLOTS``; each name is an int attribute
+    (read and assigned as usual). Counter objects built on the same tally share
+    it: a step's kernels then count all their work in one array, with no
+    per-counter bookkeeping. ``__init__`` again zeros (or sets) this object's
+    slots in place.
+    """
+
+    SLOTS: ClassVar[dict] = {}
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        """Make each slot an int attribute."""
+        super().__init_subclass__(**kwargs)
+        for name, slot in cls.SLOTS.items():
+            setattr(cls, name, property(
+                lambda self, slot=slot: int(self.tally[slot]),
+                lambda self, value, slot=slot: self.tally.__setitem__(slot, value)))
+
+    def __init__(self, *, tally: Optional[np.ndarray] = None, **values: int) -> None:
+        if tally is not None:
+            self.tally = tally
+        elif 'tally' not in self.__dict__:
+            self.tally = np.zeros(N_TALLY, dtype=np.int64)
+        unknown = sorted(set(values) - set(self.SLOTS))
+        if unknown:
+            raise TypeError(f'{type(self).__name__} has no counter {unknown[0]!r}')
+        for name, slot in self.SLOTS.items():
+            self.tally[slot] = values.get(name, 0)
+
+    def as_dict(self) -> dict:
+        """Counters as a plain dict."""
+        n = self.tally.tolist()
+        return {name: n[slot] for name, slot in self.SLOTS.items()}
+
+    def __eq__(self, other: object) -> bool:
+        """Tell whether ``other`` is of this class and counts the same."""
+        return type(other) is type(self) and self.as_dict() == other.as_dict()
+
+    __hash__ = None   # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        """Show the counters as a dataclass would."""
+        items = ', '.join(f'{k}={v}' for k, v in self.as_dict().items())
+        return f'{type(self).__name__}({items})'
+
+
+class WorkCounters(TalliedCounters):
     """
     Work done so far (reset with the simulation).
 
@@ -58,17 +115,18 @@ class WorkCounters:
 
     """
 
-    steps: int = 0
-    rhs_evaluations: int = 0
-    kick_evaluations: int = 0
-    gyroscopic_body_evaluations: int = 0
-    rotation_updates: int = 0
-    substeps: int = 0
-    retries: int = 0
+    SLOTS = {'steps': STEPS, 'rhs_evaluations': RHS, 'kick_evaluations': KICK,
+             'gyroscopic_body_evaluations': GYRO, 'rotation_updates': ROT,
+             'substeps': SUBSTEPS, 'retries': RETRIES}
 
-    def as_dict(self) -> dict:
-        """Counters as a plain dict."""
-        return asdict(self)
+
+class SolverCounters(TalliedCounters):
+    """Work of the constraint solver: factorizations and projection iterations."""
+
+    SLOTS = {'geometry_evaluations': GEOMETRY, 'factorizations': FACTORIZATIONS,
+             'rank_deficient_solves': RANK_DEFICIENT, 'projection_fallbacks': FALLBACKS,
+             'acceleration_solves': ACC_SOLVES, 'position_iterations': POS_ITERATIONS,
+             'velocity_projections': VEL_PROJECTIONS}
 
 
 class Dynamics:
@@ -88,7 +146,10 @@ class Dynamics:
         for i, effect in enumerate(effects):
             check_kernel_effect(effect, f'effects[{i}]')
         self.effects = list(effects)
-        self.counters = WorkCounters()
+        # The work tally the compiled steps add to: the counters of this object and of
+        # its solver (SolverCounters on the same tally) are slots of it.
+        self.tally = np.zeros(N_TALLY, dtype=np.int64)
+        self.counters = WorkCounters(tally=self.tally)
         # Set by the Simulation: constraint rows and their solver (None: no constraints).
         self.solver = None
         self.last_multipliers = np.zeros(0)
@@ -206,6 +267,17 @@ class Dynamics:
                 calls = 0
             effect.evaluations += calls
             effect.body_evaluations += calls * bodies
+
+    def count_effect_work_since(self, before: list, acting: Optional[list] = None) -> None:
+        """
+        Do :meth:`count_effect_work` for the kernel work tallied since ``before``.
+
+        ``before``: ``tally.tolist()`` before the kernel calls.
+        """
+        n = self.tally.tolist()
+        self.count_effect_work(n[RHS] - before[RHS], n[KICK] - before[KICK],
+                               n[FLOW] + n[DAMP_IN_KICK] - before[FLOW] - before[DAMP_IN_KICK],
+                               acting)
 
     @property
     def constrained(self) -> bool:

@@ -97,21 +97,8 @@ import numpy as np
 from . import constrained_kernels as ckern
 from . import step_kernels as kern
 from .bodies import State
-from .dynamics import Dynamics
+from .dynamics import Dynamics, STEPS
 from .errors import SpecError
-
-
-#: The kernels' count slots and the counters they add to (constrained step).
-_WORK_SLOTS = ((kern.RHS, 'rhs_evaluations'), (kern.KICK, 'kick_evaluations'),
-               (kern.GYRO, 'gyroscopic_body_evaluations'), (kern.ROT, 'rotation_updates'),
-               (ckern.SUBSTEPS, 'substeps'), (ckern.RETRIES, 'retries'))
-_SOLVER_SLOTS = ((ckern.GEOMETRY, 'geometry_evaluations'),
-                 (ckern.FACTORIZATIONS, 'factorizations'),
-                 (ckern.RANK_DEFICIENT, 'rank_deficient_solves'),
-                 (ckern.FALLBACKS, 'projection_fallbacks'),
-                 (ckern.ACC_SOLVES, 'acceleration_solves'),
-                 (ckern.POS_ITERATIONS, 'position_iterations'),
-                 (ckern.VEL_PROJECTIONS, 'velocity_projections'))
 
 
 #: ``error`` argument of the kernels when no estimate is asked for.
@@ -190,19 +177,15 @@ class Integrator:
         at = self._kick_at
         valid = (at is not None and at[0] == dyn.version and at[1] is state.pos_com_world
                  and at[2] is state.quat_principal_world)
-        counts = np.zeros(5, dtype=np.int64)
+        # The kernel adds its work to the tally that holds the work counters.
+        tally = dyn.tally
+        before = tally.tolist() if dyn.effects else None
         valid = kern.free_step(self.KERNEL, pos, quat, vel, om, dt, body, gforce, wrench, flags,
-                               self._kick_buffer, valid, counts, err)
+                               self._kick_buffer, valid, tally, err)
         self._kick_at = (dyn.version, pos, quat) if valid else None
-        rhs, kicks, gyro, rot, flows = counts.tolist()
-        c = dyn.counters
-        c.rhs_evaluations += rhs
-        c.kick_evaluations += kicks
-        c.gyroscopic_body_evaluations += gyro
-        c.rotation_updates += rot
-        c.steps += 1
-        if dyn.effects:
-            dyn.count_effect_work(rhs, kicks, flows)
+        tally[STEPS] += 1
+        if before is not None:
+            dyn.count_effect_work_since(before)
         return State(t_end, pos, quat, vel, om)
 
     def _constrained_step(self, state: State, dt: float, t_end: float, setup: tuple,
@@ -219,15 +202,14 @@ class Integrator:
         free, components = setup
         mid = state.time + 0.5 * dt
         whole = not len(free) and len(components) == 1   # one component, every body
-        pos, quat = state.pos_com_world, state.quat_principal_world
-        vel, om = state.vel_com_world, state.ang_vel_principal
-        if whole:
-            pos, quat, vel, om = (np.empty_like(pos), np.empty_like(quat), np.empty_like(vel),
-                                  np.empty_like(om))
-        else:
-            pos, quat, vel, om = pos.copy(), quat.copy(), vel.copy(), om.copy()
-        counts = np.zeros(ckern.N_COUNTS, dtype=np.int64)
-        key = (solver.time_constant, solver.omega, self.max_rotation, self.max_substeps)
+        # New arrays (copies: the cheapest fresh arrays; a whole-scene kernel overwrites them).
+        pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
+        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
+        # The kernels add their work to the tally that holds the work counters.
+        tally = dyn.tally
+        counting = bool(dyn.effects)
+        # What par depends on (solver.omega is a function of time_constant and dt).
+        key = (solver.time_constant, solver.dt, self.max_rotation, self.max_substeps)
         if self._parameters is None or self._parameters[0] != key:
             self._parameters = (key, solver.kernel_parameters(
                 self.max_rotation, self.max_substeps, getattr(self, 'CLOSING', 0.0)))
@@ -235,13 +217,12 @@ class Integrator:
         if len(free):
             body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, free)
             p, q, v, o = pos[free], quat[free], vel[free], om[free]
-            part = np.zeros(5, dtype=np.int64)
+            before = tally.tolist() if counting else None
             kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
-                           np.zeros((len(free), 6)), False, part, err)
+                           np.zeros((len(free), 6)), False, tally, err)
             pos[free], quat[free], vel[free], om[free] = p, q, v, o
-            counts[:5] += part
-            dyn.count_effect_work(int(part[kern.RHS]), int(part[kern.KICK]),
-                                  int(part[kern.FLOW]), acting)
+            if counting:
+                dyn.count_effect_work_since(before, acting)
         at = self._geometry_at
         valid = (at is not None and at[0] is setup and at[1] is state.pos_com_world
                  and at[2] is state.quat_principal_world)
@@ -260,25 +241,19 @@ class Integrator:
                 p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
                 p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
                               np.empty_like(o0))
-            part = counts if whole else np.zeros(ckern.N_COUNTS, dtype=np.int64)
-            # Only the storage in use is passed (numba compiles each case).
+            before = tally.tolist() if counting else None
             ckern.packed_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench, flags,
-                              par, use_tree, *packed, p, q, v, o, lam_c, valid, part, err)
+                              par, use_tree, *packed, p, q, v, o, lam_c, valid, tally, err)
             if whole:
                 dyn.last_multipliers = lam_c
             else:
                 pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
                 lam[rows_global] = lam_c
-                counts += part
-            dyn.count_effect_work(int(part[kern.RHS]), int(part[kern.KICK]),
-                                  int(part[kern.FLOW] + part[ckern.DAMP_IN_KICK]), acting)
+            if counting:
+                dyn.count_effect_work_since(before, acting)
         # Each component's workspace now holds the geometry of its new configuration.
         self._geometry_at = (setup, pos, quat)
-        n = counts.tolist()
-        for counters, slots in ((dyn.counters, _WORK_SLOTS), (solver.counters, _SOLVER_SLOTS)):
-            for slot, name in slots:
-                setattr(counters, name, getattr(counters, name) + n[slot])
-        dyn.counters.steps += 1
+        tally[STEPS] += 1
         return State(t_end, pos, quat, vel, om)
 
 # ----------------------------------------------------------------------------------------

@@ -126,7 +126,8 @@ class Simulation:
         self.integrator = integrator_class(integrator)(self.dynamics)
         self._initial_wrenches = [self._wrench_rows(e) for e in effects]
         self.dynamics.solver = ConstraintSolver(self.bodies, ConstraintSet(self.bodies),
-                                                time_constant=constraint_time_constant)
+                                                time_constant=constraint_time_constant,
+                                                tally=self.dynamics.tally)
         self.dynamics.solver.dt = self.dt
         self._initial_constraints = list(constraints)
         self.reset()
@@ -145,25 +146,27 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """Take ``n`` steps of size ``dt``."""
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        if type(n) is not int and (isinstance(n, bool) or not isinstance(n, np.integer)) \
+                or n < 0:
             raise SpecError('n', f'must be a non-negative integer, got {n!r}')
         dyn = self.dynamics
-        dyn.solver.dt = self.dt
+        dt = dyn.solver.dt = self.dt
         effects = dyn.effects
+        integrator, control = self.integrator, self._control
         for _ in range(int(n)):
             if effects:
-                mid = self._time_base + (self._steps + 0.5) * self.dt
+                mid = self._time_base + (self._steps + 0.5) * dt
                 # Every effect must see the new step: no short-circuit.
                 switched = [effect.begin_step(mid) for effect in effects]
                 if any(switched):
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
             try:
-                t_end = self._time_base + (self._steps + 1) * self.dt
-                if self._control is None:
-                    new = self.integrator.step(self.state, self.dt, t_end)
+                t_end = self._time_base + (self._steps + 1) * dt
+                if control is None:
+                    new = integrator.step(self.state, dt, t_end)
                 else:
-                    new = self._control.step(self.integrator, self.state, self.dt, t_end)
+                    new = control.step(integrator, self.state, dt, t_end)
             except np.linalg.LinAlgError:
                 # A factorization met non-finite numbers: the step diverged on the way.
                 raise DivergenceError(self.time, self._moving_fastest()) from None
@@ -173,7 +176,7 @@ class Simulation:
             self.state = new
             self._steps += 1
             if self._wrenches is not None and len(self._wrenches):
-                self._wrenches.remove_expired(self.state.time)
+                self._wrenches.remove_expired(new.time)
 
     def _moving_fastest(self) -> list:
         """Name the body turning fastest (where a divergence most likely began)."""
@@ -371,8 +374,9 @@ class Simulation:
 
     # -- outputs --------------------------------------------------------------------------
 
-    def _select(self, arr: np.ndarray, body: Optional[str]) -> np.ndarray:
-        return arr if body is None else arr[self.bodies.lookup(body)]
+    def _outputs(self, body: Optional[str]) -> tuple:
+        return self.bodies.outputs(self.state, None if body is None
+                                   else self.bodies.lookup(body))
 
     def pose(self, body: Optional[str] = None) -> tuple[np.ndarray, np.ndarray]:
         """
@@ -380,19 +384,19 @@ class Simulation:
 
         With ``body`` None, arrays of all bodies, (n, 3) and (n, 4).
         """
-        pos, quat = self.bodies.pose_world(self.state)
-        return self._select(pos, body), self._select(quat, body)
+        out = self._outputs(body)
+        return out[0].copy(), out[1].copy()
 
     def twist(self, body: Optional[str] = None,
               frame: str = 'world') -> tuple[np.ndarray, np.ndarray]:
         """Velocity of the body origin and angular velocity, in ``frame`` ('world' or 'body')."""
         if frame == 'world':
-            v, w = self.bodies.twist_world(self.state)
-        elif frame == 'body':
-            v, w = self.bodies.twist_body(self.state)
-        else:
-            raise SpecError('frame', f"must be 'world' or 'body', got {frame!r}")
-        return self._select(v, body), self._select(w, body)
+            out = self._outputs(body)
+            return out[2].copy(), out[3].copy()
+        if frame == 'body':
+            out = self._outputs(body)
+            return out[4].copy(), out[5].copy()
+        raise SpecError('frame', f"must be 'world' or 'body', got {frame!r}")
 
     def diagnostics(self) -> Diagnostics:
         """Energies, world-frame momenta, orthonormality and constraint violation now."""
@@ -445,7 +449,7 @@ class Simulation:
         """
         dyn = self.dynamics
         counters = (dyn.counters, dyn.solver.counters)
-        saved = ([replace(c) for c in counters],
+        saved = ([c.as_dict() for c in counters],
                  [(e.evaluations, e.body_evaluations) for e in dyn.effects],
                  dyn.solver._geometry_cache)
         try:
@@ -453,7 +457,7 @@ class Simulation:
         finally:
             # In place: callers may hold references to the counter objects.
             for live, old in zip(counters, saved[0]):
-                live.__dict__.update(old.__dict__)
+                live.__init__(**old)
             dyn.solver._geometry_cache = saved[2]
             for effect, (evaluations, body_evaluations) in zip(dyn.effects, saved[1]):
                 effect.evaluations, effect.body_evaluations = evaluations, body_evaluations

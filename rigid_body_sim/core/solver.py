@@ -53,7 +53,6 @@ order of the gravity force of the body. Step sizes above
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
 import itertools
 from typing import Callable, Optional, Sequence, TYPE_CHECKING
 import warnings
@@ -69,25 +68,13 @@ from .bodies import BodySet, State
 from .constrained_kernels import dense_storage, GENERIC, pack, workspace
 from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geometry,
                           RowJacobian)
+from .dynamics import SolverCounters
 from .errors import SpecError
 from .tree_solve import factor_arrays, tree_structure, TreeSolver
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
     from .dynamics import Dynamics
-
-
-@dataclass
-class SolverCounters:
-    """Work of the constraint solver: factorizations and projection iterations."""
-
-    geometry_evaluations: int = 0
-    factorizations: int = 0
-    rank_deficient_solves: int = 0
-    projection_fallbacks: int = 0
-    acceleration_solves: int = 0
-    position_iterations: int = 0
-    velocity_projections: int = 0
 
 
 _KEYS = itertools.count()
@@ -169,13 +156,17 @@ class ConstraintSolver:
         Stop the position projection when ``max |Φ − target|`` is below this.
     max_iterations : int
         Position projection (Newton) iterations at most.
+    tally : ndarray of int64, optional
+        The work tally to keep :attr:`counters` in (that of the
+        :class:`.dynamics.Dynamics` whose steps solve with this solver).
 
     """
 
     def __init__(self, bodies: BodySet, constraints: ConstraintSet,
                  time_constant: float = 0.05, regularization: float = 1e-12,
                  rank_rtol: float = 1e-12,
-                 position_tolerance: float = 1e-13, max_iterations: int = 6) -> None:
+                 position_tolerance: float = 1e-13, max_iterations: int = 6,
+                 tally: Optional[np.ndarray] = None) -> None:
         self.bodies = bodies
         self.constraints = constraints
         self.time_constant = positive_scalar(time_constant, 'constraint_time_constant')
@@ -185,7 +176,7 @@ class ConstraintSolver:
         self.rank_rtol = positive_scalar(rank_rtol, 'rank_rtol')
         self.position_tolerance = positive_scalar(position_tolerance, 'position_tolerance')
         self.max_iterations = int(max_iterations)
-        self.counters = SolverCounters()
+        self.counters = SolverCounters(tally=tally)
         self.dt: Optional[float] = None
         self._geometry_cache: Optional[tuple] = None
         self._tree_cache: Optional[tuple] = None
@@ -525,7 +516,7 @@ class ConstraintSolver:
         tol = self.CONSISTENCY_TOLERANCE
         rng = np.random.default_rng(0)   # the same verdict every time
         best = np.inf
-        saved = replace(self.counters)
+        saved = self.counters.as_dict()
         try:
             for scale in (0.0, 0.3, 1.0, 3.0):
                 quat = state.quat_principal_world
@@ -539,7 +530,7 @@ class ConstraintSolver:
             return 0.0
         finally:
             # In place: callers may hold a reference to the counter object.
-            self.counters.__dict__.update(saved.__dict__)
+            self.counters.__init__(**saved)
         return best
 
     def consistent(self, state: State) -> bool:
