@@ -18,6 +18,8 @@
 #   ./dev.sh test [pytest args]           run the whole test suite
 #   ./dev.sh bench [--quick]              run the benchmarks (installs bench/requirements.txt:
 #                                         MuJoCo; tables and plots in bench/out/)
+#   ./dev.sh python [ARGS]                python in the environment, e.g. one benchmark:
+#                                         ./dev.sh python bench/node.py
 #   ./dev.sh setup                        set up only
 set -euo pipefail
 
@@ -172,8 +174,13 @@ case "$cmd" in
         bench_requirements
         exec python bench/run_all.py "$@"
         ;;
+    python)
+        setup
+        bench_requirements
+        exec python "$@"
+        ;;
     *)
-        sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,23p' "$0" | sed 's/^# \{0,1\}//'
         exit 2
         ;;
 esac

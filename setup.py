@@ -26,10 +26,10 @@ setup(
     entry_points={
         'console_scripts': [
             'rigid_body_sim_run = rigid_body_sim.cli:main',
-            'sim_node = rigid_body_sim.ros.node:main',
+            'sim_node = rigid_body_sim.ros.entry:sim_node',
             'echo_body = rigid_body_sim.ros.echo:main',
             'experiment = rigid_body_sim.ros.experiment:main',
-            'record = rigid_body_sim.ros.record:main',
+            'record = rigid_body_sim.ros.entry:record',
             'plot = rigid_body_sim.ros.plot:main',
         ],
     },

@@ -250,6 +250,13 @@ def _check_names(events: list, present: list, items: list) -> None:
             present[:] = initial
 
 
+def _after_the_run(events: list, duration: float, dt: float) -> list:
+    """Return the inputs a run would never apply: those after the start of its last step."""
+    last = (int(round(duration / dt)) - 1) * dt
+    return [e for e in events
+            if not e.release and round(e.at, 9) > last + 1e-9 * max(1.0, abs(last))]
+
+
 def _where(event: Event, items: list) -> str:
     for i, item in enumerate(items):
         if isinstance(item, dict) and event.kind in item and item.get('at') == event.at:
@@ -413,6 +420,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             Path(args.schedule), sim.bodies.names, sim.constraint_names, settings)
         duration = args.duration or schedule_duration or scene.duration
         positive_scalar(duration, '--duration')
+        late = _after_the_run(events, duration, dt)
+        if late and not args.duration:
+            raise ScheduleError(
+                f'{args.schedule}: events: the {late[0].kind} at t = {late[0].at:g} s comes '
+                f"after the run's last step (duration {duration:g} s, dt {dt:g} s) and would "
+                "never be applied; lengthen the schedule's duration: or move the event")
+        if late:   # a shorter run asked for on the command line: say what it leaves out
+            print(f'experiment: note: --duration {duration:g} s ends the run before '
+                  f'{len(late)} scheduled input(s) (the first: {late[0].kind} at t = '
+                  f'{late[0].at:g} s); they are not applied', file=sys.stderr)
         if Path(args.bag).exists():
             raise SpecError('--bag', f'{args.bag} exists already; choose a new bag folder')
     except (SceneError, ScheduleError, SpecError) as exc:

@@ -41,7 +41,6 @@ import argparse
 from dataclasses import dataclass
 import importlib
 from pathlib import Path
-import signal
 import sys
 import time
 from typing import Any, Optional, Sequence
@@ -56,6 +55,7 @@ from rclpy.signals import SignalHandlerOptions
 from rosbags.serde import SerdeError
 
 from .bag import BagWriter, to_cdr, typestore
+from .stopping import Stop, StopRequested
 
 #: Messages each subscription queues before the oldest is dropped (counted).
 DEPTH = 1000
@@ -351,8 +351,14 @@ def _resolve(name: str, target: str) -> str:
     return '/' + name.lstrip('/')
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """Record until SIGINT, SIGTERM or --duration; returns the exit code."""
+def main(argv: Optional[Sequence[str]] = None, stop: Optional[Stop] = None) -> int:
+    """
+    Record until SIGINT, SIGTERM or --duration; returns the exit code.
+
+    ``stop``: the signal handling the console script installed before importing
+    this module (:mod:`.entry`); without it, it is installed here.
+    """
+    stop = stop if stop is not None else Stop().install()
     args = _parser().parse_args(rclpy.utilities.remove_ros_args(
         sys.argv if argv is None else ['record', *argv])[1:])
     out = Path(args.output)
@@ -362,12 +368,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     target = '/' + args.node.strip('/')
     topics = None if args.topics is None else [_resolve(t, target) for t in args.topics]
-    rclpy.init(args=None if argv is None else list(argv),
-               signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=None if argv is None else list(argv),
+                   signal_handler_options=SignalHandlerOptions.NO)
+        node = Node('rigid_body_sim_record', enable_rosout=False,
+                    start_parameter_services=False)
+    except StopRequested:
+        print('record: stopped while starting', file=sys.stderr, flush=True)
+        rclpy.try_shutdown()
+        return 0
     state = {'running': True}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: state.update(running=False))
-    node = Node('rigid_body_sim_record', enable_rosout=False, start_parameter_services=False)
+    stop.on_stop(lambda: state.update(running=False))
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     try:
