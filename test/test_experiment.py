@@ -145,6 +145,50 @@ def test_the_bob_flies_a_parabola_once_released(bag):
     assert np.ptp(flight) < 1e-9
 
 
+def test_the_markers_show_the_bob_as_its_sphere_and_the_joint_while_it_exists(bag):
+    from visualization_msgs.msg import Marker
+    msgs = _read(bag)
+    states = {_seconds(m.header.stamp): m for _, m in msgs[f'{NODE}/body_states']}
+    kind, (radius,) = load_scene(SCENE).shapes['bob']
+    assert (kind, radius) == ('sphere', 0.05)
+    pivot = [0.0, 0.0, 1.5]   # the scene's anchor_world of the joint
+    with_joint = []
+    for _, array in msgs[f'{NODE}/markers']:
+        first, *markers = array.markers
+        assert first.action == Marker.DELETEALL
+        t = _seconds(markers[0].header.stamp)
+        state = states[t]
+        bodies = [m for m in markers if m.ns == 'bodies']
+        joints = [m for m in markers if m.ns == 'joints']
+        assert len(bodies) + len(joints) == len(markers)
+        # The bob: a sphere of the scene's diameter, where and as the body states say.
+        (bob,) = bodies
+        assert (bob.type, bob.action, bob.text) == (Marker.SPHERE, Marker.ADD, 'bob')
+        assert bob.header.frame_id == 'world'
+        assert [bob.scale.x, bob.scale.y, bob.scale.z] == [2 * radius] * 3
+        p, q = bob.pose.position, bob.pose.orientation
+        np.testing.assert_array_equal([p.x, p.y, p.z], state.position)
+        np.testing.assert_array_equal([q.x, q.y, q.z, q.w], state.orientation)
+        # The pivot: a 4 cm red sphere at the pivot (the joint holds to rounding), while the
+        # joint exists: from the start to its removal at 1.2 s, and again from the reset at
+        # 2.5 s (stamped 2.501 s) on.
+        if round(t * 1e3) <= 1200 or round(t * 1e3) >= 2501:
+            (joint,) = joints
+            assert (joint.type, joint.action, joint.text) == (Marker.SPHERE, Marker.ADD,
+                                                              'pivot')
+            assert [joint.scale.x, joint.scale.y, joint.scale.z] == [0.04] * 3
+            assert joint.color.r > 0.8 and joint.color.g < 0.2 and joint.color.b < 0.2
+            p = joint.pose.position
+            np.testing.assert_allclose([p.x, p.y, p.z], pivot, rtol=0, atol=1e-12)
+            with_joint.append(t)
+        else:
+            assert joints == [], t
+    assert len(with_joint) == 121 + 151
+    # (The bob swings and flies: the markers follow it, far from where it hung.)
+    far = max(np.linalg.norm(np.array(m.position) - [0.0, 0.0, 1.0]) for m in states.values())
+    assert far > 0.5
+
+
 def test_the_mcap_reader_reads_the_same_bag(bag):
     msgs = _read(bag)
     counts = {}
@@ -194,6 +238,9 @@ def test_same_inputs_give_the_same_bag_bit_for_bit(tmp_path, bag):
      r"events\[0\]\.add_constraint: a constraint 'pivot' exists already"),
     ('duration: 0\nevents: []', r'duration: must be positive'),
     ('event: []', r'event: unknown key'),
+    # The last step starts at 0.999 s: an input at 1 s would never be applied.
+    ('duration: 1.0\nevents: [{at: 1.0, reset: true}]',
+     r"events: the reset at t = 1 s comes after the run's last step"),
 ])
 def test_a_bad_schedule_is_refused_before_anything_runs(tmp_path, capsys, text, message):
     schedule = tmp_path / 'bad_schedule.yaml'
@@ -212,6 +259,9 @@ def test_the_readme_command_runs_through_the_console_script(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert 'done: 500 steps' in done.stdout
+    # The run cut short leaves out the schedule's later inputs, and says so.
+    assert 'ends the run before 3 scheduled input(s) (the first: remove_constraint' \
+        in done.stderr
     assert (tmp_path / 'bag' / 'metadata.yaml').is_file()
 
 
