@@ -274,7 +274,7 @@ class SimNode(Node):
             response.success = False
             response.message = self._reject(problem[0], '~/step', problem[1])
             return response
-        published = True
+        published = False   # (0 steps: the current state is published)
         for _ in range(request.steps):
             published = self._advance()
             if session.diverged or not self._running:   # (SIGTERM ends a long request)
