@@ -66,7 +66,7 @@ REPORT_PERIOD = 1.0
 #: s of wall time the loop waits for events at most while paused (bounds shutdown latency).
 IDLE_WAIT = 0.05
 #: Events are served at most every SPIN_SHARE x the cost of one executor spin: rclpy's
-#: spin_once walks every subscription and service (about 0.15 ms for a small scene, 3.7 ms
+#: spin_once walks every subscription and service (about 0.13 ms for a small scene, 2.8 ms
 #: with 1000 wrench topics), so serving events after every step would cost more than the
 #: physics in large scenes; this keeps event handling below 1 / SPIN_SHARE of the wall time.
 SPIN_SHARE = 4.0
