@@ -18,8 +18,8 @@
 #   ./dev.sh test [pytest args]           run the whole test suite
 #   ./dev.sh bench [--quick]              run the benchmarks (installs bench/requirements.txt:
 #                                         MuJoCo; tables and plots in bench/out/)
-#   ./dev.sh python [ARGS]                python in the environment, e.g. one benchmark:
-#                                         ./dev.sh python bench/node.py
+#   ./dev.sh python [ARGS]                python in the environment (with bench/requirements.txt),
+#                                         e.g. one benchmark: ./dev.sh python bench/node.py
 #   ./dev.sh setup                        set up only
 set -euo pipefail
 
