@@ -252,6 +252,23 @@ def test_a_bad_schedule_is_refused_before_anything_runs(tmp_path, capsys, text, 
     assert re.search(r'bad_schedule\.yaml: ' + message, err), err
 
 
+def test_each_reset_moves_the_last_step_one_dt_later(tmp_path, capsys):
+    # A reset stamps the initial state one step after the last (time runs on): after a
+    # reset at 0.5 s the 1000 steps of a 1 s run end with one starting at 1.000 s, so an
+    # input at 1.0 s is applied (and written), one at 1.002 s is refused.
+    schedule = tmp_path / 'schedule.yaml'
+    text = ('duration: 1.0\nevents: [{at: 0.5, reset: true}, '
+            '{at: AT, wrench: {body: bob, force: [1.0, 0.0, 0.0]}}]\n')
+    schedule.write_text(text.replace('AT', '1.0'))
+    assert main([str(SCENE), '--schedule', str(schedule), '--bag', str(tmp_path / 'a')]) == 0
+    with Reader(tmp_path / 'a') as reader:
+        stamps = [t for c, t, _ in reader.messages() if c.topic.endswith('/bob/wrench')]
+    assert stamps == [1_000_000_000]
+    schedule.write_text(text.replace('AT', '1.002'))
+    assert main([str(SCENE), '--schedule', str(schedule), '--bag', str(tmp_path / 'b')]) == 2
+    assert "the wrench at t = 1.002 s comes after the run's last step" in capsys.readouterr().err
+
+
 def test_the_readme_command_runs_through_the_console_script(tmp_path):
     from ros_harness import executable
     done = subprocess.run([str(executable('experiment')), str(SCENE), '--schedule',

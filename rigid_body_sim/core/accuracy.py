@@ -35,7 +35,9 @@ The default for ``rkmk4`` uses both, each where it is cheaper (measured with
 and checked by the embedded pair (5 stages, where doubling's 1 + 2 sub-steps
 cost 12); when that estimate misses, the result serves as doubling's coarse run
 and the step goes on by doubling, and so do the next ones until doubling says
-one sub-step would do again. The embedded estimate alone over-resolves tight
+one sub-step would do again (after a miss, the check waits 1, 2, 4 ... up to 64
+steps, so that a scene where the embedded estimate misses by a little does not
+pay for a check every other step). The embedded estimate alone over-resolves tight
 tolerances: it goes as ``h³`` where the kept error goes as ``h⁴``, so at 1e-9
 the pendulum takes 149 sub-steps a step by it and 32 by doubling. The
 splittings have no embedded pair and always use doubling.
@@ -163,8 +165,9 @@ class ErrorControl:
         self.misses = 0
         self.steps = 0
         self.worst = 0.0
-        self.redone = 0
         self._try_embedded = True
+        self._wait = 0        # steps by doubling before the next embedded check
+        self._backoff = 1     # the wait after the next failed check
 
     def report(self) -> AccuracyReport:
         """Return what the knob did so far."""
@@ -181,18 +184,28 @@ class ErrorControl:
         elif self.k == 1 and self._try_embedded:
             # One sub-step, checked by the embedded pair (5 stages instead of the 12 of
             # doubling's 1 + 2 sub-steps); when that estimate misses, the result is
-            # doubling's coarse run and nothing is lost.
+            # doubling's coarse run, and the miss cost one stage.
             error = np.zeros(1)
             new = _advance(integrator, state, dt, t_end, 1, error)
             estimate, k = float(error[0]), 1
             if estimate > self.tolerance:
+                # The embedded estimate is the larger (third order): it can miss where
+                # doubling says one sub-step does. Each miss in a row doubles the steps
+                # (up to 64) before the next check, so they do not recur every step.
                 self._try_embedded = False
+                self._wait, self._backoff = self._backoff, min(2 * self._backoff, 64)
                 new, estimate, k = self._doubling(integrator, state, dt, t_end, new)
+            else:
+                self._backoff = 1
         else:
             new, estimate, k = self._doubling(integrator, state, dt, t_end)
-            # Back to the embedded check once doubling says one sub-step would do.
-            self._try_embedded = self.k == 1 and estimate * 2.0 ** (integrator.order + 1) \
-                < self.tolerance
+            # Back to the embedded check once doubling says one sub-step would do (and the
+            # wait after a miss is over).
+            if self.k == 1 and estimate * 2.0 ** (integrator.order + 1) < self.tolerance:
+                if self._wait > 0:
+                    self._wait -= 1
+                else:
+                    self._try_embedded = True
         self.steps += 1
         if estimate > self.tolerance:
             self.misses += 1
@@ -210,7 +223,6 @@ class ErrorControl:
             estimate = float(error[0])
             if estimate <= self.tolerance or k >= self.budget:
                 break
-            self.redone += 1
             k = min(self.budget, max(k + 1, _needed(k, estimate, self.tolerance * self.SAFETY,
                                                     order)))
         # The next step starts where this estimate says (fewer sub-steps if it allows).

@@ -21,7 +21,8 @@ Parameters array ``par`` (float64)
 regularization, closing, max_rotation, max_substeps]`` (see
 :class:`.solver.ConstraintSolver` and :class:`.integrators.Integrator`).
 
-Work counts (``counts``, int64, incremented): the slots below.
+Work counts (``counts``: the simulation's int64 tally of work counters, which
+the kernels add to; see :class:`.dynamics.Dynamics`): the slots below.
 """
 
 from __future__ import annotations
@@ -647,7 +648,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
         # is, per body, the right Jacobian of exp at its rotation u over the drift: an
         # impulse changes u by δu and the end orientation by J_r(u) δu, not by δu.
         # For an anisotropic body D is carried through its rotor flows (which also
-        # turn L): with D the iteration is Newton's method, quadratic.
+        # turn L): with D the first iteration is Newton's method.
         # A factorization serves the later iterations while they converge fast: their
         # matrices differ from it by as much as the configuration moved since (the
         # size of the corrections), and the iteration stays Newton's to that order.
@@ -812,8 +813,8 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         Written: the multipliers of the last acceleration-level solve.
     c_valid : bool
         The workspace's current geometry is that of ``pos0, quat0``.
-    counts : ndarray of int64, shape (N_COUNTS,)
-        Work counts, incremented.
+    counts : ndarray of int64, shape (N_COUNTS,) or longer
+        The work tally (slots above), added to.
     err : ndarray, shape (1,) or (0,)
         ``RKMK4`` with length 1: ``err[0]`` is raised to the largest embedded error
         estimate per unit time of the (sub)steps kept; ignored by the splittings.

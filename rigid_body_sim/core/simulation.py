@@ -220,7 +220,8 @@ class Simulation:
             old.estimator if old is not None else None)
         control = ErrorControl(tolerance, budget, estimator)
         if self._control is not None:   # keep the sub-step count and the tallies
-            for key in ('k', 'estimate', 'last_k', 'misses', 'steps', 'worst', 'redone'):
+            for key in ('k', 'estimate', 'last_k', 'misses', 'steps', 'worst', '_try_embedded',
+                        '_wait', '_backoff'):
                 setattr(control, key, getattr(self._control, key))
         self._control = control
 

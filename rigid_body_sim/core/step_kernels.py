@@ -26,8 +26,8 @@ changes, never per step)
     Bit ``HAS_POSITION_FORCES``: a kick has something to add (gravity or an
     active wrench); bit ``HAS_DAMPING``: damping acts.
 
-Work counts (``counts``, int64 (5,), incremented)
--------------------------------------------------
+Work counts (``counts``: the simulation's int64 tally; its first five slots)
+---------------------------------------------------------------------------
 ``RHS`` full right-hand sides, ``KICK`` kick evaluations (position-dependent
 wrenches), ``GYRO`` bodies whose gyroscopic term or free-rotor sub-flow was
 computed, ``ROT`` orientations updated by an exponential map, ``FLOW`` exact
@@ -437,8 +437,8 @@ def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
         The splittings' last kick (first same as last); unused by ``RKMK4``.
     kick_valid : bool
         ``kick`` was evaluated at ``pos, quat``.
-    counts : ndarray of int64, shape (5,)
-        Work counts, incremented.
+    counts : ndarray of int64, shape (5,) or longer
+        The work tally (its first five slots), added to.
     err : ndarray, shape (1,) or (0,)
         ``RKMK4`` with length 1: ``err[0]`` is raised to the step's embedded
         error estimate per unit time (:func:`rkmk4_embedded_error`); ignored by

@@ -251,10 +251,22 @@ def _check_names(events: list, present: list, items: list) -> None:
 
 
 def _after_the_run(events: list, duration: float, dt: float) -> list:
-    """Return the inputs a run would never apply: those after the start of its last step."""
+    """
+    Return the inputs a run would never apply: those after the start of its last step.
+
+    The run takes ``round(duration / dt)`` steps; a reset stamps the initial state one
+    step after the last (time runs on), so each reset applied moves the later steps,
+    the last one included, one ``dt`` later.
+    """
     last = (int(round(duration / dt)) - 1) * dt
-    return [e for e in events
-            if not e.release and round(e.at, 9) > last + 1e-9 * max(1.0, abs(last))]
+    late = []
+    for e in sorted(events, key=Event.order):
+        if round(e.at, 9) > last + 1e-9 * max(1.0, abs(last)):
+            if not e.release:
+                late.append(e)
+        elif e.kind == 'reset':
+            last += dt
+    return late
 
 
 def _where(event: Event, items: list) -> str:

@@ -565,10 +565,10 @@ def main(args: Optional[list] = None, stop: Optional[Stop] = None) -> int:
     this module (:mod:`.entry`); without it, it is installed here.
     """
     stop = stop if stop is not None else Stop().install()
-    _use_service_profile()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
+        _use_service_profile()
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         try:
             node = SimNode()
         except SceneError as exc:
@@ -577,12 +577,12 @@ def main(args: Optional[list] = None, stop: Optional[Stop] = None) -> int:
         except SpecError as exc:
             print(f'rigid_body_sim: error: {exc}', file=sys.stderr)
             return 2
-        except StopRequested:
-            print('sim_node: stopped while starting', file=sys.stderr, flush=True)
-            return 0
-        stop.on_stop(node.stop)
+        stop.on_stop(node.stop)   # from here on a signal stops the loop
         node.run()
         node.get_logger().info('shutting down')
+        return 0
+    except StopRequested:
+        print('sim_node: stopped while starting', file=sys.stderr, flush=True)
         return 0
     finally:
         if node is not None:

@@ -359,26 +359,29 @@ def main(argv: Optional[Sequence[str]] = None, stop: Optional[Stop] = None) -> i
     this module (:mod:`.entry`); without it, it is installed here.
     """
     stop = stop if stop is not None else Stop().install()
-    args = _parser().parse_args(rclpy.utilities.remove_ros_args(
-        sys.argv if argv is None else ['record', *argv])[1:])
-    out = Path(args.output)
-    if out.exists():
-        print(f'record: error: {out} exists already; choose a new bag folder',
-              file=sys.stderr)
-        return 2
-    target = '/' + args.node.strip('/')
-    topics = None if args.topics is None else [_resolve(t, target) for t in args.topics]
+    state = {'running': True}
+    node = None
     try:
+        args = _parser().parse_args(rclpy.utilities.remove_ros_args(
+            sys.argv if argv is None else ['record', *argv])[1:])
+        out = Path(args.output)
+        if out.exists():
+            print(f'record: error: {out} exists already; choose a new bag folder',
+                  file=sys.stderr)
+            return 2
+        target = '/' + args.node.strip('/')
+        topics = None if args.topics is None else [_resolve(t, target) for t in args.topics]
         rclpy.init(args=None if argv is None else list(argv),
                    signal_handler_options=SignalHandlerOptions.NO)
         node = Node('rigid_body_sim_record', enable_rosout=False,
                     start_parameter_services=False)
+        stop.on_stop(lambda: state.update(running=False))   # from here on: stop the loop
     except StopRequested:
         print('record: stopped while starting', file=sys.stderr, flush=True)
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
         return 0
-    state = {'running': True}
-    stop.on_stop(lambda: state.update(running=False))
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     try:
