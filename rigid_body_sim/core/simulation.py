@@ -206,9 +206,10 @@ class Simulation:
         Turn the accuracy knob on (a tolerance), change it, or off (None), between steps.
 
         ``budget``: most sub-steps a step may take (default: as before, else
-        1024). ``estimator``: ``'embedded'`` or ``'doubling'`` (default: the
-        integrator's embedded pair where it has one, step doubling otherwise;
-        see :mod:`.accuracy`).
+        1024). ``estimator``: ``'embedded'`` or ``'doubling'`` alone (default:
+        as before, else both where the integrator has an embedded pair, the
+        pair checking steps of one sub-step and doubling beyond, and doubling
+        otherwise; see :mod:`.accuracy`).
         """
         if tolerance is None:
             self._control = None
