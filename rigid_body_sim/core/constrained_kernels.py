@@ -33,8 +33,9 @@ from numba import njit, objmode
 import numpy as np
 
 from .row_kernels import rows_geometry, rows_rates
-from .step_kernels import (damping_flow, drift, GYRO, HAS_DAMPING, KICK, LIE_POISSON4,
-                           normalize_quaternions, position_wrench, quat_exp_multiply, RHS,
+from .step_kernels import (damping_flow, drift, finish_accelerations, HAS_DAMPING, KICK,
+                           LIE_POISSON4, normalize_quaternions, position_wrench,
+                           quat_exp_multiply, RHS,
                            RKMK4, rkmk4_embedded_error, rkmk4_finish, rkmk4_slopes,
                            rkmk4_stage, SYMPLECTIC_EULER)
 from .tree_solve import _lu, _lu_solve_vec, tree_factor, tree_solve
@@ -357,26 +358,9 @@ def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts):
     """
     force, torque, a6 = ws[5], ws[6], ws[4]
     position_wrench(quat, body, gforce, wrench, force, torque)
-    damping = flags & HAS_DAMPING
-    for i in range(quat.shape[0]):
-        for c in range(3):
-            f = force[i, c]
-            t = torque[i, c]
-            if damping:
-                f -= body[i, 5] * vel[i, c]
-                t -= body[i, 6] * om[i, c]
-            a6[i, c] = f
-            a6[i, 3 + c] = t
-        if body[i, 7] != 0.0:
-            w0, w1, w2 = om[i, 0], om[i, 1], om[i, 2]
-            l0, l1, l2 = body[i, 2] * w0, body[i, 3] * w1, body[i, 4] * w2
-            a6[i, 3] -= w1 * l2 - w2 * l1
-            a6[i, 4] -= w2 * l0 - w0 * l2
-            a6[i, 5] -= w0 * l1 - w1 * l0
-            counts[GYRO] += 1
-        for c in range(3):
-            a6[i, c] *= body[i, 1]
-            a6[i, 3 + c] /= body[i, 2 + c]
+    a6[:, :3] = force
+    a6[:, 3:] = torque
+    finish_accelerations(vel, om, body, flags, a6[:, :3], a6[:, 3:], counts)
 
 
 @njit(cache=True)

@@ -126,14 +126,15 @@ def position_wrench(quat: np.ndarray, body: np.ndarray, gforce: np.ndarray,
 
 
 @njit(cache=True)
-def accelerations(quat: np.ndarray, vel: np.ndarray, om: np.ndarray, body: np.ndarray,
-                  gforce: np.ndarray, wrench: np.ndarray, flags: int, acc: np.ndarray,
-                  om_dot: np.ndarray, counts: np.ndarray) -> None:
-    """Free (unconstrained) linear acceleration (n, 3) and dΩ/dt (n, 3): every effect."""
-    n = quat.shape[0]
-    position_wrench(quat, body, gforce, wrench, acc, om_dot)
-    counts[RHS] += 1
-    for i in range(n):
+def finish_accelerations(vel: np.ndarray, om: np.ndarray, body: np.ndarray, flags: int,
+                         acc: np.ndarray, om_dot: np.ndarray, counts: np.ndarray) -> None:
+    """
+    Turn force (world) and torque (principal) into accelerations, in place.
+
+    Adds damping and the gyroscopic term ``−Ω × JΩ`` to the position-dependent
+    force and torque in ``acc, om_dot`` (n, 3), then divides by mass and moments.
+    """
+    for i in range(acc.shape[0]):
         if flags & HAS_DAMPING:
             for a in range(3):
                 acc[i, a] -= body[i, 5] * vel[i, a]
@@ -149,6 +150,16 @@ def accelerations(quat: np.ndarray, vel: np.ndarray, om: np.ndarray, body: np.nd
         for a in range(3):
             acc[i, a] *= body[i, 1]
             om_dot[i, a] /= body[i, 2 + a]
+
+
+@njit(cache=True)
+def accelerations(quat: np.ndarray, vel: np.ndarray, om: np.ndarray, body: np.ndarray,
+                  gforce: np.ndarray, wrench: np.ndarray, flags: int, acc: np.ndarray,
+                  om_dot: np.ndarray, counts: np.ndarray) -> None:
+    """Free (unconstrained) linear acceleration (n, 3) and dΩ/dt (n, 3): every effect."""
+    position_wrench(quat, body, gforce, wrench, acc, om_dot)
+    counts[RHS] += 1
+    finish_accelerations(vel, om, body, flags, acc, om_dot, counts)
 
 
 @njit(cache=True)
