@@ -272,7 +272,8 @@ def factor_arrays(structure: TreeStructure) -> tuple:
         ``(S, piv, P, Q, B, W, E, tmp)``, all zeroed, with ``ng = n_groups``,
         ``K = block_size``, ``n = n_bodies``:
 
-        * ``S`` (ng, K, K) float64: LU factors of the pivot blocks (unit lower part);
+        * ``S`` (ng, K, K) float64: LU factors of the pivot blocks (unit lower part;
+          the diagonal holds the reciprocals of U's diagonal);
         * ``piv`` (ng, K) int64: their row interchanges (row ``j`` swapped with ``piv[j]``);
         * ``P`` (ng, 6, K) float64: ``W_p H_xpᵀ``;
         * ``Q`` (ng, K, 6) float64: ``S_x⁻¹ G_xp W_p``;
@@ -342,32 +343,24 @@ def _lu_solve_vec(d, piv, s, x):
         x[j] = v / d[j, j]
 
 
-@njit(cache=True)
-def _lu_solve_col(d, piv, s, x, col):
-    """Overwrite column ``col`` of ``x[:s]`` with ``d⁻¹ x`` (factors from :func:`_lu`)."""
-    for j in range(s):
-        p = piv[j]
-        if p != j:
-            t = x[j, col]
-            x[j, col] = x[p, col]
-            x[p, col] = t
-    for j in range(s):
-        v = x[j, col]
-        for c in range(j):
-            v -= d[j, c] * x[c, col]
-        x[j, col] = v
-    for j in range(s - 1, -1, -1):
-        v = x[j, col]
-        for c in range(j + 1, s):
-            v -= d[j, c] * x[c, col]
-        x[j, col] = v / d[j, j]
-
-
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, Gb, Ha, Hb,
                 minv6, reg, S, piv, P, Q, B, W, symmetric=False):
     """
     Factorize ``A + reg I = G M⁻¹ Hᵀ + reg I`` along the tree (allocation-free).
+
+    A first pass copies each group's row blocks into ``B`` (``G_xc, G_xp, H_xc,
+    H_xp``, zero child blocks for a world group) and finds ``max |diag A|``; a
+    second pass eliminates the groups in order (see the module docstring): ``P =
+    W_p H_xpᵀ``, the pivot block ``S_x``, its LU with partial pivoting (as
+    :func:`_lu`, but the reciprocals of U's diagonal are stored), ``Q = S_x⁻¹
+    G_xp W_p`` and the rank-k update ``W_p −= P Q``.
+
+    Written for speed under numba: every array is indexed in full (a view such as
+    ``W[p]`` costs two atomic reference counts per use), the loops over the six
+    body coordinates have the literal length 6 (unrolled), a row of 6 reused
+    across a loop is held in scalars, and 6-term dot products are summed
+    pairwise (shorter dependency chains; plain IEEE arithmetic, no fastmath).
 
     Parameters
     ----------
@@ -386,8 +379,8 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
         are the factors used by :func:`tree_solve`).
     symmetric : bool
         ``H`` is ``G`` (the caller's promise): the pivot blocks and mobilities are
-        then symmetric, ``S_x⁻¹ G_xp W_p = S_x⁻¹ P_xᵀ``, and half of each symmetric
-        product is computed and mirrored (about a third less work).
+        then symmetric, ``S_x⁻¹ G_xp W_p = S_x⁻¹ P_xᵀ``, and the upper half of each
+        symmetric product is computed and mirrored (``W`` stays exactly symmetric).
 
     Returns
     -------
@@ -397,12 +390,12 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
 
     """
     ng = group_child.shape[0]
-    n = minv6.shape[0]
-    for i in range(n):
+    for i in range(minv6.shape[0]):
         for r in range(6):
-            for c in range(6):
-                W[i, r, c] = 0.0
+            for t in range(6):
+                W[i, r, t] = 0.0
             W[i, r, r] = minv6[i, r]
+    # B[x] = (G_xc, G_xp, H_xc, H_xp), and the scale max |diag A|.
     scale = 0.0
     for x in range(ng):
         r0 = group_ptr[x]
@@ -413,23 +406,36 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
             r = group_rows[r0 + j]
             side = row_side[r]
             diag = 0.0
-            for t in range(6):
-                if side == 0:
-                    gp, hp, gc, hc = Ga[r, t], Ha[r, t], Gb[r, t], Hb[r, t]
-                elif side == 1:
-                    gp, hp, gc, hc = Gb[r, t], Hb[r, t], Ga[r, t], Ha[r, t]
-                else:
-                    gp, hp, gc, hc = Ga[r, t] + Gb[r, t], Ha[r, t] + Hb[r, t], 0.0, 0.0
-                if c < 0:
-                    gc = 0.0
-                    hc = 0.0
-                else:
+            if side == 2:   # a[r] == b[r]: one block, no child
+                for t in range(6):
+                    gp = Ga[r, t] + Gb[r, t]
+                    hp = Ha[r, t] + Hb[r, t]
+                    diag += gp * minv6[p, t] * hp
+                    B[x, 0, j, t] = 0.0
+                    B[x, 1, j, t] = gp
+                    B[x, 2, j, t] = 0.0
+                    B[x, 3, j, t] = hp
+            elif c < 0:     # to the world: no child block
+                for t in range(6):
+                    gp = Ga[r, t] if side == 0 else Gb[r, t]
+                    hp = Ha[r, t] if side == 0 else Hb[r, t]
+                    diag += gp * minv6[p, t] * hp
+                    B[x, 0, j, t] = 0.0
+                    B[x, 1, j, t] = gp
+                    B[x, 2, j, t] = 0.0
+                    B[x, 3, j, t] = hp
+            else:
+                for t in range(6):
+                    if side == 0:
+                        gp, hp, gc, hc = Ga[r, t], Ha[r, t], Gb[r, t], Hb[r, t]
+                    else:
+                        gp, hp, gc, hc = Gb[r, t], Hb[r, t], Ga[r, t], Ha[r, t]
                     diag += gc * minv6[c, t] * hc
-                diag += gp * minv6[p, t] * hp
-                B[x, 0, j, t] = gc
-                B[x, 1, j, t] = gp
-                B[x, 2, j, t] = hc
-                B[x, 3, j, t] = hp
+                    diag += gp * minv6[p, t] * hp
+                    B[x, 0, j, t] = gc
+                    B[x, 1, j, t] = gp
+                    B[x, 2, j, t] = hc
+                    B[x, 3, j, t] = hp
             if abs(diag) > scale:
                 scale = abs(diag)
     floor = 2.220446049250313e-16 * scale if scale > 0.0 else 1e-300
@@ -439,54 +445,115 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
         c = group_child[x]
         p = group_parent[x]
         # P = W_p H_xpᵀ (6 x k); Q temporarily W_c H_xcᵀ transposed (k x 6).
-        for i in range(6):
-            for j in range(k):
-                v = 0.0
-                for t in range(6):
-                    v += W[p, i, t] * B[x, 3, j, t]
-                P[x, i, j] = v
-        if c >= 0:
-            for j in range(k):
+        for j in range(k):
+            h0, h1, h2 = B[x, 3, j, 0], B[x, 3, j, 1], B[x, 3, j, 2]
+            h3, h4, h5 = B[x, 3, j, 3], B[x, 3, j, 4], B[x, 3, j, 5]
+            for i in range(6):
+                P[x, i, j] = ((W[p, i, 0] * h0 + W[p, i, 1] * h1)
+                              + (W[p, i, 2] * h2 + W[p, i, 3] * h3)
+                              + (W[p, i, 4] * h4 + W[p, i, 5] * h5))
+            if c >= 0:
+                h0, h1, h2 = B[x, 2, j, 0], B[x, 2, j, 1], B[x, 2, j, 2]
+                h3, h4, h5 = B[x, 2, j, 3], B[x, 2, j, 4], B[x, 2, j, 5]
                 for i in range(6):
-                    v = 0.0
-                    for t in range(6):
-                        v += W[c, i, t] * B[x, 2, j, t]
-                    Q[x, j, i] = v
+                    Q[x, j, i] = ((W[c, i, 0] * h0 + W[c, i, 1] * h1)
+                                  + (W[c, i, 2] * h2 + W[c, i, 3] * h3)
+                                  + (W[c, i, 4] * h4 + W[c, i, 5] * h5))
         # Pivot block S = reg I + G_xp W_p H_xpᵀ + G_xc W_c H_xcᵀ.
         for i in range(k):
+            g0, g1, g2 = B[x, 1, i, 0], B[x, 1, i, 1], B[x, 1, i, 2]
+            g3, g4, g5 = B[x, 1, i, 3], B[x, 1, i, 4], B[x, 1, i, 5]
+            d0, d1, d2 = B[x, 0, i, 0], B[x, 0, i, 1], B[x, 0, i, 2]
+            d3, d4, d5 = B[x, 0, i, 3], B[x, 0, i, 4], B[x, 0, i, 5]
             for j in range(i if symmetric else 0, k):
-                v = reg if i == j else 0.0
-                for t in range(6):
-                    v += B[x, 1, i, t] * P[x, t, j]
+                v = ((g0 * P[x, 0, j] + g1 * P[x, 1, j]) + (g2 * P[x, 2, j] + g3 * P[x, 3, j])
+                     + (g4 * P[x, 4, j] + g5 * P[x, 5, j]))
                 if c >= 0:
-                    for t in range(6):
-                        v += B[x, 0, i, t] * Q[x, j, t]
+                    v += ((d0 * Q[x, j, 0] + d1 * Q[x, j, 1]) + (d2 * Q[x, j, 2] + d3 * Q[x, j, 3])
+                          + (d4 * Q[x, j, 4] + d5 * Q[x, j, 5]))
+                if i == j:
+                    v += reg
                 S[x, i, j] = v
                 if symmetric:
                     S[x, j, i] = v
-        v = _lu(S[x], piv[x], k, floor)
-        if v < smallest:
-            smallest = v
-        # Q = S⁻¹ G_xp W_p (k x 6), then W_p −= P Q.
-        for i in range(k):
-            for j in range(6):
-                if symmetric:
-                    Q[x, i, j] = P[x, j, i]   # G_xp W_p = (W_p G_xpᵀ)ᵀ, W_p symmetric
-                else:
-                    v = 0.0
-                    for t in range(6):
-                        v += B[x, 1, i, t] * W[p, t, j]
-                    Q[x, i, j] = v
-        for j in range(6):
-            _lu_solve_col(S[x], piv[x], k, Q[x], j)
-        for i in range(6):
-            for j in range(i if symmetric else 0, 6):
-                v = 0.0
+        # LU of S_x in place with partial pivoting, as _lu; U's diagonal is stored inverted.
+        for j in range(k):
+            q = j
+            best = abs(S[x, j, j])
+            for r in range(j + 1, k):
+                v = abs(S[x, r, j])
+                if v > best:
+                    best = v
+                    q = r
+            piv[x, j] = q
+            if q != j:
                 for t in range(k):
-                    v += P[x, i, t] * Q[x, t, j]
-                W[p, i, j] -= v
-                if symmetric and j != i:
-                    W[p, j, i] -= v
+                    v = S[x, j, t]
+                    S[x, j, t] = S[x, q, t]
+                    S[x, q, t] = v
+            pivot = S[x, j, j]
+            if abs(pivot) < smallest:
+                smallest = abs(pivot)
+            if pivot == 0.0:
+                pivot = floor
+            inv = 1.0 / pivot
+            S[x, j, j] = inv
+            for r in range(j + 1, k):
+                lrj = S[x, r, j] * inv
+                S[x, r, j] = lrj
+                if lrj != 0.0:
+                    for t in range(j + 1, k):
+                        S[x, r, t] -= lrj * S[x, j, t]
+        # Q = G_xp W_p (k x 6) ...
+        if symmetric:
+            for i in range(k):
+                for j in range(6):
+                    Q[x, i, j] = P[x, j, i]   # G_xp W_p = (W_p G_xpᵀ)ᵀ, W_p symmetric
+        else:
+            for i in range(k):
+                g0, g1, g2 = B[x, 1, i, 0], B[x, 1, i, 1], B[x, 1, i, 2]
+                g3, g4, g5 = B[x, 1, i, 3], B[x, 1, i, 4], B[x, 1, i, 5]
+                for j in range(6):
+                    Q[x, i, j] = ((g0 * W[p, 0, j] + g1 * W[p, 1, j])
+                                  + (g2 * W[p, 2, j] + g3 * W[p, 3, j])
+                                  + (g4 * W[p, 4, j] + g5 * W[p, 5, j]))
+        # ... then Q = S_x⁻¹ Q, the six columns at once (rows interchanged, L, then U).
+        for j in range(k):
+            q = piv[x, j]
+            if q != j:
+                for t in range(6):
+                    v = Q[x, j, t]
+                    Q[x, j, t] = Q[x, q, t]
+                    Q[x, q, t] = v
+        for j in range(1, k):
+            for i in range(j):
+                lji = S[x, j, i]
+                for t in range(6):
+                    Q[x, j, t] -= lji * Q[x, i, t]
+        for j in range(k - 1, -1, -1):
+            for i in range(j + 1, k):
+                uji = S[x, j, i]
+                for t in range(6):
+                    Q[x, j, t] -= uji * Q[x, i, t]
+            inv = S[x, j, j]
+            for t in range(6):
+                Q[x, j, t] *= inv
+        # W_p −= P Q, one rank-one term per row of the group.
+        if symmetric:
+            for t in range(k):
+                for i in range(6):
+                    pit = P[x, i, t]
+                    for j in range(i, 6):
+                        W[p, i, j] -= pit * Q[x, t, j]
+            for i in range(1, 6):
+                for j in range(i):
+                    W[p, i, j] = W[p, j, i]
+        else:
+            for t in range(k):
+                for i in range(6):
+                    pit = P[x, i, t]
+                    for j in range(6):
+                        W[p, i, j] -= pit * Q[x, t, j]
     if ng == 0:
         return np.inf
     if scale == 0.0:
@@ -494,11 +561,16 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
     return smallest / scale
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def tree_solve(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp, rhs,
                out):
     """
     Solve ``(A + reg I) x = rhs`` with the factors of :func:`tree_factor` (allocation-free).
+
+    One pass forward over the groups and one backward (see the module docstring).
+    As in :func:`tree_factor`, arrays are indexed in full (no views), and the
+    6-vectors ``e_p``, ``e_c``, ``f_p`` and the group's contributions to ``e_p``,
+    ``f_p``, ``f_c`` are held in scalars, stored once per group.
 
     Parameters
     ----------
@@ -527,46 +599,94 @@ def tree_solve(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B
         k = group_ptr[x + 1] - r0
         c = group_child[x]
         p = group_parent[x]
+        e0, e1, e2 = E[0, p, 0], E[0, p, 1], E[0, p, 2]
+        e3, e4, e5 = E[0, p, 3], E[0, p, 4], E[0, p, 5]
+        d0 = d1 = d2 = d3 = d4 = d5 = 0.0
+        if c >= 0:
+            d0, d1, d2 = E[0, c, 0], E[0, c, 1], E[0, c, 2]
+            d3, d4, d5 = E[0, c, 3], E[0, c, 4], E[0, c, 5]
         for j in range(k):
-            v = rhs[group_rows[r0 + j]]
-            for t in range(6):
-                v -= B[x, 1, j, t] * E[0, p, t]
+            v = rhs[group_rows[r0 + j]] - ((B[x, 1, j, 0] * e0 + B[x, 1, j, 1] * e1)
+                                           + (B[x, 1, j, 2] * e2 + B[x, 1, j, 3] * e3)
+                                           + (B[x, 1, j, 4] * e4 + B[x, 1, j, 5] * e5))
             if c >= 0:
-                for t in range(6):
-                    v -= B[x, 0, j, t] * E[0, c, t]
+                v -= ((B[x, 0, j, 0] * d0 + B[x, 0, j, 1] * d1)
+                      + (B[x, 0, j, 2] * d2 + B[x, 0, j, 3] * d3)
+                      + (B[x, 0, j, 4] * d4 + B[x, 0, j, 5] * d5))
             tmp[j] = v
-        _lu_solve_vec(S[x], piv[x], k, tmp)
+        # tmp = S_x⁻¹ tmp: rows interchanged, L (unit lower), U (inverted diagonal).
         for j in range(k):
-            out[group_rows[r0 + j]] = tmp[j]
-        for t in range(6):
-            v = 0.0
-            for j in range(k):
-                v += P[x, t, j] * tmp[j]
-            E[0, p, t] += v
+            q = piv[x, j]
+            if q != j:
+                v = tmp[j]
+                tmp[j] = tmp[q]
+                tmp[q] = v
+        for j in range(1, k):
+            v = tmp[j]
+            for i in range(j):
+                v -= S[x, j, i] * tmp[i]
+            tmp[j] = v
+        for j in range(k - 1, -1, -1):
+            v = tmp[j]
+            for i in range(j + 1, k):
+                v -= S[x, j, i] * tmp[i]
+            tmp[j] = v * S[x, j, j]
+        a0 = a1 = a2 = a3 = a4 = a5 = 0.0
+        for j in range(k):
+            v = tmp[j]
+            out[group_rows[r0 + j]] = v
+            a0 += P[x, 0, j] * v
+            a1 += P[x, 1, j] * v
+            a2 += P[x, 2, j] * v
+            a3 += P[x, 3, j] * v
+            a4 += P[x, 4, j] * v
+            a5 += P[x, 5, j] * v
+        E[0, p, 0] = e0 + a0
+        E[0, p, 1] = e1 + a1
+        E[0, p, 2] = e2 + a2
+        E[0, p, 3] = e3 + a3
+        E[0, p, 4] = e4 + a4
+        E[0, p, 5] = e5 + a5
     # Backward: x_x = v_x − Q_x f_p, f_p += H_xpᵀ x_x, f_c += H_xcᵀ x_x.
     for x in range(ng - 1, -1, -1):
         r0 = group_ptr[x]
         k = group_ptr[x + 1] - r0
         c = group_child[x]
         p = group_parent[x]
+        f0, f1, f2 = E[1, p, 0], E[1, p, 1], E[1, p, 2]
+        f3, f4, f5 = E[1, p, 3], E[1, p, 4], E[1, p, 5]
+        a0 = a1 = a2 = a3 = a4 = a5 = 0.0   # H_xpᵀ x_x
+        b0 = b1 = b2 = b3 = b4 = b5 = 0.0   # H_xcᵀ x_x (zero blocks without a child)
         for j in range(k):
-            v = out[group_rows[r0 + j]]
-            for t in range(6):
-                v -= Q[x, j, t] * E[1, p, t]
-            tmp[j] = v
-        for j in range(k):
-            out[group_rows[r0 + j]] = tmp[j]
-        for t in range(6):
-            v = 0.0
-            for j in range(k):
-                v += B[x, 3, j, t] * tmp[j]
-            E[1, p, t] += v
+            r = group_rows[r0 + j]
+            v = out[r] - ((Q[x, j, 0] * f0 + Q[x, j, 1] * f1) + (Q[x, j, 2] * f2 + Q[x, j, 3] * f3)
+                          + (Q[x, j, 4] * f4 + Q[x, j, 5] * f5))
+            out[r] = v
+            a0 += B[x, 3, j, 0] * v
+            a1 += B[x, 3, j, 1] * v
+            a2 += B[x, 3, j, 2] * v
+            a3 += B[x, 3, j, 3] * v
+            a4 += B[x, 3, j, 4] * v
+            a5 += B[x, 3, j, 5] * v
+            b0 += B[x, 2, j, 0] * v
+            b1 += B[x, 2, j, 1] * v
+            b2 += B[x, 2, j, 2] * v
+            b3 += B[x, 2, j, 3] * v
+            b4 += B[x, 2, j, 4] * v
+            b5 += B[x, 2, j, 5] * v
+        E[1, p, 0] = f0 + a0
+        E[1, p, 1] = f1 + a1
+        E[1, p, 2] = f2 + a2
+        E[1, p, 3] = f3 + a3
+        E[1, p, 4] = f4 + a4
+        E[1, p, 5] = f5 + a5
         if c >= 0:
-            for t in range(6):
-                v = 0.0
-                for j in range(k):
-                    v += B[x, 2, j, t] * tmp[j]
-                E[1, c, t] += v
+            E[1, c, 0] += b0
+            E[1, c, 1] += b1
+            E[1, c, 2] += b2
+            E[1, c, 3] += b3
+            E[1, c, 4] += b4
+            E[1, c, 5] += b5
 
 
 class TreeSolver:
