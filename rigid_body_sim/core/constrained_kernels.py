@@ -33,11 +33,11 @@ from numba import njit, objmode
 import numpy as np
 
 from .row_kernels import rows_geometry, rows_rates
-from .step_kernels import (damping_flow, drift, finish_accelerations, HAS_DAMPING, KICK,
-                           LIE_POISSON4, normalize_quaternions, position_wrench,
-                           quat_exp_multiply, RHS,
-                           RKMK4, rkmk4_embedded_error, rkmk4_finish, rkmk4_slopes,
-                           rkmk4_stage, SYMPLECTIC_EULER)
+from .step_kernels import (all_finite, damping_flow, drift, finish_accelerations,
+                           HAS_DAMPING, KICK, LIE_POISSON4, normalize_quaternions,
+                           position_wrench, positive_product, quat_exp_multiply, raw,
+                           raw_slice, RHS, RKMK4, rkmk4_embedded_error, rkmk4_finish,
+                           rkmk4_slopes, rkmk4_stage, SYMPLECTIC_EULER)
 from .tree_solve import _lu, _lu_solve_vec, tree_factor, tree_solve
 
 # Counter slots beyond step_kernels' five.
@@ -465,14 +465,8 @@ def _right_jacobians(quat_s, quat_e, Jr):
     """
     for i in range(quat_s.shape[0]):
         # q = conj(q_s) ⊗ q_e
-        ax, ay, az, aw = -quat_s[i, 0], -quat_s[i, 1], -quat_s[i, 2], quat_s[i, 3]
-        bx, by, bz, bw = quat_e[i, 0], quat_e[i, 1], quat_e[i, 2], quat_e[i, 3]
-        x = aw * bx + ax * bw + ay * bz - az * by
-        y = aw * by - ax * bz + ay * bw + az * bx
-        z = aw * bz + ax * by - ay * bx + az * bw
-        w = aw * bw - ax * bx - ay * by - az * bz
-        if w < 0.0:
-            x, y, z, w = -x, -y, -z, -w
+        x, y, z, w = positive_product(-quat_s[i, 0], -quat_s[i, 1], -quat_s[i, 2], quat_s[i, 3],
+                                      quat_e[i, 0], quat_e[i, 1], quat_e[i, 2], quat_e[i, 3])
         s = math.sqrt(x * x + y * y + z * z)
         theta = 2.0 * math.atan2(s, w)
         k = theta / s if s > 0.0 else 2.0 / w
@@ -803,6 +797,11 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         ``RKMK4`` with length 1: ``err[0]`` is raised to the largest embedded error
         estimate per unit time of the (sub)steps kept; ignored by the splittings.
 
+    Returns
+    -------
+    bool
+        Every entry of the new state is finite.
+
     """
     n = pos0.shape[0]
     max_rot = par[P_MAX_ROT]
@@ -842,6 +841,7 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         k = min(2 * k, max_sub)
         valid0 = False   # the failed attempt overwrote the workspace's geometry
     normalize_quaternions(quat)
+    return all_finite(pos, quat, vel, om)
 
 
 def workspace(n: int, m: int, body: np.ndarray) -> tuple:
@@ -923,27 +923,22 @@ def pack(rows: tuple, ws: tuple, dense: tuple, trees: tuple) -> tuple:
 
 @njit(cache=True)
 def _v1(buf, L, k):
-    o = L[k, 0]
-    return buf[o:o + L[k, 1]]
+    return raw_slice(buf, L[k, 0], (L[k, 1],))
 
 
 @njit(cache=True)
 def _v2(buf, L, k):
-    o = L[k, 0]
-    return buf[o:o + L[k, 1] * L[k, 2]].reshape((L[k, 1], L[k, 2]))
+    return raw_slice(buf, L[k, 0], (L[k, 1], L[k, 2]))
 
 
 @njit(cache=True)
 def _v3(buf, L, k):
-    o = L[k, 0]
-    return buf[o:o + L[k, 1] * L[k, 2] * L[k, 3]].reshape((L[k, 1], L[k, 2], L[k, 3]))
+    return raw_slice(buf, L[k, 0], (L[k, 1], L[k, 2], L[k, 3]))
 
 
 @njit(cache=True)
 def _v4(buf, L, k):
-    o = L[k, 0]
-    size = L[k, 1] * L[k, 2] * L[k, 3] * L[k, 4]
-    return buf[o:o + size].reshape((L[k, 1], L[k, 2], L[k, 3], L[k, 4]))
+    return raw_slice(buf, L[k, 0], (L[k, 1], L[k, 2], L[k, 3], L[k, 4]))
 
 
 @njit(cache=True)
@@ -961,21 +956,26 @@ def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
     """
     :func:`constrained_step` with a component's arrays packed by :func:`pack`.
 
-    ``key, floats, ints, layout`` replace ``rows, watch, tree, dense, ws``.
+    ``key, floats, ints, layout`` replace ``rows, watch, tree, dense, ws``. Returns
+    whether every entry of the new state is finite.
     """
     f, i, L = floats, ints, layout
+    pos0, quat0, vel0, om0 = raw(pos0), raw(quat0), raw(vel0), raw(om0)
+    pos, quat, vel, om = raw(pos), raw(quat), raw(vel), raw(om)
+    body, gforce, wrench, par = raw(body), raw(gforce), raw(wrench), raw(par)
+    lam, counts, err = raw(lam), raw(counts), raw(err)
     rows = (_v1(i, L, 0), _v1(i, L, 1), _v1(i, L, 2), _v1(i, L, 3), _v2(f, L, 4), key)
     ws = (_v2(f, L, 5), _v4(f, L, 6), _v2(f, L, 7), _v2(f, L, 8), _v2(f, L, 9),
           _v2(f, L, 10), _v2(f, L, 11), _v2(f, L, 12), _v1(i, L, 13), _v1(i, L, 14))
     if use_tree:
         tree = (_tree_views(f, i, L, 25), _tree_views(f, i, L, 38))
-        constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
-                         rows, ws[9], par, True, tree, None, ws, pos, quat, vel, om, lam,
-                         c_valid, counts, err)
+        return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
+                                flags, rows, ws[9], par, True, tree, None, ws, pos, quat,
+                                vel, om, lam, c_valid, counts, err)
     else:
         dense = ((_v2(f, L, 15), _v1(i, L, 16), _v2(f, L, 17), _v1(f, L, 18), _v2(f, L, 19)),
                  (_v2(f, L, 20), _v1(i, L, 21), _v2(f, L, 22), _v1(f, L, 23),
                   _v2(f, L, 24)))
-        constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
-                         rows, ws[9], par, False, None, dense, ws, pos, quat, vel, om, lam,
-                         c_valid, counts, err)
+        return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
+                                flags, rows, ws[9], par, False, None, dense, ws, pos, quat,
+                                vel, om, lam, c_valid, counts, err)

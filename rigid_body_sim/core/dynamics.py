@@ -158,15 +158,20 @@ class Dynamics:
         self.version = 0
         self._kernel_model: Optional[tuple] = None
         self._submodels: dict = {}
+        # Kernel work of whole-scene steps not yet added to the effects' counters:
+        # (the kernel model it was done with, the tally before it); see defer_effect_work.
+        self._unsettled: Optional[tuple] = None
 
     def add_effect(self, effect: Effect) -> None:
         """Add an (already bound) effect between steps."""
         check_kernel_effect(effect, 'effect')
+        self.settle_effect_work()
         self.effects.append(effect)
         self.changed()
 
     def changed(self) -> None:
         """Mark the model as changed, which invalidates cached evaluations."""
+        self.settle_effect_work()
         self.version += 1
 
     def kernel_model(self, time_mid: float) -> tuple:
@@ -267,6 +272,39 @@ class Dynamics:
                 calls = 0
             effect.evaluations += calls
             effect.body_evaluations += calls * bodies
+
+    def defer_effect_work(self) -> Optional[list]:
+        """
+        Call before a kernel steps every body with :meth:`kernel_model`'s arrays.
+
+        The effects' counters are a linear function of the tallied right-hand
+        sides, kicks and flows for as long as the model stays the same, so the
+        work of a run of such steps is added to them at once, when the model
+        changes or the counters are read (:meth:`settle_effect_work`), instead of
+        after every step. Returns None then; for a model that depends on the
+        time (a wrench table no Simulation switches), the tally before the call,
+        for :meth:`count_effect_work_since` right after it.
+        """
+        key = self._kernel_model
+        pending = self._unsettled
+        if key is not None and key[1] is None:
+            if pending is None or pending[0] is not key:
+                self.settle_effect_work()
+                self._unsettled = (key, self.tally.tolist())
+            return None
+        self.settle_effect_work()
+        return self.tally.tolist()
+
+    def settle_effect_work(self) -> None:
+        """Add the deferred kernel work (:meth:`defer_effect_work`) to the effects' counters."""
+        pending = self._unsettled
+        if pending is not None:
+            self._unsettled = None
+            self.count_effect_work_since(pending[1])
+
+    def discard_effect_work(self) -> None:
+        """Drop the deferred kernel work (the tally was reset or restored under it)."""
+        self._unsettled = None
 
     def count_effect_work_since(self, before: list, acting: Optional[list] = None) -> None:
         """

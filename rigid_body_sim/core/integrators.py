@@ -149,6 +149,11 @@ class Integrator:
         self._kick_at: Optional[tuple] = None
         self._geometry_at: Optional[tuple] = None
         self._parameters: Optional[tuple] = None
+        # The free-body kernel's workspace (grown to the most bodies it has stepped).
+        self._ws = np.empty(kern.workspace_size(len(dynamics.bodies)))
+        #: Whether the state the last :meth:`step` returned is finite everywhere
+        #: (checked inside the kernels), or None when that step did not check.
+        self.finite: Optional[bool] = None
 
     def step(self, state: State, dt: float, t_end: Optional[float] = None,
              error: Optional[np.ndarray] = None) -> State:
@@ -179,10 +184,11 @@ class Integrator:
                  and at[2] is state.quat_principal_world)
         # The kernel adds its work to the tally that holds the work counters.
         tally = dyn.tally
-        before = tally.tolist() if dyn.effects else None
-        valid = kern.free_step(self.KERNEL, pos, quat, vel, om, dt, body, gforce, wrench, flags,
-                               self._kick_buffer, valid, tally, err)
-        self._kick_at = (dyn.version, pos, quat) if valid else None
+        before = dyn.defer_effect_work() if dyn.effects else None
+        code = kern.free_step(self.KERNEL, pos, quat, vel, om, dt, body, gforce, wrench, flags,
+                              self._kick_buffer, valid, tally, err, self._ws)
+        self._kick_at = (dyn.version, pos, quat) if code & kern.KICK_VALID else None
+        self.finite = bool(code & kern.FINITE)
         tally[STEPS] += 1
         if before is not None:
             dyn.count_effect_work_since(before)
@@ -200,6 +206,7 @@ class Integrator:
         dyn = self.dynamics
         solver = dyn.solver
         free, components = setup
+        finite = True
         mid = state.time + 0.5 * dt
         whole = not len(free) and len(components) == 1   # one component, every body
         # New arrays (copies: the cheapest fresh arrays; a whole-scene kernel overwrites them).
@@ -217,9 +224,12 @@ class Integrator:
         if len(free):
             body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, free)
             p, q, v, o = pos[free], quat[free], vel[free], om[free]
-            before = tally.tolist() if counting else None
-            kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
-                           np.zeros((len(free), 6)), False, tally, err)
+            if counting:
+                dyn.settle_effect_work()
+                before = tally.tolist()
+            code = kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
+                                  np.zeros((len(free), 6)), False, tally, err, self._ws)
+            finite = bool(code & kern.FINITE)
             pos[free], quat[free], vel[free], om[free] = p, q, v, o
             if counting:
                 dyn.count_effect_work_since(before, acting)
@@ -241,18 +251,26 @@ class Integrator:
                 p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
                 p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
                               np.empty_like(o0))
-            before = tally.tolist() if counting else None
-            ckern.packed_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench, flags,
-                              par, use_tree, *packed, p, q, v, o, lam_c, valid, tally, err)
+            if not counting:
+                before = None
+            elif whole:
+                before = dyn.defer_effect_work()
+            else:
+                dyn.settle_effect_work()
+                before = tally.tolist()
+            finite &= ckern.packed_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
+                                        flags, par, use_tree, *packed, p, q, v, o, lam_c, valid,
+                                        tally, err)
             if whole:
                 dyn.last_multipliers = lam_c
             else:
                 pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
                 lam[rows_global] = lam_c
-            if counting:
+            if before is not None:
                 dyn.count_effect_work_since(before, acting)
         # Each component's workspace now holds the geometry of its new configuration.
         self._geometry_at = (setup, pos, quat)
+        self.finite = finite
         tally[STEPS] += 1
         return State(t_end, pos, quat, vel, om)
 

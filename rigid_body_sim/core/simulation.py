@@ -170,7 +170,9 @@ class Simulation:
             except np.linalg.LinAlgError:
                 # A factorization met non-finite numbers: the step diverged on the way.
                 raise DivergenceError(self.time, self._moving_fastest()) from None
-            if not _finite(new):
+            # A plain step's kernels tell whether the new state is finite.
+            if not (integrator.finite if control is None and integrator.finite is not None
+                    else _finite(new)):
                 bad = _non_finite_bodies(new)
                 raise DivergenceError(self.time, [self.bodies.names[i] for i in bad])
             self.state = new
@@ -239,6 +241,7 @@ class Simulation:
 
     def reset(self) -> None:
         """Back to the initial state; applied wrenches return to the scene's own."""
+        self.dynamics.discard_effect_work()   # the counters restart from zero
         self.state: State = self.bodies.initial_state(self._specs)
         if self._control is not None:
             self._control.reset()
@@ -450,6 +453,7 @@ class Simulation:
         the configuration the next step would reuse.
         """
         dyn = self.dynamics
+        dyn.settle_effect_work()
         counters = (dyn.counters, dyn.solver.counters)
         saved = ([c.as_dict() for c in counters],
                  [(e.evaluations, e.body_evaluations) for e in dyn.effects],
@@ -463,6 +467,7 @@ class Simulation:
             dyn.solver._geometry_cache = saved[2]
             for effect, (evaluations, body_evaluations) in zip(dyn.effects, saved[1]):
                 effect.evaluations, effect.body_evaluations = evaluations, body_evaluations
+            dyn.discard_effect_work()
 
     def joint_anchors(self) -> dict:
         """
@@ -485,6 +490,7 @@ class Simulation:
 
     def work(self) -> dict:
         """Work counters: integrator totals plus each effect's evaluations."""
+        self.dynamics.settle_effect_work()
         out = self.dynamics.counters.as_dict()
         for effect in self.dynamics.effects:
             out[f'{effect.name}_evaluations'] = out.get(f'{effect.name}_evaluations', 0) \

@@ -38,16 +38,54 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from numba import carray, njit, types
+from numba.extending import intrinsic
 import numpy as np
 
 SYMPLECTIC_EULER, LIE_POISSON2, LIE_POISSON4, RKMK4 = 0, 1, 2, 3
 HAS_POSITION_FORCES, HAS_DAMPING = 1, 2
 RHS, KICK, GYRO, ROT, FLOW = 0, 1, 2, 3, 4
+# Bits of free_step's result.
+KICK_VALID, FINITE = 1, 2
 
 # Below this angle (rad) exp uses its series (as rotation.exp_quat).
 _SMALL_ANGLE = 1e-4
 _W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+
+
+@intrinsic
+def _address(typingctx, arr, offset):
+    """Pointer to element ``offset`` of the C-contiguous array ``arr`` (compiled code only)."""
+    if not isinstance(arr, types.Array) or arr.layout != 'C':
+        return None
+    sig = types.CPointer(arr.dtype)(arr, offset)
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        return builder.gep(ary.data, [args[1]])
+    return sig, codegen
+
+
+@njit(cache=True)
+def raw(a: np.ndarray) -> np.ndarray:
+    """
+    Return ``a`` (C-contiguous) as a view that carries no reference count.
+
+    numba counts references to every array a compiled function passes on or
+    slices, with an atomic increment and decrement each: in the many small
+    calls of a step they cost as much as the arithmetic (measured with perf:
+    20 % of a pendulum step in ``NRT_incref``/``NRT_decref``). A view made from
+    the data pointer has no memory-info object, so the counting is skipped. The
+    caller keeps ``a`` alive while the view is used: a kernel's arguments are
+    alive for the whole call, and no view outlives it.
+    """
+    return carray(_address(a, 0), a.shape)
+
+
+@njit(cache=True)
+def raw_slice(a: np.ndarray, start: int, shape: tuple) -> np.ndarray:
+    """Return ``a.ravel()[start:start + prod(shape)].reshape(shape)`` as a :func:`raw` view."""
+    return carray(_address(a, start), shape)
 
 
 @njit(cache=True)
@@ -66,6 +104,30 @@ def quat_exp_multiply(q: np.ndarray, u0: float, u1: float, u2: float, out: np.nd
     out[1] = aw * by - ax * bz + ay * bw + az * bx
     out[2] = aw * bz + ax * by - ay * bx + az * bw
     out[3] = aw * bw - ax * bx - ay * by - az * bz
+
+
+@njit(cache=True)
+def _matrix(x: float, y: float, z: float, w: float) -> tuple:
+    """Rotation matrix of the unit quaternion (x, y, z, w), row by row (9 floats)."""
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    return (1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
+            2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
+            2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy))
+
+
+@njit(cache=True)
+def positive_product(ax: float, ay: float, az: float, aw: float, bx: float, by: float,
+                     bz: float, bw: float) -> tuple:
+    """Return the quaternion product ``a ⊗ b`` (xyzw), its sign chosen so that ``w >= 0``."""
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    w = aw * bw - ax * bx - ay * by - az * bz
+    if w < 0.0:
+        return -x, -y, -z, -w
+    return x, y, z, w
 
 
 @njit(cache=True)
@@ -96,6 +158,8 @@ def position_wrench(quat: np.ndarray, body: np.ndarray, gforce: np.ndarray,
     """
     force[:] = gforce
     torque[:] = 0.0
+    if wrench.shape[0] == 0:
+        return
     R = np.empty((3, 3))
     for e in range(wrench.shape[0]):
         i = int(wrench[e, 0])
@@ -268,23 +332,37 @@ def rkmk4_embedded_error(vel: np.ndarray, om: np.ndarray, u: np.ndarray, kp: np.
 
 
 @njit(cache=True)
+def workspace_size(n: int) -> int:
+    """Length of the float64 workspace :func:`free_step` needs for ``n`` bodies."""
+    return 76 * n
+
+
+@njit(cache=True)
 def rkmk4_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, h: float,
                body: np.ndarray, gforce: np.ndarray, wrench: np.ndarray, flags: int,
-               counts: np.ndarray, err: np.ndarray) -> None:
+               counts: np.ndarray, err: np.ndarray, ws: np.ndarray) -> None:
     """
     One classical RK4 Munthe-Kaas step of every body, in place.
 
     With ``err`` of length 1 the step also evaluates the slopes at its end and
     raises ``err[0]`` to the embedded estimate (:func:`rkmk4_embedded_error`);
-    with length 0 it does not.
+    with length 0 it does not. ``ws``: a float64 workspace of at least
+    :func:`workspace_size` entries (the stages live there: no allocation).
     """
     n = pos.shape[0]
     estimate = err.shape[0] > 0
     slots = 5 if estimate else 4
-    kp, kv = np.empty((slots, n, 3)), np.empty((slots, n, 3))
-    kw, kr = np.empty((slots, n, 3)), np.empty((slots, n, 3))
-    p, v, w, u = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
-    q = np.empty((n, 4))
+    size = slots * n * 3
+    kp = raw_slice(ws, 0, (slots, n, 3))
+    kv = raw_slice(ws, size, (slots, n, 3))
+    kw = raw_slice(ws, 2 * size, (slots, n, 3))
+    kr = raw_slice(ws, 3 * size, (slots, n, 3))
+    o = 4 * size
+    p = raw_slice(ws, o, (n, 3))
+    v = raw_slice(ws, o + 3 * n, (n, 3))
+    w = raw_slice(ws, o + 6 * n, (n, 3))
+    u = raw_slice(ws, o + 9 * n, (n, 3))
+    q = raw_slice(ws, o + 12 * n, (n, 4))
     for s in range(4):
         rkmk4_stage(s, h, pos, quat, vel, om, kp, kv, kw, kr, p, q, v, w, u, counts)
         accelerations(q, v, w, body, gforce, wrench, flags, kv[s], kw[s], counts)
@@ -359,14 +437,14 @@ def damping_flow(vel: np.ndarray, mom: np.ndarray, body: np.ndarray, tau: float,
 def splitting_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                    om: np.ndarray, dt: float, body: np.ndarray, gforce: np.ndarray,
                    wrench: np.ndarray, flags: int, kick: np.ndarray, kick_valid: bool,
-                   counts: np.ndarray) -> bool:
+                   counts: np.ndarray, ws: np.ndarray) -> bool:
     """
     One step of symplectic Euler or a Lie–Poisson splitting, in place.
 
     ``kick`` (n, 6: force world, torque principal) holds the last kick's
     wrench; ``kick_valid`` says it belongs to the configuration ``pos, quat`` it
     starts from (first same as last). Returns whether ``kick`` is valid for the
-    configuration the step ends at.
+    configuration the step ends at. ``ws``: workspace (:func:`workspace_size`).
     """
     n = pos.shape[0]
     symmetric = method != SYMPLECTIC_EULER
@@ -375,7 +453,7 @@ def splitting_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarr
     else:
         weights = (1.0, 0.0, 0.0)
     n_sub = 3 if method == LIE_POISSON4 else 1
-    mom = np.empty((n, 3))
+    mom = raw_slice(ws, 0, (n, 3))
     for i in range(n):
         for a in range(3):
             mom[i, a] = om[i, a] * body[i, 2 + a]
@@ -426,7 +504,7 @@ def normalize_quaternions(quat: np.ndarray) -> None:
 def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
               om: np.ndarray, dt: float, body: np.ndarray, gforce: np.ndarray,
               wrench: np.ndarray, flags: int, kick: np.ndarray, kick_valid: bool,
-              counts: np.ndarray, err: np.ndarray) -> bool:
+              counts: np.ndarray, err: np.ndarray, ws: np.ndarray) -> int:
     """
     One step of ``method`` for bodies no constraint couples; the arrays are updated.
 
@@ -454,33 +532,42 @@ def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
         ``RKMK4`` with length 1: ``err[0]`` is raised to the step's embedded
         error estimate per unit time (:func:`rkmk4_embedded_error`); ignored by
         the splittings.
+    ws : ndarray of float64
+        Workspace of at least :func:`workspace_size` entries (overwritten).
 
     Returns
     -------
-    bool
-        ``kick`` is valid for the new configuration.
+    int
+        Bit ``KICK_VALID``: ``kick`` is valid for the new configuration; bit
+        ``FINITE``: every entry of the new state is finite.
 
     """
+    if ws.shape[0] < workspace_size(pos.shape[0]):
+        raise ValueError('free_step: ws is smaller than workspace_size(n)')
     if method == RKMK4:
-        rkmk4_step(pos, quat, vel, om, dt, body, gforce, wrench, flags, counts, err)
+        # Its many small calls pass the arrays on: views without reference counts.
+        pos, quat, vel, om = raw(pos), raw(quat), raw(vel), raw(om)
+        rkmk4_step(pos, quat, vel, om, dt, raw(body), raw(gforce), raw(wrench), flags,
+                   raw(counts), raw(err), raw(ws))
         valid = False
     else:
         valid = splitting_step(method, pos, quat, vel, om, dt, body, gforce, wrench, flags,
-                               kick, kick_valid, counts)
+                               kick, kick_valid, counts, ws)
     normalize_quaternions(quat)
-    return valid
+    return (KICK_VALID if valid else 0) | (FINITE if all_finite(pos, quat, vel, om) else 0)
 
 
 @njit(cache=True)
 def all_finite(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray) -> bool:
     """Tell whether every entry of the four state arrays is finite."""
-    for arr in (pos, vel, om):
-        for x in arr.ravel():
-            if not math.isfinite(x):
+    for i in range(pos.shape[0]):
+        for c in range(3):
+            if not (math.isfinite(pos[i, c]) and math.isfinite(vel[i, c])
+                    and math.isfinite(om[i, c])):
                 return False
-    for x in quat.ravel():
-        if not math.isfinite(x):
-            return False
+        for c in range(4):
+            if not math.isfinite(quat[i, c]):
+                return False
     return True
 
 
@@ -504,41 +591,37 @@ def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
         origin velocity (3, body), angular velocity (3, body).
 
     """
-    R = np.empty((3, 3))
-    Rp = np.empty((3, 3))
-    qb = np.empty(4)
-    off = np.empty(3)
-    w = np.empty(3)
     for i in range(pos.shape[0]):
         # q_wb = q_wp ⊗ conj(q_bp), sign fixed to w >= 0.
         ax, ay, az, aw = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
-        bx, by, bz, bw = -quat_bp[i, 0], -quat_bp[i, 1], -quat_bp[i, 2], quat_bp[i, 3]
-        qb[0] = aw * bx + ax * bw + ay * bz - az * by
-        qb[1] = aw * by - ax * bz + ay * bw + az * bx
-        qb[2] = aw * bz + ax * by - ay * bx + az * bw
-        qb[3] = aw * bw - ax * bx - ay * by - az * bz
-        if qb[3] < 0.0:
-            for c in range(4):
-                qb[c] = -qb[c]
-        quat_matrix(qb, R)
-        for a in range(3):
-            off[a] = R[a, 0] * com_body[i, 0] + R[a, 1] * com_body[i, 1] \
-                + R[a, 2] * com_body[i, 2]
-            out[i, a] = pos[i, a] - off[a]
-        for c in range(4):
-            out[i, 3 + c] = qb[c]
+        q0, q1, q2, q3 = positive_product(ax, ay, az, aw, -quat_bp[i, 0], -quat_bp[i, 1],
+                                          -quat_bp[i, 2], quat_bp[i, 3])
+        out[i, 3], out[i, 4], out[i, 5], out[i, 6] = q0, q1, q2, q3
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(q0, q1, q2, q3)
+        c0, c1, c2 = com_body[i, 0], com_body[i, 1], com_body[i, 2]
+        f0 = r00 * c0 + r01 * c1 + r02 * c2
+        f1 = r10 * c0 + r11 * c1 + r12 * c2
+        f2 = r20 * c0 + r21 * c1 + r22 * c2
+        out[i, 0] = pos[i, 0] - f0
+        out[i, 1] = pos[i, 1] - f1
+        out[i, 2] = pos[i, 2] - f2
         # World angular velocity ω = R_wp Ω; origin velocity v − ω × offset.
-        quat_matrix(quat[i], Rp)
-        for a in range(3):
-            w[a] = Rp[a, 0] * om[i, 0] + Rp[a, 1] * om[i, 1] + Rp[a, 2] * om[i, 2]
-        out[i, 7] = vel[i, 0] + (w[1] * -off[2] - w[2] * -off[1])
-        out[i, 8] = vel[i, 1] + (w[2] * -off[0] - w[0] * -off[2])
-        out[i, 9] = vel[i, 2] + (w[0] * -off[1] - w[1] * -off[0])
-        for a in range(3):
-            out[i, 10 + a] = w[a]
-        for a in range(3):
-            out[i, 13 + a] = R[0, a] * out[i, 7] + R[1, a] * out[i, 8] + R[2, a] * out[i, 9]
-            out[i, 16 + a] = R[0, a] * w[0] + R[1, a] * w[1] + R[2, a] * w[2]
+        p00, p01, p02, p10, p11, p12, p20, p21, p22 = _matrix(ax, ay, az, aw)
+        o0, o1, o2 = om[i, 0], om[i, 1], om[i, 2]
+        w0 = p00 * o0 + p01 * o1 + p02 * o2
+        w1 = p10 * o0 + p11 * o1 + p12 * o2
+        w2 = p20 * o0 + p21 * o1 + p22 * o2
+        v0 = vel[i, 0] + (w1 * -f2 - w2 * -f1)
+        v1 = vel[i, 1] + (w2 * -f0 - w0 * -f2)
+        v2 = vel[i, 2] + (w0 * -f1 - w1 * -f0)
+        out[i, 7], out[i, 8], out[i, 9] = v0, v1, v2
+        out[i, 10], out[i, 11], out[i, 12] = w0, w1, w2
+        out[i, 13] = r00 * v0 + r10 * v1 + r20 * v2
+        out[i, 14] = r01 * v0 + r11 * v1 + r21 * v2
+        out[i, 15] = r02 * v0 + r12 * v1 + r22 * v2
+        out[i, 16] = r00 * w0 + r10 * w1 + r20 * w2
+        out[i, 17] = r01 * w0 + r11 * w1 + r21 * w2
+        out[i, 18] = r02 * w0 + r12 * w1 + r22 * w2
 
 
 @njit(cache=True)
