@@ -1,7 +1,7 @@
 """A step evaluates only the effects a scene lists; work counters show it."""
 
 import pytest
-from rigid_body_sim.core import Constraint, Gravity, INTEGRATORS, RigidBody, Simulation
+from rigid_body_sim.core import Constraint, Damping, Gravity, INTEGRATORS, RigidBody, Simulation
 
 STEPS = 50
 # Right-hand sides per step: rkmk4 has 4 stages; the splitting methods evaluate
@@ -82,3 +82,33 @@ def test_reading_outputs_does_no_counted_work():
     assert watched.dynamics.solver.counters == quiet.dynamics.solver.counters
     # Counters are restored in place: references a caller holds stay live.
     assert held[0] is watched.dynamics.counters and held[1] is watched.dynamics.solver.counters
+
+
+@pytest.mark.parametrize('name', sorted(INTEGRATORS))
+def test_effect_work_deferred_over_a_run_equals_work_counted_every_step(name):
+    # The effects' counters of whole-scene steps are settled when the model changes or
+    # they are read: a run read once must count what a run read after every step
+    # counts, across wrenches that start, stop and are replaced mid-run, a damping
+    # effect and a second body that no wrench touches.
+    def run(read_every_step):
+        bodies = [RigidBody('a', 1.0, (1.0, 2.0, 3.0), angular_velocity_body=(0.1, 1.0, 0.2)),
+                  RigidBody('b', 2.0, (1.0, 1.0, 1.0), position_world=(1.0, 0.0, 0.0))]
+        sim = Simulation(bodies, [Gravity(), Damping(0.1, 0.01)], name, 1e-3)
+        for k in range(STEPS):
+            if k == 10:
+                sim.apply_wrench('a', (1.0, 0.0, 0.0), duration=0.015)
+            if k == 20:
+                sim.apply_wrench('a', (0.0, 1.0, 0.0), point_body=(0.1, 0.0, 0.0))
+                sim.apply_wrench('b', (0.0, 0.0, 1.0), start=0.03, duration=0.005)
+            if k == 40:
+                sim.clear_wrenches('a')
+            sim.step()
+            if read_every_step:
+                sim.work()
+        return sim.work()
+
+    once, every = run(False), run(True)
+    assert once == every
+    # The wrenches did work in some steps only: a wrong settlement would count them in all.
+    assert 0 < once['wrenches_body_evaluations'] < 2 * once['gravity_evaluations']
+    assert once['wrenches_evaluations'] < once['gravity_evaluations']

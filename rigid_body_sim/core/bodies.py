@@ -184,6 +184,35 @@ class RigidBody:
             object.__setattr__(self, key, value)
 
 
+class _Outputs:
+    """
+    The outputs of one state (see :meth:`BodySet.outputs`) and what they belong to.
+
+    They are kept with the arrays they were computed from: a step replaces a
+    state's arrays, it does not modify them.
+    """
+
+    _PARTS = ((0, 3), (3, 7), (7, 10), (10, 13), (13, 16), (16, 19))
+    NOTHING = (None,) * 5
+
+    def __init__(self, n: int, quat_body_principal: np.ndarray, com_body: np.ndarray) -> None:
+        self.out = np.empty((n, 19))
+        self.views = [tuple(self.out[i, a:b] for a, b in self._PARTS) for i in range(n)]
+        self.views.append(tuple(self.out[:, a:b] for a, b in self._PARTS))
+        self.frames = np.ascontiguousarray(np.hstack([quat_body_principal, com_body]))
+        self.key: tuple = self.NOTHING
+        #: Read since the last step: the next step's kernel computes them.
+        self.wanted = False
+
+    def adopt(self, state: 'State') -> None:
+        """Record that ``out`` now holds the outputs of ``state``."""
+        self.key = (state, state.pos_com_world, state.quat_principal_world,
+                    state.vel_com_world, state.ang_vel_principal)
+
+
+_NO_OUTPUTS = np.empty((0, 19))
+
+
 @dataclass(slots=True)
 class State:
     """Dynamic state of all bodies (see the module docstring for frames)."""
@@ -301,23 +330,41 @@ class BodySet:
         """
         c = self._outputs
         if c is None:
-            out = np.empty((len(self), 19))
-            parts = ((0, 3), (3, 7), (7, 10), (10, 13), (13, 16), (16, 19))
-            views = [tuple(out[i, a:b] for a, b in parts) for i in range(len(self))]
-            views.append(tuple(out[:, a:b] for a, b in parts))
-            c = self._outputs = [None, None, None, None, None, out, views]
-        elif (c[0] is state and c[1] is state.pos_com_world
-              and c[2] is state.quat_principal_world and c[3] is state.vel_com_world
-              and c[4] is state.ang_vel_principal):
-            return c[6][-1 if body is None else body]
-        step_kernels.outputs(state.pos_com_world, state.quat_principal_world,
-                             state.vel_com_world, state.ang_vel_principal,
-                             self.quat_body_principal, self.com_body, c[5])
-        # Kept with the arrays it was computed from: a step replaces a state's arrays,
-        # it does not modify them.
-        c[0:5] = (state, state.pos_com_world, state.quat_principal_world,
-                  state.vel_com_world, state.ang_vel_principal)
-        return c[6][-1 if body is None else body]
+            c = self._outputs = _Outputs(len(self), self.quat_body_principal, self.com_body)
+        c.wanted = True
+        k = c.key
+        if not (k[0] is state and k[1] is state.pos_com_world
+                and k[2] is state.quat_principal_world and k[3] is state.vel_com_world
+                and k[4] is state.ang_vel_principal):
+            step_kernels.outputs(state.pos_com_world, state.quat_principal_world,
+                                 state.vel_com_world, state.ang_vel_principal, c.frames, c.out)
+            c.adopt(state)
+        return c.views[-1 if body is None else body]
+
+    def step_outputs(self) -> tuple:
+        """
+        Return ``(frames, out)``: the buffer a step's kernel fills with the new outputs.
+
+        ``frames`` (n, 7) is the principal frame in the body frame (xyzw), then
+        the centre of mass. When the outputs of the state a step starts from
+        were read (a node, a controller's loop), the step's kernel computes those
+        of the new state too, into ``out`` (n, 19), and the caller keeps them with
+        ``adopt(state)`` of the returned ``outputs``; otherwise ``out`` is empty
+        (a node that steps ten times between publishes computes them at the read).
+        """
+        c = self._outputs
+        if c is None:
+            c = self._outputs = _Outputs(len(self), self.quat_body_principal, self.com_body)
+        if not c.wanted:
+            return c.frames, _NO_OUTPUTS
+        c.wanted = False
+        c.key = _Outputs.NOTHING   # the kernel overwrites them
+        return c.frames, c.out
+
+    @property
+    def outputs_cache(self) -> '_Outputs':
+        """Return the outputs kept for one state (created by :meth:`step_outputs`)."""
+        return self._outputs
 
     def pose_world(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Body-origin positions (n, 3) and body-frame orientations (n, 4, xyzw) in world."""

@@ -103,6 +103,8 @@ from .errors import SpecError
 
 #: ``error`` argument of the kernels when no estimate is asked for.
 _NO_ESTIMATE = np.zeros(0)
+#: ``frames, out`` arguments of the free-body kernel when it computes no outputs.
+_NO_FRAMES, _NO_OUTPUTS = np.zeros((0, 7)), np.zeros((0, 19))
 
 
 class Invariant(enum.Enum):
@@ -185,14 +187,18 @@ class Integrator:
         # The kernel adds its work to the tally that holds the work counters.
         tally = dyn.tally
         before = dyn.defer_effect_work() if dyn.effects else None
+        frames, out = dyn.bodies.step_outputs()
         code = kern.free_step(self.KERNEL, pos, quat, vel, om, dt, body, gforce, wrench, flags,
-                              self._kick_buffer, valid, tally, err, self._ws)
+                              self._kick_buffer, valid, tally, err, self._ws, frames, out)
         self._kick_at = (dyn.version, pos, quat) if code & kern.KICK_VALID else None
         self.finite = bool(code & kern.FINITE)
         tally[STEPS] += 1
         if before is not None:
             dyn.count_effect_work_since(before)
-        return State(t_end, pos, quat, vel, om)
+        new = State(t_end, pos, quat, vel, om)
+        if len(out):
+            dyn.bodies.outputs_cache.adopt(new)
+        return new
 
     def _constrained_step(self, state: State, dt: float, t_end: float, setup: tuple,
                           err: np.ndarray) -> State:
@@ -228,7 +234,8 @@ class Integrator:
                 dyn.settle_effect_work()
                 before = tally.tolist()
             code = kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
-                                  np.zeros((len(free), 6)), False, tally, err, self._ws)
+                                  np.zeros((len(free), 6)), False, tally, err, self._ws,
+                                  _NO_FRAMES, _NO_OUTPUTS)
             finite = bool(code & kern.FINITE)
             pos[free], quat[free], vel[free], om[free] = p, q, v, o
             if counting:

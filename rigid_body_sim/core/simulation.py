@@ -379,27 +379,25 @@ class Simulation:
 
     # -- outputs --------------------------------------------------------------------------
 
-    def _outputs(self, body: Optional[str]) -> tuple:
-        return self.bodies.outputs(self.state, None if body is None
-                                   else self.bodies.lookup(body))
-
     def pose(self, body: Optional[str] = None) -> tuple[np.ndarray, np.ndarray]:
         """
         Position of the body origin (3,) and orientation (4,, xyzw), world frame.
 
         With ``body`` None, arrays of all bodies, (n, 3) and (n, 4).
         """
-        out = self._outputs(body)
+        bodies = self.bodies
+        out = bodies.outputs(self.state, None if body is None else bodies.lookup(body))
         return out[0].copy(), out[1].copy()
 
     def twist(self, body: Optional[str] = None,
               frame: str = 'world') -> tuple[np.ndarray, np.ndarray]:
         """Velocity of the body origin and angular velocity, in ``frame`` ('world' or 'body')."""
+        bodies = self.bodies
         if frame == 'world':
-            out = self._outputs(body)
+            out = bodies.outputs(self.state, None if body is None else bodies.lookup(body))
             return out[2].copy(), out[3].copy()
         if frame == 'body':
-            out = self._outputs(body)
+            out = bodies.outputs(self.state, None if body is None else bodies.lookup(body))
             return out[4].copy(), out[5].copy()
         raise SpecError('frame', f"must be 'world' or 'body', got {frame!r}")
 

@@ -504,7 +504,8 @@ def normalize_quaternions(quat: np.ndarray) -> None:
 def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
               om: np.ndarray, dt: float, body: np.ndarray, gforce: np.ndarray,
               wrench: np.ndarray, flags: int, kick: np.ndarray, kick_valid: bool,
-              counts: np.ndarray, err: np.ndarray, ws: np.ndarray) -> int:
+              counts: np.ndarray, err: np.ndarray, ws: np.ndarray, frames: np.ndarray,
+              out: np.ndarray) -> int:
     """
     One step of ``method`` for bodies no constraint couples; the arrays are updated.
 
@@ -534,6 +535,8 @@ def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
         the splittings.
     ws : ndarray of float64
         Workspace of at least :func:`workspace_size` entries (overwritten).
+    frames, out : ndarray, shapes (n, 7) and (n, 19) or (0, 19)
+        With ``n`` rows, ``out`` gets the :func:`outputs` of the new state.
 
     Returns
     -------
@@ -554,6 +557,8 @@ def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
         valid = splitting_step(method, pos, quat, vel, om, dt, body, gforce, wrench, flags,
                                kick, kick_valid, counts, ws)
     normalize_quaternions(quat)
+    if out.shape[0]:
+        outputs(pos, quat, vel, om, frames, out)
     return (KICK_VALID if valid else 0) | (FINITE if all_finite(pos, quat, vel, om) else 0)
 
 
@@ -573,7 +578,7 @@ def all_finite(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarra
 
 @njit(cache=True)
 def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
-            quat_bp: np.ndarray, com_body: np.ndarray, out: np.ndarray) -> None:
+            frames: np.ndarray, out: np.ndarray) -> None:
     """
     Poses and twists in the user's body frames, for every body.
 
@@ -581,10 +586,9 @@ def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
     ----------
     pos, vel, om, quat
         The state (see :func:`free_step`).
-    quat_bp : ndarray, shape (n, 4)
-        Principal frame in the body frame.
-    com_body : ndarray, shape (n, 3)
-        Centre of mass in the body frame (m).
+    frames : ndarray, shape (n, 7)
+        Principal frame in the body frame (xyzw), then the centre of mass in the
+        body frame (m).
     out : ndarray, shape (n, 19)
         Written: body-origin position (3, world), body orientation (4, xyzw,
         w >= 0), origin velocity (3, world), angular velocity (3, world),
@@ -594,11 +598,11 @@ def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
     for i in range(pos.shape[0]):
         # q_wb = q_wp ⊗ conj(q_bp), sign fixed to w >= 0.
         ax, ay, az, aw = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
-        q0, q1, q2, q3 = positive_product(ax, ay, az, aw, -quat_bp[i, 0], -quat_bp[i, 1],
-                                          -quat_bp[i, 2], quat_bp[i, 3])
+        q0, q1, q2, q3 = positive_product(ax, ay, az, aw, -frames[i, 0], -frames[i, 1],
+                                          -frames[i, 2], frames[i, 3])
         out[i, 3], out[i, 4], out[i, 5], out[i, 6] = q0, q1, q2, q3
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(q0, q1, q2, q3)
-        c0, c1, c2 = com_body[i, 0], com_body[i, 1], com_body[i, 2]
+        c0, c1, c2 = frames[i, 4], frames[i, 5], frames[i, 6]
         f0 = r00 * c0 + r01 * c1 + r02 * c2
         f1 = r10 * c0 + r11 * c1 + r12 * c2
         f2 = r20 * c0 + r21 * c1 + r22 * c2
