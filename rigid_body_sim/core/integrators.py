@@ -172,8 +172,51 @@ class Integrator:
         err = _NO_ESTIMATE if error is None else error
         if not self.dynamics.constrained:
             return self._free_step(state, dt, t_end, err)
-        return self._constrained_step(state, dt, t_end, self.dynamics.solver.kernel_setup(),
-                                      err)
+        setup = self.dynamics.solver.kernel_setup()
+        if not len(setup[0]) and len(setup[1]) == 1:
+            return self._whole_step(state, dt, t_end, setup, err)
+        return self._constrained_step(state, dt, t_end, setup, err)
+
+    def _kernel_parameters(self) -> np.ndarray:
+        """``par`` of the constrained kernels, rebuilt when what it depends on changed."""
+        solver = self.dynamics.solver
+        # solver.omega is a function of time_constant and dt.
+        key = (solver.time_constant, solver.dt, self.max_rotation, self.max_substeps)
+        if self._parameters is None or self._parameters[0] != key:
+            self._parameters = (key, solver.kernel_parameters(
+                self.max_rotation, self.max_substeps, getattr(self, 'CLOSING', 0.0)))
+        return self._parameters[1]
+
+    def _whole_step(self, state: State, dt: float, t_end: float, setup: tuple,
+                    err: np.ndarray) -> State:
+        """
+        Take a step of a scene whose bodies all belong to one component: one compiled call.
+
+        The common case (a mechanism, a chain) of :meth:`_constrained_step`, without
+        its bookkeeping of subsets.
+        """
+        dyn = self.dynamics
+        body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
+        pos0, quat0 = state.pos_com_world, state.quat_principal_world
+        at = self._geometry_at
+        valid = at is not None and at[0] is setup and at[1] is pos0 and at[2] is quat0
+        lam, use_tree, packed = setup[1][0][4], setup[1][0][3], setup[1][0][2]
+        # New arrays (copies: the cheapest fresh arrays), overwritten by the kernel.
+        pos, quat = pos0.copy(), quat0.copy()
+        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
+        tally = dyn.tally
+        before = dyn.defer_effect_work() if dyn.effects else None
+        self.finite = ckern.packed_step(
+            self.KERNEL, pos0, quat0, state.vel_com_world, state.ang_vel_principal, dt, body,
+            gforce, wrench, flags, self._kernel_parameters(), use_tree, *packed, pos, quat, vel,
+            om, lam, valid, tally, err)
+        dyn.last_multipliers = lam
+        if before is not None:
+            dyn.count_effect_work_since(before)
+        # The component's workspace now holds the geometry of its new configuration.
+        self._geometry_at = (setup, pos, quat)
+        tally[STEPS] += 1
+        return State(t_end, pos, quat, vel, om)
 
     def _free_step(self, state: State, dt: float, t_end: float, err: np.ndarray) -> State:
         """Take a step of bodies no constraint couples: one call of the compiled kernel."""
@@ -214,25 +257,18 @@ class Integrator:
         free, components = setup
         finite = True
         mid = state.time + 0.5 * dt
-        whole = not len(free) and len(components) == 1   # one component, every body
-        # New arrays (copies: the cheapest fresh arrays; a whole-scene kernel overwrites them).
         pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
         vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
         # The kernels add their work to the tally that holds the work counters.
         tally = dyn.tally
         counting = bool(dyn.effects)
-        # What par depends on (solver.omega is a function of time_constant and dt).
-        key = (solver.time_constant, solver.dt, self.max_rotation, self.max_substeps)
-        if self._parameters is None or self._parameters[0] != key:
-            self._parameters = (key, solver.kernel_parameters(
-                self.max_rotation, self.max_substeps, getattr(self, 'CLOSING', 0.0)))
-        par = self._parameters[1]
+        if counting:
+            dyn.settle_effect_work()   # counted per subset below
+        par = self._kernel_parameters()
         if len(free):
             body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, free)
             p, q, v, o = pos[free], quat[free], vel[free], om[free]
-            if counting:
-                dyn.settle_effect_work()
-                before = tally.tolist()
+            before = tally.tolist() if counting else None
             code = kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
                                   np.zeros((len(free), 6)), False, tally, err, self._ws,
                                   _NO_FRAMES, _NO_OUTPUTS)
@@ -244,36 +280,20 @@ class Integrator:
         valid = (at is not None and at[0] is setup and at[1] is state.pos_com_world
                  and at[2] is state.quat_principal_world)
         lam = dyn.last_multipliers
-        if not whole and (len(lam) != solver.constraints.n_rows or lam is components[0][4]):
+        if len(lam) != solver.constraints.n_rows or lam is components[0][4]:
             lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)
         for bodies, rows_global, packed, use_tree, lam_c in components:
-            if whole:
-                body, gforce, wrench, flags = dyn.kernel_model(mid)
-                acting = None
-                p0, q0, v0, o0 = (state.pos_com_world, state.quat_principal_world,
-                                  state.vel_com_world, state.ang_vel_principal)
-                p, q, v, o = pos, quat, vel, om
-            else:
-                body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, bodies)
-                p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
-                p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
-                              np.empty_like(o0))
-            if not counting:
-                before = None
-            elif whole:
-                before = dyn.defer_effect_work()
-            else:
-                dyn.settle_effect_work()
-                before = tally.tolist()
+            body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, bodies)
+            p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
+            p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
+                          np.empty_like(o0))
+            before = tally.tolist() if counting else None
             finite &= ckern.packed_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
                                         flags, par, use_tree, *packed, p, q, v, o, lam_c, valid,
                                         tally, err)
-            if whole:
-                dyn.last_multipliers = lam_c
-            else:
-                pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
-                lam[rows_global] = lam_c
-            if before is not None:
+            pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
+            lam[rows_global] = lam_c
+            if counting:
                 dyn.count_effect_work_since(before, acting)
         # Each component's workspace now holds the geometry of its new configuration.
         self._geometry_at = (setup, pos, quat)
