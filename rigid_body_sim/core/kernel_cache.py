@@ -21,7 +21,7 @@ from pathlib import Path
 import numba
 
 #: The modules whose compiled kernels call one another.
-KERNEL_MODULES = ('step_kernels', 'row_kernels', 'tree_solve', 'constrained_kernels')
+KERNEL_MODULES = ('step_kernels', 'row_kernels', 'tree_solve', 'loop_solve', 'constrained_kernels')
 STAMP = 'kernel-sources.sha256'
 
 

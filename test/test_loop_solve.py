@@ -1,0 +1,92 @@
+"""Closed-loop solve (spanning forest + Schur complement of the loop-closing rows) vs numpy."""
+
+import numpy as np
+import pytest
+from rigid_body_sim.core.loop_solve import loop_back, loop_forward, loop_schur, loop_structure
+from rigid_body_sim.core.tree_solve import factor_arrays, tree_factor
+from test_tree_solve import draw, rows_of
+
+
+def loop_solve(a, b, n, Ga, Gb, Ha, Hb, minv6, rhs, reg=0.0):
+    """Factor and solve through the loop kernels; S's system by numpy (as the caller would)."""
+    st = loop_structure(a, b, n)
+    assert st is not None
+    t = st.tree
+    S, piv, P, Q, B, W, E, tmp = factor_arrays(t)
+    tree_factor(*t.arrays, Ga, Gb, Ha, Hb, minv6, reg, S, piv, P, Q, B, W,
+                Ha is Ga and Hb is Gb)
+    c, m = st.closure.size, a.size
+    X, F = np.zeros((c, m)), np.zeros((c, c))
+    work, f, g = np.zeros(m), np.zeros((n, 6)), np.zeros((2, 6))
+    loop_schur(*t.arrays[:4], S, piv, P, Q, B, E, tmp, st.closure, a, b, Ga, Gb, Ha, Hb, minv6,
+               reg, X, F, work, f, g)
+    out, z = np.zeros(m), np.zeros(c)
+    loop_forward(*t.arrays[:4], S, piv, P, Q, B, E, tmp, st.closure, a, b, Ga, Gb, Ha, Hb,
+                 minv6, rhs, out, z, f, np.zeros(c))
+    loop_back(t.group_rows, st.closure, X, np.linalg.solve(F, z), out)
+    return st, F, out
+
+
+def ring(n, k, to_world=True):
+    """Joints of a ring of n bodies with k rows each, body 0 also held by the world."""
+    joints = [(i, i - 1, k) for i in range(1, n)] + [(0, n - 1, k)]
+    return ([(0, -1, 3)] if to_world else []) + joints
+
+
+def ladder(n, k):
+    """Two chains of n bodies joined by a rung at every body: n - 1 loops."""
+    joints = [(0, -1, 3)]
+    joints += [(i, i - 1, k) for i in range(1, n)]
+    joints += [(n + i, n + i - 1, k) for i in range(1, n)]
+    joints += [(i, n + i, k) for i in range(n)]
+    return joints
+
+
+@pytest.mark.parametrize('unsymmetric', [False, True])
+@pytest.mark.parametrize('joints, n', [(ring(6, 3), 6), (ring(9, 5), 9), (ladder(5, 3), 10),
+                                       (ring(4, 2, to_world=False), 4)])
+def test_loop_solve_equals_dense_solve(rng, joints, n, unsymmetric):
+    a, b = rows_of(joints, n, rng)
+    Ga, Gb, Ha, Hb, minv6, A = draw(rng, a, b, n, unsymmetric)
+    rhs = rng.normal(size=a.size)
+    st, F, x = loop_solve(a, b, n, Ga, Gb, Ha, Hb, minv6, rhs)
+    expected = np.linalg.solve(A, rhs)
+    assert np.linalg.norm(x - expected) < 1e-9 * np.linalg.norm(expected)
+    # S is the Schur complement of the forest's rows, assembled densely here.
+    C = st.closure
+    T = np.setdiff1d(np.arange(a.size), C)
+    schur = A[np.ix_(C, C)] - A[np.ix_(C, T)] @ np.linalg.solve(A[np.ix_(T, T)], A[np.ix_(T, C)])
+    assert np.allclose(F, schur, rtol=1e-9, atol=1e-9 * np.abs(schur).max())
+
+
+def test_closure_rows_are_those_of_the_loop_closing_joints(rng):
+    n = 9
+    a, b = rows_of(ring(n, 5), n, rng)
+    st = loop_structure(a, b, n)
+    # One loop: one joint of 5 rows closes it (the last one met: 0 - (n - 1)).
+    assert st.closure.size == 5
+    assert set(zip(a[st.closure].tolist(), b[st.closure].tolist())) <= {(0, n - 1), (n - 1, 0)}
+    # Every other row is in exactly one group of the forest.
+    assert sorted(st.tree.group_rows.tolist() + st.closure.tolist()) == list(range(a.size))
+    a, b = rows_of(ladder(6, 3), 12, rng)
+    assert loop_structure(a, b, 12).closure.size == 3 * 5
+
+
+def test_loops_through_the_world_and_trees_need_no_closure(rng):
+    # A four-bar grounded at both ends closes its loop through the world, which does not
+    # move: its system is tree-structured. A chain has no loop either.
+    a, b = rows_of([(0, -1, 5), (1, 0, 5), (2, 1, 5), (2, -1, 5)], 3, rng)
+    assert loop_structure(a, b, 3) is None
+    a, b = rows_of([(0, -1, 3)] + [(i, i - 1, 3) for i in range(1, 8)], 8, rng)
+    assert loop_structure(a, b, 8) is None
+
+
+def test_tikhonov_term_is_carried_into_the_closure_block(rng):
+    n = 6
+    a, b = rows_of(ring(n, 3), n, rng)
+    Ga, Gb, Ha, Hb, minv6, A = draw(rng, a, b, n, False)
+    reg = 0.3
+    rhs = rng.normal(size=a.size)
+    _, _, x = loop_solve(a, b, n, Ga, Gb, Ha, Hb, minv6, rhs, reg)
+    expected = np.linalg.solve(A + reg * np.eye(a.size), rhs)
+    assert np.linalg.norm(x - expected) < 1e-10 * np.linalg.norm(expected)
