@@ -1,7 +1,8 @@
 """
 Constraint benchmarks: cost per step of chains and trees, and error vs wall time.
 
-1. Chains and binary trees of N = 10, 100, 1000 rods joined by ball joints:
+1. Chains and binary trees of N = 10, 100, 1000 rods joined by ball joints, and
+   rings of N hinged rods closed by a ball joint (one closed loop, 5 N + 3 rows):
    wall time per step and the fitted growth exponent p of ``time ∝ N^p``
    (p near 1: linear; the Python overhead per step flattens small N).
 2. Pendulum (ball joint, 60° release) and four-bar linkage (four parallel
@@ -24,7 +25,7 @@ import time
 
 import numpy as np
 from rigid_body_sim.core import Constraint, Gravity, INTEGRATORS, RigidBody, Simulation
-from rigid_body_sim.core.mechanisms import chain, four_bar, tree
+from rigid_body_sim.core.mechanisms import chain, four_bar, ring, tree
 from scipy.special import ellipk
 
 OUT = Path(__file__).resolve().parent / 'out'
@@ -33,7 +34,7 @@ OUT = Path(__file__).resolve().parent / 'out'
 def scaling(ns, integrators, min_steps):
     """Rows (topology, integrator, N, ms per step)."""
     rows = []
-    for topo, build in (('chain', chain), ('tree', tree)):
+    for topo, build in (('chain', chain), ('tree', tree), ('ring', ring)):
         for name in integrators:
             for n in ns:
                 sim = build(n, name)
@@ -49,7 +50,7 @@ def scaling(ns, integrators, min_steps):
                 print(f'  {topo:5s} {name:16s} N {n:5d}  {per * 1e3:9.2f} ms/step  '
                       f'violation {viol:.1e}', flush=True)
     fits = []
-    for topo in ('chain', 'tree'):
+    for topo in ('chain', 'tree', 'ring'):
         for name in integrators:
             rs = [r for r in rows if r[0] == topo and r[1] == name]
             p = np.polyfit(np.log([r[2] for r in rs]), np.log([r[3] for r in rs]), 1)[0]
@@ -151,7 +152,7 @@ def _plot(sc_rows, acc_rows, integrators):
         print('matplotlib not installed: no plots')
         return
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
-    for topo, style in (('chain', 'o-'), ('tree', 's--')):
+    for topo, style in (('chain', 'o-'), ('tree', 's--'), ('ring', 'd:')):
         for name in integrators:
             rs = [r for r in sc_rows if r[0] == topo and r[1] == name]
             axes[0].loglog([r[2] for r in rs], [r[3] for r in rs], style,
@@ -185,7 +186,7 @@ def main(argv=None) -> int:
         ns, dts, min_steps = (10, 30), (1e-2, 5e-3), 3
     else:
         ns, dts, min_steps = (10, 100, 1000), (1e-2, 3e-3, 1e-3), 5
-    print('\n== constraints: cost per step of chains and trees (ball joints) ==')
+    print('\n== constraints: cost per step of chains and trees (ball joints), rings (one loop) ==')
     sc, fits = scaling(ns, ('lie_poisson2', 'rkmk4'), min_steps)
     _table(OUT / 'constraints_scaling.md', ('topology', 'integrator', 'links', 'ms / step',
                                             'violation'), sc,

@@ -16,13 +16,11 @@ def loop_solve(a, b, n, Ga, Gb, Ha, Hb, minv6, rhs, reg=0.0):
     tree_factor(*t.arrays, Ga, Gb, Ha, Hb, minv6, reg, S, piv, P, Q, B, W,
                 Ha is Ga and Hb is Gb)
     c, m = st.closure.size, a.size
-    X, F = np.zeros((c, m)), np.zeros((c, c))
-    work, f, g = np.zeros(m), np.zeros((n, 6)), np.zeros((2, 6))
+    X, Y, F = np.zeros((c, m)), np.zeros((c, m)), np.zeros((c, c))
     loop_schur(*t.arrays[:4], S, piv, P, Q, B, E, tmp, st.closure, a, b, Ga, Gb, Ha, Hb, minv6,
-               reg, X, F, work, f, g)
+               reg, X, Y, F, np.zeros(m), np.zeros((2, 6)))
     out, z = np.zeros(m), np.zeros(c)
-    loop_forward(*t.arrays[:4], S, piv, P, Q, B, E, tmp, st.closure, a, b, Ga, Gb, Ha, Hb,
-                 minv6, rhs, out, z, f, np.zeros(c))
+    loop_forward(*t.arrays[:4], S, piv, P, Q, B, E, tmp, st.closure, Y, rhs, out, z)
     loop_back(t.group_rows, st.closure, X, np.linalg.solve(F, z), out)
     return st, F, out
 

@@ -9,7 +9,9 @@ and a velocity projection in ``rkmk4``) and the linear algebra that of
 constraint rows are those of :mod:`.row_kernels` (point, dot, line, distance);
 the systems ``G M⁻¹ Hᵀ`` are solved densely (Cholesky, LU, or a truncated SVD
 for redundant rows) up to ``DENSE_ROWS`` rows and by the tree solve of
-:mod:`.tree_solve` beyond.
+:mod:`.tree_solve` beyond; beyond that size a component with closed loops is
+solved by the tree solve of a spanning forest and a dense system of the rows
+that close the loops (their Schur complement, :mod:`.loop_solve`).
 
 A step is split into sub-steps when a constrained body turns fast, and redone
 with twice as many when SHAKE stops converging (see :mod:`.integrators`); both
@@ -32,13 +34,14 @@ import math
 from numba import njit, objmode
 import numpy as np
 
+from .loop_solve import loop_back, loop_forward, loop_schur
 from .row_kernels import rows_geometry, rows_rates
 from .step_kernels import (all_finite, damping_flow, drift, finish_accelerations,
                            HAS_DAMPING, KICK, LIE_POISSON4, normalize_quaternions,
                            position_wrench, positive_product, quat_exp_multiply, raw,
                            raw_slice, RHS, RKMK4, rkmk4_embedded_error, rkmk4_finish,
                            rkmk4_slopes, rkmk4_stage, SYMPLECTIC_EULER)
-from .tree_solve import _lu, _lu_solve_vec, tree_factor, tree_solve
+from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_solve
 
 # Counter slots beyond step_kernels' five.
 DAMP_IN_KICK, GEOMETRY, FACTORIZATIONS, RANK_DEFICIENT, FALLBACKS = 5, 6, 7, 8, 9
@@ -51,6 +54,11 @@ P_MAX_ROT, P_MAX_SUB = 7, 8
 
 # Factorization modes.
 CHOLESKY, LU, SVD, TREE = 0, 1, 2, 3
+
+# How a component's systems are solved (packed_step's ``solve``): densely (few rows), by
+# the tree solve (a forest), or by the tree solve of a spanning forest and the Schur
+# complement of the rows that close loops (:mod:`.loop_solve`).
+SOLVE_DENSE, SOLVE_TREE, SOLVE_LOOP = 0, 1, 2
 
 _W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 
@@ -80,30 +88,52 @@ def _schur(Ga, Gb, Ha, Hb, a, b, minv6, A):
 
 
 @njit(cache=True)
-def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, counts):
-    """Factorize ``G M⁻¹ Hᵀ`` by the tree solve (Tikhonov term for redundant rows)."""
+def _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6):
+    """Largest ``|diag(G M⁻¹ Hᵀ)|`` (1.0 if all are zero)."""
+    n = minv6.shape[0]
+    peak = 0.0
+    for i in range(Ga.shape[0]):
+        d = 0.0
+        for c in range(6):
+            d += Ga[i, c] * Ha[i, c] * minv6[a[i], c]
+            if b[i] < n:
+                d += Gb[i, c] * Hb[i, c] * minv6[b[i], c]
+        peak = max(peak, abs(d))
+    return peak if peak > 0.0 else 1.0
+
+
+@njit(cache=True)
+def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, counts):
+    """
+    Factorize ``G M⁻¹ Hᵀ`` by the tree solve (Tikhonov term for redundant rows).
+
+    With ``dense`` (not None) the component has closed loops: the tree solve
+    factorizes the rows of its spanning forest, and the Schur complement of the
+    rows that close the loops (:func:`.loop_solve.loop_schur`) is factorized
+    into ``dense`` as a small dense system, with the truncated SVD when closure
+    rows are redundant. Returns the mode for :func:`_sol`.
+    """
     counts[FACTORIZATIONS] += 1
-    m = Ga.shape[0]
     rtol = par[P_RANK_RTOL]
     tg_ptr, tg_rows, tg_child, tg_parent, t_side = tree[0], tree[1], tree[2], tree[3], tree[4]
     tS, tpiv, tP, tQ, tB, tW = tree[5], tree[6], tree[7], tree[8], tree[9], tree[10]
     pivot = tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
                         minv6, 0.0, tS, tpiv, tP, tQ, tB, tW, symmetric)
+    reg = 0.0
     if not pivot > rtol:
         counts[RANK_DEFICIENT] += 1
-        n = minv6.shape[0]
-        peak = 0.0
-        for i in range(m):
-            d = 0.0
-            for c in range(6):
-                d += Ga[i, c] * Ha[i, c] * minv6[a[i], c]
-                if b[i] < n:
-                    d += Gb[i, c] * Hb[i, c] * minv6[b[i], c]
-            peak = max(peak, abs(d))
-        scale = peak if peak > 0.0 else 1.0
+        reg = par[P_REG] * _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
         tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
-                    minv6, par[P_REG] * scale, tS, tpiv, tP, tQ, tB, tW, symmetric)
-    return TREE
+                    minv6, reg, tS, tpiv, tP, tQ, tB, tW, symmetric)
+    if dense is None:
+        return TREE
+    closure, X, Y, work, g = tree[13], tree[14], tree[15], tree[16], tree[17]
+    loop_schur(tg_ptr, tg_rows, tg_child, tg_parent, tS, tpiv, tP, tQ, tB, tree[11], tree[12],
+               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y, dense[0], work, g)
+    # Pivots of S are measured against the whole system's scale: a redundant closure row
+    # leaves only rounding in S.
+    tiny = rtol * _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
+    return _factor_matrix(closure.shape[0], symmetric, tiny, tiny, dense, counts)
 
 
 @njit(cache=True)
@@ -116,12 +146,19 @@ def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, which, counts
     from call to call. Returns the mode for :func:`_sol`.
     """
     mode = TREE
-    # Two tests on the arguments themselves: numba drops a branch whose argument is None.
+    # Each storage is indexed only under a test that it is not None: numba drops the
+    # branches of an argument that is None. Both given: a closed loop (see _factor_tree).
     if tree is not None:
-        mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree[which], counts)
+        if dense is not None:
+            mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree[which],
+                                dense[which], counts)
+        if dense is None:
+            mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree[which],
+                                None, counts)
     if dense is not None:
-        mode = _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense[which],
-                             counts)
+        if tree is None:
+            mode = _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense[which],
+                                 counts)
     return mode
 
 
@@ -130,10 +167,19 @@ def _sol(mode, rhs, out, tree, dense, which):
     """Solve with the factors in storage ``which`` (see :func:`_fac`)."""
     if tree is not None:
         t = tree[which]
-        tree_solve(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12], rhs,
-                   out)
+        if dense is None:
+            tree_solve(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
+                       rhs, out)
+        if dense is not None:
+            # Closed loops: forest, then the closure rows' Schur complement, then back.
+            z, xc = t[18], t[19]
+            loop_forward(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
+                         t[13], t[15], rhs, out, z)
+            _solve_dense(mode, z, xc, dense[which])
+            loop_back(t[1], t[13], t[14], xc, out)
     if dense is not None:
-        _solve_dense(mode, rhs, out, dense[which])
+        if tree is None:
+            _solve_dense(mode, rhs, out, dense[which])
 
 
 @njit(cache=True)
@@ -147,15 +193,27 @@ def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense, counts):
     """
     counts[FACTORIZATIONS] += 1
     m = Ga.shape[0]
-    rtol = par[P_RANK_RTOL]
-    F, dpiv, U, sv, Vt = dense
+    F = dense[0]
     _schur(Ga, Gb, Ha, Hb, a, b, minv6, F)
     scale = 0.0
     for i in range(m):
         scale = max(scale, abs(F[i, i]))
     if not scale > 0.0:
         scale = 1.0
-    tiny = rtol * scale
+    return _factor_matrix(m, symmetric, par[P_RANK_RTOL] * scale, 0.0, dense, counts)
+
+
+@njit(cache=True)
+def _factor_matrix(m, symmetric, tiny, floor, dense, counts):
+    """
+    Factorize the matrix in ``dense[0]`` (m, m) in place; return the mode.
+
+    Cholesky (``symmetric``) or LU with partial pivoting; a pivot at most
+    ``tiny`` marks redundant rows, which get the truncated SVD (minimum-norm
+    solution): singular values at most ``1e-13`` of the largest, or ``floor``,
+    count as zero.
+    """
+    F, dpiv, U, sv, Vt = dense
     A = F.copy()
     ok = True
     if symmetric:
@@ -183,7 +241,7 @@ def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense, counts):
     U[:, :] = u
     Vt[:, :] = vt
     for i in range(m):
-        sv[i] = s[i] if s[i] > 1e-13 * s[0] else 0.0
+        sv[i] = s[i] if s[i] > 1e-13 * s[0] and s[i] > floor else 0.0
     return SVD
 
 
@@ -778,11 +836,12 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         Solve with the tree solve instead of densely.
     tree : tuple
         Two storages of :mod:`.tree_solve` (general, and the symmetric factor
-        kept for the current geometry), each ``group_ptr, group_rows,
-        group_child, group_parent, row_side, S, piv, P, Q, B, W, E, tmp``.
+        kept for the current geometry), each :func:`tree_storage`.
     dense : tuple
         Two dense storages ``(F, piv, U, s, Vt)`` (see :func:`dense_storage`).
-        Exactly one of ``tree`` and ``dense`` is given, the other is None.
+        One of ``tree`` and ``dense`` is given and the other is None, or both
+        for closed loops (``dense`` then holds the Schur complement of the
+        loop-closing rows).
     ws : tuple
         Workspace (see :func:`workspace`); its current geometry persists between calls.
     pos, quat, vel, om : ndarray
@@ -882,9 +941,13 @@ _SLOTS = (
     # two dense storages (F, piv, U, s, Vt)
     'f2', 'i1', 'f2', 'f1', 'f2', 'f2', 'i1', 'f2', 'f1', 'f2',
     # two tree storages (group_ptr, group_rows, group_child, group_parent, row_side, S, piv,
-    # P, Q, B, W, E, tmp)
+    # P, Q, B, W, E, tmp; then for closed loops: closure, X, Y, work, g, z, xc, see
+    # tree_storage())
     'i1', 'i1', 'i1', 'i1', 'i1', 'f3', 'i2', 'f3', 'f3', 'f4', 'f3', 'f3', 'f1',
-    'i1', 'i1', 'i1', 'i1', 'i1', 'f3', 'i2', 'f3', 'f3', 'f4', 'f3', 'f3', 'f1')
+    'i1', 'f2', 'f2', 'f1', 'f2', 'f1', 'f1',
+    'i1', 'i1', 'i1', 'i1', 'i1', 'f3', 'i2', 'f3', 'f3', 'f4', 'f3', 'f3', 'f1',
+    'i1', 'f2', 'f2', 'f1', 'f2', 'f1', 'f1')
+_TREE_SLOTS = 20
 
 
 def pack(rows: tuple, ws: tuple, dense: tuple, trees: tuple) -> tuple:
@@ -917,7 +980,8 @@ def pack(rows: tuple, ws: tuple, dense: tuple, trees: tuple) -> tuple:
     rows_v = (*views[:5], rows[5])
     ws_v = tuple(views[5:15])
     dense_v = (tuple(views[15:20]), tuple(views[20:25]))
-    trees_v = (tuple(views[25:38]), tuple(views[38:51]))
+    trees_v = (tuple(views[25:25 + _TREE_SLOTS]),
+               tuple(views[25 + _TREE_SLOTS:25 + 2 * _TREE_SLOTS]))
     return (rows[5], floats, ints, layout), (rows_v, ws_v, dense_v, trees_v)
 
 
@@ -946,18 +1010,35 @@ def _tree_views(f, i, L, k):
     return (_v1(i, L, k), _v1(i, L, k + 1), _v1(i, L, k + 2), _v1(i, L, k + 3),
             _v1(i, L, k + 4), _v3(f, L, k + 5), _v2(i, L, k + 6), _v3(f, L, k + 7),
             _v3(f, L, k + 8), _v4(f, L, k + 9), _v3(f, L, k + 10), _v3(f, L, k + 11),
-            _v1(f, L, k + 12))
+            _v1(f, L, k + 12), _v1(i, L, k + 13), _v2(f, L, k + 14), _v2(f, L, k + 15),
+            _v1(f, L, k + 16), _v2(f, L, k + 17), _v1(f, L, k + 18), _v1(f, L, k + 19))
+
+
+def tree_storage(structure, closure: np.ndarray, m: int) -> tuple:
+    """
+    One tree storage of a component with ``m`` rows: arrays and factors of its forest.
+
+    ``structure``: the :class:`.tree_solve.TreeStructure` of the forest;
+    ``closure``: the rows that close loops (empty for a forest), for which the
+    storage also holds ``X``, ``Y`` (c, m), a work vector (m,), ``g`` (2, 6) and
+    the vectors ``z``, ``xc`` (c,) of :mod:`.loop_solve`.
+    """
+    c = closure.shape[0]
+    return (*structure.arrays, *factor_arrays(structure), closure.astype(np.int64),
+            np.zeros((c, m)), np.zeros((c, m)), np.zeros(m), np.zeros((2, 6)), np.zeros(c),
+            np.zeros(c))
 
 
 @njit(cache=True)
 def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, par,
-                use_tree, key, floats, ints, layout, pos, quat, vel, om, lam, c_valid, counts,
+                solve, key, floats, ints, layout, pos, quat, vel, om, lam, c_valid, counts,
                 err):
     """
     :func:`constrained_step` with a component's arrays packed by :func:`pack`.
 
-    ``key, floats, ints, layout`` replace ``rows, watch, tree, dense, ws``. Returns
-    whether every entry of the new state is finite.
+    ``key, floats, ints, layout`` replace ``rows, watch, tree, dense, ws``;
+    ``solve`` (``SOLVE_DENSE``, ``SOLVE_TREE`` or ``SOLVE_LOOP``) says which
+    storages are in use. Returns whether every entry of the new state is finite.
     """
     f, i, L = floats, ints, layout
     pos0, quat0, vel0, om0 = raw(pos0), raw(quat0), raw(vel0), raw(om0)
@@ -967,15 +1048,19 @@ def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
     rows = (_v1(i, L, 0), _v1(i, L, 1), _v1(i, L, 2), _v1(i, L, 3), _v2(f, L, 4), key)
     ws = (_v2(f, L, 5), _v4(f, L, 6), _v2(f, L, 7), _v2(f, L, 8), _v2(f, L, 9),
           _v2(f, L, 10), _v2(f, L, 11), _v2(f, L, 12), _v1(i, L, 13), _v1(i, L, 14))
-    if use_tree:
-        tree = (_tree_views(f, i, L, 25), _tree_views(f, i, L, 38))
+    t2 = 25 + _TREE_SLOTS
+    if solve == SOLVE_TREE:
+        tree = (_tree_views(f, i, L, 25), _tree_views(f, i, L, t2))
         return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
                                 flags, rows, ws[9], par, True, tree, None, ws, pos, quat,
                                 vel, om, lam, c_valid, counts, err)
-    else:
-        dense = ((_v2(f, L, 15), _v1(i, L, 16), _v2(f, L, 17), _v1(f, L, 18), _v2(f, L, 19)),
-                 (_v2(f, L, 20), _v1(i, L, 21), _v2(f, L, 22), _v1(f, L, 23),
-                  _v2(f, L, 24)))
+    dense = ((_v2(f, L, 15), _v1(i, L, 16), _v2(f, L, 17), _v1(f, L, 18), _v2(f, L, 19)),
+             (_v2(f, L, 20), _v1(i, L, 21), _v2(f, L, 22), _v1(f, L, 23), _v2(f, L, 24)))
+    if solve == SOLVE_LOOP:
+        tree = (_tree_views(f, i, L, 25), _tree_views(f, i, L, t2))
         return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
-                                flags, rows, ws[9], par, False, None, dense, ws, pos, quat,
+                                flags, rows, ws[9], par, True, tree, dense, ws, pos, quat,
                                 vel, om, lam, c_valid, counts, err)
+    return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
+                            flags, rows, ws[9], par, False, None, dense, ws, pos, quat,
+                            vel, om, lam, c_valid, counts, err)

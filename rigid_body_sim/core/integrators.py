@@ -83,7 +83,8 @@ A step is one compiled call (numba) per component of the constraint graph
 (:mod:`.constrained_kernels`) and one for the bodies no constraint couples
 (:mod:`.step_kernels`): these modules hold the arithmetic of the methods above.
 Generic constraint rows (a user's Python function) are evaluated by Python from
-inside the compiled step; closed loops are solved densely.
+inside the compiled step; closed loops by the tree solve of a spanning forest and
+the Schur complement of the rows that close them.
 
 """
 
@@ -200,7 +201,7 @@ class Integrator:
         pos0, quat0 = state.pos_com_world, state.quat_principal_world
         at = self._geometry_at
         valid = at is not None and at[0] is setup and at[1] is pos0 and at[2] is quat0
-        lam, use_tree, packed = setup[1][0][4], setup[1][0][3], setup[1][0][2]
+        lam, solve, packed = setup[1][0][4], setup[1][0][3], setup[1][0][2]
         # New arrays (copies: the cheapest fresh arrays), overwritten by the kernel.
         pos, quat = pos0.copy(), quat0.copy()
         vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
@@ -208,8 +209,8 @@ class Integrator:
         before = dyn.defer_effect_work() if dyn.effects else None
         self.finite = ckern.packed_step(
             self.KERNEL, pos0, quat0, state.vel_com_world, state.ang_vel_principal, dt, body,
-            gforce, wrench, flags, self._kernel_parameters(), use_tree, *packed, pos, quat, vel,
-            om, lam, valid, tally, err)
+            gforce, wrench, flags, self._kernel_parameters(), solve, *packed, pos, quat, vel, om,
+            lam, valid, tally, err)
         dyn.last_multipliers = lam
         if before is not None:
             dyn.count_effect_work_since(before)
@@ -282,14 +283,14 @@ class Integrator:
         lam = dyn.last_multipliers
         if len(lam) != solver.constraints.n_rows or lam is components[0][4]:
             lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)
-        for bodies, rows_global, packed, use_tree, lam_c in components:
+        for bodies, rows_global, packed, solve, lam_c in components:
             body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, bodies)
             p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
             p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
                           np.empty_like(o0))
             before = tally.tolist() if counting else None
             finite &= ckern.packed_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
-                                        flags, par, use_tree, *packed, p, q, v, o, lam_c, valid,
+                                        flags, par, solve, *packed, p, q, v, o, lam_c, valid,
                                         tally, err)
             pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
             lam[rows_global] = lam_c

@@ -19,10 +19,12 @@ loops. With ``A = G M⁻¹ Hᵀ + reg I`` partitioned accordingly, block elimina
     S = A_CC − A_CT X                     (c x c, dense)
     y = A_TT⁻¹ rhs_T,   S x_C = rhs_C − A_CT y,   x_T = y − X x_C
 
-The blocks ``A_TC = G_T M⁻¹ H_Cᵀ`` and ``A_CT = G_C M⁻¹ H_Tᵀ`` are never formed
-as matrices: a column of ``A_TC`` is ``G_T`` applied to the (two-body) impulse
-response ``M⁻¹ H_jᵀ``, and ``A_CT y`` is ``G_C M⁻¹ (H_Tᵀ y)``. The cost is a
-tree factorization plus ``c`` tree solves, ``O(c m)``, and a dense ``c³``
+The blocks ``A_TC = G_T M⁻¹ H_Cᵀ`` and ``A_CT = G_C M⁻¹ H_Tᵀ`` are computed
+from the row blocks: a column of ``A_TC`` is ``G_T`` applied to the (two-body)
+impulse response ``M⁻¹ H_jᵀ``, non-zero only on the forest rows that share a
+body with closure row ``j``. The cost is a tree factorization plus ``c`` tree
+solves and the products with ``X`` and ``A_CT`` (kept as (c, m) arrays, so a
+solve needs no blocks), ``O(c² m)``, and a dense ``c³``
 factorization of ``S`` (by the caller: :mod:`.constrained_kernels` factors it
 as it factors a small dense system, with a truncated SVD when closure rows are
 redundant, as in a planar loop modelled in 3D); linear in the size of the
@@ -130,42 +132,10 @@ def _apply(i, a, b, Ga, Gb, n, body0, body1, g):
 
 
 @njit(cache=True)
-def _transpose_times(tree_rows, a, b, Ha, Hb, y, f):
-    """``f`` (n, 6) = ``H_Tᵀ y`` over the rows ``tree_rows`` (overwritten)."""
-    n = f.shape[0]
-    for i in range(n):
-        for t in range(6):
-            f[i, t] = 0.0
-    for r in tree_rows:
-        v = y[r]
-        if v != 0.0:
-            for t in range(6):
-                f[a[r], t] += Ha[r, t] * v
-            if b[r] < n:
-                for t in range(6):
-                    f[b[r], t] += Hb[r, t] * v
-
-
-@njit(cache=True)
-def _closure_times(closure, a, b, Ga, Gb, minv6, f, out):
-    """``out[j] = G_j M⁻¹ f`` for the closure rows ``j`` (``f`` (n, 6))."""
-    n = f.shape[0]
-    for k in range(closure.shape[0]):
-        j = closure[k]
-        s = 0.0
-        for t in range(6):
-            s += Ga[j, t] * minv6[a[j], t] * f[a[j], t]
-        if b[j] < n:
-            for t in range(6):
-                s += Gb[j, t] * minv6[b[j], t] * f[b[j], t]
-        out[k] = s
-
-
-@njit(cache=True)
 def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
-               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, F, work, f, g):
+               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y, F, work, g):
     """
-    Given the tree factors of ``A_TT``, compute ``X = A_TT⁻¹ A_TC`` and ``F = S``.
+    Given the tree factors of ``A_TT``, compute ``X``, ``Y = A_CT`` and ``F = S``.
 
     Parameters
     ----------
@@ -178,11 +148,14 @@ def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B
         The system (see the module docstring).
     X : ndarray, shape (c, m)
         Written: column ``k`` of ``A_TT⁻¹ A_TC`` as row ``k`` (zero at closure rows).
+    Y : ndarray, shape (c, m)
+        Written: ``A_CT`` (zero at closure rows); only the rows of the forest that
+        share a body with a closure row are non-zero.
     F : ndarray, shape (c, c)
         Written: the Schur complement ``A_CC + reg I − A_CT X``.
     work : ndarray, shape (m,)
         Workspace (overwritten).
-    f, g : ndarray, shapes (n, 6) and (2, 6)
+    g : ndarray, shape (2, 6)
         Workspace (overwritten).
 
     """
@@ -191,45 +164,57 @@ def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B
     c = closure.shape[0]
     for k in range(c):
         j = closure[k]
-        # Column j of A: the tree rows' response to an impulse along H_jᵀ.
+        for r in range(m):
+            X[k, r] = 0.0
+            Y[k, r] = 0.0
+        # Row k of A_CT: closure row j applied to each forest row's impulse response.
+        for r in group_rows:
+            if a[r] == a[j] or a[r] == b[j] or (b[r] < n and (b[r] == a[j] or b[r] == b[j])):
+                _response(r, a, b, Ha, Hb, minv6, n, g)
+                Y[k, r] = _apply(j, a, b, Ga, Gb, n, a[r], b[r], g)
+        # Column k of A_TC: the forest rows' response to an impulse along H_jᵀ, solved.
         _response(j, a, b, Ha, Hb, minv6, n, g)
         for r in range(m):
             work[r] = 0.0
         for r in group_rows:
-            work[r] = _apply(r, a, b, Ga, Gb, n, a[j], b[j], g)
+            if a[r] == a[j] or a[r] == b[j] or (b[r] < n and (b[r] == a[j] or b[r] == b[j])):
+                work[r] = _apply(r, a, b, Ga, Gb, n, a[j], b[j], g)
         tree_solve(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
                    work, work)
-        for r in range(m):
-            X[k, r] = 0.0
         for r in group_rows:
             X[k, r] = work[r]
-        # Column k of S: A_CC[:, k] + reg e_k − A_CT X_k (A_CT X_k into work[:c]).
-        _transpose_times(group_rows, a, b, Ha, Hb, work, f)
-        _closure_times(closure, a, b, Ga, Gb, minv6, f, work)
+        # Column k of A_CC.
         for i in range(c):
-            F[i, k] = _apply(closure[i], a, b, Ga, Gb, n, a[j], b[j], g) - work[i]
+            F[i, k] = _apply(closure[i], a, b, Ga, Gb, n, a[j], b[j], g)
         F[k, k] += reg
+    # S = A_CC + reg I − A_CT X.
+    for i in range(c):
+        for k in range(c):
+            s = 0.0
+            for r in group_rows:
+                s += Y[i, r] * X[k, r]
+            F[i, k] -= s
 
 
 @njit(cache=True)
 def loop_forward(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
-                 closure, a, b, Ga, Gb, Ha, Hb, minv6, rhs, out, z, f, tmp2):
+                 closure, Y, rhs, out, z):
     """
     First half of a solve: ``out_T = A_TT⁻¹ rhs_T`` and ``z = rhs_C − A_CT out_T``.
 
     ``out`` (m,) may be ``rhs``; ``z`` (c,) is the right-hand side of ``S x_C = z``
-    (solved by the caller), then :func:`loop_back` finishes. ``f`` (n, 6) and
-    ``tmp2`` (c,): workspace.
+    (solved by the caller), then :func:`loop_back` finishes.
     """
     c = closure.shape[0]
     for k in range(c):
         z[k] = rhs[closure[k]]
     tree_solve(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
                rhs, out)
-    _transpose_times(group_rows, a, b, Ha, Hb, out, f)
-    _closure_times(closure, a, b, Ga, Gb, minv6, f, tmp2)
     for k in range(c):
-        z[k] -= tmp2[k]
+        s = 0.0
+        for r in group_rows:
+            s += Y[k, r] * out[r]
+        z[k] -= s
 
 
 @njit(cache=True)

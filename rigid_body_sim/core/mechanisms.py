@@ -1,5 +1,5 @@
 """
-Ready-made constrained mechanisms: rods, chains, trees, a four-bar linkage.
+Ready-made constrained mechanisms: rods, chains, trees, a ring, a four-bar linkage.
 
 Used by the benchmarks and the tests, and a starting point for users. Every
 builder returns a :class:`Simulation` under gravity (``g = 9.81 m/s²``, -z).
@@ -61,6 +61,26 @@ def tree(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
         tips.append(start + ROD_LENGTH * d)
         joints.append(Constraint(f'j{i}', 'ball', f'l{i}', None if i == 0 else f'l{(i - 1) // 2}',
                                  anchor_world=start))
+    return Simulation(bodies, [Gravity()], integrator, dt, joints)
+
+
+def ring(n: int, integrator: str, dt: float = 1e-3) -> Simulation:
+    """
+    Build a closed ring of n rods in the x-z plane, hinged about y, hanging from the world.
+
+    The rods form a regular polygon through the origin; rod i runs from vertex i to
+    vertex i + 1, joined to rod i - 1 by a hinge at vertex i (rod 0 to the world),
+    and a ball joint at the origin closes the loop: ``5 n + 3`` rows, 3 of them
+    redundant, one closed loop.
+    """
+    radius = ROD_LENGTH / (2.0 * np.sin(np.pi / n))
+    angles = -0.5 * np.pi + 2.0 * np.pi * np.arange(n + 1) / n
+    vertex = radius * np.column_stack([np.cos(angles), np.zeros(n + 1), np.sin(angles) + 1.0])
+    y = [0.0, 1.0, 0.0]
+    bodies = [rod(f'l{i}', vertex[i], vertex[i + 1] - vertex[i]) for i in range(n)]
+    joints = [Constraint(f'j{i}', 'hinge', f'l{i}', f'l{i - 1}' if i else None,
+                         anchor_world=vertex[i], axis_world=y) for i in range(n)]
+    joints.append(Constraint('close', 'ball', f'l{n - 1}', 'l0', anchor_world=vertex[n]))
     return Simulation(bodies, [Gravity()], integrator, dt, joints)
 
 

@@ -24,7 +24,9 @@ in tree order by :mod:`.tree_solve` (Baraff 1996; linear in the number of
 links, compiled); systems of at most ``DENSE_ROWS`` rows use a dense Cholesky
 factorization, which is faster at that size (see
 :data:`.constraints.DENSE_ROWS`). A step does this in compiled code
-(:mod:`.constrained_kernels`, where a closed loop is solved densely); the
+(:mod:`.constrained_kernels`, where a closed loop beyond that size is solved by
+the tree solve of a spanning forest and the Schur complement of the rows that
+close the loops, :mod:`.loop_solve`); the
 solves of this class (reactions, consistency, velocity reconciliation when a
 constraint is added) factorize a closed loop by SuperLU with a minimum-degree
 ordering of ``A + Aᵀ``.
@@ -65,12 +67,14 @@ import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constrained_kernels import dense_storage, GENERIC, pack, workspace
+from .constrained_kernels import (dense_storage, GENERIC, pack, SOLVE_DENSE, SOLVE_LOOP,
+                                  SOLVE_TREE, tree_storage, workspace)
 from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geometry,
                           RowJacobian)
 from .dynamics import SolverCounters
 from .errors import SpecError
-from .tree_solve import factor_arrays, tree_structure, TreeSolver
+from .loop_solve import loop_structure
+from .tree_solve import tree_structure, TreeSolver
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -277,10 +281,13 @@ class ConstraintSolver:
         motion needs, and the bodies no constraint touches as free bodies
         (see :meth:`.integrators.Integrator.substeps`). Generic rows (a user's
         Python function) are evaluated by Python from inside the compiled step
-        (:data:`.constrained_kernels.GENERIC`); a component with a closed loop is
-        solved densely. Returns ``(free, components)``: the indices of the free
-        bodies, and per component ``(bodies, rows_global, packed, use_tree,
-        multipliers)``, ``packed`` the arguments of
+        (:data:`.constrained_kernels.GENERIC`). A component of at most
+        ``DENSE_ROWS`` rows is solved densely, a larger one by the tree solve, and
+        one with closed loops by the tree solve of a spanning forest and the Schur
+        complement of the loop-closing rows (:mod:`.loop_solve`). Returns
+        ``(free, components)``: the indices of the free bodies, and per component
+        ``(bodies, rows_global, packed, solve, multipliers)``, ``solve`` one of
+        ``constrained_kernels.SOLVE_*`` and ``packed`` the arguments of
         :func:`.constrained_kernels.packed_step` (its rows in the component's own
         body numbering, workspace and factor storages). Rebuilt only when the
         constraint set changes.
@@ -321,18 +328,21 @@ class ConstraintSolver:
             local[n] = len(bodies)   # the world
             ra, rb = local[a[rows_global]], local[b[rows_global]]
             mc = len(rows_global)
-            use_tree = mc > DENSE_ROWS
-            st = tree_structure(ra if use_tree else ra[:0], rb if use_tree else rb[:0],
-                                len(bodies))
-            if st is None:
-                # A closed loop: solved densely (O(m³) per factorization; a loop
-                # beyond DENSE_ROWS rows costs more than a tree of its size).
-                use_tree = False
+            closure = np.zeros(0, dtype=np.int64)
+            if mc <= DENSE_ROWS:
+                solve, d = SOLVE_DENSE, mc
                 st = tree_structure(ra[:0], rb[:0], len(bodies))
+            else:
+                st = tree_structure(ra, rb, len(bodies))
+                solve, d = SOLVE_TREE, 0
+                if st is None:
+                    # Closed loops: the tree solve of a spanning forest and a dense
+                    # system of the rows that close the loops.
+                    st, closure = loop_structure(ra, rb, len(bodies))
+                    solve, d = SOLVE_LOOP, len(closure)
             # Two storages each: general, and the symmetric factor kept for the
             # current geometry (see constrained_kernels._sym_factor).
-            trees = ((*st.arrays, *factor_arrays(st)), (*st.arrays, *factor_arrays(st)))
-            d = 0 if use_tree else mc
+            trees = (tree_storage(st, closure, mc), tree_storage(st, closure, mc))
             body = np.zeros((len(bodies), 8))
             body[:, 1] = self.bodies.inv_mass[bodies]
             body[:, 2:5] = self.bodies.moments[bodies]
@@ -349,7 +359,7 @@ class ConstraintSolver:
             ws = workspace(len(bodies), mc, body)
             packed, _ = pack(rows, (*ws[:9], ws[9].astype(np.int64)),
                              (dense_storage(d), dense_storage(d)), trees)
-            components.append((bodies, rows_global, packed, use_tree, np.zeros(mc)))
+            components.append((bodies, rows_global, packed, solve, np.zeros(mc)))
         setup = (np.flatnonzero(~touched), components)
         self._kernel_cache = (cs, cs.version, setup)
         return setup

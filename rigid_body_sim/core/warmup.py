@@ -6,8 +6,9 @@ the source (``__pycache__``); the first run on a machine takes about 90 s, a
 later one 0.4 s. ``./dev.sh`` runs ``python -m rigid_body_sim.core.warmup``
 after the set-up, so neither the node's first start nor a test pays for it.
 The scenes below take every kernel path with the argument types of real runs:
-a free body with every effect, a small constrained scene (dense solves) and a
-chain long enough for the tree solve.
+a free body with every effect, a small constrained scene (dense solves), a
+chain long enough for the tree solve and a ring (a closed loop: the tree solve
+of a spanning tree and the Schur complement of the loop-closing rows).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import time
 from .bodies import RigidBody
 from .constraints import Constraint
 from .effects import Damping, Gravity
+from .mechanisms import ring
 from .simulation import Simulation
 
 
@@ -38,6 +40,7 @@ def warm_up() -> float:
         chain = Simulation(bodies, [Gravity()], 'lie_poisson2', 1e-3, joints)
         chain.step(2)
         chain.reactions()
+    ring(10, 'lie_poisson2').step(2)   # 53 rows: beyond the dense size
     return time.perf_counter() - start
 
 
