@@ -35,7 +35,7 @@ from numba import njit, objmode
 import numpy as np
 
 from .loop_solve import loop_back, loop_forward, loop_schur
-from .row_kernels import rows_geometry, rows_rates
+from .row_kernels import framed_geometry, framed_rates, frames
 from .step_kernels import (all_finite, damping_flow, drift, finish_accelerations,
                            HAS_DAMPING, KICK, LIE_POISSON4, normalize_quaternions,
                            position_wrench, positive_product, quat_exp_multiply, raw,
@@ -211,10 +211,12 @@ def _factor_matrix(m, symmetric, tiny, floor, dense, counts):
     Cholesky (``symmetric``) or LU with partial pivoting; a pivot at most
     ``tiny`` marks redundant rows, which get the truncated SVD (minimum-norm
     solution): singular values at most ``1e-13`` of the largest, or ``floor``,
-    count as zero.
+    count as zero. ``dense[2]`` keeps a copy of the matrix for that SVD.
     """
     F, dpiv, U, sv, Vt = dense
-    A = F.copy()
+    for i in range(m):
+        for j in range(m):
+            U[i, j] = F[i, j]
     ok = True
     if symmetric:
         # Cholesky, lower triangle in place.
@@ -237,7 +239,7 @@ def _factor_matrix(m, symmetric, tiny, floor, dense, counts):
     elif _lu(F, dpiv, m, tiny) > tiny:   # LU with partial pivoting (tree_solve's)
         return LU
     counts[RANK_DEFICIENT] += 1
-    u, s, vt = np.linalg.svd(A)
+    u, s, vt = np.linalg.svd(U)   # the copy: F now holds a partial factorization
     U[:, :] = u
     Vt[:, :] = vt
     for i in range(m):
@@ -286,13 +288,23 @@ def _solve_dense(mode, rhs, out, dense):
 def _gt_lambda(Ga, Gb, a, b, lam, out):
     """``out = Gᵀ λ`` as (n, 6) (overwritten)."""
     n = out.shape[0]
-    out[:, :] = 0.0
+    for i in range(n):
+        for c in range(6):
+            out[i, c] = 0.0
     for r in range(Ga.shape[0]):
         for c in range(6):
             out[a[r], c] += Ga[r, c] * lam[r]
         if b[r] < n:
             for c in range(6):
                 out[b[r], c] += Gb[r, c] * lam[r]
+
+
+@njit(cache=True)
+def _copy(src, dst):
+    """``dst[:, :] = src`` for arrays of the same shape (r, c)."""
+    for i in range(src.shape[0]):
+        for c in range(src.shape[1]):
+            dst[i, c] = src[i, c]
 
 
 @njit(cache=True)
@@ -311,6 +323,8 @@ def _g_times(Ga, Gb, a, b, x6, out):
 
 # Workspace slots (a tuple of arrays, see constrained_step): which geometry.
 START, CURRENT, END = 0, 1, 2
+# The scratch arrays after the workspace's ten (see scratch()).
+FRAMES, OMEGA_WORLD, JR, G2, VECTORS, BODY_VECTORS, QUATS, STAGES, ROTOR = range(10, 19)
 
 
 # Generic rows (a user's Python function) are evaluated by Python from inside the
@@ -340,9 +354,10 @@ def _geometry(pos, quat, rows, which, ws, counts):
     ``len(kind)``; with ``key >= 0`` the generic rows after them are filled by
     :func:`generic_geometry` (Python, in object mode).
     """
-    phi3, G3 = ws[0], ws[1]
+    phi3, G3, R = ws[0], ws[1], ws[FRAMES]
     phi_w, Ga_w, Gb_w = phi3[which], G3[which, 0], G3[which, 1]
-    rows_geometry(pos, quat, rows[0], rows[1], rows[2], rows[3], rows[4], phi_w, Ga_w, Gb_w)
+    frames(quat, R)
+    framed_geometry(pos, R, rows[0], rows[1], rows[2], rows[3], rows[4], phi_w, Ga_w, Gb_w)
     key = rows[5]
     if key >= 0:
         with objmode():
@@ -380,8 +395,10 @@ def _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, 
     phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
     vm, g6, a6, minv6 = ws[2], ws[3], ws[4], ws[7]
     a, b = rows[2], rows[3]
-    rows_rates(pos, quat, vel, om, rows[0], rows[1], a, b, rows[4], Ga, Gb, True, vm[0],
-               vm[1])
+    R = ws[FRAMES]
+    frames(quat, R)
+    framed_rates(pos, vel, om, R, ws[OMEGA_WORLD], rows[0], rows[1], a, b, rows[4], Ga, Gb,
+                 True, vm[0], vm[1])
     key = rows[5]
     if key >= 0:
         # Generic rows: Φ̇ = G ν here, γ from the user's function (object mode).
@@ -416,8 +433,10 @@ def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts):
     """
     force, torque, a6 = ws[5], ws[6], ws[4]
     position_wrench(quat, body, gforce, wrench, force, torque)
-    a6[:, :3] = force
-    a6[:, 3:] = torque
+    for i in range(quat.shape[0]):
+        for c in range(3):
+            a6[i, c] = force[i, c]
+            a6[i, 3 + c] = torque[i, c]
     finish_accelerations(vel, om, body, flags, a6[:, :3], a6[:, 3:], counts)
 
 
@@ -435,7 +454,7 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, 
     counts[KICK] += 1
     if flags & HAS_DAMPING:
         counts[DAMP_IN_KICK] += 1
-    om = np.empty((n, 3))
+    om = ws[BODY_VECTORS][1]
     for i in range(n):
         for c in range(3):
             om[i, c] = mom[i, c] / body[i, 2 + c]
@@ -545,7 +564,7 @@ def _right_jacobians(quat_s, quat_e, Jr):
 
 
 @njit(cache=True)
-def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr):
+def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
     """
     Per body, how the end orientation of a drift responds to its start momentum.
 
@@ -554,12 +573,10 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr):
     fills every body first); for an anisotropic one, the derivative carried
     through the drift's rotor flows about the principal axes, each a rotation by
     ``φ = τ L_k / J_k`` that also turns ``L`` (see ``step_kernels.axis_flow``).
+    ``scratch`` (6, 3) is overwritten.
     """
     _right_jacobians(quat_s, quat_e, Jr)
-    dT = np.empty((3, 3))
-    dL = np.empty((3, 3))
-    L = np.empty(3)
-    row = np.empty(3)
+    dL, L, row, ex = scratch[0:3], scratch[3], scratch[4], scratch[5]
     if symmetric:
         axes, weights = (0, 1, 2, 1, 0), (0.5, 0.5, 1.0, 0.5, 0.5)
     else:
@@ -567,6 +584,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr):
     for i in range(quat_s.shape[0]):
         if body[i, 7] == 0.0:
             continue
+        dT = Jr[i]   # the derivative of the end rotation, scaled into J_r at the end
         for r in range(3):
             L[r] = mom_s[i, r]
             for c in range(3):
@@ -586,7 +604,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr):
             L[j] = cs * lj + sn * lk
             L[kk] = cs * lk - sn * lj
             # e_k × L_new
-            ex = np.zeros(3)
+            ex[k] = 0.0
             ex[j] = -L[kk]
             ex[kk] = L[j]
             for c in range(3):
@@ -601,7 +619,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr):
                     dL[r, c] -= ex[r] * row[c]
         for r in range(3):
             for c in range(3):
-                Jr[i, r, c] = dT[r, c] * body[i, 2 + c] / h
+                dT[r, c] = dT[r, c] * body[i, 2 + c] / h
 
 
 @njit(cache=True)
@@ -643,24 +661,26 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
     a, b = rows[2], rows[3]
     m = phiS.shape[0]
     rho = math.exp(-h / par[P_TAU])
-    target = np.empty(m)
+    target = ws[VECTORS][0]
     closing = False
     for r in range(m):
         target[r] = rho * phiS[r]
         if abs(phiS[r]) > par[P_CLOSING]:
             closing = True
     max_it = int(par[P_MAX_IT])
-    pos_s, quat_s = pos.copy(), quat.copy()
-    mom_s = mom.copy()
-    Jr = np.empty((n, 3, 3))
-    Ga2 = np.empty((m, 6))
-    Gb2 = np.empty((m, 6))
+    # The start of the drift (the body vectors' slots 0 and 1 are the caller's).
+    pos_s, mom_s, quat_s = ws[BODY_VECTORS][2], ws[BODY_VECTORS][3], ws[QUATS]
+    _copy(pos, pos_s)
+    _copy(quat, quat_s)
+    _copy(mom, mom_s)
+    Jr, Ga2, Gb2 = ws[JR], ws[G2][0], ws[G2][1]
     previous = np.inf
     mode = -1
     for it in range(max_it + 1):
-        pos[:, :] = pos_s
-        quat[:, :] = quat_s
-        mom[:, :] = mom_s
+        if it:
+            _copy(pos_s, pos)
+            _copy(quat_s, quat)
+            _copy(mom_s, mom)
         drift(pos, quat, vel, mom, body, h, symmetric, counts)
         _geometry(pos, quat, rows, CURRENT, ws, counts)
         phiE, GaE, GbE = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
@@ -689,7 +709,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
         # matrices differ from it by as much as the configuration moved since (the
         # size of the corrections), and the iteration stays Newton's to that order.
         if refactor:
-            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr)
+            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, ws[ROTOR])
             _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
             mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, tree, dense, 0, counts)
         _sol(mode, vm[2], vm[3], tree, dense, 0)
@@ -713,7 +733,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
         weights = (1.0, 0.0, 0.0)
     n_sub = 3 if method == LIE_POISSON4 else 1
     damping = flags & HAS_DAMPING
-    mom = np.empty((n, 3))
+    mom = ws[BODY_VECTORS][0]
     for i in range(n):
         for c in range(3):
             mom[i, c] = om[i, c] * body[i, 2 + c]
@@ -722,8 +742,11 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
         if not c_valid:
             _geometry(pos, quat, rows, CURRENT, ws, counts)
             c_valid = True
-        ws[0][START, :] = ws[0][CURRENT]
-        ws[1][START] = ws[1][CURRENT]
+        phi, G = ws[0], ws[1]
+        for r in range(phi.shape[1]):
+            phi[START, r] = phi[CURRENT, r]
+        _copy(G[CURRENT, 0], G[START, 0])
+        _copy(G[CURRENT, 1], G[START, 1])
         first = 0.5 * h if symmetric else h
         if damping:
             damping_flow(vel, mom, body, first, counts)
@@ -757,16 +780,9 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
     """
     n = pos.shape[0]
     estimate = err.shape[0] > 0
-    slots = 5 if estimate else 4
-    kp = np.empty((slots, n, 3))
-    kv = np.empty((slots, n, 3))
-    kw = np.empty((slots, n, 3))
-    kr = np.empty((slots, n, 3))
-    p = np.empty((n, 3))
-    v = np.empty((n, 3))
-    w = np.empty((n, 3))
-    u = np.empty((n, 3))
-    q = np.empty((n, 4))
+    stages, vectors = ws[STAGES], ws[BODY_VECTORS]
+    kp, kv, kw, kr = stages[0], stages[1], stages[2], stages[3]
+    p, v, w, u, q = vectors[0], vectors[1], vectors[2], vectors[3], ws[QUATS]
     a6, g6, minv6 = ws[4], ws[3], ws[7]
     for s in range(4):
         rkmk4_stage(s, h, pos, quat, vel, om, kp, kv, kw, kr, p, q, v, w, u, counts)
@@ -791,13 +807,13 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
         counts[RHS] += 1
         _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts)
         _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense,
-                     np.empty_like(lam), counts)
+                     ws[VECTORS][1], counts)
         for i in range(n):
             for c in range(3):
                 kv[4, i, c] = a6[i, c] - minv6[i, c] * g6[i, c]
                 kw[4, i, c] = a6[i, 3 + c] - minv6[i, 3 + c] * g6[i, 3 + c]
         err[0] = max(err[0], rkmk4_embedded_error(vel, om, u, kp, kv, kw, kr))
-    mom = np.empty((n, 3))
+    mom = vectors[0]
     for i in range(n):
         for c in range(3):
             mom[i, c] = om[i, c] * body[i, 2 + c]
@@ -843,7 +859,8 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         for closed loops (``dense`` then holds the Schur complement of the
         loop-closing rows).
     ws : tuple
-        Workspace (see :func:`workspace`); its current geometry persists between calls.
+        Workspace (see :func:`workspace`; its current geometry persists between calls)
+        followed by the scratch arrays of :func:`scratch`.
     pos, quat, vel, om : ndarray
         Written: the state at the end.
     lam : ndarray, shape (m,)
@@ -874,10 +891,10 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
     valid0 = c_valid
     while True:
         last_resort = k >= max_sub
-        pos[:, :] = pos0
-        quat[:, :] = quat0
-        vel[:, :] = vel0
-        om[:, :] = om0
+        _copy(pos0, pos)
+        _copy(quat0, quat)
+        _copy(vel0, vel)
+        _copy(om0, om)
         c_valid = valid0
         ok = True
         if k > 1:
@@ -921,6 +938,21 @@ def workspace(n: int, m: int, body: np.ndarray) -> tuple:
             np.zeros(2, dtype=np.int64), np.ones(n, dtype=bool))
 
 
+def scratch(n: int, m: int) -> tuple:
+    """
+    Scratch arrays of the constrained step, after the workspace's in ``ws``.
+
+    ``(rotations (n + 1, 3, 3), world angular velocities (n + 1, 3), J_r
+    (n, 3, 3), G diag(I, J_r) (2, m, 6), vectors (2, m), body vectors (4, n, 3),
+    quaternions (n, 4), RKMK4 stages (4, 5, n, 3), rotor flow (6, 3))``, slots
+    FRAMES to ROTOR: nothing in them outlives a call, they spare the step its
+    allocations.
+    """
+    return (np.zeros((n + 1, 3, 3)), np.zeros((n + 1, 3)), np.zeros((n, 3, 3)),
+            np.zeros((2, m, 6)), np.zeros((2, m)), np.zeros((4, n, 3)), np.zeros((n, 4)),
+            np.zeros((4, 5, n, 3)), np.zeros((6, 3)))
+
+
 def dense_storage(d: int) -> tuple:
     """Dense factor storage ``(F (d, d), piv (d,), U (d, d), s (d,), Vt (d, d))``."""
     return (np.zeros((d, d)), np.zeros(d, dtype=np.int64), np.zeros((d, d)), np.zeros(d),
@@ -929,15 +961,17 @@ def dense_storage(d: int) -> tuple:
 
 # ----------------------------------------------------------------------------------------
 # Packed arguments. A compiled call from Python pays for every array it is passed (each is
-# unboxed, typed and released: about 70 ns): a component's rows, workspace and two dense
-# and two tree storages, 50 arrays, live in one float64 and one int64 buffer described by a
-# layout table, and :func:`packed_step` rebuilds the tuples as views into them.
+# unboxed, typed and released: about 70 ns): a component's rows, workspace, scratch and two
+# dense and two tree storages, 74 arrays, live in one float64 and one int64 buffer described
+# by a layout table, and :func:`packed_step` rebuilds the tuples as views into them.
 
 _SLOTS = (
     # rows: kind, comp, a, b, par
     'i1', 'i1', 'i1', 'i1', 'f2',
     # workspace (see workspace())
     'f2', 'f4', 'f2', 'f2', 'f2', 'f2', 'f2', 'f2', 'i1', 'i1',
+    # scratch (see scratch())
+    'f3', 'f2', 'f3', 'f3', 'f2', 'f3', 'f2', 'f4', 'f2',
     # two dense storages (F, piv, U, s, Vt)
     'f2', 'i1', 'f2', 'f1', 'f2', 'f2', 'i1', 'f2', 'f1', 'f2',
     # two tree storages (group_ptr, group_rows, group_child, group_parent, row_side, S, piv,
@@ -947,19 +981,22 @@ _SLOTS = (
     'i1', 'f2', 'f2', 'f1', 'f2', 'f1', 'f1',
     'i1', 'i1', 'i1', 'i1', 'i1', 'f3', 'i2', 'f3', 'f3', 'f4', 'f3', 'f3', 'f1',
     'i1', 'f2', 'f2', 'f1', 'f2', 'f1', 'f1')
-_TREE_SLOTS = 20
+# Where the dense and the tree storages start in _SLOTS, and a tree storage's length.
+_DENSE, _TREES, _TREE_SLOTS = 24, 34, 20
 
 
 def pack(rows: tuple, ws: tuple, dense: tuple, trees: tuple) -> tuple:
     """
     Copy a component's arrays into two buffers; return ``(packed, views)``.
 
-    ``packed`` is ``(key, floats, ints, layout)``, the arguments of
-    :func:`packed_step`; ``views`` the same nested tuples as given, as views into
-    the buffers (what the compiled step reads and writes). Boolean arrays become
-    int64 (the workspace's ``watch``).
+    ``ws`` is the workspace of :func:`workspace`, to which the scratch arrays of
+    :func:`scratch` are added. ``packed`` is ``(key, floats, ints, layout)``, the
+    arguments of :func:`packed_step`; ``views`` the same nested tuples as given
+    (``ws`` with the scratch), as views into the buffers (what the compiled step
+    reads and writes). Boolean arrays become int64 (the workspace's ``watch``).
     """
-    arrays = [*rows[:5], *ws, *dense[0], *dense[1], *trees[0], *trees[1]]
+    n, m = ws[3].shape[0], ws[0].shape[1]
+    arrays = [*rows[:5], *ws, *scratch(n, m), *dense[0], *dense[1], *trees[0], *trees[1]]
     if len(arrays) != len(_SLOTS):
         raise ValueError(f'expected {len(_SLOTS)} arrays, got {len(arrays)}')
     layout = np.zeros((len(arrays), 6), dtype=np.int64)
@@ -978,10 +1015,10 @@ def pack(rows: tuple, ws: tuple, dense: tuple, trees: tuple) -> tuple:
         v[...] = x
         views.append(v)
     rows_v = (*views[:5], rows[5])
-    ws_v = tuple(views[5:15])
-    dense_v = (tuple(views[15:20]), tuple(views[20:25]))
-    trees_v = (tuple(views[25:25 + _TREE_SLOTS]),
-               tuple(views[25 + _TREE_SLOTS:25 + 2 * _TREE_SLOTS]))
+    ws_v = tuple(views[5:_DENSE])
+    dense_v = (tuple(views[_DENSE:_DENSE + 5]), tuple(views[_DENSE + 5:_TREES]))
+    trees_v = (tuple(views[_TREES:_TREES + _TREE_SLOTS]),
+               tuple(views[_TREES + _TREE_SLOTS:_TREES + 2 * _TREE_SLOTS]))
     return (rows[5], floats, ints, layout), (rows_v, ws_v, dense_v, trees_v)
 
 
@@ -1047,17 +1084,22 @@ def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
     lam, counts, err = raw(lam), raw(counts), raw(err)
     rows = (_v1(i, L, 0), _v1(i, L, 1), _v1(i, L, 2), _v1(i, L, 3), _v2(f, L, 4), key)
     ws = (_v2(f, L, 5), _v4(f, L, 6), _v2(f, L, 7), _v2(f, L, 8), _v2(f, L, 9),
-          _v2(f, L, 10), _v2(f, L, 11), _v2(f, L, 12), _v1(i, L, 13), _v1(i, L, 14))
-    t2 = 25 + _TREE_SLOTS
+          _v2(f, L, 10), _v2(f, L, 11), _v2(f, L, 12), _v1(i, L, 13), _v1(i, L, 14),
+          _v3(f, L, 15), _v2(f, L, 16), _v3(f, L, 17), _v3(f, L, 18), _v2(f, L, 19),
+          _v3(f, L, 20), _v2(f, L, 21), _v4(f, L, 22), _v2(f, L, 23))
+    t1, t2 = _TREES, _TREES + _TREE_SLOTS
     if solve == SOLVE_TREE:
-        tree = (_tree_views(f, i, L, 25), _tree_views(f, i, L, t2))
+        tree = (_tree_views(f, i, L, t1), _tree_views(f, i, L, t2))
         return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
                                 flags, rows, ws[9], par, True, tree, None, ws, pos, quat,
                                 vel, om, lam, c_valid, counts, err)
-    dense = ((_v2(f, L, 15), _v1(i, L, 16), _v2(f, L, 17), _v1(f, L, 18), _v2(f, L, 19)),
-             (_v2(f, L, 20), _v1(i, L, 21), _v2(f, L, 22), _v1(f, L, 23), _v2(f, L, 24)))
+    d = _DENSE
+    dense = ((_v2(f, L, d), _v1(i, L, d + 1), _v2(f, L, d + 2), _v1(f, L, d + 3),
+              _v2(f, L, d + 4)),
+             (_v2(f, L, d + 5), _v1(i, L, d + 6), _v2(f, L, d + 7), _v1(f, L, d + 8),
+              _v2(f, L, d + 9)))
     if solve == SOLVE_LOOP:
-        tree = (_tree_views(f, i, L, 25), _tree_views(f, i, L, t2))
+        tree = (_tree_views(f, i, L, t1), _tree_views(f, i, L, t2))
         return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
                                 flags, rows, ws[9], par, True, tree, dense, ws, pos, quat,
                                 vel, om, lam, c_valid, counts, err)

@@ -91,29 +91,22 @@ def pack_rows(rows: list) -> tuple:
 
 
 @njit(cache=True)
-def frames(pos: np.ndarray, quat: np.ndarray, R: np.ndarray, x: np.ndarray) -> None:
+def frames(quat: np.ndarray, R: np.ndarray) -> None:
     """
-    Fill the rotations and positions of the n bodies and the world.
+    Fill the rotations of the n bodies and the world.
 
     Parameters
     ----------
-    pos : ndarray, shape (n, 3)
-        Centre-of-mass positions, world frame.
     quat : ndarray, shape (n, 4)
         Principal-frame orientations ``(x, y, z, w)``.
     R : ndarray, shape (n + 1, 3, 3)
         Output: principal-to-world rotations, ``R[n] = I``.
-    x : ndarray, shape (n + 1, 3)
-        Output: positions, ``x[n] = 0``.
 
     """
-    n = pos.shape[0]
+    n = quat.shape[0]
     for i in range(n):
         quat_matrix(quat[i], R[i])
-        for j in range(3):
-            x[i, j] = pos[i, j]
     for j in range(3):
-        x[n, j] = 0.0
         for k in range(3):
             R[n, j, k] = 1.0 if j == k else 0.0
 
@@ -139,6 +132,14 @@ def _rot_t(R: np.ndarray, i: int, v: tuple) -> tuple:
 def _vec(arr: np.ndarray, i: int) -> tuple:
     """Row ``arr[i]`` (3,) as a 3-tuple."""
     return (arr[i, 0], arr[i, 1], arr[i, 2])
+
+
+@njit(cache=True)
+def _body_vec(arr: np.ndarray, i: int) -> tuple:
+    """Row ``arr[i]`` of an (n, 3) array of the bodies as a 3-tuple; zero for the world."""
+    if i < arr.shape[0]:
+        return (arr[i, 0], arr[i, 1], arr[i, 2])
+    return (0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
@@ -211,10 +212,20 @@ def rows_geometry(pos: np.ndarray, quat: np.ndarray, kind: np.ndarray, comp: np.
         Output: ``∂Φ/∂(δx, δΘ)`` of body a and of body b (also for the world).
 
     """
-    n = pos.shape[0]
-    R = np.empty((n + 1, 3, 3))
-    x = np.empty((n + 1, 3))
-    frames(pos, quat, R, x)
+    R = np.empty((pos.shape[0] + 1, 3, 3))
+    frames(quat, R)
+    framed_geometry(pos, R, kind, comp, a, b, par, phi_out, Ga_out, Gb_out)
+
+
+@njit(cache=True)
+def framed_geometry(pos: np.ndarray, R: np.ndarray, kind: np.ndarray, comp: np.ndarray,
+                    a: np.ndarray, b: np.ndarray, par: np.ndarray, phi_out: np.ndarray,
+                    Ga_out: np.ndarray, Gb_out: np.ndarray) -> None:
+    """
+    :func:`rows_geometry` with the rotations ``R`` (n + 1, 3, 3) of :func:`frames` given.
+
+    The compiled step keeps ``R`` in its workspace: no allocation per call.
+    """
     zero = (0.0, 0.0, 0.0)
     for k in range(kind.shape[0]):
         i, j, kd = a[k], b[k], kind[k]
@@ -228,8 +239,8 @@ def rows_geometry(pos: np.ndarray, quat: np.ndarray, kind: np.ndarray, comp: np.
             continue
         r_a = (par[k, PAR_RA], par[k, PAR_RA + 1], par[k, PAR_RA + 2])
         r_b = (par[k, PAR_RB], par[k, PAR_RB + 1], par[k, PAR_RB + 2])
-        d = _sub(_add(_vec(x, i), _rot(R, i, par, k, PAR_RA)),
-                 _add(_vec(x, j), _rot(R, j, par, k, PAR_RB)))
+        d = _sub(_add(_body_vec(pos, i), _rot(R, i, par, k, PAR_RA)),
+                 _add(_body_vec(pos, j), _rot(R, j, par, k, PAR_RB)))
         if kd == KIND_POINT:
             c = comp[k]
             unit = (1.0 if c == 0 else 0.0, 1.0 if c == 1 else 0.0, 1.0 if c == 2 else 0.0)
@@ -288,16 +299,30 @@ def rows_rates(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, omega: np.nda
     """
     n = pos.shape[0]
     R = np.empty((n + 1, 3, 3))
-    x = np.empty((n + 1, 3))
-    frames(pos, quat, R, x)
-    # World-frame velocities ν = (v, ω = R Ω); the world's are zero.
-    v = np.zeros((n + 1, 3))
-    w = np.zeros((n + 1, 3))
+    frames(quat, R)
+    framed_rates(pos, vel, omega, R, np.empty((n + 1, 3)), kind, comp, a, b, par, Ga, Gb,
+                 need_gamma, phi_dot_out, gamma_out)
+
+
+@njit(cache=True)
+def framed_rates(pos: np.ndarray, vel: np.ndarray, omega: np.ndarray, R: np.ndarray,
+                 w: np.ndarray, kind: np.ndarray, comp: np.ndarray, a: np.ndarray,
+                 b: np.ndarray, par: np.ndarray, Ga: np.ndarray, Gb: np.ndarray,
+                 need_gamma: bool, phi_dot_out: np.ndarray, gamma_out: np.ndarray) -> None:
+    """
+    :func:`rows_rates` with the rotations ``R`` (n + 1, 3, 3) of :func:`frames` given.
+
+    ``w`` (n + 1, 3) is scratch (overwritten: the world-frame angular velocities).
+    The compiled step keeps ``R`` and ``w`` in its workspace: no allocation per call.
+    """
+    n = pos.shape[0]
+    # World-frame angular velocities ω = R Ω; the world's are zero.
     for i in range(n):
         for r in range(3):
-            v[i, r] = vel[i, r]
             w[i, r] = (R[i, r, 0] * omega[i, 0] + R[i, r, 1] * omega[i, 1]
                        + R[i, r, 2] * omega[i, 2])
+    for r in range(3):
+        w[n, r] = 0.0
     for k in range(kind.shape[0]):
         i, j, kd = a[k], b[k], kind[k]
         rate = 0.0
@@ -326,8 +351,8 @@ def rows_rates(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, omega: np.nda
         if kd == KIND_POINT:
             gamma_out[k] = _pick(centripetal, comp[k])
             continue
-        d = _sub(_add(_vec(x, i), lever_a), _add(_vec(x, j), lever_b))
-        d_dot = _sub(_add(_vec(v, i), wva), _add(_vec(v, j), wvb))
+        d = _sub(_add(_body_vec(pos, i), lever_a), _add(_body_vec(pos, j), lever_b))
+        d_dot = _sub(_add(_body_vec(vel, i), wva), _add(_body_vec(vel, j), wvb))
         if kd == KIND_LINE:
             eps = _rot(R, j, par, k, PAR_E)
             wbe = _cross(w_b, eps)
