@@ -471,6 +471,25 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, 
 
 
 @njit(cache=True)
+def _free_kick(quat, vel, mom, tau, body, gforce, wrench, ws, counts):
+    """
+    ``v += tau f/m`` and ``L += tau τ`` of gravity and the wrenches alone, in place.
+
+    RATTLE's last kick when the velocity projection follows it directly: the
+    projection removes any impulse along ``M⁻¹ Gᵀ`` (it solves for the end
+    velocities from scratch), so the constraint force a :func:`_kick` would add
+    changes nothing but the rounding, and its acceleration-level solve is skipped.
+    """
+    counts[KICK] += 1
+    force, torque = ws[5], ws[6]
+    position_wrench(quat, body, gforce, wrench, force, torque)
+    for i in range(vel.shape[0]):
+        for c in range(3):
+            vel[i, c] += tau * body[i, 1] * force[i, c]
+            mom[i, c] += tau * torque[i, c]
+
+
+@njit(cache=True)
 def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree, dense,
                         counts):
     """Project velocities onto ``Φ̇ = −ωΦ`` at the current geometry, in place."""
@@ -755,11 +774,14 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
         if not _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort,
                       use_tree, tree, dense, counts):
             return False, False
-        if symmetric:
+        if symmetric and damping:
+            # The damping flow between kick and projection is not along M⁻¹ Gᵀ: the
+            # kick's constraint force is part of the method here.
             _kick(pos, quat, vel, mom, 0.5 * h, body, gforce, wrench, flags, rows, ws, par,
                   use_tree, tree, dense, lam, True, counts)
-            if damping:
-                damping_flow(vel, mom, body, 0.5 * h, counts)
+            damping_flow(vel, mom, body, 0.5 * h, counts)
+        elif symmetric:
+            _free_kick(quat, vel, mom, 0.5 * h, body, gforce, wrench, ws, counts)
         _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree, dense,
                             counts)
     for i in range(n):

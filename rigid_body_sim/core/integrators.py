@@ -39,12 +39,15 @@ their order; other velocity-dependent effects are evaluated in the kick.
 Constraints (see :mod:`.solver`)
 --------------------------------
 ``symplectic_euler``, ``lie_poisson2``, ``lie_poisson4``
-    RATTLE in every (sub)step: the kick carries the constraint force of the
-    acceleration-level solve as a predictor; the half-step velocities then get
-    the impulse along ``G(q_start)ᵀ`` for which the drift from the start lands
-    on ``Φ = exp(−h/τ) Φ_start`` (SHAKE, Newton iterations that redo the drift),
-    and the end velocities the impulse along ``G(q_end)ᵀ`` onto
-    ``Φ̇ = −ωΦ`` (``ω = 1/τ``, at most ``1/(2 dt)``). Symmetric and
+    RATTLE in every (sub)step: the first kick carries the constraint force of
+    the acceleration-level solve as a predictor; the half-step velocities then
+    get the impulse along ``G(q_start)ᵀ`` for which the drift from the start
+    lands on ``Φ = exp(−h/τ) Φ_start`` (SHAKE, Newton iterations that redo the
+    drift), and the end velocities the impulse along ``G(q_end)ᵀ`` onto
+    ``Φ̇ = −ωΦ`` (``ω = 1/τ``, at most ``1/(2 dt)``). That projection solves
+    for the end velocities whatever impulse along ``M⁻¹ G(q_end)ᵀ`` the last
+    kick gave, so the last kick carries no predictor (one solve fewer a
+    sub-step) unless a damping flow comes between them. Symmetric and
     symplectic; internal joints conserve linear and angular momentum to
     rounding; the orders stay 1, 2 and 4 (measured).
 ``rkmk4``
