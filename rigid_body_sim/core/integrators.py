@@ -155,7 +155,7 @@ class Integrator:
         self._kick_at: Optional[tuple] = None
         self._geometry_at: Optional[tuple] = None
         self._parameters: Optional[tuple] = None
-        # The free-body kernel's workspace (grown to the most bodies it has stepped).
+        # The free-body kernel's workspace, sized for every body of the scene.
         self._ws = np.empty(kern.workspace_size(len(dynamics.bodies)))
         #: Whether the state the last :meth:`step` returned is finite everywhere
         #: (checked inside the kernels), or None when that step did not check.

@@ -110,6 +110,7 @@ class Simulation:
                  constraint_time_constant: float = 0.05, tolerance: Optional[float] = None,
                  tolerance_budget: int = DEFAULT_BUDGET) -> None:
         self.dt = positive_scalar(dt, 'dt')
+        self._switching: tuple = (None, 0, [])
         self._control = (None if tolerance is None
                          else ErrorControl(tolerance, tolerance_budget))
         self._specs = list(bodies)
@@ -151,13 +152,19 @@ class Simulation:
             raise SpecError('n', f'must be a non-negative integer, got {n!r}')
         dyn = self.dynamics
         dt = dyn.solver.dt = self.dt
+        # The effects that switch between steps (time-dependent ones: wrench tables).
         effects = dyn.effects
+        cached = self._switching
+        if cached[0] is not effects or cached[1] != len(effects):
+            cached = self._switching = (effects, len(effects), [
+                e for e in effects if type(e).begin_step is not Effect.begin_step])
+        switching = cached[2]
         integrator, control = self.integrator, self._control
         for _ in range(int(n)):
-            if effects:
+            if switching:
                 mid = self._time_base + (self._steps + 0.5) * dt
                 # Every effect must see the new step: no short-circuit.
-                switched = [effect.begin_step(mid) for effect in effects]
+                switched = [effect.begin_step(mid) for effect in switching]
                 if any(switched):
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
