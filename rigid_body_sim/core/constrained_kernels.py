@@ -137,36 +137,31 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, count
 
 
 @njit(cache=True)
-def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, which, counts):
+def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, counts):
     """
-    Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``) into storage ``which``.
+    Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``) into the storages given.
 
-    Exactly one of ``tree`` and ``dense`` is None: numba compiles each case
-    separately and drops the other branch, so only the storage in use is passed
-    from call to call. Returns the mode for :func:`_sol`.
+    ``tree`` is one tree storage and ``dense`` one dense storage (the callers
+    pass those of one slot, 0 or 1, see :func:`constrained_step`); one of them
+    is None, or neither for closed loops (see :func:`_factor_tree`). numba
+    compiles each case separately and drops the branches of an argument that is
+    None, so a storage is used only under a test that it is not None. Returns
+    the mode for :func:`_sol`.
     """
     mode = TREE
-    # Each storage is indexed only under a test that it is not None: numba drops the
-    # branches of an argument that is None. Both given: a closed loop (see _factor_tree).
     if tree is not None:
-        if dense is not None:
-            mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree[which],
-                                dense[which], counts)
-        if dense is None:
-            mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree[which],
-                                None, counts)
+        mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, counts)
     if dense is not None:
         if tree is None:
-            mode = _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense[which],
-                                 counts)
+            mode = _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense, counts)
     return mode
 
 
 @njit(cache=True)
-def _sol(mode, rhs, out, tree, dense, which):
-    """Solve with the factors in storage ``which`` (see :func:`_fac`)."""
+def _sol(mode, rhs, out, tree, dense):
+    """Solve with the factors in the storages given (see :func:`_fac`)."""
     if tree is not None:
-        t = tree[which]
+        t = tree
         if dense is None:
             tree_solve(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
                        rhs, out)
@@ -175,11 +170,11 @@ def _sol(mode, rhs, out, tree, dense, which):
             z, xc = t[18], t[19]
             loop_forward(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
                          t[13], t[15], rhs, out, z)
-            _solve_dense(mode, z, xc, dense[which])
+            _solve_dense(mode, z, xc, dense)
             loop_back(t[1], t[13], t[14], xc, out)
     if dense is not None:
         if tree is None:
-            _solve_dense(mode, rhs, out, dense[which])
+            _solve_dense(mode, rhs, out, dense)
 
 
 @njit(cache=True)
@@ -346,15 +341,16 @@ def generic_gamma(key: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
 
 
 @njit(cache=True)
-def _geometry(pos, quat, rows, which, ws, counts):
+def _geometry(pos, quat, rows, which, phi3, G3, R, fs, counts):
     """
-    Φ and G of every row at ``pos, quat`` into slot ``which`` of the workspace.
+    Φ and G of every row at ``pos, quat`` into slot ``which`` of ``phi3, G3``.
 
     ``rows`` is ``(kind, comp, a, b, par, key)``: the built-in rows are the first
     ``len(kind)``; with ``key >= 0`` the generic rows after them are filled by
-    :func:`generic_geometry` (Python, in object mode).
+    :func:`generic_geometry` (Python, in object mode). ``phi3``, ``G3``, ``fs``
+    are the workspace's Φ, G and factor state (``ws[0]``, ``ws[1]``, ``ws[8]``);
+    ``R`` is scratch for the rotations (``ws[FRAMES]``).
     """
-    phi3, G3, R = ws[0], ws[1], ws[FRAMES]
     phi_w, Ga_w, Gb_w = phi3[which], G3[which, 0], G3[which, 1]
     frames(quat, R)
     framed_geometry(pos, R, rows[0], rows[1], rows[2], rows[3], rows[4], phi_w, Ga_w, Gb_w)
@@ -364,33 +360,35 @@ def _geometry(pos, quat, rows, which, ws, counts):
             generic_geometry(key, pos, quat, phi_w, Ga_w, Gb_w)
     counts[GEOMETRY] += 1
     if which == CURRENT:
-        ws[8][0] = 0   # the symmetric factor was of the geometry replaced
+        fs[0] = 0   # the symmetric factor was of the geometry replaced
 
 
 @njit(cache=True)
-def _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts):
+def _sym_factor(Ga, Gb, a, b, minv6, par, tree, dense, fs, counts):
     """
     Factorize ``G M⁻¹ Gᵀ`` of the current geometry, or reuse its factors.
 
     A splitting step's second kick and its velocity projection, and the next
     step's first kick, all solve with the matrix of one configuration: it is
-    factorized once (into the second storage, ``tree[1]``, ``dense[1]``).
+    factorized once (into the second storages, ``tree1``, ``dense1`` of
+    :func:`constrained_step`, the ones passed here). ``fs`` is the workspace's
+    factor state ``ws[8]``: [the factors are of the current geometry, their mode].
     """
-    fs = ws[8]
     if fs[0] == 1:
         return fs[1]
-    mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, tree, dense, 1, counts)
+    mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, tree, dense, counts)
     fs[0] = 1
     fs[1] = mode
     return mode
 
 
 @njit(cache=True)
-def _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, counts):
+def _multipliers(pos, quat, vel, om, rows, ws, par, tree, dense, lam, counts):
     """
     λ of the acceleration-level solve at the current geometry; ``ws[3]`` gets ``Gᵀλ``.
 
-    ``ws[4]`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ``.
+    ``ws[4]`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ``. ``tree``,
+    ``dense``: the storages of the symmetric factor (see :func:`_sym_factor`).
     """
     phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
     vm, g6, a6, minv6 = ws[2], ws[3], ws[4], ws[7]
@@ -417,21 +415,21 @@ def _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, 
     _g_times(Ga, Gb, a, b, a6, vm[2])
     for r in range(phi.shape[0]):
         vm[2, r] += vm[1, r] + 2.0 * w * vm[0, r] + w * w * phi[r]
-    mode = _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts)
+    mode = _sym_factor(Ga, Gb, a, b, minv6, par, tree, dense, ws[8], counts)
     counts[ACC_SOLVES] += 1
-    _sol(mode, vm[2], lam, tree, dense, 1)
+    _sol(mode, vm[2], lam, tree, dense)
     _gt_lambda(Ga, Gb, a, b, lam, g6)
 
 
 @njit(cache=True)
-def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts):
+def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, torque, counts):
     """
-    Free accelerations (every effect and the gyroscopic term) into ``ws[4]`` (n, 6).
+    Free accelerations (every effect and the gyroscopic term) into ``a6`` (n, 6).
 
     The force (world) and torque (principal) of gravity and the wrenches alone
-    go to ``ws[5]`` and ``ws[6]`` (the kick applies them).
+    go to ``force`` and ``torque`` (n, 3; the kick applies them). The callers
+    pass the workspace's ``ws[4]``, ``ws[5]``, ``ws[6]``.
     """
-    force, torque, a6 = ws[5], ws[6], ws[4]
     position_wrench(quat, body, gforce, wrench, force, torque)
     for i in range(quat.shape[0]):
         for c in range(3):
@@ -441,14 +439,15 @@ def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts):
 
 
 @njit(cache=True)
-def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, use_tree,
-          tree, dense, lam, c_valid, counts):
+def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, tree, dense,
+          lam, c_valid, counts):
     """
     ``v += tau f/m`` and ``L += tau τ`` with the constraint force ``−Gᵀλ``, in place.
 
     λ comes from the full accelerations (damping and the gyroscopic term
     included), so the kick, the flows and the free rotor together follow the
-    constrained vector field. Returns True (the current geometry is valid).
+    constrained vector field. ``tree``, ``dense``: the storages of the symmetric
+    factor (see :func:`_sym_factor`). Returns True (the current geometry is valid).
     """
     n = pos.shape[0]
     counts[KICK] += 1
@@ -458,10 +457,11 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, 
     for i in range(n):
         for c in range(3):
             om[i, c] = mom[i, c] / body[i, 2 + c]
-    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts)
+    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws[4], ws[5], ws[6],
+                        counts)
     if not c_valid:
-        _geometry(pos, quat, rows, CURRENT, ws, counts)
-    _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense, lam, counts)
+        _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
+    _multipliers(pos, quat, vel, om, rows, ws, par, tree, dense, lam, counts)
     force, torque, g6 = ws[5], ws[6], ws[3]
     for i in range(n):
         for c in range(3):
@@ -471,7 +471,7 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, 
 
 
 @njit(cache=True)
-def _free_kick(quat, vel, mom, tau, body, gforce, wrench, ws, counts):
+def _free_kick(quat, vel, mom, tau, body, gforce, wrench, force, torque, counts):
     """
     ``v += tau f/m`` and ``L += tau τ`` of gravity and the wrenches alone, in place.
 
@@ -479,9 +479,9 @@ def _free_kick(quat, vel, mom, tau, body, gforce, wrench, ws, counts):
     projection removes any impulse along ``M⁻¹ Gᵀ`` (it solves for the end
     velocities from scratch), so the constraint force a :func:`_kick` would add
     changes nothing but the rounding, and its acceleration-level solve is skipped.
+    ``force``, ``torque`` (n, 3): scratch (the workspace's ``ws[5]``, ``ws[6]``).
     """
     counts[KICK] += 1
-    force, torque = ws[5], ws[6]
     position_wrench(quat, body, gforce, wrench, force, torque)
     for i in range(vel.shape[0]):
         for c in range(3):
@@ -490,9 +490,12 @@ def _free_kick(quat, vel, mom, tau, body, gforce, wrench, ws, counts):
 
 
 @njit(cache=True)
-def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree, dense,
-                        counts):
-    """Project velocities onto ``Φ̇ = −ωΦ`` at the current geometry, in place."""
+def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, tree, dense, counts):
+    """
+    Project velocities onto ``Φ̇ = −ωΦ`` at the current geometry, in place.
+
+    ``tree``, ``dense``: the storages of the symmetric factor (see :func:`_sym_factor`).
+    """
     n = pos.shape[0]
     counts[VEL_PROJECTIONS] += 1
     phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
@@ -506,8 +509,8 @@ def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree
     w = par[P_OMEGA]
     for r in range(phi.shape[0]):
         vm[2, r] += w * phi[r]
-    mode = _sym_factor(Ga, Gb, a, b, minv6, par, use_tree, tree, dense, ws, counts)
-    _sol(mode, vm[2], vm[3], tree, dense, 1)
+    mode = _sym_factor(Ga, Gb, a, b, minv6, par, tree, dense, ws[8], counts)
+    _sol(mode, vm[2], vm[3], tree, dense)
     _gt_lambda(Ga, Gb, a, b, vm[3], g6)
     for i in range(n):
         for c in range(3):
@@ -516,12 +519,13 @@ def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree
 
 
 @njit(cache=True)
-def _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, counts):
+def _project_positions(pos, quat, target, rows, ws, par, tree, dense, counts):
     """
     Orthogonal projection of ``pos, quat`` onto ``Φ = target`` (SHAKE's last resort).
 
     Newton steps ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁻¹ (Φ − target)`` at the current
     configuration; ends with the current geometry at the returned configuration.
+    ``tree``, ``dense``: the general storages (slot 0, see :func:`constrained_step`).
     """
     n = pos.shape[0]
     max_it = int(par[P_MAX_IT])
@@ -529,7 +533,7 @@ def _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, 
     a, b = rows[2], rows[3]
     for it in range(max_it + 1):
         if it:
-            _geometry(pos, quat, rows, CURRENT, ws, counts)
+            _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
         phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
         norm = 0.0
         for r in range(phi.shape[0]):
@@ -538,8 +542,8 @@ def _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, 
         if norm <= par[P_POS_TOL] or it == max_it:
             break
         counts[POS_ITERATIONS] += 1
-        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, tree, dense, 0, counts)
-        _sol(mode, vm[2], vm[3], tree, dense, 0)
+        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, tree, dense, counts)
+        _sol(mode, vm[2], vm[3], tree, dense)
         _gt_lambda(Ga, Gb, a, b, vm[3], g6)
         for i in range(n):
             for c in range(3):
@@ -665,14 +669,15 @@ def _apply_jacobians(Ga, Gb, a, b, Jr, Ga2, Gb2):
 
 
 @njit(cache=True)
-def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, use_tree,
-           tree, dense, counts):
+def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, tree, dense,
+           counts):
     """
     Drift with the start impulse that lands on ``Φ = exp(−h/τ) Φ_start``, in place.
 
     Returns False when the Newton iterations stop converging on joints that
     hold (the step is then redone finer), True otherwise; on True the current
-    geometry is that of the new configuration.
+    geometry is that of the new configuration. ``tree``, ``dense``: the general
+    storages (slot 0, see :func:`constrained_step`).
     """
     n = pos.shape[0]
     phiS, GaS, GbS = ws[0][START], ws[1][START, 0], ws[1][START, 1]
@@ -701,7 +706,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
             _copy(quat_s, quat)
             _copy(mom_s, mom)
         drift(pos, quat, vel, mom, body, h, symmetric, counts)
-        _geometry(pos, quat, rows, CURRENT, ws, counts)
+        _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
         phiE, GaE, GbE = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
         norm = 0.0
         for r in range(m):
@@ -713,7 +718,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
             if not closing and not last_resort:
                 return False
             counts[FALLBACKS] += 1
-            _project_positions(pos, quat, target, rows, ws, par, use_tree, tree, dense, counts)
+            _project_positions(pos, quat, target, rows, ws, par, tree, dense, counts)
             break
         # Refactor unless the last iteration cut the residual a hundredfold.
         refactor = mode < 0 or norm > 1e-2 * previous
@@ -730,8 +735,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
         if refactor:
             _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, ws[ROTOR])
             _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
-            mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, tree, dense, 0, counts)
-        _sol(mode, vm[2], vm[3], tree, dense, 0)
+            mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, tree, dense, counts)
+        _sol(mode, vm[2], vm[3], tree, dense)
         _gt_lambda(GaS, GbS, a, b, vm[3], g6)
         for i in range(n):
             for c in range(3):
@@ -742,8 +747,13 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
 
 @njit(cache=True)
 def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows, ws, par,
-               last_resort, use_tree, tree, dense, lam, c_valid, counts):
-    """One (sub)step of a splitting method with RATTLE; returns (converged, c_valid)."""
+               last_resort, tree0, tree1, dense0, dense1, lam, c_valid, counts):
+    """
+    One (sub)step of a splitting method with RATTLE; returns (converged, c_valid).
+
+    SHAKE factorizes into the storages ``tree0``, ``dense0``; the kicks and the
+    velocity projection solve with the symmetric factor in ``tree1``, ``dense1``.
+    """
     n = pos.shape[0]
     symmetric = method != SYMPLECTIC_EULER
     if method == LIE_POISSON4:
@@ -759,7 +769,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
     for sub in range(n_sub):
         h = weights[sub] * dt
         if not c_valid:
-            _geometry(pos, quat, rows, CURRENT, ws, counts)
+            _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
             c_valid = True
         phi, G = ws[0], ws[1]
         for r in range(phi.shape[1]):
@@ -769,21 +779,20 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
         first = 0.5 * h if symmetric else h
         if damping:
             damping_flow(vel, mom, body, first, counts)
-        _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, rows, ws, par,
-              use_tree, tree, dense, lam, c_valid, counts)
+        _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, rows, ws, par, tree1,
+              dense1, lam, c_valid, counts)
         if not _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort,
-                      use_tree, tree, dense, counts):
+                      tree0, dense0, counts):
             return False, False
         if symmetric and damping:
             # The damping flow between kick and projection is not along M⁻¹ Gᵀ: the
             # kick's constraint force is part of the method here.
             _kick(pos, quat, vel, mom, 0.5 * h, body, gforce, wrench, flags, rows, ws, par,
-                  use_tree, tree, dense, lam, True, counts)
+                  tree1, dense1, lam, True, counts)
             damping_flow(vel, mom, body, 0.5 * h, counts)
         elif symmetric:
-            _free_kick(quat, vel, mom, 0.5 * h, body, gforce, wrench, ws, counts)
-        _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree, dense,
-                            counts)
+            _free_kick(quat, vel, mom, 0.5 * h, body, gforce, wrench, ws[5], ws[6], counts)
+        _project_velocities(pos, quat, vel, mom, body, rows, ws, par, tree1, dense1, counts)
     for i in range(n):
         for c in range(3):
             om[i, c] = mom[i, c] / body[i, 2 + c]
@@ -791,14 +800,15 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
 
 
 @njit(cache=True)
-def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, use_tree,
-           tree, dense, lam, c_valid, counts, err):
+def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, tree, dense,
+           lam, c_valid, counts, err):
     """
     One RKMK4 (sub)step with constraint forces at every stage, then Φ̇ = −ωΦ.
 
     With ``err`` of length 1, the slopes at the end (constraint forces included,
     before the velocity projection) give the embedded estimate
-    (:func:`.step_kernels.rkmk4_embedded_error`), raising ``err[0]``.
+    (:func:`.step_kernels.rkmk4_embedded_error`), raising ``err[0]``. ``tree``,
+    ``dense``: the storages of the symmetric factor (see :func:`_sym_factor`).
     """
     n = pos.shape[0]
     estimate = err.shape[0] > 0
@@ -811,10 +821,10 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
         if s:
             c_valid = False
         counts[RHS] += 1
-        _free_accelerations(q, v, w, body, gforce, wrench, flags, ws, counts)
+        _free_accelerations(q, v, w, body, gforce, wrench, flags, a6, ws[5], ws[6], counts)
         if not c_valid:
-            _geometry(p, q, rows, CURRENT, ws, counts)
-        _multipliers(p, q, v, w, rows, ws, par, use_tree, tree, dense, lam, counts)
+            _geometry(p, q, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
+        _multipliers(p, q, v, w, rows, ws, par, tree, dense, lam, counts)
         for i in range(n):
             for c in range(3):
                 kv[s, i, c] = a6[i, c] - minv6[i, c] * g6[i, c]
@@ -822,14 +832,13 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
         rkmk4_slopes(s, v, w, u, kp, kr)
     rkmk4_finish(h, pos, quat, vel, om, kp, kv, kw, kr, u, counts)
     # Velocities onto Φ̇ = −ωΦ at the end configuration: an internal impulse.
-    _geometry(pos, quat, rows, CURRENT, ws, counts)
+    _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
     if estimate:
         # The fifth stage (its factorization is the projection's): λ to scratch, so
         # the reported multipliers are those of the step without the estimate.
         counts[RHS] += 1
-        _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws, counts)
-        _multipliers(pos, quat, vel, om, rows, ws, par, use_tree, tree, dense,
-                     ws[VECTORS][1], counts)
+        _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, ws[5], ws[6], counts)
+        _multipliers(pos, quat, vel, om, rows, ws, par, tree, dense, ws[VECTORS][1], counts)
         for i in range(n):
             for c in range(3):
                 kv[4, i, c] = a6[i, c] - minv6[i, c] * g6[i, c]
@@ -839,8 +848,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
     for i in range(n):
         for c in range(3):
             mom[i, c] = om[i, c] * body[i, 2 + c]
-    _project_velocities(pos, quat, vel, mom, body, rows, ws, par, use_tree, tree, dense,
-                        counts)
+    _project_velocities(pos, quat, vel, mom, body, rows, ws, par, tree, dense, counts)
     for i in range(n):
         for c in range(3):
             om[i, c] = mom[i, c] / body[i, 2 + c]
@@ -849,8 +857,8 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, us
 
 @njit(cache=True)
 def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, rows,
-                     watch, par, use_tree, tree, dense, ws, pos, quat, vel, om, lam, c_valid,
-                     counts, err):
+                     watch, par, tree0, tree1, dense0, dense1, ws, pos, quat, vel, om, lam,
+                     c_valid, counts, err):
     """
     One step of ``method`` with constraints; the new state goes to ``pos, quat, vel, om``.
 
@@ -870,16 +878,16 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         Bodies some constraint touches (their rotation decides the sub-steps).
     par : ndarray
         Solver and sub-step parameters (see the module docstring).
-    use_tree : bool
-        Solve with the tree solve instead of densely.
-    tree : tuple
-        Two storages of :mod:`.tree_solve` (general, and the symmetric factor
-        kept for the current geometry), each :func:`tree_storage`.
-    dense : tuple
-        Two dense storages ``(F, piv, U, s, Vt)`` (see :func:`dense_storage`).
-        One of ``tree`` and ``dense`` is given and the other is None, or both
-        for closed loops (``dense`` then holds the Schur complement of the
-        loop-closing rows).
+    tree0, tree1 : tuple or None
+        Two storages of :mod:`.tree_solve`, each :func:`tree_storage`: slot 0
+        for the general factorizations (SHAKE's), slot 1 for the symmetric
+        factor kept for the current geometry (see :func:`_sym_factor`).
+    dense0, dense1 : tuple or None
+        Two dense storages ``(F, piv, U, s, Vt)`` (see :func:`dense_storage`),
+        slots as above. The tree storages are given and the dense ones None, or
+        the other way round, or all four for closed loops (the dense storages
+        then hold the Schur complement of the loop-closing rows). Each function
+        is passed only the storages of the slot it uses.
     ws : tuple
         Workspace (see :func:`workspace`; its current geometry persists between calls)
         followed by the scratch arrays of :func:`scratch`.
@@ -924,12 +932,12 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         h = dt / k
         for _ in range(k):
             if method == RKMK4:
-                _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par,
-                       use_tree, tree, dense, lam, c_valid, counts, err)
+                _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, tree1,
+                       dense1, lam, c_valid, counts, err)
             else:
                 ok, c_valid = _splitting(method, pos, quat, vel, om, h, body, gforce, wrench,
-                                         flags, rows, ws, par, last_resort, use_tree, tree,
-                                         dense, lam, c_valid, counts)
+                                         flags, rows, ws, par, last_resort, tree0, tree1,
+                                         dense0, dense1, lam, c_valid, counts)
                 if not ok:
                     break
             c_valid = True
@@ -1111,20 +1119,20 @@ def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
           _v3(f, L, 20), _v2(f, L, 21), _v4(f, L, 22), _v2(f, L, 23))
     t1, t2 = _TREES, _TREES + _TREE_SLOTS
     if solve == SOLVE_TREE:
-        tree = (_tree_views(f, i, L, t1), _tree_views(f, i, L, t2))
+        tree0, tree1 = _tree_views(f, i, L, t1), _tree_views(f, i, L, t2)
         return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
-                                flags, rows, ws[9], par, True, tree, None, ws, pos, quat,
-                                vel, om, lam, c_valid, counts, err)
+                                flags, rows, ws[9], par, tree0, tree1, None, None, ws, pos,
+                                quat, vel, om, lam, c_valid, counts, err)
     d = _DENSE
-    dense = ((_v2(f, L, d), _v1(i, L, d + 1), _v2(f, L, d + 2), _v1(f, L, d + 3),
-              _v2(f, L, d + 4)),
-             (_v2(f, L, d + 5), _v1(i, L, d + 6), _v2(f, L, d + 7), _v1(f, L, d + 8),
-              _v2(f, L, d + 9)))
+    dense0 = (_v2(f, L, d), _v1(i, L, d + 1), _v2(f, L, d + 2), _v1(f, L, d + 3),
+              _v2(f, L, d + 4))
+    dense1 = (_v2(f, L, d + 5), _v1(i, L, d + 6), _v2(f, L, d + 7), _v1(f, L, d + 8),
+              _v2(f, L, d + 9))
     if solve == SOLVE_LOOP:
-        tree = (_tree_views(f, i, L, t1), _tree_views(f, i, L, t2))
+        tree0, tree1 = _tree_views(f, i, L, t1), _tree_views(f, i, L, t2)
         return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
-                                flags, rows, ws[9], par, True, tree, dense, ws, pos, quat,
-                                vel, om, lam, c_valid, counts, err)
+                                flags, rows, ws[9], par, tree0, tree1, dense0, dense1, ws,
+                                pos, quat, vel, om, lam, c_valid, counts, err)
     return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
-                            flags, rows, ws[9], par, False, None, dense, ws, pos, quat,
-                            vel, om, lam, c_valid, counts, err)
+                            flags, rows, ws[9], par, None, None, dense0, dense1, ws, pos,
+                            quat, vel, om, lam, c_valid, counts, err)
