@@ -38,7 +38,7 @@ from .loop_solve import loop_back, loop_forward, loop_schur
 from .row_kernels import framed_geometry, framed_rates, frames
 from .step_kernels import (all_finite, damping_flow, drift, finish_accelerations,
                            HAS_DAMPING, KICK, LIE_POISSON4, normalize_quaternions,
-                           position_wrench, positive_product, quat_exp_multiply, raw,
+                           outputs, position_wrench, positive_product, quat_exp_multiply, raw,
                            raw_slice, RHS, RKMK4, rkmk4_embedded_error, rkmk4_finish,
                            rkmk4_slopes, rkmk4_stage, SYMPLECTIC_EULER)
 from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_solve
@@ -1099,14 +1099,29 @@ def tree_storage(structure, closure: np.ndarray, m: int) -> tuple:
 @njit(cache=True)
 def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, par,
                 solve, key, floats, ints, layout, pos, quat, vel, om, lam, c_valid, counts,
-                err):
+                err, frames, out):
     """
     :func:`constrained_step` with a component's arrays packed by :func:`pack`.
 
     ``key, floats, ints, layout`` replace ``rows, watch, tree, dense, ws``;
     ``solve`` (``SOLVE_DENSE``, ``SOLVE_TREE`` or ``SOLVE_LOOP``) says which
-    storages are in use. Returns whether every entry of the new state is finite.
+    storages are in use. With ``n`` rows, ``out`` (n, 19) gets the
+    :func:`.step_kernels.outputs` of the new state (``frames`` (n, 7)); with none,
+    nothing. Returns whether every entry of the new state is finite.
     """
+    finite = _packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
+                          par, solve, key, floats, ints, layout, pos, quat, vel, om, lam,
+                          c_valid, counts, err)
+    if out.shape[0]:
+        outputs(pos, quat, vel, om, frames, out)
+    return finite
+
+
+@njit(cache=True)
+def _packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, par,
+                 solve, key, floats, ints, layout, pos, quat, vel, om, lam, c_valid, counts,
+                 err):
+    """:func:`packed_step` without the outputs."""
     f, i, L = floats, ints, layout
     pos0, quat0, vel0, om0 = raw(pos0), raw(quat0), raw(vel0), raw(om0)
     pos, quat, vel, om = raw(pos), raw(quat), raw(vel), raw(om)

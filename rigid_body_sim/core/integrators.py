@@ -210,17 +210,21 @@ class Integrator:
         vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
         tally = dyn.tally
         before = dyn.defer_effect_work() if dyn.effects else None
+        frames, out = dyn.bodies.step_outputs()
         self.finite = ckern.packed_step(
             self.KERNEL, pos0, quat0, state.vel_com_world, state.ang_vel_principal, dt, body,
             gforce, wrench, flags, self._kernel_parameters(), solve, *packed, pos, quat, vel, om,
-            lam, valid, tally, err)
+            lam, valid, tally, err, frames, out)
         dyn.last_multipliers = lam
         if before is not None:
             dyn.count_effect_work_since(before)
         # The component's workspace now holds the geometry of its new configuration.
         self._geometry_at = (setup, pos, quat)
         tally[STEPS] += 1
-        return State(t_end, pos, quat, vel, om)
+        new = State(t_end, pos, quat, vel, om)
+        if len(out):
+            dyn.bodies.outputs_cache.adopt(new)
+        return new
 
     def _free_step(self, state: State, dt: float, t_end: float, err: np.ndarray) -> State:
         """Take a step of bodies no constraint couples: one call of the compiled kernel."""
@@ -294,7 +298,7 @@ class Integrator:
             before = tally.tolist() if counting else None
             finite &= ckern.packed_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
                                         flags, par, solve, *packed, p, q, v, o, lam_c, valid,
-                                        tally, err)
+                                        tally, err, _NO_FRAMES, _NO_OUTPUTS)
             pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
             lam[rows_global] = lam_c
             if counting:
