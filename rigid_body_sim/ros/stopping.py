@@ -4,7 +4,7 @@ Clean exits on SIGINT and SIGTERM from the first instant of a console script.
 A long-running tool (the node, the recorder) stops on either signal with exit
 code 0 and no traceback, also while it is still starting: importing rclpy and
 loading (or, on a first start, compiling) the kernels takes from 0.7 s to about
-90 s. :func:`run` installs the handlers before anything heavy is imported; until
+165 s. :func:`run` installs the handlers before anything heavy is imported; until
 the program says how to stop (:meth:`Stop.on_stop`), a signal ends the start-up
 by raising :class:`StopRequested`, which :func:`run` turns into exit code 0.
 """
