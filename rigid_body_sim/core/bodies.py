@@ -349,8 +349,8 @@ class BodySet:
         the centre of mass. When the outputs of the state a step starts from
         were read (a node, a controller's loop), the step's kernel computes those
         of the new state too, into ``out`` (n, 19), and the caller keeps them with
-        ``adopt(state)`` of the returned ``outputs``; otherwise ``out`` is empty
-        (a node that steps ten times between publishes computes them at the read).
+        ``outputs_cache.adopt(new_state)``; otherwise ``out`` is empty (a node
+        that steps ten times between publishes computes them at the read).
         """
         c = self._outputs
         if c is None:
