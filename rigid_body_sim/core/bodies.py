@@ -328,9 +328,7 @@ class BodySet:
         kept for the state it was computed for (a node reads pose and twist after
         every step); read-only to callers, who copy what they keep.
         """
-        c = self._outputs
-        if c is None:
-            c = self._outputs = _Outputs(len(self), self.quat_body_principal, self.com_body)
+        c = self._outputs or self._new_outputs()
         c.wanted = True
         k = c.key
         if not (k[0] is state and k[1] is state.pos_com_world
@@ -352,14 +350,16 @@ class BodySet:
         ``outputs_cache.adopt(new_state)``; otherwise ``out`` is empty (a node
         that steps ten times between publishes computes them at the read).
         """
-        c = self._outputs
-        if c is None:
-            c = self._outputs = _Outputs(len(self), self.quat_body_principal, self.com_body)
+        c = self._outputs or self._new_outputs()
         if not c.wanted:
             return c.frames, _NO_OUTPUTS
         c.wanted = False
         c.key = _Outputs.NOTHING   # the kernel overwrites them
         return c.frames, c.out
+
+    def _new_outputs(self) -> '_Outputs':
+        self._outputs = _Outputs(len(self), self.quat_body_principal, self.com_body)
+        return self._outputs
 
     @property
     def outputs_cache(self) -> '_Outputs':

@@ -120,9 +120,11 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, count
     pivot = tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
                         minv6, 0.0, tS, tpiv, tP, tQ, tB, tW, symmetric)
     reg = 0.0
+    peak = 0.0   # the largest |diagonal entry|, computed once if needed
     if not pivot > rtol:
         counts[RANK_DEFICIENT] += 1
-        reg = par[P_REG] * _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
+        peak = _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
+        reg = par[P_REG] * peak
         tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
                     minv6, reg, tS, tpiv, tP, tQ, tB, tW, symmetric)
     if dense is None:
@@ -132,7 +134,9 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, count
                closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y, dense[0], work, g)
     # Pivots of S are measured against the whole system's scale: a redundant closure row
     # leaves only rounding in S.
-    tiny = rtol * _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
+    if peak == 0.0:
+        peak = _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
+    tiny = rtol * peak
     return _factor_matrix(closure.shape[0], symmetric, tiny, tiny, dense, counts)
 
 
