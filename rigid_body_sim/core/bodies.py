@@ -210,9 +210,6 @@ class _Outputs:
                     state.vel_com_world, state.ang_vel_principal)
 
 
-_NO_OUTPUTS = np.empty((0, 19))
-
-
 @dataclass(slots=True)
 class State:
     """Dynamic state of all bodies (see the module docstring for frames)."""
@@ -339,23 +336,22 @@ class BodySet:
             c.adopt(state)
         return c.views[-1 if body is None else body]
 
-    def step_outputs(self) -> tuple:
+    def want_outputs(self) -> bool:
         """
-        Return ``(frames, out)``: the buffer a step's kernel fills with the new outputs.
+        Tell whether a step's kernel computes the outputs of the new state.
 
-        ``frames`` (n, 7) is the principal frame in the body frame (xyzw), then
-        the centre of mass. When the outputs of the state a step starts from
-        were read (a node, a controller's loop), the step's kernel computes those
-        of the new state too, into ``out`` (n, 19), and the caller keeps them with
-        ``outputs_cache.adopt(new_state)``; otherwise ``out`` is empty (a node
-        that steps ten times between publishes computes them at the read).
+        When the outputs of the state a step starts from were read (a node, a
+        controller's loop), the step's kernel computes those of the new state too,
+        into ``outputs_cache.out`` (n, 19), and the caller keeps them with
+        ``outputs_cache.adopt(new_state)``; otherwise they are computed at the
+        read (a node that steps ten times between publishes).
         """
         c = self._outputs or self._new_outputs()
         if not c.wanted:
-            return c.frames, _NO_OUTPUTS
+            return False
         c.wanted = False
         c.key = _Outputs.NOTHING   # the kernel overwrites them
-        return c.frames, c.out
+        return True
 
     def _new_outputs(self) -> '_Outputs':
         self._outputs = _Outputs(len(self), self.quat_body_principal, self.com_body)
@@ -363,8 +359,13 @@ class BodySet:
 
     @property
     def outputs_cache(self) -> '_Outputs':
-        """Return the outputs kept for one state (created by :meth:`step_outputs`)."""
-        return self._outputs
+        """
+        Return the outputs kept for one state: ``out`` (n, 19), see :meth:`outputs`.
+
+        ``frames`` (n, 7) is the principal frame in the body frame (xyzw), then
+        the centre of mass in the body frame: what the kernels compute them from.
+        """
+        return self._outputs or self._new_outputs()
 
     def pose_world(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Body-origin positions (n, 3) and body-frame orientations (n, 4, xyzw) in world."""

@@ -38,9 +38,10 @@ from .loop_solve import loop_back, loop_forward, loop_schur
 from .row_kernels import framed_geometry, framed_rates, frames
 from .step_kernels import (all_finite, damping_flow, drift, finish_accelerations,
                            HAS_DAMPING, KICK, LIE_POISSON4, normalize_quaternions,
-                           outputs, position_wrench, positive_product, quat_exp_multiply, raw,
-                           raw_slice, RHS, RKMK4, rkmk4_embedded_error, rkmk4_finish,
-                           rkmk4_slopes, rkmk4_stage, SYMPLECTIC_EULER)
+                           outputs, Pinned, pinned, pinned_int, position_wrench,
+                           positive_product, quat_exp_multiply, raw, raw_slice, RHS, RKMK4,
+                           rkmk4_embedded_error, rkmk4_finish, rkmk4_slopes, rkmk4_stage,
+                           SYMPLECTIC_EULER)
 from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_solve
 
 # Counter slots beyond step_kernels' five.
@@ -1119,6 +1120,41 @@ def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
     if out.shape[0]:
         outputs(pos, quat, vel, om, frames, out)
     return finite
+
+
+def component_table(method: int, model: tuple, par: np.ndarray, solve: int, packed: tuple,
+                    lam: np.ndarray, counts: np.ndarray, frames: np.ndarray, out: np.ndarray,
+                    key: object) -> Pinned:
+    """
+    Pin the arrays of :func:`pinned_packed_step` (a :class:`.step_kernels.Pinned`).
+
+    ``model`` is ``(body, gforce, wrench, flags)``, ``packed`` the ``(key, floats,
+    ints, layout)`` of :func:`pack`; the others are arguments of
+    :func:`packed_step`, ``out`` with all ``n`` rows.
+    """
+    body, gforce, wrench, flags = model
+    generic, floats, ints, layout = packed
+    return Pinned((body, gforce, wrench, par, floats, ints, layout, lam, counts, frames, out),
+                  (len(wrench), flags, method, solve, generic, len(par), len(floats),
+                   len(ints), len(layout), len(lam), len(counts)), key=key)
+
+
+@njit(cache=True)
+def pinned_packed_step(pos0, quat0, vel0, om0, pos, quat, vel, om, dt, c_valid,
+                       with_outputs, err, table):
+    """
+    :func:`packed_step` with its other arrays in the table of :func:`component_table`.
+
+    ``with_outputs``: the outputs of the new state are written to the table's
+    ``out``. Returns whether every entry of the new state is finite.
+    """
+    n, t = pos0.shape[0], table
+    return packed_step(t[13], pos0, quat0, vel0, om0, dt, pinned(t, 0, (n, 8)),
+                       pinned(t, 1, (n, 3)), pinned(t, 2, (t[11], 11)), t[12],
+                       pinned(t, 3, (t[16],)), t[14], t[15], pinned(t, 4, (t[17],)),
+                       pinned_int(t, 5, (t[18],)), pinned_int(t, 6, (t[19], 6)), pos, quat,
+                       vel, om, pinned(t, 7, (t[20],)), c_valid, pinned_int(t, 8, (t[21],)),
+                       err, pinned(t, 9, (n, 7)), pinned(t, 10, (n if with_outputs else 0, 19)))
 
 
 @njit(cache=True)

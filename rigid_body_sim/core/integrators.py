@@ -157,6 +157,8 @@ class Integrator:
         self._parameters: Optional[tuple] = None
         # The free-body kernel's workspace, sized for every body of the scene.
         self._ws = np.empty(kern.workspace_size(len(dynamics.bodies)))
+        # The arrays of a whole-scene step that persist across steps, as one table.
+        self._table: Optional[kern.Pinned] = None
         #: Whether the state the last :meth:`step` returned is finite everywhere
         #: (checked inside the kernels), or None when that step did not check.
         self.finite: Optional[bool] = None
@@ -197,57 +199,73 @@ class Integrator:
         Take a step of a scene whose bodies all belong to one component: one compiled call.
 
         The common case (a mechanism, a chain) of :meth:`_constrained_step`, without
-        its bookkeeping of subsets.
+        its bookkeeping of subsets; the arrays that persist across steps go to the
+        kernel as one table (:class:`.step_kernels.Pinned`).
         """
         dyn = self.dynamics
-        body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
+        model = dyn.kernel_model(state.time + 0.5 * dt)
+        par = self._kernel_parameters()
+        table = self._table
+        key = table.key if table is not None else None
+        if key is None or key[0] is not model or key[1] is not par or key[2] is not setup:
+            table = self._component_table(model, par, setup)
         pos0, quat0 = state.pos_com_world, state.quat_principal_world
         at = self._geometry_at
         valid = at is not None and at[0] is setup and at[1] is pos0 and at[2] is quat0
-        lam, solve, packed = setup[1][0][4], setup[1][0][3], setup[1][0][2]
         # New arrays (copies: the cheapest fresh arrays), overwritten by the kernel.
         pos, quat = pos0.copy(), quat0.copy()
         vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
-        tally = dyn.tally
         before = dyn.defer_effect_work() if dyn.effects else None
-        frames, out = dyn.bodies.step_outputs()
-        self.finite = ckern.packed_step(
-            self.KERNEL, pos0, quat0, state.vel_com_world, state.ang_vel_principal, dt, body,
-            gforce, wrench, flags, self._kernel_parameters(), solve, *packed, pos, quat, vel, om,
-            lam, valid, tally, err, frames, out)
-        dyn.last_multipliers = lam
+        with_outputs = dyn.bodies.want_outputs()
+        self.finite = ckern.pinned_packed_step(
+            pos0, quat0, state.vel_com_world, state.ang_vel_principal, pos, quat, vel, om, dt,
+            valid, with_outputs, err, table.table)
+        dyn.last_multipliers = setup[1][0][4]
         if before is not None:
             dyn.count_effect_work_since(before)
         # The component's workspace now holds the geometry of its new configuration.
         self._geometry_at = (setup, pos, quat)
-        tally[STEPS] += 1
+        dyn.tally[STEPS] += 1
         new = State(t_end, pos, quat, vel, om)
-        if len(out):
+        if with_outputs:
             dyn.bodies.outputs_cache.adopt(new)
         return new
+
+    def _component_table(self, model: tuple, par: np.ndarray, setup: tuple):
+        """Pin the arrays of :meth:`_whole_step` (kept until one of them changes)."""
+        dyn = self.dynamics
+        _, _, packed, solve, lam = setup[1][0]
+        c = dyn.bodies.outputs_cache
+        self._table = ckern.component_table(self.KERNEL, model, par, solve, packed, lam,
+                                            dyn.tally, c.frames, c.out, (model, par, setup))
+        return self._table
 
     def _free_step(self, state: State, dt: float, t_end: float, err: np.ndarray) -> State:
         """Take a step of bodies no constraint couples: one call of the compiled kernel."""
         dyn = self.dynamics
-        body, gforce, wrench, flags = dyn.kernel_model(state.time + 0.5 * dt)
+        model = dyn.kernel_model(state.time + 0.5 * dt)
+        table = self._table
+        if table is None or table.key is not model:
+            c = dyn.bodies.outputs_cache
+            table = self._table = kern.free_table(self.KERNEL, model, self._kick_buffer,
+                                                  dyn.tally, self._ws, c.frames, c.out)
         pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
         vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
         at = self._kick_at
         valid = (at is not None and at[0] == dyn.version and at[1] is state.pos_com_world
                  and at[2] is state.quat_principal_world)
         # The kernel adds its work to the tally that holds the work counters.
-        tally = dyn.tally
         before = dyn.defer_effect_work() if dyn.effects else None
-        frames, out = dyn.bodies.step_outputs()
-        code = kern.free_step(self.KERNEL, pos, quat, vel, om, dt, body, gforce, wrench, flags,
-                              self._kick_buffer, valid, tally, err, self._ws, frames, out)
+        with_outputs = dyn.bodies.want_outputs()
+        code = kern.pinned_free_step(pos, quat, vel, om, dt, valid, with_outputs, err,
+                                     table.table)
         self._kick_at = (dyn.version, pos, quat) if code & kern.KICK_VALID else None
         self.finite = bool(code & kern.FINITE)
-        tally[STEPS] += 1
+        dyn.tally[STEPS] += 1
         if before is not None:
             dyn.count_effect_work_since(before)
         new = State(t_end, pos, quat, vel, om)
-        if len(out):
+        if with_outputs:
             dyn.bodies.outputs_cache.adopt(new)
         return new
 

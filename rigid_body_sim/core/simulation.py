@@ -160,30 +160,34 @@ class Simulation:
                 e for e in effects if type(e).begin_step is not Effect.begin_step])
         switching = cached[2]
         integrator, control = self.integrator, self._control
-        for _ in range(int(n)):
+        for _ in range(n):
+            steps = self._steps
             if switching:
-                mid = self._time_base + (self._steps + 0.5) * dt
+                mid = self._time_base + (steps + 0.5) * dt
                 # Every effect must see the new step: no short-circuit.
                 switched = [effect.begin_step(mid) for effect in switching]
                 if any(switched):
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
+            t_end = self._time_base + (steps + 1) * dt
             try:
-                t_end = self._time_base + (self._steps + 1) * dt
                 if control is None:
                     new = integrator.step(self.state, dt, t_end)
+                    # A plain step's kernels tell whether the new state is finite.
+                    finite = integrator.finite
+                    if finite is None:
+                        finite = _finite(new)
                 else:
                     new = control.step(integrator, self.state, dt, t_end)
+                    finite = _finite(new)
             except np.linalg.LinAlgError:
                 # A factorization met non-finite numbers: the step diverged on the way.
                 raise DivergenceError(self.time, self._moving_fastest()) from None
-            # A plain step's kernels tell whether the new state is finite.
-            if not (integrator.finite if control is None and integrator.finite is not None
-                    else _finite(new)):
+            if not finite:
                 bad = _non_finite_bodies(new)
                 raise DivergenceError(self.time, [self.bodies.names[i] for i in bad])
             self.state = new
-            self._steps += 1
+            self._steps = steps + 1
             if self._wrenches is not None and len(self._wrenches):
                 self._wrenches.remove_expired(new.time)
 
