@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from rigid_body_sim.core import (AppliedWrenches, Gravity, INTEGRATORS, RigidBody,
-                                 Simulation)
+                                 Simulation, State)
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core.reference import (free_body_reference, intermediate_axis_period,
                                            symmetric_body_omega)
@@ -197,3 +197,31 @@ def test_outputs_computed_inside_the_step_equal_those_computed_when_read(name):
             every.state = late.state.copy()
             assert np.array_equal(read(every, None), read(late, None))
     assert np.array_equal(read(every, None), read(late, None))
+
+
+def test_state_is_one_buffer_that_steps_replace():
+    """The four state arrays are views of one buffer; a step or an assignment replaces it."""
+    sim = Simulation([RigidBody('a', 1.0, (1.0, 2.0, 3.0), angular_velocity_body=(0.1, 2, 0.1)),
+                      RigidBody('b', 2.0, (1.0, 1.0, 1.0), position_world=(1, 2, 3))],
+                     [Gravity()], 'lie_poisson2', 1e-2)
+    s0 = sim.state
+    parts = (s0.pos_com_world, s0.quat_principal_world, s0.vel_com_world, s0.ang_vel_principal)
+    assert [p.shape for p in parts] == [(2, 3), (2, 4), (2, 3), (2, 3)]
+    assert all(np.shares_memory(p, s0.y) for p in parts)
+    assert np.array_equal(s0.y, np.concatenate([p.ravel() for p in parts]))
+    before = s0.y.copy()
+    sim.step(3)
+    # The step made a new state with a new buffer; the old one is untouched.
+    assert sim.state.y is not s0.y and np.array_equal(s0.y, before)
+    assert not np.array_equal(sim.state.pos_com_world, s0.pos_com_world)
+    # Assigning an attribute gives the state a new buffer (caches keyed on it see it).
+    s = sim.state
+    old_y, old_quat = s.y, s.quat_principal_world
+    s.vel_com_world = s.vel_com_world + 1.0
+    assert s.y is not old_y and np.array_equal(s.vel_com_world, old_y[14:20].reshape(2, 3) + 1)
+    assert np.array_equal(s.quat_principal_world, old_quat)
+    copy = s.copy()
+    copy.pos_com_world[0, 0] = 99.0
+    assert s.pos_com_world[0, 0] != 99.0
+    with pytest.raises(ValueError, match='quat_principal_world: expected shape'):
+        State(0.0, np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3)))

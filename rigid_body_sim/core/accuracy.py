@@ -107,10 +107,7 @@ def state_distance(a: State, b: State) -> float:
     Compiled (:func:`.step_kernels.state_distance`): step doubling compares two
     states every step.
     """
-    return float(kern.state_distance(a.pos_com_world, a.quat_principal_world,
-                                     a.vel_com_world, a.ang_vel_principal,
-                                     b.pos_com_world, b.quat_principal_world,
-                                     b.vel_com_world, b.ang_vel_principal))
+    return float(kern.state_distance(*a.parts, *b.parts))
 
 
 def _positive(value: Any, field_name: str) -> float:

@@ -41,7 +41,7 @@ from .step_kernels import (all_finite, damping_flow, drift, finish_accelerations
                            outputs, Pinned, pinned, pinned_int, position_wrench,
                            positive_product, quat_exp_multiply, raw, raw_slice, RHS, RKMK4,
                            rkmk4_embedded_error, rkmk4_finish, rkmk4_slopes, rkmk4_stage,
-                           SYMPLECTIC_EULER)
+                           state_parts, SYMPLECTIC_EULER)
 from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_solve
 
 # Counter slots beyond step_kernels' five.
@@ -1140,14 +1140,16 @@ def component_table(method: int, model: tuple, par: np.ndarray, solve: int, pack
 
 
 @njit(cache=True)
-def pinned_packed_step(pos0, quat0, vel0, om0, pos, quat, vel, om, dt, c_valid,
-                       with_outputs, err, table):
+def pinned_packed_step(y0, y, dt, c_valid, with_outputs, err, table):
     """
-    :func:`packed_step` with its other arrays in the table of :func:`component_table`.
+    :func:`packed_step` from the state buffer ``y0`` to ``y`` (:func:`state_parts`).
 
+    Its other arrays are in the table of :func:`component_table`.
     ``with_outputs``: the outputs of the new state are written to the table's
     ``out``. Returns whether every entry of the new state is finite.
     """
+    pos0, quat0, vel0, om0 = state_parts(y0)
+    pos, quat, vel, om = state_parts(y)
     n, t = pos0.shape[0], table
     return packed_step(t[13], pos0, quat0, vel0, om0, dt, pinned(t, 0, (n, 8)),
                        pinned(t, 1, (n, 3)), pinned(t, 2, (t[11], 11)), t[12],

@@ -209,24 +209,22 @@ class Integrator:
         key = table.key if table is not None else None
         if key is None or key[0] is not model or key[1] is not par or key[2] is not setup:
             table = self._component_table(model, par, setup)
-        pos0, quat0 = state.pos_com_world, state.quat_principal_world
+        y0 = state.y
         at = self._geometry_at
-        valid = at is not None and at[0] is setup and at[1] is pos0 and at[2] is quat0
-        # New arrays (copies: the cheapest fresh arrays), overwritten by the kernel.
-        pos, quat = pos0.copy(), quat0.copy()
-        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
+        valid = at is not None and at[0] is setup and at[1] is y0
+        # A new buffer (a copy: the cheapest fresh array), overwritten by the kernel.
+        y = y0.copy()
         before = dyn.defer_effect_work() if dyn.effects else None
         with_outputs = dyn.bodies.want_outputs()
-        self.finite = ckern.pinned_packed_step(
-            pos0, quat0, state.vel_com_world, state.ang_vel_principal, pos, quat, vel, om, dt,
-            valid, with_outputs, err, table.table)
+        self.finite = ckern.pinned_packed_step(y0, y, dt, valid, with_outputs, err,
+                                               table.table)
         dyn.last_multipliers = setup[1][0][4]
         if before is not None:
             dyn.count_effect_work_since(before)
         # The component's workspace now holds the geometry of its new configuration.
-        self._geometry_at = (setup, pos, quat)
+        self._geometry_at = (setup, y)
         dyn.tally[STEPS] += 1
-        new = State(t_end, pos, quat, vel, om)
+        new = State.of(t_end, y)
         if with_outputs:
             dyn.bodies.outputs_cache.adopt(new)
         return new
@@ -249,22 +247,19 @@ class Integrator:
             c = dyn.bodies.outputs_cache
             table = self._table = kern.free_table(self.KERNEL, model, self._kick_buffer,
                                                   dyn.tally, self._ws, c.frames, c.out)
-        pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
-        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
+        y = state.y.copy()
         at = self._kick_at
-        valid = (at is not None and at[0] == dyn.version and at[1] is state.pos_com_world
-                 and at[2] is state.quat_principal_world)
+        valid = at is not None and at[0] == dyn.version and at[1] is state.y
         # The kernel adds its work to the tally that holds the work counters.
         before = dyn.defer_effect_work() if dyn.effects else None
         with_outputs = dyn.bodies.want_outputs()
-        code = kern.pinned_free_step(pos, quat, vel, om, dt, valid, with_outputs, err,
-                                     table.table)
-        self._kick_at = (dyn.version, pos, quat) if code & kern.KICK_VALID else None
+        code = kern.pinned_free_step(y, dt, valid, with_outputs, err, table.table)
+        self._kick_at = (dyn.version, y) if code & kern.KICK_VALID else None
         self.finite = bool(code & kern.FINITE)
         dyn.tally[STEPS] += 1
         if before is not None:
             dyn.count_effect_work_since(before)
-        new = State(t_end, pos, quat, vel, om)
+        new = State.of(t_end, y)
         if with_outputs:
             dyn.bodies.outputs_cache.adopt(new)
         return new
@@ -283,8 +278,8 @@ class Integrator:
         free, components = setup
         finite = True
         mid = state.time + 0.5 * dt
-        pos, quat = state.pos_com_world.copy(), state.quat_principal_world.copy()
-        vel, om = state.vel_com_world.copy(), state.ang_vel_principal.copy()
+        new = State.of(t_end, state.y.copy())
+        pos, quat, vel, om = new.parts
         # The kernels add their work to the tally that holds the work counters.
         tally = dyn.tally
         counting = bool(dyn.effects)
@@ -303,8 +298,7 @@ class Integrator:
             if counting:
                 dyn.count_effect_work_since(before, acting)
         at = self._geometry_at
-        valid = (at is not None and at[0] is setup and at[1] is state.pos_com_world
-                 and at[2] is state.quat_principal_world)
+        valid = at is not None and at[0] is setup and at[1] is state.y
         lam = dyn.last_multipliers
         if len(lam) != solver.constraints.n_rows or lam is components[0][4]:
             lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)
@@ -322,10 +316,10 @@ class Integrator:
             if counting:
                 dyn.count_effect_work_since(before, acting)
         # Each component's workspace now holds the geometry of its new configuration.
-        self._geometry_at = (setup, pos, quat)
+        self._geometry_at = (setup, new.y)
         self.finite = finite
         tally[STEPS] += 1
-        return State(t_end, pos, quat, vel, om)
+        return new
 
 # ----------------------------------------------------------------------------------------
 # The methods (their arithmetic: step_kernels.py and constrained_kernels.py)

@@ -42,13 +42,11 @@ from .validate import positive_scalar
 
 def _finite(s: State) -> bool:
     """Tell whether every number of a state is finite."""
-    return step_kernels.all_finite(s.pos_com_world, s.quat_principal_world, s.vel_com_world,
-                                   s.ang_vel_principal)
+    return step_kernels.all_finite(*s.parts)
 
 
 def _non_finite_bodies(s: State) -> np.ndarray:
-    arrays = (s.pos_com_world, s.quat_principal_world, s.vel_com_world, s.ang_vel_principal)
-    return np.flatnonzero(~np.all([np.all(np.isfinite(a), axis=1) for a in arrays], axis=0))
+    return np.flatnonzero(~np.all([np.all(np.isfinite(a), axis=1) for a in s.parts], axis=0))
 
 
 @dataclass(frozen=True)

@@ -670,15 +670,29 @@ def free_table(method: int, model: tuple, kick: np.ndarray, counts: np.ndarray,
 
 
 @njit(cache=True)
-def pinned_free_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
-                     dt: float, kick_valid: bool, with_outputs: bool, err: np.ndarray,
-                     table: np.ndarray) -> int:
+def state_parts(y: np.ndarray) -> tuple:
     """
-    :func:`free_step` with its other arrays in the table of :func:`free_table`.
+    Return ``pos, quat, vel, om`` of a state's buffer ``y`` (13 n) as :func:`raw` views.
 
-    ``with_outputs``: the outputs of the new state are written to the table's
-    ``out``. Returns what :func:`free_step` returns.
+    The layout of :class:`.bodies.State`: positions (n, 3), quaternions (n, 4),
+    velocities (n, 3), Ω (n, 3), one after the other.
     """
+    n = y.shape[0] // 13
+    return (raw_slice(y, 0, (n, 3)), raw_slice(y, 3 * n, (n, 4)),
+            raw_slice(y, 7 * n, (n, 3)), raw_slice(y, 10 * n, (n, 3)))
+
+
+@njit(cache=True)
+def pinned_free_step(y: np.ndarray, dt: float, kick_valid: bool, with_outputs: bool,
+                     err: np.ndarray, table: np.ndarray) -> int:
+    """
+    :func:`free_step` of the state buffer ``y`` (:func:`state_parts`), in place.
+
+    Its other arrays are in the table of :func:`free_table`. ``with_outputs``:
+    the outputs of the new state are written to the table's ``out``. Returns
+    what :func:`free_step` returns.
+    """
+    pos, quat, vel, om = state_parts(y)
     n = pos.shape[0]
     t = table
     return free_step(t[10], pos, quat, vel, om, dt, pinned(t, 0, (n, 8)), pinned(t, 1, (n, 3)),
@@ -751,6 +765,13 @@ def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
         out[i, 16] = r00 * w0 + r10 * w1 + r20 * w2
         out[i, 17] = r01 * w0 + r11 * w1 + r21 * w2
         out[i, 18] = r02 * w0 + r12 * w1 + r22 * w2
+
+
+@njit(cache=True)
+def state_outputs(y: np.ndarray, frames: np.ndarray, out: np.ndarray) -> None:
+    """:func:`outputs` of the state buffer ``y`` (:func:`state_parts`)."""
+    pos, quat, vel, om = state_parts(y)
+    outputs(pos, quat, vel, om, frames, out)
 
 
 @njit(cache=True)
