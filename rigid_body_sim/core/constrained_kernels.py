@@ -143,7 +143,7 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     return _factor_matrix(closure.shape[0], symmetric, tiny, tiny, cx, slot, counts)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     """
     Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``) into the storages ``slot``.
@@ -157,7 +157,7 @@ def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     return _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _sol(mode, rhs, out, cx, slot):
     """Solve with the factors in the storages ``slot`` (see :func:`_fac`)."""
     solve = cx[4]
@@ -279,7 +279,7 @@ def _solve_dense(mode, rhs, out, cx, slot):
         out[i] = s / F[i, i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _gt_lambda(Ga, Gb, a, b, lam, out):
     """``out = Gᵀ λ`` as (n, 6) (overwritten)."""
     n = out.shape[0]
@@ -294,7 +294,7 @@ def _gt_lambda(Ga, Gb, a, b, lam, out):
                 out[b[r], c] += Gb[r, c] * lam[r]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _copy(src, dst):
     """``dst[:, :] = src`` for arrays of the same shape (r, c)."""
     for i in range(src.shape[0]):
@@ -302,7 +302,7 @@ def _copy(src, dst):
             dst[i, c] = src[i, c]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _g_times(Ga, Gb, a, b, x6, out):
     """``out = G x`` for generalized vectors ``x6`` (n, 6)."""
     n = x6.shape[0]
@@ -426,7 +426,7 @@ def _geometry(pos, quat, cx, which, counts):
         _i1(cx, FACTOR_STATE)[0] = 0   # the symmetric factor was of the geometry replaced
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts):
     """
     Factorize ``G M⁻¹ Gᵀ`` of the current geometry, or reuse its factors.
@@ -485,7 +485,7 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
     _gt_lambda(Ga, Gb, a, b, lam, g6)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, torque, counts):
     """
     Free accelerations (every effect and the gyroscopic term) into ``a6`` (n, 6).
@@ -502,7 +502,7 @@ def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, t
     finish_accelerations(vel, om, body, flags, a6[:, :3], a6[:, 3:], counts)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, cx, par, lam, c_valid,
           counts):
     """
@@ -534,7 +534,7 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, cx, par, lam, c
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _free_kick(quat, vel, mom, tau, body, gforce, wrench, force, torque, counts):
     """
     ``v += tau f/m`` and ``L += tau τ`` of gravity and the wrenches alone, in place.
@@ -553,7 +553,7 @@ def _free_kick(quat, vel, mom, tau, body, gforce, wrench, force, torque, counts)
             mom[i, c] += tau * torque[i, c]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     """
     Project velocities onto ``Φ̇ = −ωΦ`` at the current geometry, in place.
