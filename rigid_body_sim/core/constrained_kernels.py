@@ -63,7 +63,7 @@ SOLVE_DENSE, SOLVE_TREE, SOLVE_LOOP = 0, 1, 2
 _W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _schur(Ga, Gb, Ha, Hb, a, b, minv6, A):
     """Dense ``A = G M⁻¹ Hᵀ`` (m, m) from the row blocks (world: ``b == n``)."""
     m = Ga.shape[0]
@@ -177,7 +177,7 @@ def _sol(mode, rhs, out, cx, slot):
     loop_back(t[1], t[13], t[14], xc, out)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     """
     Factorize ``G M⁻¹ Hᵀ`` densely; returns the mode for :func:`_solve_dense`.
@@ -242,7 +242,7 @@ def _factor_matrix(m, symmetric, tiny, floor, cx, slot, counts):
     return SVD
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _solve_dense(mode, rhs, out, cx, slot):
     """Solve with the factors of :func:`_factor_matrix`; ``out`` (m,) may not alias ``rhs``."""
     m = rhs.shape[0]
@@ -621,7 +621,7 @@ def _project_positions(pos, quat, target, cx, par, counts):
                 quat[i, c] /= s
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _right_jacobians(quat_s, quat_e, Jr):
     """
     ``J_r(u)`` (n, 3, 3) of each body's rotation ``u = log(q_s⁻¹ ⊗ q_e)``.
@@ -652,7 +652,7 @@ def _right_jacobians(quat_s, quat_e, Jr):
                 Jr[i, r, c] = (1.0 if r == c else 0.0) - ca * H[r][c] + cb * h2
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
     """
     Per body, how the end orientation of a drift responds to its start momentum.
@@ -711,7 +711,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
                 dT[r, c] = dT[r, c] * body[i, 2 + c] / h
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _apply_jacobians(Ga, Gb, a, b, Jr, Ga2, Gb2):
     """Rows' angular blocks times each body's ``J_r``: ``G2 = G diag(I, J_r)``."""
     n = Jr.shape[0]
