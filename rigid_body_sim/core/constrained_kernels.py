@@ -404,6 +404,33 @@ def generic_gamma(key: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
 
 
 @njit(cache=True)
+def _generic_geometry(key, pos, quat, phi, Ga, Gb):
+    """Φ and G of the generic rows by :func:`generic_geometry` (Python, in object mode)."""
+    with objmode():
+        generic_geometry(key, pos, quat, phi, Ga, Gb)
+
+
+@njit(cache=True)
+def _generic_rates(key, pos, quat, vel, om, Ga, Gb, a, b, first, vm):
+    """
+    Φ̇ and γ of the generic rows (from row ``first``) into ``vm[0]``, ``vm[1]``.
+
+    Φ̇ = G ν here, γ from the user's function (:func:`generic_gamma`, in object mode).
+    """
+    n = pos.shape[0]
+    for r in range(first, vm.shape[1]):
+        rate = 0.0
+        for c in range(3):
+            rate += Ga[r, c] * vel[a[r], c] + Ga[r, 3 + c] * om[a[r], c]
+            if b[r] < n:
+                rate += Gb[r, c] * vel[b[r], c] + Gb[r, 3 + c] * om[b[r], c]
+        vm[0, r] = rate
+    gamma = vm[1]
+    with objmode():
+        generic_gamma(key, pos, quat, vel, om, gamma)
+
+
+@njit(cache=True, inline='always')
 def _geometry(pos, quat, cx, which, counts):
     """
     Φ and G of every row at ``pos, quat`` into slot ``which`` of the workspace's Φ, G.
@@ -417,10 +444,8 @@ def _geometry(pos, quat, cx, which, counts):
     frames(quat, R)
     kind, comp, a, b, rpar = _rows(cx)
     framed_geometry(pos, R, kind, comp, a, b, rpar, phi_w, Ga_w, Gb_w)
-    key = cx[3]
-    if key >= 0:
-        with objmode():
-            generic_geometry(key, pos, quat, phi_w, Ga_w, Gb_w)
+    if cx[3] >= 0:
+        _generic_geometry(cx[3], pos, quat, phi_w, Ga_w, Gb_w)
     counts[GEOMETRY] += 1
     if which == CURRENT:
         _i1(cx, FACTOR_STATE)[0] = 0   # the symmetric factor was of the geometry replaced
@@ -461,20 +486,8 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
     frames(quat, R)
     framed_rates(pos, vel, om, R, _f2(cx, OMEGA_WORLD), kind, comp, a, b, rpar, Ga, Gb,
                  True, vm[0], vm[1])
-    key = cx[3]
-    if key >= 0:
-        # Generic rows: Φ̇ = G ν here, γ from the user's function (object mode).
-        n = pos.shape[0]
-        for r in range(kind.shape[0], phi.shape[0]):
-            rate = 0.0
-            for c in range(3):
-                rate += Ga[r, c] * vel[a[r], c] + Ga[r, 3 + c] * om[a[r], c]
-                if b[r] < n:
-                    rate += Gb[r, c] * vel[b[r], c] + Gb[r, 3 + c] * om[b[r], c]
-            vm[0, r] = rate
-        gamma = vm[1]
-        with objmode():
-            generic_gamma(key, pos, quat, vel, om, gamma)
+    if cx[3] >= 0:
+        _generic_rates(cx[3], pos, quat, vel, om, Ga, Gb, a, b, kind.shape[0], vm)
     w = par[P_OMEGA]
     _g_times(Ga, Gb, a, b, a6, vm[2])
     for r in range(phi.shape[0]):
