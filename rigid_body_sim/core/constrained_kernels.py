@@ -826,7 +826,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, par,
                last_resort, lam, c_valid, counts):
     """
@@ -880,7 +880,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
     return True, True
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_valid, counts,
            err):
     """
@@ -938,7 +938,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, cx, par,
                      pos, quat, vel, om, lam, c_valid, counts, err):
     """
