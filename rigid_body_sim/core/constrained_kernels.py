@@ -66,7 +66,7 @@ SOLVE_DENSE, SOLVE_TREE, SOLVE_LOOP = 0, 1, 2
 _W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _schur(Ga, Gb, Ha, Hb, a, b, minv6, A):
     """Dense ``A = G M⁻¹ Hᵀ`` (m, m) from the row blocks (world: ``b == n``)."""
     m = Ga.shape[0]
@@ -106,18 +106,20 @@ def _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6):
 
 
 @njit(cache=True)
-def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, counts):
+def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     """
     Factorize ``G M⁻¹ Hᵀ`` by the tree solve (Tikhonov term for redundant rows).
 
-    With ``dense`` (not None) the component has closed loops: the tree solve
-    factorizes the rows of its spanning forest, and the Schur complement of the
-    rows that close the loops (:func:`.loop_solve.loop_schur`) is factorized
-    into ``dense`` as a small dense system, with the truncated SVD when closure
-    rows are redundant. Returns the mode for :func:`_sol`.
+    Into the tree storage ``slot`` of the component ``cx``. For ``SOLVE_LOOP`` the
+    component has closed loops: the tree solve factorizes the rows of its
+    spanning forest, and the Schur complement of the rows that close the loops
+    (:func:`.loop_solve.loop_schur`) is factorized into the dense storage
+    ``slot`` as a small dense system, with the truncated SVD when closure rows
+    are redundant. Returns the mode for :func:`_sol`.
     """
     counts[FACTORIZATIONS] += 1
     rtol = par[P_RANK_RTOL]
+    tree = _tree(cx, slot)
     tg_ptr, tg_rows, tg_child, tg_parent, t_side = tree[0], tree[1], tree[2], tree[3], tree[4]
     tS, tpiv, tP, tQ, tB, tW = tree[5], tree[6], tree[7], tree[8], tree[9], tree[10]
     pivot = tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
@@ -130,62 +132,56 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, count
         reg = par[P_REG] * peak
         tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
                     minv6, reg, tS, tpiv, tP, tQ, tB, tW, symmetric)
-    if dense is None:
+    if cx[4] != SOLVE_LOOP:
         return TREE
     closure, X, Y, work, g = tree[13], tree[14], tree[15], tree[16], tree[17]
     loop_schur(tg_ptr, tg_rows, tg_child, tg_parent, tS, tpiv, tP, tQ, tB, tree[11], tree[12],
-               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y, dense[0], work, g)
+               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y, _f2(cx, _DENSE + 5 * slot),
+               work, g)
     # Pivots of S are measured against the whole system's scale: a redundant closure row
     # leaves only rounding in S.
     if peak == 0.0:
         peak = _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
     tiny = rtol * peak
-    return _factor_matrix(closure.shape[0], symmetric, tiny, tiny, dense, counts)
+    return _factor_matrix(closure.shape[0], symmetric, tiny, tiny, cx, slot, counts)
 
 
-@njit(cache=True)
-def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, counts):
+@njit(cache=True, inline='always')
+def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     """
-    Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``) into the storages given.
+    Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``) into the storages ``slot``.
 
-    ``tree`` is one tree storage and ``dense`` one dense storage (the callers
-    pass those of one slot, 0 or 1, see :func:`constrained_step`); one of them
-    is None, or neither for closed loops (see :func:`_factor_tree`). numba
-    compiles each case separately and drops the branches of an argument that is
-    None, so a storage is used only under a test that it is not None. Returns
+    ``slot`` is ``GENERAL`` or ``SYMMETRIC`` (see :func:`constrained_step`); the
+    component's ``solve`` (``cx[4]``) says which storages are in use. Returns
     the mode for :func:`_sol`.
     """
-    mode = TREE
-    if tree is not None:
-        mode = _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, tree, dense, counts)
-    if dense is not None:
-        if tree is None:
-            mode = _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense, counts)
-    return mode
+    if cx[4] == SOLVE_DENSE:
+        return _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
+    return _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
 
 
-@njit(cache=True)
-def _sol(mode, rhs, out, tree, dense):
-    """Solve with the factors in the storages given (see :func:`_fac`)."""
-    if tree is not None:
-        t = tree
-        if dense is None:
-            tree_solve(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
-                       rhs, out)
-        if dense is not None:
-            # Closed loops: forest, then the closure rows' Schur complement, then back.
-            z, xc = t[18], t[19]
-            loop_forward(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
-                         t[13], t[15], rhs, out, z)
-            _solve_dense(mode, z, xc, dense)
-            loop_back(t[1], t[13], t[14], xc, out)
-    if dense is not None:
-        if tree is None:
-            _solve_dense(mode, rhs, out, dense)
+@njit(cache=True, inline='always')
+def _sol(mode, rhs, out, cx, slot):
+    """Solve with the factors in the storages ``slot`` (see :func:`_fac`)."""
+    solve = cx[4]
+    if solve == SOLVE_DENSE:
+        _solve_dense(mode, rhs, out, cx, slot)
+        return
+    t = _tree(cx, slot)
+    if solve == SOLVE_TREE:
+        tree_solve(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
+                   rhs, out)
+        return
+    # Closed loops: forest, then the closure rows' Schur complement, then back.
+    z, xc = t[18], t[19]
+    loop_forward(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
+                 t[13], t[15], rhs, out, z)
+    _solve_dense(mode, z, xc, cx, slot)
+    loop_back(t[1], t[13], t[14], xc, out)
 
 
-@njit(cache=True)
-def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense, counts):
+@njit(cache=True, inline='always')
+def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     """
     Factorize ``G M⁻¹ Hᵀ`` densely; returns the mode for :func:`_solve_dense`.
 
@@ -195,27 +191,27 @@ def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, dense, counts):
     """
     counts[FACTORIZATIONS] += 1
     m = Ga.shape[0]
-    F = dense[0]
+    F = _f2(cx, _DENSE + 5 * slot)
     _schur(Ga, Gb, Ha, Hb, a, b, minv6, F)
     scale = 0.0
     for i in range(m):
         scale = max(scale, abs(F[i, i]))
     if not scale > 0.0:
         scale = 1.0
-    return _factor_matrix(m, symmetric, par[P_RANK_RTOL] * scale, 0.0, dense, counts)
+    return _factor_matrix(m, symmetric, par[P_RANK_RTOL] * scale, 0.0, cx, slot, counts)
 
 
 @njit(cache=True)
-def _factor_matrix(m, symmetric, tiny, floor, dense, counts):
+def _factor_matrix(m, symmetric, tiny, floor, cx, slot, counts):
     """
-    Factorize the matrix in ``dense[0]`` (m, m) in place; return the mode.
+    Factorize the matrix ``F`` (m, m) of the dense storage ``slot`` in place; return the mode.
 
     Cholesky (``symmetric``) or LU with partial pivoting; a pivot at most
     ``tiny`` marks redundant rows, which get the truncated SVD (minimum-norm
     solution): singular values at most ``1e-13`` of the largest, or ``floor``,
-    count as zero. ``dense[2]`` keeps a copy of the matrix for that SVD.
+    count as zero. The storage's ``U`` keeps a copy of the matrix for that SVD.
     """
-    F, dpiv, U, sv, Vt = dense
+    F, dpiv, U, sv, Vt = _dense(cx, slot)
     for i in range(m):
         for j in range(m):
             U[i, j] = F[i, j]
@@ -249,11 +245,11 @@ def _factor_matrix(m, symmetric, tiny, floor, dense, counts):
     return SVD
 
 
-@njit(cache=True)
-def _solve_dense(mode, rhs, out, dense):
-    """Solve with the factors of :func:`_factor_dense`; ``out`` (m,) may not alias ``rhs``."""
+@njit(cache=True, inline='always')
+def _solve_dense(mode, rhs, out, cx, slot):
+    """Solve with the factors of :func:`_factor_matrix`; ``out`` (m,) may not alias ``rhs``."""
     m = rhs.shape[0]
-    F, dpiv, U, sv, Vt = dense
+    F, dpiv, U, sv, Vt = _dense(cx, slot)
     if mode == SVD:
         y = np.zeros(m)
         for k in range(m):
@@ -286,7 +282,7 @@ def _solve_dense(mode, rhs, out, dense):
         out[i] = s / F[i, i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _gt_lambda(Ga, Gb, a, b, lam, out):
     """``out = Gᵀ λ`` as (n, 6) (overwritten)."""
     n = out.shape[0]
@@ -301,7 +297,7 @@ def _gt_lambda(Ga, Gb, a, b, lam, out):
                 out[b[r], c] += Gb[r, c] * lam[r]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _copy(src, dst):
     """``dst[:, :] = src`` for arrays of the same shape (r, c)."""
     for i in range(src.shape[0]):
@@ -309,7 +305,7 @@ def _copy(src, dst):
             dst[i, c] = src[i, c]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _g_times(Ga, Gb, a, b, x6, out):
     """``out = G x`` for generalized vectors ``x6`` (n, 6)."""
     n = x6.shape[0]
@@ -323,10 +319,73 @@ def _g_times(Ga, Gb, a, b, x6, out):
         out[r] = s
 
 
-# Workspace slots (a tuple of arrays, see constrained_step): which geometry.
+# A component's arrays live in the buffers of :func:`pack`; the compiled step passes them
+# on as one context ``cx = (floats, ints, layout, key, solve)`` (``key``: the component's
+# generic rows, -1 if none; ``solve``: SOLVE_DENSE, SOLVE_TREE or SOLVE_LOOP), and each
+# function takes the views it uses from it with the accessors below. A tuple of arrays is
+# passed by value: the ~75 arrays of a component as tuples cost each call ~400 machine
+# words copied (perf: most of a pendulum step), the context 25.
+#
+# Slots of the layout (see _SLOTS): the rows ``(kind, comp, a, b, par)`` of
+# :mod:`.row_kernels`, the workspace (see :func:`workspace`) and the scratch arrays (see
+# :func:`scratch`), then the dense and the tree storages.
+KIND, COMP, ROW_A, ROW_B, ROW_PAR = range(5)
+PHI, JAC, VM, GT_LAMBDA, FREE_ACC, FORCE, TORQUE, MINV, FACTOR_STATE, WATCH = range(5, 15)
+FRAMES, OMEGA_WORLD, JR, G2, VECTORS, BODY_VECTORS, QUATS, STAGES, ROTOR = range(15, 24)
+# Which geometry, in the workspace's Φ (3, m) and G (3, 2, m, 6).
 START, CURRENT, END = 0, 1, 2
-# The scratch arrays after the workspace's ten (see scratch()).
-FRAMES, OMEGA_WORLD, JR, G2, VECTORS, BODY_VECTORS, QUATS, STAGES, ROTOR = range(10, 19)
+# Which storages (dense and tree): the general factorizations (SHAKE's), and the symmetric
+# factor kept for the current geometry (see _sym_factor).
+GENERAL, SYMMETRIC = 0, 1
+
+
+@njit(cache=True)
+def _f1(cx, k):
+    """Float slot ``k`` (1-D) of the context ``cx``."""
+    return _v1(cx[0], cx[2], k)
+
+
+@njit(cache=True)
+def _f2(cx, k):
+    """Float slot ``k`` (2-D) of the context ``cx``."""
+    return _v2(cx[0], cx[2], k)
+
+
+@njit(cache=True)
+def _f3(cx, k):
+    """Float slot ``k`` (3-D) of the context ``cx``."""
+    return _v3(cx[0], cx[2], k)
+
+
+@njit(cache=True)
+def _f4(cx, k):
+    """Float slot ``k`` (4-D) of the context ``cx``."""
+    return _v4(cx[0], cx[2], k)
+
+
+@njit(cache=True)
+def _i1(cx, k):
+    """Integer slot ``k`` (1-D) of the context ``cx``."""
+    return _v1(cx[1], cx[2], k)
+
+
+@njit(cache=True)
+def _rows(cx):
+    """Return the rows ``(kind, comp, a, b, par)`` (see :mod:`.row_kernels`)."""
+    return _i1(cx, KIND), _i1(cx, COMP), _i1(cx, ROW_A), _i1(cx, ROW_B), _f2(cx, ROW_PAR)
+
+
+@njit(cache=True)
+def _dense(cx, slot):
+    """Dense storage ``slot``: ``(F, piv, U, s, Vt)`` (see :func:`dense_storage`)."""
+    d = _DENSE + 5 * slot
+    return _f2(cx, d), _i1(cx, d + 1), _f2(cx, d + 2), _f1(cx, d + 3), _f2(cx, d + 4)
+
+
+@njit(cache=True)
+def _tree(cx, slot):
+    """Tree storage ``slot`` (see :func:`tree_storage`)."""
+    return _tree_views(cx[0], cx[1], cx[2], _TREES + _TREE_SLOTS * slot)
 
 
 # Generic rows (a user's Python function) are evaluated by Python from inside the
@@ -348,87 +407,101 @@ def generic_gamma(key: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
 
 
 @njit(cache=True)
-def _geometry(pos, quat, rows, which, phi3, G3, R, fs, counts):
-    """
-    Φ and G of every row at ``pos, quat`` into slot ``which`` of ``phi3, G3``.
-
-    ``rows`` is ``(kind, comp, a, b, par, key)``: the built-in rows are the first
-    ``len(kind)``; with ``key >= 0`` the generic rows after them are filled by
-    :func:`generic_geometry` (Python, in object mode). ``phi3``, ``G3``, ``fs``
-    are the workspace's Φ, G and factor state (``ws[0]``, ``ws[1]``, ``ws[8]``);
-    ``R`` is scratch for the rotations (``ws[FRAMES]``).
-    """
-    phi_w, Ga_w, Gb_w = phi3[which], G3[which, 0], G3[which, 1]
-    frames(quat, R)
-    framed_geometry(pos, R, rows[0], rows[1], rows[2], rows[3], rows[4], phi_w, Ga_w, Gb_w)
-    key = rows[5]
-    if key >= 0:
-        with objmode():
-            generic_geometry(key, pos, quat, phi_w, Ga_w, Gb_w)
-    counts[GEOMETRY] += 1
-    if which == CURRENT:
-        fs[0] = 0   # the symmetric factor was of the geometry replaced
+def _generic_geometry(key, pos, quat, phi, Ga, Gb):
+    """Φ and G of the generic rows by :func:`generic_geometry` (Python, in object mode)."""
+    with objmode():
+        generic_geometry(key, pos, quat, phi, Ga, Gb)
 
 
 @njit(cache=True)
-def _sym_factor(Ga, Gb, a, b, minv6, par, tree, dense, fs, counts):
+def _generic_rates(key, pos, quat, vel, om, Ga, Gb, a, b, first, vm):
+    """
+    Φ̇ and γ of the generic rows (from row ``first``) into ``vm[0]``, ``vm[1]``.
+
+    Φ̇ = G ν here, γ from the user's function (:func:`generic_gamma`, in object mode).
+    """
+    n = pos.shape[0]
+    for r in range(first, vm.shape[1]):
+        rate = 0.0
+        for c in range(3):
+            rate += Ga[r, c] * vel[a[r], c] + Ga[r, 3 + c] * om[a[r], c]
+            if b[r] < n:
+                rate += Gb[r, c] * vel[b[r], c] + Gb[r, 3 + c] * om[b[r], c]
+        vm[0, r] = rate
+    gamma = vm[1]
+    with objmode():
+        generic_gamma(key, pos, quat, vel, om, gamma)
+
+
+@njit(cache=True, inline='always')
+def _geometry(pos, quat, cx, which, counts):
+    """
+    Φ and G of every row at ``pos, quat`` into slot ``which`` of the workspace's Φ, G.
+
+    The built-in rows are the first ``len(kind)``; with ``key >= 0`` (``cx[3]``)
+    the generic rows after them are filled by :func:`generic_geometry` (Python,
+    in object mode). The rotations go to the scratch ``FRAMES``.
+    """
+    phi3, G3, R = _f2(cx, PHI), _f4(cx, JAC), _f3(cx, FRAMES)
+    phi_w, Ga_w, Gb_w = phi3[which], G3[which, 0], G3[which, 1]
+    frames(quat, R)
+    kind, comp, a, b, rpar = _rows(cx)
+    framed_geometry(pos, R, kind, comp, a, b, rpar, phi_w, Ga_w, Gb_w)
+    if cx[3] >= 0:
+        _generic_geometry(cx[3], pos, quat, phi_w, Ga_w, Gb_w)
+    counts[GEOMETRY] += 1
+    if which == CURRENT:
+        _i1(cx, FACTOR_STATE)[0] = 0   # the symmetric factor was of the geometry replaced
+
+
+@njit(cache=True, inline='always')
+def _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts):
     """
     Factorize ``G M⁻¹ Gᵀ`` of the current geometry, or reuse its factors.
 
     A splitting step's second kick and its velocity projection, and the next
     step's first kick, all solve with the matrix of one configuration: it is
-    factorized once (into the second storages, ``tree1``, ``dense1`` of
-    :func:`constrained_step`, the ones passed here). ``fs`` is the workspace's
-    factor state ``ws[8]``: [the factors are of the current geometry, their mode].
+    factorized once, into the storages ``SYMMETRIC``. The workspace's factor
+    state (``FACTOR_STATE``) is [the factors are of the current geometry, their mode].
     """
+    fs = _i1(cx, FACTOR_STATE)
     if fs[0] == 1:
         return fs[1]
-    mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, tree, dense, counts)
+    mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, SYMMETRIC, counts)
     fs[0] = 1
     fs[1] = mode
     return mode
 
 
 @njit(cache=True)
-def _multipliers(pos, quat, vel, om, rows, ws, par, tree, dense, lam, counts):
+def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
     """
-    λ of the acceleration-level solve at the current geometry; ``ws[3]`` gets ``Gᵀλ``.
+    λ of the acceleration-level solve at the current geometry; ``GT_LAMBDA`` gets ``Gᵀλ``.
 
-    ``ws[4]`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ``. ``tree``,
-    ``dense``: the storages of the symmetric factor (see :func:`_sym_factor`).
+    ``FREE_ACC`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ``. The
+    solve uses the symmetric factor (see :func:`_sym_factor`).
     """
-    phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
-    vm, g6, a6, minv6 = ws[2], ws[3], ws[4], ws[7]
-    a, b = rows[2], rows[3]
-    R = ws[FRAMES]
+    phi, G = _f2(cx, PHI)[CURRENT], _f4(cx, JAC)
+    Ga, Gb = G[CURRENT, 0], G[CURRENT, 1]
+    vm, g6, a6, minv6 = _f2(cx, VM), _f2(cx, GT_LAMBDA), _f2(cx, FREE_ACC), _f2(cx, MINV)
+    kind, comp, a, b, rpar = _rows(cx)
+    R = _f3(cx, FRAMES)
     frames(quat, R)
-    framed_rates(pos, vel, om, R, ws[OMEGA_WORLD], rows[0], rows[1], a, b, rows[4], Ga, Gb,
+    framed_rates(pos, vel, om, R, _f2(cx, OMEGA_WORLD), kind, comp, a, b, rpar, Ga, Gb,
                  True, vm[0], vm[1])
-    key = rows[5]
-    if key >= 0:
-        # Generic rows: Φ̇ = G ν here, γ from the user's function (object mode).
-        n = pos.shape[0]
-        for r in range(rows[0].shape[0], phi.shape[0]):
-            rate = 0.0
-            for c in range(3):
-                rate += Ga[r, c] * vel[a[r], c] + Ga[r, 3 + c] * om[a[r], c]
-                if b[r] < n:
-                    rate += Gb[r, c] * vel[b[r], c] + Gb[r, 3 + c] * om[b[r], c]
-            vm[0, r] = rate
-        gamma = vm[1]
-        with objmode():
-            generic_gamma(key, pos, quat, vel, om, gamma)
+    if cx[3] >= 0:
+        _generic_rates(cx[3], pos, quat, vel, om, Ga, Gb, a, b, kind.shape[0], vm)
     w = par[P_OMEGA]
     _g_times(Ga, Gb, a, b, a6, vm[2])
     for r in range(phi.shape[0]):
         vm[2, r] += vm[1, r] + 2.0 * w * vm[0, r] + w * w * phi[r]
-    mode = _sym_factor(Ga, Gb, a, b, minv6, par, tree, dense, ws[8], counts)
+    mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
     counts[ACC_SOLVES] += 1
-    _sol(mode, vm[2], lam, tree, dense)
+    _sol(mode, vm[2], lam, cx, SYMMETRIC)
     _gt_lambda(Ga, Gb, a, b, lam, g6)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, torque, counts):
     """
     Free accelerations (every effect and the gyroscopic term) into ``a6`` (n, 6).
@@ -445,31 +518,31 @@ def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, t
     finish_accelerations(vel, om, body, flags, a6[:, :3], a6[:, 3:], counts)
 
 
-@njit(cache=True)
-def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, tree, dense,
-          lam, c_valid, counts):
+@njit(cache=True, inline='always')
+def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, cx, par, lam, c_valid,
+          counts):
     """
     ``v += tau f/m`` and ``L += tau τ`` with the constraint force ``−Gᵀλ``, in place.
 
     λ comes from the full accelerations (damping and the gyroscopic term
     included), so the kick, the flows and the free rotor together follow the
-    constrained vector field. ``tree``, ``dense``: the storages of the symmetric
-    factor (see :func:`_sym_factor`). Returns True (the current geometry is valid).
+    constrained vector field; the solve uses the symmetric factor (see
+    :func:`_sym_factor`). Returns True (the current geometry is valid).
     """
     n = pos.shape[0]
     counts[KICK] += 1
     if flags & HAS_DAMPING:
         counts[DAMP_IN_KICK] += 1
-    om = ws[BODY_VECTORS][1]
+    om = _f3(cx, BODY_VECTORS)[1]
     for i in range(n):
         for c in range(3):
             om[i, c] = mom[i, c] / body[i, 2 + c]
-    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, ws[4], ws[5], ws[6],
-                        counts)
+    force, torque, g6 = _f2(cx, FORCE), _f2(cx, TORQUE), _f2(cx, GT_LAMBDA)
+    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, _f2(cx, FREE_ACC), force,
+                        torque, counts)
     if not c_valid:
-        _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
-    _multipliers(pos, quat, vel, om, rows, ws, par, tree, dense, lam, counts)
-    force, torque, g6 = ws[5], ws[6], ws[3]
+        _geometry(pos, quat, cx, CURRENT, counts)
+    _multipliers(pos, quat, vel, om, cx, par, lam, counts)
     for i in range(n):
         for c in range(3):
             vel[i, c] += tau * body[i, 1] * (force[i, c] - g6[i, c])
@@ -477,7 +550,7 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, rows, ws, par, 
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _free_kick(quat, vel, mom, tau, body, gforce, wrench, force, torque, counts):
     """
     ``v += tau f/m`` and ``L += tau τ`` of gravity and the wrenches alone, in place.
@@ -496,18 +569,19 @@ def _free_kick(quat, vel, mom, tau, body, gforce, wrench, force, torque, counts)
             mom[i, c] += tau * torque[i, c]
 
 
-@njit(cache=True)
-def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, tree, dense, counts):
+@njit(cache=True, inline='always')
+def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     """
     Project velocities onto ``Φ̇ = −ωΦ`` at the current geometry, in place.
 
-    ``tree``, ``dense``: the storages of the symmetric factor (see :func:`_sym_factor`).
+    The solve uses the symmetric factor (see :func:`_sym_factor`).
     """
     n = pos.shape[0]
     counts[VEL_PROJECTIONS] += 1
-    phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
-    vm, g6, x6, minv6 = ws[2], ws[3], ws[4], ws[7]
-    a, b = rows[2], rows[3]
+    phi, G = _f2(cx, PHI)[CURRENT], _f4(cx, JAC)
+    Ga, Gb = G[CURRENT, 0], G[CURRENT, 1]
+    vm, g6, x6, minv6 = _f2(cx, VM), _f2(cx, GT_LAMBDA), _f2(cx, FREE_ACC), _f2(cx, MINV)
+    a, b = _i1(cx, ROW_A), _i1(cx, ROW_B)
     for i in range(n):
         for c in range(3):
             x6[i, c] = vel[i, c]
@@ -516,8 +590,8 @@ def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, tree, dense, c
     w = par[P_OMEGA]
     for r in range(phi.shape[0]):
         vm[2, r] += w * phi[r]
-    mode = _sym_factor(Ga, Gb, a, b, minv6, par, tree, dense, ws[8], counts)
-    _sol(mode, vm[2], vm[3], tree, dense)
+    mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
+    _sol(mode, vm[2], vm[3], cx, SYMMETRIC)
     _gt_lambda(Ga, Gb, a, b, vm[3], g6)
     for i in range(n):
         for c in range(3):
@@ -526,22 +600,23 @@ def _project_velocities(pos, quat, vel, mom, body, rows, ws, par, tree, dense, c
 
 
 @njit(cache=True)
-def _project_positions(pos, quat, target, rows, ws, par, tree, dense, counts):
+def _project_positions(pos, quat, target, cx, par, counts):
     """
     Orthogonal projection of ``pos, quat`` onto ``Φ = target`` (SHAKE's last resort).
 
     Newton steps ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁻¹ (Φ − target)`` at the current
     configuration; ends with the current geometry at the returned configuration.
-    ``tree``, ``dense``: the general storages (slot 0, see :func:`constrained_step`).
+    Factorizes into the storages ``GENERAL``.
     """
     n = pos.shape[0]
     max_it = int(par[P_MAX_IT])
-    vm, g6, minv6 = ws[2], ws[3], ws[7]
-    a, b = rows[2], rows[3]
+    vm, g6, minv6 = _f2(cx, VM), _f2(cx, GT_LAMBDA), _f2(cx, MINV)
+    phi3, G = _f2(cx, PHI), _f4(cx, JAC)
+    a, b = _i1(cx, ROW_A), _i1(cx, ROW_B)
     for it in range(max_it + 1):
         if it:
-            _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
-        phi, Ga, Gb = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
+            _geometry(pos, quat, cx, CURRENT, counts)
+        phi, Ga, Gb = phi3[CURRENT], G[CURRENT, 0], G[CURRENT, 1]
         norm = 0.0
         for r in range(phi.shape[0]):
             vm[2, r] = phi[r] - target[r]
@@ -549,8 +624,8 @@ def _project_positions(pos, quat, target, rows, ws, par, tree, dense, counts):
         if norm <= par[P_POS_TOL] or it == max_it:
             break
         counts[POS_ITERATIONS] += 1
-        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, tree, dense, counts)
-        _sol(mode, vm[2], vm[3], tree, dense)
+        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, GENERAL, counts)
+        _sol(mode, vm[2], vm[3], cx, GENERAL)
         _gt_lambda(Ga, Gb, a, b, vm[3], g6)
         for i in range(n):
             for c in range(3):
@@ -562,7 +637,7 @@ def _project_positions(pos, quat, target, rows, ws, par, tree, dense, counts):
                 quat[i, c] /= s
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _right_jacobians(quat_s, quat_e, Jr):
     """
     ``J_r(u)`` (n, 3, 3) of each body's rotation ``u = log(q_s⁻¹ ⊗ q_e)``.
@@ -593,7 +668,7 @@ def _right_jacobians(quat_s, quat_e, Jr):
                 Jr[i, r, c] = (1.0 if r == c else 0.0) - ca * H[r][c] + cb * h2
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
     """
     Per body, how the end orientation of a drift responds to its start momentum.
@@ -652,7 +727,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
                 dT[r, c] = dT[r, c] * body[i, 2 + c] / h
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _apply_jacobians(Ga, Gb, a, b, Jr, Ga2, Gb2):
     """Rows' angular blocks times each body's ``J_r``: ``G2 = G diag(I, J_r)``."""
     n = Jr.shape[0]
@@ -676,23 +751,23 @@ def _apply_jacobians(Ga, Gb, a, b, Jr, Ga2, Gb2):
 
 
 @njit(cache=True)
-def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, tree, dense,
-           counts):
+def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts):
     """
     Drift with the start impulse that lands on ``Φ = exp(−h/τ) Φ_start``, in place.
 
     Returns False when the Newton iterations stop converging on joints that
     hold (the step is then redone finer), True otherwise; on True the current
-    geometry is that of the new configuration. ``tree``, ``dense``: the general
-    storages (slot 0, see :func:`constrained_step`).
+    geometry is that of the new configuration. Factorizes into the storages
+    ``GENERAL``.
     """
     n = pos.shape[0]
-    phiS, GaS, GbS = ws[0][START], ws[1][START, 0], ws[1][START, 1]
-    vm, g6, minv6 = ws[2], ws[3], ws[7]
-    a, b = rows[2], rows[3]
+    phi3, G = _f2(cx, PHI), _f4(cx, JAC)
+    phiS, GaS, GbS = phi3[START], G[START, 0], G[START, 1]
+    vm, g6, minv6 = _f2(cx, VM), _f2(cx, GT_LAMBDA), _f2(cx, MINV)
+    a, b = _i1(cx, ROW_A), _i1(cx, ROW_B)
     m = phiS.shape[0]
     rho = math.exp(-h / par[P_TAU])
-    target = ws[VECTORS][0]
+    target = _f2(cx, VECTORS)[0]
     closing = False
     for r in range(m):
         target[r] = rho * phiS[r]
@@ -700,11 +775,13 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
             closing = True
     max_it = int(par[P_MAX_IT])
     # The start of the drift (the body vectors' slots 0 and 1 are the caller's).
-    pos_s, mom_s, quat_s = ws[BODY_VECTORS][2], ws[BODY_VECTORS][3], ws[QUATS]
+    body_vectors = _f3(cx, BODY_VECTORS)
+    pos_s, mom_s, quat_s = body_vectors[2], body_vectors[3], _f2(cx, QUATS)
     _copy(pos, pos_s)
     _copy(quat, quat_s)
     _copy(mom, mom_s)
-    Jr, Ga2, Gb2 = ws[JR], ws[G2][0], ws[G2][1]
+    g2 = _f3(cx, G2)
+    Jr, Ga2, Gb2 = _f3(cx, JR), g2[0], g2[1]
     previous = np.inf
     mode = -1
     for it in range(max_it + 1):
@@ -713,8 +790,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
             _copy(quat_s, quat)
             _copy(mom_s, mom)
         drift(pos, quat, vel, mom, body, h, symmetric, counts)
-        _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
-        phiE, GaE, GbE = ws[0][CURRENT], ws[1][CURRENT, 0], ws[1][CURRENT, 1]
+        _geometry(pos, quat, cx, CURRENT, counts)
+        phiE, GaE, GbE = phi3[CURRENT], G[CURRENT, 0], G[CURRENT, 1]
         norm = 0.0
         for r in range(m):
             vm[2, r] = phiE[r] - target[r]
@@ -727,7 +804,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
             if not closing and not last_resort:
                 return False
             counts[FALLBACKS] += 1
-            _project_positions(pos, quat, target, rows, ws, par, tree, dense, counts)
+            _project_positions(pos, quat, target, cx, par, counts)
             break
         # Refactor unless the last iteration cut the residual a hundredfold.
         refactor = mode < 0 or norm > 1e-2 * previous
@@ -742,10 +819,10 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort, 
         # matrices differ from it by as much as the configuration moved since (the
         # size of the corrections), and the iteration stays Newton's to that order.
         if refactor:
-            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, ws[ROTOR])
+            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, _f2(cx, ROTOR))
             _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
-            mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, tree, dense, counts)
-        _sol(mode, vm[2], vm[3], tree, dense)
+            mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, cx, GENERAL, counts)
+        _sol(mode, vm[2], vm[3], cx, GENERAL)
         _gt_lambda(GaS, GbS, a, b, vm[3], g6)
         for i in range(n):
             for c in range(3):
@@ -779,14 +856,14 @@ def _rounding_floor(pos, m):
     return ROUNDING_ULPS * math.sqrt(m) * 2.220446049250313e-16 * scale
 
 
-@njit(cache=True)
-def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows, ws, par,
-               last_resort, tree0, tree1, dense0, dense1, lam, c_valid, counts):
+@njit(cache=True, inline='always')
+def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, par,
+               last_resort, lam, c_valid, counts):
     """
     One (sub)step of a splitting method with RATTLE; returns (converged, c_valid).
 
-    SHAKE factorizes into the storages ``tree0``, ``dense0``; the kicks and the
-    velocity projection solve with the symmetric factor in ``tree1``, ``dense1``.
+    SHAKE factorizes into the storages ``GENERAL``; the kicks and the velocity
+    projection solve with the symmetric factor in ``SYMMETRIC``.
     """
     n = pos.shape[0]
     symmetric = method != SYMPLECTIC_EULER
@@ -796,16 +873,16 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
         weights = (1.0, 0.0, 0.0)
     n_sub = 3 if method == LIE_POISSON4 else 1
     damping = flags & HAS_DAMPING
-    mom = ws[BODY_VECTORS][0]
+    mom = _f3(cx, BODY_VECTORS)[0]
+    phi, G = _f2(cx, PHI), _f4(cx, JAC)
     for i in range(n):
         for c in range(3):
             mom[i, c] = om[i, c] * body[i, 2 + c]
     for sub in range(n_sub):
         h = weights[sub] * dt
         if not c_valid:
-            _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
+            _geometry(pos, quat, cx, CURRENT, counts)
             c_valid = True
-        phi, G = ws[0], ws[1]
         for r in range(phi.shape[1]):
             phi[START, r] = phi[CURRENT, r]
         _copy(G[CURRENT, 0], G[START, 0])
@@ -813,52 +890,53 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, rows
         first = 0.5 * h if symmetric else h
         if damping:
             damping_flow(vel, mom, body, first, counts)
-        _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, rows, ws, par, tree1,
-              dense1, lam, c_valid, counts)
-        if not _shake(pos, quat, vel, mom, h, symmetric, body, rows, ws, par, last_resort,
-                      tree0, dense0, counts):
+        _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, cx, par, lam, c_valid,
+              counts)
+        if not _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts):
             return False, False
         if symmetric and damping:
             # The damping flow between kick and projection is not along M⁻¹ Gᵀ: the
             # kick's constraint force is part of the method here.
-            _kick(pos, quat, vel, mom, 0.5 * h, body, gforce, wrench, flags, rows, ws, par,
-                  tree1, dense1, lam, True, counts)
+            _kick(pos, quat, vel, mom, 0.5 * h, body, gforce, wrench, flags, cx, par, lam,
+                  True, counts)
             damping_flow(vel, mom, body, 0.5 * h, counts)
         elif symmetric:
-            _free_kick(quat, vel, mom, 0.5 * h, body, gforce, wrench, ws[5], ws[6], counts)
-        _project_velocities(pos, quat, vel, mom, body, rows, ws, par, tree1, dense1, counts)
+            _free_kick(quat, vel, mom, 0.5 * h, body, gforce, wrench, _f2(cx, FORCE),
+                       _f2(cx, TORQUE), counts)
+        _project_velocities(pos, quat, vel, mom, body, cx, par, counts)
     for i in range(n):
         for c in range(3):
             om[i, c] = mom[i, c] / body[i, 2 + c]
     return True, True
 
 
-@njit(cache=True)
-def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, tree, dense,
-           lam, c_valid, counts, err):
+@njit(cache=True, inline='always')
+def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_valid, counts,
+           err):
     """
     One RKMK4 (sub)step with constraint forces at every stage, then Φ̇ = −ωΦ.
 
     With ``err`` of length 1, the slopes at the end (constraint forces included,
     before the velocity projection) give the embedded estimate
-    (:func:`.step_kernels.rkmk4_embedded_error`), raising ``err[0]``. ``tree``,
-    ``dense``: the storages of the symmetric factor (see :func:`_sym_factor`).
+    (:func:`.step_kernels.rkmk4_embedded_error`), raising ``err[0]``. The solves
+    use the symmetric factor (see :func:`_sym_factor`).
     """
     n = pos.shape[0]
     estimate = err.shape[0] > 0
-    stages, vectors = ws[STAGES], ws[BODY_VECTORS]
+    stages, vectors = _f4(cx, STAGES), _f3(cx, BODY_VECTORS)
     kp, kv, kw, kr = stages[0], stages[1], stages[2], stages[3]
-    p, v, w, u, q = vectors[0], vectors[1], vectors[2], vectors[3], ws[QUATS]
-    a6, g6, minv6 = ws[4], ws[3], ws[7]
+    p, v, w, u, q = vectors[0], vectors[1], vectors[2], vectors[3], _f2(cx, QUATS)
+    a6, g6, minv6 = _f2(cx, FREE_ACC), _f2(cx, GT_LAMBDA), _f2(cx, MINV)
+    force, torque = _f2(cx, FORCE), _f2(cx, TORQUE)
     for s in range(4):
         rkmk4_stage(s, h, pos, quat, vel, om, kp, kv, kw, kr, p, q, v, w, u, counts)
         if s:
             c_valid = False
         counts[RHS] += 1
-        _free_accelerations(q, v, w, body, gforce, wrench, flags, a6, ws[5], ws[6], counts)
+        _free_accelerations(q, v, w, body, gforce, wrench, flags, a6, force, torque, counts)
         if not c_valid:
-            _geometry(p, q, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
-        _multipliers(p, q, v, w, rows, ws, par, tree, dense, lam, counts)
+            _geometry(p, q, cx, CURRENT, counts)
+        _multipliers(p, q, v, w, cx, par, lam, counts)
         for i in range(n):
             for c in range(3):
                 kv[s, i, c] = a6[i, c] - minv6[i, c] * g6[i, c]
@@ -866,13 +944,14 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, tr
         rkmk4_slopes(s, v, w, u, kp, kr)
     rkmk4_finish(h, pos, quat, vel, om, kp, kv, kw, kr, u, counts)
     # Velocities onto Φ̇ = −ωΦ at the end configuration: an internal impulse.
-    _geometry(pos, quat, rows, CURRENT, ws[0], ws[1], ws[FRAMES], ws[8], counts)
+    _geometry(pos, quat, cx, CURRENT, counts)
     if estimate:
         # The fifth stage (its factorization is the projection's): λ to scratch, so
         # the reported multipliers are those of the step without the estimate.
         counts[RHS] += 1
-        _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, ws[5], ws[6], counts)
-        _multipliers(pos, quat, vel, om, rows, ws, par, tree, dense, ws[VECTORS][1], counts)
+        _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, torque,
+                            counts)
+        _multipliers(pos, quat, vel, om, cx, par, _f2(cx, VECTORS)[1], counts)
         for i in range(n):
             for c in range(3):
                 kv[4, i, c] = a6[i, c] - minv6[i, c] * g6[i, c]
@@ -882,17 +961,16 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, tr
     for i in range(n):
         for c in range(3):
             mom[i, c] = om[i, c] * body[i, 2 + c]
-    _project_velocities(pos, quat, vel, mom, body, rows, ws, par, tree, dense, counts)
+    _project_velocities(pos, quat, vel, mom, body, cx, par, counts)
     for i in range(n):
         for c in range(3):
             om[i, c] = mom[i, c] / body[i, 2 + c]
     return True
 
 
-@njit(cache=True)
-def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, rows,
-                     watch, par, tree0, tree1, dense0, dense1, ws, pos, quat, vel, om, lam,
-                     c_valid, counts, err):
+@njit(cache=True, inline='always')
+def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags, cx, par,
+                     pos, quat, vel, om, lam, c_valid, counts, err):
     """
     One step of ``method`` with constraints; the new state goes to ``pos, quat, vel, om``.
 
@@ -906,25 +984,18 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         s.
     body, gforce, wrench, flags
         The effects (see :mod:`.step_kernels`).
-    rows : tuple
-        ``(kind, comp, a, b, par)`` of the constraint rows (see :mod:`.row_kernels`).
-    watch : ndarray of bool, shape (n,)
-        Bodies some constraint touches (their rotation decides the sub-steps).
+    cx : tuple
+        The component's context ``(floats, ints, layout, key, solve)``: its rows,
+        workspace (whose current geometry persists between calls), scratch and
+        storages in the buffers of :func:`pack` (see the slots above). Two
+        storages each, dense or tree as ``solve`` says (both for closed loops,
+        the dense ones then hold the Schur complement of the loop-closing
+        rows): ``GENERAL`` for SHAKE's factorizations, ``SYMMETRIC`` for the
+        symmetric factor kept for the current geometry (see :func:`_sym_factor`).
+        The workspace's ``WATCH`` (n,) marks the bodies some constraint touches
+        (their rotation decides the sub-steps).
     par : ndarray
         Solver and sub-step parameters (see the module docstring).
-    tree0, tree1 : tuple or None
-        Two storages of :mod:`.tree_solve`, each :func:`tree_storage`: slot 0
-        for the general factorizations (SHAKE's), slot 1 for the symmetric
-        factor kept for the current geometry (see :func:`_sym_factor`).
-    dense0, dense1 : tuple or None
-        Two dense storages ``(F, piv, U, s, Vt)`` (see :func:`dense_storage`),
-        slots as above. The tree storages are given and the dense ones None, or
-        the other way round, or all four for closed loops (the dense storages
-        then hold the Schur complement of the loop-closing rows). Each function
-        is passed only the storages of the slot it uses.
-    ws : tuple
-        Workspace (see :func:`workspace`; its current geometry persists between calls)
-        followed by the scratch arrays of :func:`scratch`.
     pos, quat, vel, om : ndarray
         Written: the state at the end.
     lam : ndarray, shape (m,)
@@ -946,6 +1017,7 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
     n = pos0.shape[0]
     max_rot = par[P_MAX_ROT]
     max_sub = int(par[P_MAX_SUB])
+    watch = _i1(cx, WATCH)
     rate = 0.0
     for i in range(n):
         if watch[i]:
@@ -966,12 +1038,11 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         h = dt / k
         for _ in range(k):
             if method == RKMK4:
-                _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, rows, ws, par, tree1,
-                       dense1, lam, c_valid, counts, err)
+                _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam,
+                       c_valid, counts, err)
             else:
                 ok, c_valid = _splitting(method, pos, quat, vel, om, h, body, gforce, wrench,
-                                         flags, rows, ws, par, last_resort, tree0, tree1,
-                                         dense0, dense1, lam, c_valid, counts)
+                                         flags, cx, par, last_resort, lam, c_valid, counts)
                 if not ok:
                     break
             c_valid = True
@@ -1027,7 +1098,7 @@ def dense_storage(d: int) -> tuple:
 # Packed arguments. A compiled call from Python pays for every array it is passed (each is
 # unboxed, typed and released: about 70 ns): a component's rows, workspace, scratch and two
 # dense and two tree storages, 74 arrays, live in one float64 and one int64 buffer described
-# by a layout table, and :func:`packed_step` rebuilds the tuples as views into them.
+# by a layout table, and the compiled step takes views of them (see the context ``cx``).
 
 _SLOTS = (
     # rows: kind, comp, a, b, par
@@ -1193,32 +1264,10 @@ def _packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags
                  solve, key, floats, ints, layout, pos, quat, vel, om, lam, c_valid, counts,
                  err):
     """:func:`packed_step` without the outputs."""
-    f, i, L = floats, ints, layout
     pos0, quat0, vel0, om0 = raw(pos0), raw(quat0), raw(vel0), raw(om0)
     pos, quat, vel, om = raw(pos), raw(quat), raw(vel), raw(om)
     body, gforce, wrench, par = raw(body), raw(gforce), raw(wrench), raw(par)
     lam, counts, err = raw(lam), raw(counts), raw(err)
-    rows = (_v1(i, L, 0), _v1(i, L, 1), _v1(i, L, 2), _v1(i, L, 3), _v2(f, L, 4), key)
-    ws = (_v2(f, L, 5), _v4(f, L, 6), _v2(f, L, 7), _v2(f, L, 8), _v2(f, L, 9),
-          _v2(f, L, 10), _v2(f, L, 11), _v2(f, L, 12), _v1(i, L, 13), _v1(i, L, 14),
-          _v3(f, L, 15), _v2(f, L, 16), _v3(f, L, 17), _v3(f, L, 18), _v2(f, L, 19),
-          _v3(f, L, 20), _v2(f, L, 21), _v4(f, L, 22), _v2(f, L, 23))
-    t1, t2 = _TREES, _TREES + _TREE_SLOTS
-    if solve == SOLVE_TREE:
-        tree0, tree1 = _tree_views(f, i, L, t1), _tree_views(f, i, L, t2)
-        return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
-                                flags, rows, ws[9], par, tree0, tree1, None, None, ws, pos,
-                                quat, vel, om, lam, c_valid, counts, err)
-    d = _DENSE
-    dense0 = (_v2(f, L, d), _v1(i, L, d + 1), _v2(f, L, d + 2), _v1(f, L, d + 3),
-              _v2(f, L, d + 4))
-    dense1 = (_v2(f, L, d + 5), _v1(i, L, d + 6), _v2(f, L, d + 7), _v1(f, L, d + 8),
-              _v2(f, L, d + 9))
-    if solve == SOLVE_LOOP:
-        tree0, tree1 = _tree_views(f, i, L, t1), _tree_views(f, i, L, t2)
-        return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
-                                flags, rows, ws[9], par, tree0, tree1, dense0, dense1, ws,
-                                pos, quat, vel, om, lam, c_valid, counts, err)
-    return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench,
-                            flags, rows, ws[9], par, None, None, dense0, dense1, ws, pos,
-                            quat, vel, om, lam, c_valid, counts, err)
+    cx = (raw(floats), raw(ints), raw(layout), key, solve)
+    return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
+                            cx, par, pos, quat, vel, om, lam, c_valid, counts, err)

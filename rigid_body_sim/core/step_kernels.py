@@ -67,28 +67,21 @@ def _address(typingctx, arr, offset):
     return sig, codegen
 
 
-@intrinsic
-def _float_at(typingctx, address):
-    """Return the float64 pointer at the integer ``address`` (compiled code only)."""
-    if not isinstance(address, types.Integer):
-        return None
-    sig = types.CPointer(types.float64)(address)
+def _pointer_at(dtype):
+    """Return an intrinsic: the ``dtype`` pointer at an integer address (compiled code only)."""
+    @intrinsic
+    def pointer_at(typingctx, address):
+        if not isinstance(address, types.Integer):
+            return None
+        sig = types.CPointer(dtype)(address)
 
-    def codegen(context, builder, signature, args):
-        return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
-    return sig, codegen
+        def codegen(context, builder, signature, args):
+            return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
+        return sig, codegen
+    return pointer_at
 
 
-@intrinsic
-def _int_at(typingctx, address):
-    """Return the int64 pointer at the integer ``address`` (compiled code only)."""
-    if not isinstance(address, types.Integer):
-        return None
-    sig = types.CPointer(types.int64)(address)
-
-    def codegen(context, builder, signature, args):
-        return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
-    return sig, codegen
+_float_at, _int_at = _pointer_at(types.float64), _pointer_at(types.int64)
 
 
 @njit(cache=True)
