@@ -5,7 +5,11 @@ Constraint benchmarks: cost per step of chains and trees, and error vs wall time
    rings of N hinged rods closed by a ball joint (one closed loop, 5 N + 3 rows):
    wall time per step and the fitted growth exponent p of ``time ∝ N^p``
    (p near 1: linear; the Python overhead per step flattens small N).
-2. Pendulum (ball joint, 60° release) and four-bar linkage (four parallel
+2. 100-link chains released horizontal, 10 s of whipping at dt = 1e-3 with
+   ``lie_poisson2`` (ball joints: ``mechanisms.chain``; hinges of 0.1 m, 1 kg
+   links): wall time per step, mean and range over the 1 s blocks, and the
+   sub-steps the whip takes (issue 8's target: 300 us a step for a node at 1 kHz).
+3. Pendulum (ball joint, 60° release) and four-bar linkage (four parallel
    hinges: a closed loop with 3 redundant rows) across integrators and step
    sizes: error (pendulum: period against 4 sqrt(L/g) K(sin²(θ0/2)); four-bar:
    crank angle at 2.1 s against an rkmk4 run with dt = 1e-4), energy error,
@@ -25,7 +29,7 @@ import time
 
 import numpy as np
 from rigid_body_sim.core import Constraint, Gravity, INTEGRATORS, RigidBody, Simulation
-from rigid_body_sim.core.mechanisms import chain, four_bar, ring, tree
+from rigid_body_sim.core.mechanisms import chain, four_bar, ring, rod, tree
 from scipy.special import ellipk
 
 OUT = Path(__file__).resolve().parent / 'out'
@@ -175,6 +179,35 @@ def _plot(sc_rows, acc_rows, integrators):
     print(f'plot: {OUT / "constraints.png"}')
 
 
+def hinge_chain(n: int, name: str) -> Simulation:
+    """Build n rods of 0.1 m and 1 kg on hinges about y, released horizontal."""
+    bodies = [rod(f'l{i}', np.array([0.1 * i, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), 0.1, 1.0)
+              for i in range(n)]
+    joints = [Constraint(f'j{i}', 'hinge', f'l{i}', f'l{i - 1}' if i else None,
+                         anchor_world=(0.1 * i, 0.0, 0.0), axis_world=(0.0, 1.0, 0.0))
+              for i in range(n)]
+    return Simulation(bodies, [Gravity()], name, 1e-3, joints)
+
+
+def whip(seconds: int):
+    """Rows (chain, mean, min, max us per step over 1 s blocks, sub-steps, retries)."""
+    rows = []
+    for label, sim in (('100 links, ball joints', chain(100, 'lie_poisson2')),
+                       ('100 links, hinges', hinge_chain(100, 'lie_poisson2'))):
+        blocks = []
+        for _ in range(seconds):
+            t0 = time.perf_counter()
+            sim.step(1000)
+            blocks.append((time.perf_counter() - t0) / 1000 * 1e6)
+        w = sim.work()
+        rows.append((label, float(np.mean(blocks)), min(blocks), max(blocks), w['substeps'],
+                     w['retries']))
+        print(f'  {label:24s} {rows[-1][1]:6.0f} us/step mean ({rows[-1][2]:.0f} to '
+              f'{rows[-1][3]:.0f} per simulated second), {w["substeps"]} sub-steps, '
+              f'{w["retries"]} retries', flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     """Run the constraint benchmarks."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -194,6 +227,11 @@ def main(argv=None) -> int:
     _table(OUT / 'constraints_growth.md', ('topology', 'integrator', 'exponent (all N)',
                                            'exponent (N >= 100)'), fits,
            ('{}', '{}', '{:.2f}', '{:.2f}'))
+    print('\n== constraints: 100-link chains whipping, lie_poisson2, dt 1e-3 ==')
+    wh = whip(2 if args.quick else 10)
+    _table(OUT / 'constraints_whip.md', ('chain', 'us / step (mean)', 'min (1 s block)',
+                                         'max (1 s block)', 'sub-steps', 'retries'), wh,
+           ('{}', '{:.0f}', '{:.0f}', '{:.0f}', '{}', '{}'))
     print('\n== constraints: error vs wall time (pendulum, four-bar) ==')
     acc = accuracy(dts, integrators)
     _table(OUT / 'constraints_accuracy.md', ('scene', 'integrator', 'dt [s]', 'error',
