@@ -37,6 +37,7 @@ damping flows.
 from __future__ import annotations
 
 import math
+import weakref
 
 import numba
 from numba import carray, njit, types
@@ -120,8 +121,8 @@ def pinned_int(table: np.ndarray, slot: int, shape: tuple) -> np.ndarray:
 
 if numba.config.DISABLE_JIT:
     # Plain Python (debugging): the views are ordinary numpy views, and a pinned
-    # table's addresses are looked up among the arrays the tables keep.
-    _PINNED: dict = {}
+    # table's addresses are looked up among the arrays the tables keep (alive).
+    _PINNED = weakref.WeakValueDictionary()
 
     def raw(a: np.ndarray) -> np.ndarray:   # noqa: F811
         return a
