@@ -21,12 +21,12 @@ ill-conditioned the mass ratios make it (a point mass on a rod: 1e9).
 The matrix ``G M⁻¹ Gᵀ`` couples only constraints that share a body: block
 tridiagonal for chains, tree-shaped for trees. Chains and trees are eliminated
 in tree order by :mod:`.tree_solve` (Baraff 1996; linear in the number of
-links, compiled); systems of at most ``DENSE_ROWS`` rows use a dense Cholesky
-factorization, which is faster at that size (see
-:data:`.constraints.DENSE_ROWS`). A step does this in compiled code
-(:mod:`.constrained_kernels`, where a closed loop beyond that size is solved by
-the tree solve of a spanning forest and the Schur complement of the rows that
-close the loops, :mod:`.loop_solve`); the
+links, compiled); systems of at most :data:`.constraints.DENSE_ROWS` rows use a
+dense Cholesky factorization, which is faster at that size. A step does this in
+compiled code (:mod:`.constrained_kernels`: dense up to :data:`KERNEL_DENSE_ROWS`
+rows, or up to ``DENSE_ROWS`` with a closed loop; a larger closed loop among
+bodies is solved by the tree solve of a spanning forest and the Schur complement
+of the rows that close the loops, :mod:`.loop_solve`); the
 solves of this class (reactions, consistency, velocity reconciliation when a
 constraint is added) factorize a closed loop by SuperLU with a minimum-degree
 ordering of ``A + Aᵀ``.
@@ -82,6 +82,24 @@ if TYPE_CHECKING:
 
 
 _KEYS = itertools.count()
+
+#: A component of the compiled step with at most this many rows is solved densely
+#: (Cholesky or LU), a larger one by the tree solve (:mod:`.loop_solve` for loops
+#: among its bodies). Measured per step at dt 1e-3, ``lie_poisson2``: the dense solve
+#: is faster up to 20 rows (a 4-link hinge chain: 13.8 against 14.9 us), the tree
+#: solve from 25 (5 links: 16.7 against 17.7; 9 links, 45 rows: 24.4 against 43.5).
+#: A closed loop of up to :data:`.constraints.DENSE_ROWS` rows stays dense: its
+#: redundant rows (3 for a planar loop) take the truncated SVD there, where the tree
+#: solve of a loop through the world adds a Tikhonov term that biases it (the
+#: four-bar under the accuracy knob then missed tolerances of 1e-7 and 1e-9).
+KERNEL_DENSE_ROWS = 24
+
+
+def _closes_loop(ra: np.ndarray, rb: np.ndarray, n: int) -> bool:
+    """Tell whether the joints of a component (rows ``ra``-``rb``, world ``n``) close a loop."""
+    pairs = {(min(i, j), max(i, j)) for i, j in zip(ra.tolist(), rb.tolist()) if i != j}
+    nodes = n + (1 if any(n in p for p in pairs) else 0)
+    return len(pairs) > nodes - 1
 
 
 def _drop_generic(keys: list) -> None:
@@ -282,9 +300,10 @@ class ConstraintSolver:
         (see :meth:`.integrators.Integrator.substeps`). Generic rows (a user's
         Python function) are evaluated by Python from inside the compiled step
         (:data:`.constrained_kernels.GENERIC`). A component of at most
-        ``DENSE_ROWS`` rows is solved densely, a larger one by the tree solve, and
-        one with closed loops by the tree solve of a spanning forest and the Schur
-        complement of the loop-closing rows (:mod:`.loop_solve`). Returns
+        :data:`KERNEL_DENSE_ROWS` rows (``DENSE_ROWS`` with a closed loop) is solved
+        densely, a larger one by the tree solve, and one with closed loops among its
+        bodies by the tree solve of a spanning forest and the Schur complement of
+        the loop-closing rows (:mod:`.loop_solve`). Returns
         ``(free, components)``: the indices of the free bodies, and per component
         ``(bodies, rows_global, packed, solve, multipliers)``, ``solve`` one of
         ``constrained_kernels.SOLVE_*`` and ``packed`` the arguments of
@@ -329,7 +348,8 @@ class ConstraintSolver:
             ra, rb = local[a[rows_global]], local[b[rows_global]]
             mc = len(rows_global)
             closure = np.zeros(0, dtype=np.int64)
-            if mc <= DENSE_ROWS:
+            if mc <= KERNEL_DENSE_ROWS or (mc <= DENSE_ROWS
+                                           and _closes_loop(ra, rb, len(bodies))):
                 solve, d = SOLVE_DENSE, mc
                 st = tree_structure(ra[:0], rb[:0], len(bodies))
             else:
