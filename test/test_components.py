@@ -134,3 +134,37 @@ def test_outputs_computed_inside_a_constrained_step_equal_those_computed_when_re
         if k % 7 == 0:
             assert np.array_equal(got, read(late))
     assert np.array_equal(read(every), read(late))
+
+
+def _hinge_chain(n, name, again=False):
+    from rigid_body_sim.core.mechanisms import rod
+    bodies = [rod(f'l{i}', np.array([0.1 * i, 0, 0]), np.array([1.0, 0, 0]), 0.1, 1.0)
+              for i in range(n)]
+    joints = [Constraint(f'j{i}', 'hinge', f'l{i}', f'l{i - 1}' if i else None,
+                         anchor_world=(0.1 * i, 0, 0), axis_world=(0, 1, 0)) for i in range(n)]
+    if again:   # the joint between l1 and l2 once more: 5 redundant rows
+        joints.append(Constraint('again', 'hinge', 'l2', 'l1', anchor_world=(0.2, 0, 0),
+                                 axis_world=(0, 1, 0)))
+    return Simulation(bodies, [Gravity()], name, 1e-3, joints)
+
+
+@pytest.mark.parametrize('name', sorted(INTEGRATORS))
+def test_mid_sized_components_take_the_tree_solve_unless_they_close_a_loop(name, monkeypatch):
+    # 25 to 48 rows: an open chain takes the tree solve (faster there) and moves as under
+    # the dense solve; the same chain with a joint added twice (a loop of two, redundant
+    # rows) keeps the dense solve and its truncated SVD, and moves as without the copy.
+    from rigid_body_sim.core import constrained_kernels as ck, solver
+    tree = _hinge_chain(6, name)
+    twice = _hinge_chain(5, name, again=True)
+    assert tree.dynamics.solver.constraints.n_rows == twice.dynamics.solver.constraints.n_rows
+    assert tree.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_TREE
+    assert twice.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
+    once = _hinge_chain(5, name)
+    monkeypatch.setattr(solver, 'KERNEL_DENSE_ROWS', 48)
+    dense = _hinge_chain(6, name)
+    assert dense.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
+    for sim in (tree, dense, twice, once):
+        sim.step(400)   # 0.4 s of a falling chain
+    np.testing.assert_allclose(tree.state.y, dense.state.y, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(twice.state.y, once.state.y, rtol=0, atol=1e-9)
+    assert twice.dynamics.solver.counters.rank_deficient_solves > 0

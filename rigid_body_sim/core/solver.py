@@ -95,11 +95,16 @@ _KEYS = itertools.count()
 KERNEL_DENSE_ROWS = 24
 
 
-def _closes_loop(ra: np.ndarray, rb: np.ndarray, n: int) -> bool:
-    """Tell whether the joints of a component (rows ``ra``-``rb``, world ``n``) close a loop."""
-    pairs = {(min(i, j), max(i, j)) for i, j in zip(ra.tolist(), rb.tolist()) if i != j}
-    nodes = n + (1 if any(n in p for p in pairs) else 0)
-    return len(pairs) > nodes - 1
+def _closes_loop(joints: list, n: int) -> bool:
+    """
+    Tell whether the joints of a connected component close a loop.
+
+    ``joints``: a ``(a, b)`` pair of body indices per constraint, the world ``n``.
+    A joint added twice counts as a loop of two (its rows are redundant too).
+    """
+    edges = [(i, j) for i, j in joints if i != j]
+    nodes = n + (1 if any(n in e for e in edges) else 0)
+    return len(edges) > nodes - 1
 
 
 def _drop_generic(keys: list) -> None:
@@ -348,8 +353,9 @@ class ConstraintSolver:
             ra, rb = local[a[rows_global]], local[b[rows_global]]
             mc = len(rows_global)
             closure = np.zeros(0, dtype=np.int64)
-            if mc <= KERNEL_DENSE_ROWS or (mc <= DENSE_ROWS
-                                           and _closes_loop(ra, rb, len(bodies))):
+            if mc <= KERNEL_DENSE_ROWS or (mc <= DENSE_ROWS and _closes_loop(
+                    [(local[r.a], local[r.b]) for r in cs._resolved.values()
+                     if label[r.a] == lab], len(bodies))):
                 solve, d = SOLVE_DENSE, mc
                 st = tree_structure(ra[:0], rb[:0], len(bodies))
             else:
