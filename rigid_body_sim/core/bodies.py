@@ -18,7 +18,8 @@ State (all bodies at once; ``n`` bodies)
 principal-frame coordinates to world), ``vel_com_world`` (n, 3), and
 ``ang_vel_principal`` (n, 3): the seed's body-frame angular velocity Ω, in the
 principal frame. See :mod:`rigid_body_sim.core.rotation` for the quaternion
-convention.
+convention. The four are views of one buffer, ``State.y`` (13 n floats), which
+is what a step copies and hands to its compiled kernel.
 
 """
 
