@@ -95,11 +95,12 @@ def test_a_closed_loop_solved_through_its_spanning_tree_moves_as_when_solved_den
         name, monkeypatch):
     # A ring of 12 hinged rods closed by a ball joint (63 rows, 3 redundant): the tree
     # solve of its spanning chain plus the Schur complement of the closing joint's rows
-    # must give the motion of the dense solve (which it replaced beyond DENSE_ROWS).
+    # must give the motion of the dense solve (which it replaced for closed loops).
     from rigid_body_sim.core import constrained_kernels as ck, solver
     loop = ring(12, name)
     assert loop.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_LOOP
     monkeypatch.setattr(solver, 'DENSE_ROWS', 1000)
+    monkeypatch.setattr(solver, 'LOOP_DENSE_ROWS', 1000)
     dense = ring(12, name)
     assert dense.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
     for _ in range(4):
@@ -168,3 +169,22 @@ def test_mid_sized_components_take_the_tree_solve_unless_they_close_a_loop(name,
     np.testing.assert_allclose(tree.state.y, dense.state.y, rtol=0, atol=1e-9)
     np.testing.assert_allclose(twice.state.y, once.state.y, rtol=0, atol=1e-9)
     assert twice.dynamics.solver.counters.rank_deficient_solves > 0
+
+
+@pytest.mark.parametrize('name', sorted(INTEGRATORS))
+def test_a_loop_through_the_world_is_closed_like_one_among_bodies(name, monkeypatch):
+    # The four-bar's loop runs through the world (crank and rocker hinged to it): its
+    # last joint to the world closes the loop, and its 3 redundant rows meet the
+    # closure block's truncated SVD. It must move as under the dense solve of the whole
+    # system, as unbiased (the tree solve's Tikhonov term would not be).
+    from rigid_body_sim.core import constrained_kernels as ck, solver
+    from rigid_body_sim.core.mechanisms import four_bar
+    loop = four_bar(name, 1e-3)
+    assert loop.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_LOOP
+    monkeypatch.setattr(solver, 'LOOP_DENSE_ROWS', 1000)
+    dense = four_bar(name, 1e-3)
+    assert dense.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
+    for sim in (loop, dense):
+        sim.step(1000)
+    np.testing.assert_allclose(loop.state.y, dense.state.y, rtol=0, atol=1e-9)
+    assert loop.dynamics.solver.counters.rank_deficient_solves > 0

@@ -79,6 +79,21 @@ def test_loops_through_the_world_and_trees_need_no_closure(rng):
     assert loop_structure(a, b, 8) is None
 
 
+def test_a_loop_through_the_world_can_be_closed_like_one_among_bodies(rng):
+    # With through_world, the four-bar's last joint to the world closes its loop (its
+    # redundant rows then meet the closure block's truncated SVD); the chain still has
+    # no loop, nor has a body held twice by the world (one pair of bodies).
+    a, b = rows_of([(0, -1, 5), (1, 0, 5), (2, 1, 5), (2, -1, 5)], 3, rng)
+    st = loop_structure(a, b, 3, through_world=True)
+    assert set(zip(a[st.closure].tolist(), b[st.closure].tolist())) == {(2, 3)}
+    assert st.closure.size == 5
+    assert sorted(st.tree.group_rows.tolist() + st.closure.tolist()) == list(range(a.size))
+    a, b = rows_of([(0, -1, 3)] + [(i, i - 1, 3) for i in range(1, 8)], 8, rng)
+    assert loop_structure(a, b, 8, through_world=True) is None
+    a, b = rows_of([(0, -1, 3), (0, -1, 3)], 1, rng)
+    assert loop_structure(a, b, 1, through_world=True) is None
+
+
 def test_tikhonov_term_is_carried_into_the_closure_block(rng):
     n = 6
     a, b = rows_of(ring(n, 3), n, rng)

@@ -8,10 +8,11 @@ and a velocity projection in ``rkmk4``) and the linear algebra that of
 (``@njit(cache=True)``; ``NUMBA_DISABLE_JIT=1`` runs it as Python). The
 constraint rows are those of :mod:`.row_kernels` (point, dot, line, distance);
 the systems ``G M⁻¹ Hᵀ`` are solved densely (Cholesky, LU, or a truncated SVD
-for redundant rows) up to ``DENSE_ROWS`` rows and by the tree solve of
-:mod:`.tree_solve` beyond; beyond that size a component with closed loops is
+for redundant rows) for small components and by the tree solve of
+:mod:`.tree_solve` for larger ones; a component whose joints close loops is
 solved by the tree solve of a spanning forest and a dense system of the rows
-that close the loops (their Schur complement, :mod:`.loop_solve`).
+that close the loops (their Schur complement, :mod:`.loop_solve`). The solver
+chooses (:data:`.solver.KERNEL_DENSE_ROWS`, :data:`.solver.LOOP_DENSE_ROWS`).
 
 A step is split into sub-steps when a constrained body turns fast, and redone
 with twice as many when SHAKE stops converging (see :mod:`.integrators`); both

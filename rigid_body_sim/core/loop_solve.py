@@ -62,18 +62,22 @@ class LoopStructure(NamedTuple):
     closure: np.ndarray
 
 
-def loop_structure(a, b, n_bodies: int) -> Optional[LoopStructure]:
+def loop_structure(a, b, n_bodies: int, through_world: bool = False) -> Optional[LoopStructure]:
     """
     Split the rows into a spanning forest and loop-closing rows (plain Python, per set).
 
     Groups are taken in the order of their first row; a group whose two bodies
     are already connected closes a loop. Returns None when there is no loop
-    (use :func:`.tree_solve.tree_structure` alone).
+    (use :func:`.tree_solve.tree_structure` alone). The world couples no rows, so
+    a loop through it leaves the system tree-structured; with ``through_world``
+    it is a node all the same, and a second joint to the world closes a loop:
+    the redundant rows of such a loop (a four-bar's three) then meet the closure
+    block's truncated SVD instead of the tree solve's Tikhonov term.
     """
     a = np.asarray(a, dtype=np.int64).ravel()
     b = np.asarray(b, dtype=np.int64).ravel()
     n = int(n_bodies)
-    root = list(range(n))
+    root = list(range(n + 1))
 
     def find(i: int) -> int:
         while root[i] != i:
@@ -83,7 +87,7 @@ def loop_structure(a, b, n_bodies: int) -> Optional[LoopStructure]:
 
     closing: dict = {}   # pair -> closes a loop
     for ar, br in zip(a.tolist(), b.tolist()):
-        if br == n or br == ar:
+        if (br == n and not through_world) or br == ar:
             continue
         key = (min(ar, br), max(ar, br))
         if key in closing:
@@ -93,7 +97,7 @@ def loop_structure(a, b, n_bodies: int) -> Optional[LoopStructure]:
         if ri != rj:
             root[ri] = rj
     closure = np.array([r for r in range(a.size)
-                        if b[r] != n and b[r] != a[r]
+                        if (b[r] != n or through_world) and b[r] != a[r]
                         and closing[(min(a[r], b[r]), max(a[r], b[r]))]], dtype=np.int64)
     if not closure.size:
         return None

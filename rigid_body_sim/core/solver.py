@@ -24,9 +24,9 @@ in tree order by :mod:`.tree_solve` (Baraff 1996; linear in the number of
 links, compiled); systems of at most :data:`.constraints.DENSE_ROWS` rows use a
 dense Cholesky factorization, which is faster at that size. A step does this in
 compiled code (:mod:`.constrained_kernels`: dense up to :data:`KERNEL_DENSE_ROWS`
-rows, or up to ``DENSE_ROWS`` with a closed loop; a larger closed loop among
-bodies is solved by the tree solve of a spanning forest and the Schur complement
-of the rows that close the loops, :mod:`.loop_solve`); the
+rows; a closed loop, among bodies or through the world, by the tree solve of a
+spanning forest and the Schur complement of the rows that close the loops,
+:mod:`.loop_solve`); the
 solves of this class (reactions, consistency, velocity reconciliation when a
 constraint is added) factorize a closed loop by SuperLU with a minimum-degree
 ordering of ``A + Aᵀ``.
@@ -83,16 +83,23 @@ if TYPE_CHECKING:
 
 _KEYS = itertools.count()
 
-#: A component of the compiled step with at most this many rows is solved densely
-#: (Cholesky or LU), a larger one by the tree solve (:mod:`.loop_solve` for loops
-#: among its bodies). Measured per step at dt 1e-3, ``lie_poisson2``: the dense solve
-#: is faster up to 20 rows (a 4-link hinge chain: 13.8 against 14.9 us), the tree
-#: solve from 25 (5 links: 16.7 against 17.7; 9 links, 45 rows: 24.4 against 43.5).
-#: A closed loop of up to :data:`.constraints.DENSE_ROWS` rows stays dense: its
-#: redundant rows (3 for a planar loop) take the truncated SVD there, where the tree
-#: solve of a loop through the world adds a Tikhonov term that biases it (the
-#: four-bar under the accuracy knob then missed tolerances of 1e-7 and 1e-9).
+#: A component of the compiled step with at most this many rows and no closed loop
+#: is solved densely (Cholesky or LU), a larger one by the tree solve. Measured per
+#: step at dt 1e-3, ``lie_poisson2``: the dense solve is faster up to 20 rows (a
+#: 4-link hinge chain: 13.8 against 14.9 us), the tree solve from 25 (5 links: 16.7
+#: against 17.7; 9 links, 45 rows: 24.4 against 43.5).
 KERNEL_DENSE_ROWS = 24
+#: A component whose joints close a loop (through the world too) and has more rows
+#: than this is solved by the tree solve of a spanning forest and the Schur
+#: complement of the loop-closing rows (:mod:`.loop_solve`); none is solved densely.
+#: A loop has redundant rows as a rule (3 for a planar one), which the dense solve
+#: met with the truncated SVD of the whole system: the four-bar (20 rows) took 83 us
+#: a step that way and takes 33 us now, a ring of 6 rods (33 rows) 211 and 40 us.
+#: The closure block's truncated SVD keeps them unbiased, where the tree solve of
+#: the whole loop would add a Tikhonov term (the four-bar then missed the accuracy
+#: knob's tolerances of 1e-7 and 1e-9). A joint added twice is redundant without a
+#: loop of distinct joints: it stays dense up to ``DENSE_ROWS`` rows.
+LOOP_DENSE_ROWS = 0
 
 
 def _closes_loop(joints: list, n: int) -> bool:
@@ -305,10 +312,10 @@ class ConstraintSolver:
         (see :meth:`.integrators.Integrator.substeps`). Generic rows (a user's
         Python function) are evaluated by Python from inside the compiled step
         (:data:`.constrained_kernels.GENERIC`). A component of at most
-        :data:`KERNEL_DENSE_ROWS` rows (``DENSE_ROWS`` with a closed loop) is solved
-        densely, a larger one by the tree solve, and one with closed loops among its
-        bodies by the tree solve of a spanning forest and the Schur complement of
-        the loop-closing rows (:mod:`.loop_solve`). Returns
+        :data:`KERNEL_DENSE_ROWS` rows without a closed loop is solved densely, a
+        larger one by the tree solve, and one whose joints close loops (through the
+        world too, :data:`LOOP_DENSE_ROWS`) by the tree solve of a spanning forest
+        and the Schur complement of the loop-closing rows (:mod:`.loop_solve`). Returns
         ``(free, components)``: the indices of the free bodies, and per component
         ``(bodies, rows_global, packed, solve, multipliers)``, ``solve`` one of
         ``constrained_kernels.SOLVE_*`` and ``packed`` the arguments of
@@ -353,19 +360,23 @@ class ConstraintSolver:
             ra, rb = local[a[rows_global]], local[b[rows_global]]
             mc = len(rows_global)
             closure = np.zeros(0, dtype=np.int64)
-            if mc <= KERNEL_DENSE_ROWS or (mc <= DENSE_ROWS and _closes_loop(
-                    [(local[r.a], local[r.b]) for r in cs._resolved.values()
-                     if label[r.a] == lab], len(bodies))):
+            joints = [(local[r.a], local[r.b]) for r in cs._resolved.values()
+                      if label[r.a] == lab]
+            closes = _closes_loop(joints, len(bodies))
+            # A loop through the world counts: its redundant rows go to the closure.
+            loops = (loop_structure(ra, rb, len(bodies), through_world=True)
+                     if closes and mc > LOOP_DENSE_ROWS else None)
+            if loops is not None:
+                # Closed loops: the tree solve of a spanning forest and a dense
+                # system of the rows that close the loops.
+                st, closure = loops
+                solve, d = SOLVE_LOOP, len(closure)
+            elif mc <= (DENSE_ROWS if closes else KERNEL_DENSE_ROWS):
                 solve, d = SOLVE_DENSE, mc
                 st = tree_structure(ra[:0], rb[:0], len(bodies))
             else:
                 st = tree_structure(ra, rb, len(bodies))
                 solve, d = SOLVE_TREE, 0
-                if st is None:
-                    # Closed loops: the tree solve of a spanning forest and a dense
-                    # system of the rows that close the loops.
-                    st, closure = loop_structure(ra, rb, len(bodies))
-                    solve, d = SOLVE_LOOP, len(closure)
             # Two storages each: general, and the symmetric factor kept for the
             # current geometry (see constrained_kernels._sym_factor).
             trees = (tree_storage(st, closure, mc), tree_storage(st, closure, mc))
