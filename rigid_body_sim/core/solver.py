@@ -351,6 +351,9 @@ class ConstraintSolver:
         touched = np.zeros(n, dtype=bool)
         touched[cs.touched] = True
         components = []
+        joints_of: dict = {}   # component label -> (a, b) per constraint
+        for r in cs._resolved.values():
+            joints_of.setdefault(label[r.a], []).append((r.a, r.b))
         for lab in np.unique(label[touched]):
             bodies = np.flatnonzero(label == lab)
             rows_global = np.flatnonzero(label[a] == lab)
@@ -360,12 +363,12 @@ class ConstraintSolver:
             ra, rb = local[a[rows_global]], local[b[rows_global]]
             mc = len(rows_global)
             closure = np.zeros(0, dtype=np.int64)
-            joints = [(local[r.a], local[r.b]) for r in cs._resolved.values()
-                      if label[r.a] == lab]
-            closes = _closes_loop(joints, len(bodies))
-            # A loop through the world counts: its redundant rows go to the closure.
+            closes = _closes_loop([(local[i], local[j]) for i, j in joints_of[lab]],
+                                  len(bodies))
+            # A loop through the world counts: its redundant rows go to the closure
+            # (beyond DENSE_ROWS a loop among bodies must: the tree solve needs a tree).
             loops = (loop_structure(ra, rb, len(bodies), through_world=True)
-                     if closes and mc > LOOP_DENSE_ROWS else None)
+                     if closes and mc > min(LOOP_DENSE_ROWS, DENSE_ROWS) else None)
             if loops is not None:
                 # Closed loops: the tree solve of a spanning forest and a dense
                 # system of the rows that close the loops.
