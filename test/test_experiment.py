@@ -107,6 +107,7 @@ def test_the_bag_holds_what_the_core_computes(bag):
     at_1s = [m for _, m in msgs[f'{NODE}/constraints/pivot/wrench']
              if _seconds(m.header.stamp) == 1.0 and m.header.frame_id == 'bob'][0]
     R = Rotation.from_quat(got[1000][1]).as_matrix()
+    # bound: two rotations (node's, scipy's) of a 17.6 N force, ~10 eps each: 4e-14 N; x25
     np.testing.assert_allclose([at_1s.wrench.force.x, at_1s.wrench.force.y,
                                 at_1s.wrench.force.z], R.T @ reaction, rtol=1e-12, atol=1e-12)
     metric = [m for _, m in msgs[f'{NODE}/metrics'] if _seconds(m.header.stamp) == 1.0][0]
@@ -137,11 +138,14 @@ def test_the_bob_flies_a_parabola_once_released(bag):
     for m in fly[1:]:
         dt = _seconds(m.header.stamp) - t0
         expected = p0 + v0 * dt + 0.5 * np.array([0.0, 0.0, -G]) * dt * dt
-        np.testing.assert_allclose(m.position, expected, rtol=0, atol=1e-12)
+        # bound: worst-case rounding N u (|z| + N dt |v|) = 1300 x 1.1e-16 x (6 + 16) m = 3e-12
+        np.testing.assert_allclose(m.position, expected, rtol=0, atol=1e-11)
     # Metrics: energy holds in flight and while swinging; the violation stays at rounding.
     metrics = [m for _, m in msgs[f'{NODE}/metrics']]
-    assert max(m.constraint_violation for m in metrics) < 1e-12
+    # bound: SHAKE stops within 1e-13 of rho Phi, rho = exp(-dt / tau): 1e-13 / (1 - rho) = 5e-12
+    assert max(m.constraint_violation for m in metrics) < 1e-11
     flight = [m.total_energy for m in metrics if 1.3 <= _seconds(m.header.stamp) < 2.5]
+    # bound: m (g dz + |v| dv), dz 3e-12 m (above), dv 2 N u |v| = 3.4e-12 m/s: 7e-11 J; x2 ptp
     assert np.ptp(flight) < 1e-9
 
 
@@ -179,7 +183,8 @@ def test_the_markers_show_the_bob_as_its_sphere_and_the_joint_while_it_exists(ba
             assert [joint.scale.x, joint.scale.y, joint.scale.z] == [0.04] * 3
             assert joint.color.r > 0.8 and joint.color.g < 0.2 and joint.color.b < 0.2
             p = joint.pose.position
-            np.testing.assert_allclose([p.x, p.y, p.z], pivot, rtol=0, atol=1e-12)
+            # bound: the joint's violation (<= 5e-12 m, as the metrics') + 4 eps x 1.5 m
+            np.testing.assert_allclose([p.x, p.y, p.z], pivot, rtol=0, atol=1e-11)
             with_joint.append(t)
         else:
             assert joints == [], t
@@ -353,7 +358,9 @@ def test_the_runner_writes_what_a_live_node_publishes(ros, tmp_path):
             key = (time_seconds(m.header.stamp), m.header.frame_id)
             assert _same(m, written[key]), (name, key)
             compared += 1
-        assert compared >= len(written) // 2, (name, compared, len(written))
+        # How many of a step call's burst arrive depends on the machine's speed (the node's
+        # publishers keep 10): not asserted. The waits above make it at least one per topic.
+        assert compared >= 1, name
 
 
 def _same(live, written) -> bool:

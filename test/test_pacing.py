@@ -9,16 +9,20 @@ def test_steps_fall_due_on_the_real_time_schedule():
     pacer.restart(10.0)
     assert pacer.due(10.0)
     pacer.stepped()
+    # (Due at 10.0 + 0.002, equal to 10.002 only to rounding: checked 1 ns either side.)
     assert not pacer.due(10.0019)
-    assert pacer.due(10.002)
-    assert pacer.next_due() == pytest.approx(10.002)
+    assert not pacer.due(10.002 - 1e-9)
+    assert pacer.due(10.002 + 1e-9)
+    # bound: one product and one sum of <= 10 s: 2 x eps/2 x 10 s = 2e-15 s; x10
+    assert pacer.next_due() == pytest.approx(10.002, rel=0, abs=2e-14)
 
 
 def test_a_backlog_is_caught_up_within_the_bound_then_dropped():
     pacer = Pacer(dt=1e-3, real_time_factor=1.0)
     pacer.restart(0.0)
-    # 50 ms late: every due step runs back to back, none dropped.
-    now = 0.05
+    # 50.5 ms late (between the steps due at 50 and 51 ms, not on one to rounding): every
+    # due step runs back to back, none dropped.
+    now = 0.0505
     taken = 0
     while pacer.due(now):
         pacer.stepped()
@@ -28,7 +32,8 @@ def test_a_backlog_is_caught_up_within_the_bound_then_dropped():
     now += MAX_LAG + 0.05
     assert pacer.due(now)
     assert pacer.lag_resets == 1
-    assert pacer.dropped_wall == pytest.approx(MAX_LAG + 0.05 - 1e-3, abs=1e-9)
+    # bound: ~4 roundings of <= 0.2 s: 4 x eps/2 x 0.2 s = 9e-17 s; x100 (a step off: 1e-3)
+    assert pacer.dropped_wall == pytest.approx(MAX_LAG + 0.05 - 0.5e-3, abs=1e-14)
     pacer.stepped()
     assert not pacer.due(now)
 

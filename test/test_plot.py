@@ -179,10 +179,12 @@ def test_read_bag_returns_exactly_what_was_written(bag):
     assert [(e.service, e.name, e.success) for e in s.events] == [
         ('remove_constraint', 'tether', True), ('add_constraint', 'rope', False),
         ('reset', '', True)]
+    # bound: np.interp over exact integer ns offsets, ~4 roundings of <= 1 s: 1e-15 s; x1000
     assert [e.t for e in s.events] == pytest.approx(
         [T[i] + 0.0005 for i in (REMOVE, REFUSED, RESET)], abs=1e-12)
     assert s.events[1].message == 'type: unknown'
     # The falling body's energy is the known one: m g z0 + m vx^2 / 2 at every stamp.
+    # bound: ~6 roundings (u = 1.1e-16) of terms up to 96 J in known_series: 7e-14 J; x15
     assert np.allclose(m['total_energy'], MASS * G * 1.0 + 0.5 * MASS * 0.1 ** 2, rtol=0,
                        atol=1e-12)
     # One reaction sample per stamp: the world-frame message for a constraint to the world,
@@ -197,14 +199,19 @@ def test_read_bag_returns_exactly_what_was_written(bag):
     # Inputs: at the simulation time the bag received them (stamps 0 are not used).
     push = s.inputs['ball']
     assert list(s.inputs) == ['ball']
+    # bound: as the calls' times above (np.interp of exact ns offsets): 1e-15 s
     assert push.t == pytest.approx([T[i] + 0.0025 for i in PUSH], abs=1e-12)
     assert np.array_equal(push.force, [[0.0, 0.0, 5.0], [0.0, 0.0, 0.0]])
     assert push.frames == ['world', 'world']
     # Orientation panel: both turn about one world axis, so the angle is signed, unwrapped.
+    # bound: axis eps / sin(angle / 2) at the first turned sample (>= 0.01 rad): 5e-14; angle
+    # ~10 roundings (sin, cos, atan2: numpy's SIMD paths <= 4 ulp) of <= 7 rad: 1e-12 deg; x100
     angle, axis = s.orientation_angle_deg('ball')
-    assert np.allclose(axis, [0.0, 0.0, 1.0]) and np.allclose(angle, np.degrees(k['spin']))
+    assert np.allclose(axis, [0.0, 0.0, 1.0], rtol=0, atol=1e-12)
+    assert np.allclose(angle, np.degrees(k['spin']), rtol=0, atol=1e-10)
     angle, axis = s.orientation_angle_deg('pendulum')
-    assert np.allclose(axis, [0.0, 1.0, 0.0]) and np.allclose(angle, np.degrees(k['theta']))
+    assert np.allclose(axis, [0.0, 1.0, 0.0], rtol=0, atol=1e-12)
+    assert np.allclose(angle, np.degrees(k['theta']), rtol=0, atol=1e-10)
 
 
 def test_node_and_bodies_select(bag):
@@ -222,24 +229,32 @@ def test_orientation_angle():
     q = np.stack([0 * turn, 0 * turn, np.sin(turn / 2), np.cos(turn / 2)], axis=1)
     q[::3] *= -1.0
     angle, axis = orientation_angle_deg(q)
-    assert np.allclose(axis, [0, 0, 1]) and np.allclose(angle, np.degrees(turn), atol=1e-9)
+    # bound: axis eps / sin(angle / 2) at the first turned sample (5 deg): 1e-14; angle ~10
+    # roundings (sin, cos, atan2: numpy's SIMD paths <= 4 ulp) of <= 7 rad: 1e-12 deg; x100
+    assert np.allclose(axis, [0, 0, 1], rtol=0, atol=1e-12)
+    assert np.allclose(angle, np.degrees(turn), rtol=0, atol=1e-10)
     # From a tilted start, about a tilted axis: the axis is found in world axes.
     start = so3.exp_quat(np.array([0.3, -0.2, 0.5]))
     tilted = np.array([1.0, 2.0, 2.0]) / 3.0
     q = so3.quat_multiply(so3.exp_quat(turn[:, None] * tilted), start)
     angle, axis = orientation_angle_deg(q)
-    assert np.allclose(axis, tilted) and np.allclose(angle, np.degrees(turn), atol=1e-9)
+    # bound: as above, with ~10 more roundings composing q: axis 5e-14, angle 2e-12 deg
+    assert np.allclose(axis, tilted, rtol=0, atol=1e-12)
+    assert np.allclose(angle, np.degrees(turn), rtol=0, atol=1e-10)
     # Restarted (a reset) where the raw angle is 250 degrees: that episode starts at -110.
     jump = np.radians(np.concatenate([np.linspace(0.0, 300.0, 31), np.linspace(250.0, 400.0, 16)]))
     q = np.stack([0 * jump, 0 * jump, np.sin(jump / 2), np.cos(jump / 2)], axis=1)
     angle, _ = orientation_angle_deg(q, restarts=[31])
-    assert np.allclose(angle, np.degrees(jump) - np.where(np.arange(47) >= 31, 360.0, 0.0))
+    # bound: as above, 1e-12 deg; x100
+    assert np.allclose(angle, np.degrees(jump) - np.where(np.arange(47) >= 31, 360.0, 0.0),
+                       rtol=0, atol=1e-10)
     # A tumble (the axis moves): the unsigned angle from the first orientation, 0 to 180.
     rotvec = np.stack([turn, 0.5 * np.sin(3 * turn), 0.2 * turn], axis=1)
     q = so3.exp_quat(rotvec)
     angle, axis = orientation_angle_deg(q)
     expected = (Rotation.from_quat(q) * Rotation.from_quat(q[0]).inv()).magnitude()
-    assert axis is None and np.allclose(angle, np.degrees(expected), atol=1e-9)
+    # bound: both sides ~10 roundings of <= 3.2 rad (2 atan2(|v|, |w|)): 5e-13 deg; x200
+    assert axis is None and np.allclose(angle, np.degrees(expected), rtol=0, atol=1e-10)
     assert np.all((angle >= 0.0) & (angle <= 180.0))
     # Absent samples stay absent.
     q[5] = np.nan

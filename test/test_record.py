@@ -26,6 +26,7 @@ from ros_harness import DEADLINE, executable, random_domain, ros_env
 NODE = '/rigid_body_sim'
 G = 9.81
 DT = 1e-3
+EPS = 2.220446049250313e-16
 
 FALLING_BOB = """
 name: falling_bob
@@ -168,6 +169,20 @@ def _read_mcap(out: Path) -> dict:
     return topics
 
 
+def _fall_tolerances(t: float) -> tuple:
+    """
+    Return the rounding bounds (m, m/s) on z and v_z of the bob falling from rest for t s.
+
+    Kick-drift-kick integrates constant gravity exactly; its rounding does not. With
+    every rounding one way over N = t / dt steps, v_z is off by at most N eps |v|
+    (two half kicks a step, u = eps / 2 each) and z by N eps |z| / 2 plus that velocity
+    error carried over t: eps g t^2 / dt and eps g t^3 / dt; x4 for the products' own
+    rounding. (At t = 1 s: 9e-12 m, far below a first-order error, g dt t / 2 = 5e-3 m.)
+    The node has run for as long as the test waited, so the bound grows with t.
+    """
+    return 4 * EPS * G * t ** 3 / DT + 1e-15, 4 * EPS * G * t ** 2 / DT + 1e-15
+
+
 def _ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
@@ -176,6 +191,7 @@ def _step_time(stamp) -> float:
     """Return the simulation time of a stamp as the node's step count times dt."""
     ns = _ns(stamp)
     k = round(ns / (DT * 1e9))
+    # bound: ns stamps of base + k dt: 0.5 ns quantization + eps t (< 1e-5 ns for t < 1 h)
     assert abs(ns - k * DT * 1e9) <= 1, f'stamp {ns} ns is not on the step grid'
     return k * DT
 
@@ -236,17 +252,20 @@ def test_records_a_running_node_and_the_bag_reads_back(ros, tmp_path, recorders,
         assert t > last
         last = t
         assert list(msg.names) == ['bob']
+        # Exact on any IEEE machine: x + dt 0 is x (v_x = v_y = g_x = g_y = 0, exact zeros).
         assert msg.position[0] == 0.5 and msg.position[1] == 0.0
-        assert abs(msg.position[2] - (-G * t * t / 2)) <= 1e-9
-        assert abs(msg.linear_velocity[2] - (-G * t)) <= 1e-9
+        z_tol, v_tol = _fall_tolerances(t)   # bound: see _fall_tolerances (9e-12 at 1 s)
+        assert abs(msg.position[2] - (-G * t * t / 2)) <= z_tol, (t, z_tol)
+        assert abs(msg.linear_velocity[2] - (-G * t)) <= v_tol, (t, v_tol)
     for _, msg in got[f'{NODE}/bodies/bob/pose'][1]:
         t = _step_time(msg.header.stamp)
         p, q = msg.pose.position, msg.pose.orientation
+        # Exact as above; a rotation by an exact zero angle is exactly the identity.
         assert (p.x, p.y) == (0.5, 0.0) and (q.x, q.y, q.z, q.w) == (0.0, 0.0, 0.0, 1.0)
-        assert abs(p.z - (-G * t * t / 2)) <= 1e-9
+        assert abs(p.z - (-G * t * t / 2)) <= _fall_tolerances(t)[0]   # bound: as above
     for _, msg in got[f'{NODE}/bodies/bob/twist'][1]:
         t = _step_time(msg.header.stamp)
-        assert abs(msg.twist.linear.z - (-G * t)) <= 1e-9
+        assert abs(msg.twist.linear.z - (-G * t)) <= _fall_tolerances(t)[1]   # bound: as above
     # The clock ticks in whole steps; the mcap reader decodes the same values.
     clock = [_step_time(msg.clock) for _, msg in got['/clock'][1]]
     assert all(b > a for a, b in zip(clock, clock[1:]))
@@ -317,7 +336,11 @@ def test_a_topic_that_appears_later_is_recorded(ros, tmp_path, recorders):
     frames = Counter(msg.header.frame_id for _, msg in messages)
     assert set(frames) == {'bob', 'world'}
     stamps = Counter(_ns(msg.header.stamp) for _, msg in messages)
-    assert sum(n == 2 for n in stamps.values()) >= len(stamps) - 2   # (ends may be cut)
+    # (The ends may be cut; a message the recorder dropped, counted, unpairs one stamp: how
+    # many it drops depends on the machine's speed.)
+    unpaired = sum(n != 2 for n in stamps.values())
+    assert summary[topic][1] is not None   # (one publisher: its drops are counted)
+    assert unpaired <= 2 + summary[topic][1], (unpaired, summary[topic])
     # The reactions start after the body states did: the topic was subscribed later.
     first_state = min(s for s, _ in got[f'{NODE}/body_states'][1])
     assert min(s for s, _ in messages) > first_state

@@ -22,24 +22,30 @@ def test_shipped_scene_loads_and_steps(path):
     sim.step(20)
     d = sim.diagnostics()
     assert np.isfinite(d.total_energy)
+    # bound: order 2, 20 steps x C dt^3: 2.1e-8 J (chain, measured) x50; rounding only ~1e-12 J
     assert abs(d.total_energy - e0) <= 1e-6 * max(1.0, abs(e0))
-    assert d.constraint_violation < 1e-9
+    # bound: SHAKE stops within 1e-13 of rho Phi, rho = exp(-dt / tau): 1e-13 / (1 - rho) = 5e-12
+    assert d.constraint_violation < 1e-11
 
 
 def test_default_scene_bodies_in_user_frame():
     sim = load_scene(CONFIG / 'default_scene.yaml').simulation
     pos, quat = sim.pose('tumbling_box')
-    np.testing.assert_allclose(pos, [-0.15, -0.1, 1.05], atol=1e-15)
-    np.testing.assert_allclose(quat, [0.0, 0.0, 0.0, 1.0], atol=1e-15)
+    # bound: to the centre of mass and back, ~4 roundings of |x| <= 1.05 m: 5e-16; x20
+    np.testing.assert_allclose(pos, [-0.15, -0.1, 1.05], rtol=0, atol=1e-14)
+    # bound: eigh's axes, eps |J| / gap = 2.2e-16 x 0.022 / 0.005 = 1e-15 rad; x10
+    np.testing.assert_allclose(quat, [0.0, 0.0, 0.0, 1.0], rtol=0, atol=1e-14)
     _, w_body = sim.twist('tumbling_box', frame='body')
-    np.testing.assert_allclose(w_body, [0.05, 12.0, 0.05], atol=1e-13)
+    # bound: the same axes error times |w| = 12 rad/s: 1.2e-14 rad/s; x10
+    np.testing.assert_allclose(w_body, [0.05, 12.0, 0.05], rtol=0, atol=1e-13)
 
 
 def test_shape_inertia_matches_formula():
     data = {'dt': 1e-3, 'bodies': [{'name': 'box', 'mass': 12.0, 'inertia': {'box': [1, 2, 3]}}]}
     sim = scene_from_dict(data).simulation
     moments = np.sort(sim.bodies.moments[0])
-    np.testing.assert_allclose(moments, np.sort([4 + 9, 1 + 9, 1 + 4]), rtol=1e-15)
+    # bound: eigh's eigenvalues, ~3 eps |J| = 3 x 2.2e-16 x 13 = 9e-15 kg m^2; x10
+    np.testing.assert_allclose(moments, np.sort([4 + 9, 1 + 9, 1 + 4]), rtol=0, atol=1e-13)
 
 
 def _default():
