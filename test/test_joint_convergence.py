@@ -18,7 +18,8 @@ def crank_state(name: str, dt: float) -> np.ndarray:
 
 @pytest.fixture(scope='module')
 def reference():
-    # lie_poisson4 at dt = 2.5e-4: error ~1e-10 by its own convergence (below).
+    # lie_poisson4 at dt = 2.5e-4: error 3.5e-10 by its own convergence (measured against
+    # dt = 1.25e-4: 3.3e-10, x16/15), rounding of the four-bar's redundant rows included.
     return crank_state('lie_poisson4', 2.5e-4)
 
 
@@ -29,5 +30,7 @@ def test_order_with_a_redundant_closed_loop(name, reference):
     # (1.03), lie_poisson2 2.00 (2.00), lie_poisson4 4.07 (4.02), rkmk4 3.87 (3.94).
     errors = [np.max(np.abs(crank_state(name, dt) - reference)) for dt in (4e-3, 2e-3)]
     observed = np.log2(errors[0] / errors[1])
-    assert errors[1] > 1e-9, 'too close to the reference error to measure an order'
+    # bound: 30 x the reference's 3.5e-10 shifts the order by < 0.05 (measured: 1.2e-6 and up)
+    assert errors[1] > 1e-8, 'too close to the reference error to measure an order'
+    # bound: p + pre-asymptotic terms (measured at most 0.13) + the reference's < 0.05
     assert abs(observed - INTEGRATORS[name].order) < 0.2, (errors, observed)
