@@ -105,8 +105,10 @@ def test_the_live_graph_is_the_one_the_readme_documents(ros):
         typ = typ.replace('/', '/msg/')
         if '/B/' in full:
             topics.update({full.replace('/B/', f'/{b}/'): typ for b in sim.bodies.names})
-        elif '/C/' not in full and '<service>' not in full:   # (no constraints here;
-            topics[full] = typ                                  # service events: below)
+        elif '/C/' in full:
+            topics.update({full.replace('/C/', f'/{c}/'): typ for c in sim.constraint_names})
+        elif '<service>' not in full:   # (service events: below)
+            topics[full] = typ
 
     def live_services():
         found = dict(graph.get_service_names_and_types_by_node('rigid_body_sim', '/'))
@@ -307,7 +309,7 @@ def _ellipk(m):
 
 
 def test_stepping_is_bit_identical_across_runs_and_equal_to_the_core(ros, tmp_path):
-    scene = str(CONFIG / 'default_scene.yaml')
+    scene = str(CONFIG / 'thrown_bodies.yaml')
     finals = []
     for run in range(2):
         ns = f'/run{run}'
@@ -332,7 +334,7 @@ def test_stepping_with_inputs_is_bit_identical_across_runs_and_equal_to_the_core
     # Two runs of ~/step with the same inputs between the calls: a held wrench on each body
     # (world and body frame), a distance constraint added and removed, a reset. Every state
     # the step replies stand for is the same in both runs and the core's, bit for bit.
-    scene = str(CONFIG / 'default_scene.yaml')
+    scene = str(CONFIG / 'thrown_bodies.yaml')
     push = {'force': (3.0, -2.0, 5.0), 'torque': (0.0, 0.02, 0.0)}
     spin = {'force': (0.0, 0.5, 0.0), 'torque': (0.01, 0.0, -0.003)}
     tether = {'name': 'tether', 'type': 'distance', 'body_a': 'rugby_ball',
@@ -430,7 +432,7 @@ def _queue_wrench(ros, node, pub, msg, diags, nth, ns=NODE):
 
 
 def test_as_fast_as_possible_is_bit_identical_to_the_core(ros, tmp_path):
-    scene = str(CONFIG / 'default_scene.yaml')
+    scene = str(CONFIG / 'thrown_bodies.yaml')
     node = ros.start({'scene': scene, 'real_time_factor': 0.0, 'start_paused': True})
     states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
     # A paused node republishes its state each second: then no message is missed.
@@ -732,7 +734,7 @@ def test_metrics_and_markers_match_the_core(ros, tmp_path):
     from rigid_body_sim.ros.outputs import equal_inertia_box
     from rigid_body_sim_interfaces.msg import Metrics
     from visualization_msgs.msg import Marker, MarkerArray
-    scene = str(CONFIG / 'default_scene.yaml')
+    scene = str(CONFIG / 'thrown_bodies.yaml')
     node = ros.start({'scene': scene, 'start_paused': True})
     metrics = ros.client.subscribe(Metrics, f'{NODE}/metrics')
     markers = ros.client.subscribe(MarkerArray, f'{NODE}/markers')

@@ -505,6 +505,11 @@ class SimNode(Node):
             level, summary = DiagnosticStatus.WARN, f'{w.overruns} steps over budget, ' \
                 f'{self._pacer.lag_resets - w.lag_resets_before} backlogs dropped'
         energy_change = d.total_energy - session.energy0
+        # The largest force a joint carries now (N): what the joints do, in the log line.
+        reaction_max = max((float(np.linalg.norm(r.force_world))
+                            for per_body in sim.reactions().values()
+                            for r in per_body.values()), default=0.0) \
+            if sim.constraint_names and not session.diverged else 0.0
         values = {
             'sim_time_s': f'{session.seconds():.9g}',
             'time_since_reset_s': f'{sim.time:.9g}',
@@ -527,6 +532,7 @@ class SimNode(Node):
             'energy_j': f'{d.total_energy:.12g}',
             'energy_change_j': f'{energy_change:.6g}',
             'constraint_violation': f'{d.constraint_violation:.3g}',
+            'reaction_force_max_n': f'{reaction_max:.6g}',
             'substeps_total': str(work.get('substeps', 0)),
             'retries_total': str(work.get('retries', 0)),
             'capped_steps_total': str(work.get('capped_steps', 0)),
@@ -552,7 +558,8 @@ class SimNode(Node):
         self.get_logger().info(
             f't={session.seconds():.3f} s  rtf={rtf:.2f}  {w.steps / wall:.0f} steps/s  '
             f'E={d.total_energy:.6g} J  dE={energy_change:+.1e} J  '
-            f'violation={d.constraint_violation:.1e}'
+            + (f'violation={d.constraint_violation:.1e}  reaction_max={reaction_max:.3g} N'
+               if sim.constraint_names else '')
             + (f'  overruns={w.overruns}' if w.overruns else '') + f'  [{summary}]')
         self._new_window(now)
 
