@@ -44,8 +44,9 @@ class NodeProcess:
     """The simulator node, ``sim_node``, running in a child process."""
 
     def __init__(self, domain: int, params: dict, namespace: Optional[str] = None,
-                 log_path: Optional[Path] = None, ros_args: tuple = ()) -> None:
-        args = [str(executable('sim_node')), '--ros-args', *ros_args]
+                 log_path: Optional[Path] = None, ros_args: tuple = (),
+                 program: Optional[list] = None) -> None:
+        args = [*(program or [str(executable('sim_node'))]), '--ros-args', *ros_args]
         for key, value in params.items():
             text = str(value).lower() if isinstance(value, bool) else str(value)
             args += ['-p', f'{key}:={text}']
@@ -159,7 +160,8 @@ def ros_session(tmp_path):
     Start nodes and a client on a fresh random domain; stop them all afterwards.
 
     A generator for the ``ros`` fixture (conftest.py): yields an object with
-    ``start(params, namespace=None)`` -> NodeProcess and ``client`` (a :class:`Client`).
+    ``start(params, namespace=None, ros_args=(), program=None)`` -> NodeProcess (``program``:
+    the command to run instead of ``sim_node``) and ``client`` (a :class:`Client`).
     """
     domain = random_domain()
 
@@ -168,9 +170,9 @@ def ros_session(tmp_path):
         client = Client(domain)
 
         def start(self, params: dict, namespace: Optional[str] = None,
-                  ros_args: tuple = ()) -> NodeProcess:
+                  ros_args: tuple = (), program: Optional[list] = None) -> NodeProcess:
             log = tmp_path / f'node{len(self.nodes)}.log'
-            node = NodeProcess(domain, params, namespace, log, ros_args)
+            node = NodeProcess(domain, params, namespace, log, ros_args, program)
             self.nodes.append(node)
             return node
 

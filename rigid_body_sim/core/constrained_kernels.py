@@ -48,7 +48,10 @@ from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_sol
 # Counter slots beyond step_kernels' five.
 DAMP_IN_KICK, GEOMETRY, FACTORIZATIONS, RANK_DEFICIENT, FALLBACKS = 5, 6, 7, 8, 9
 ACC_SOLVES, POS_ITERATIONS, VEL_PROJECTIONS, SUBSTEPS, RETRIES = 10, 11, 12, 13, 14
-N_COUNTS = 15
+# Steps whose sub-steps were capped at max_substeps (each then turns by more than
+# max_rotation): the bound on the work of one step, reported, never silent.
+CAPPED = 15
+N_COUNTS = 16
 
 # par slots
 P_TAU, P_OMEGA, P_POS_TOL, P_MAX_IT, P_RANK_RTOL, P_REG, P_CLOSING = 0, 1, 2, 3, 4, 5, 6
@@ -1024,7 +1027,14 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         if watch[i]:
             for c in range(3):
                 rate = max(rate, abs(om0[i, c]))
-    k = max(1, int(math.ceil(rate * abs(dt) / max_rot)))
+    # Compared as a float, before any int conversion: a huge, inf or NaN rate must
+    # neither overflow it nor ask for unbounded work.
+    want = rate * abs(dt) / max_rot
+    if want <= max_sub:
+        k = max(1, int(math.ceil(want)))
+    else:
+        counts[CAPPED] += 1   # the work of one step stays bounded; the caller reports it
+        k = max_sub
     valid0 = c_valid
     while True:
         last_resort = k >= max_sub

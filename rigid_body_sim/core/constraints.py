@@ -56,6 +56,13 @@ from .row_kernels import (KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT, pack_r
 from .validate import finite_array, positive_scalar
 
 
+#: m: how far from the world origin a joint's points may lie. Beyond it a coordinate's
+#: rounding (one ulp is 1.2e-10 m at 1e6 m, 1.2e-4 m at 1e12 m) nears the 1e-8 m within
+#: which a constraint must be satisfiable to be added (``CONSISTENCY_TOLERANCE`` of
+#: :class:`.solver.ConstraintSolver`), and the drift bounds we state no longer hold.
+MAX_JOINT_DISTANCE = 1e6
+
+
 class JointType(enum.Enum):
     """Constraint (joint) types."""
 
@@ -158,9 +165,11 @@ class Constraint:
         if self.axis_world is not None:
             axis = finite_array(self.axis_world, 'axis_world', (3,))
             norm = float(np.linalg.norm(axis))
-            if not norm > 1e-12:
-                raise SpecError('axis_world', f'zero-length axis {axis.tolist()}')
-            object.__setattr__(self, 'axis_world', axis / norm)
+            if not norm > 1e-12:   # (norm inf: components near the float limit)
+                raise SpecError('axis_world', f'zero-length axis {axis.tolist()} (shorter '
+                                              f'than 1e-12)')
+            axis = axis / np.max(np.abs(axis))   # (no overflow in the norm below)
+            object.__setattr__(self, 'axis_world', axis / np.linalg.norm(axis))
         if self.length is not None:
             if jt is not JointType.DISTANCE:
                 raise SpecError('length', f'only for distance constraints, not {jt.value}')
@@ -501,6 +510,17 @@ class ConstraintSet:
             r_a, r_b = local_point(a, spec.anchor_world), local_point(b, spec.anchor_world)
         else:
             r_a, r_b = body_point(a, spec.anchor_a_body), body_point(b, spec.anchor_b_body)
+        if spec.type is not JointType.GENERIC:
+            for field_name, i, r in (('anchor_a_body', a, r_a), ('anchor_b_body', b, r_b)):
+                point = x[i] + R[i] @ r
+                far = float(np.max(np.abs(point)))
+                if not far <= MAX_JOINT_DISTANCE:
+                    raise SpecError(
+                        'anchor_world' if spec.anchor_world is not None else field_name,
+                        f'the joint point {point.tolist()} m (world) has a coordinate of '
+                        f'{far:.3g} m, outside the range of +-{MAX_JOINT_DISTANCE:g} m in '
+                        f'which joints are supported (farther out, the rounding of a '
+                        f'coordinate nears the 1e-8 m to which a joint must hold)')
         res = _Resolved(spec, a, b, anchor=(r_a, r_b))
         jt = spec.type
         if jt in (JointType.HINGE, JointType.SLIDER, JointType.FIXED):

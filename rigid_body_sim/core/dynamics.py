@@ -23,7 +23,7 @@ import numpy as np
 
 from . import rotation as so3
 from .bodies import BodySet
-from .constrained_kernels import (ACC_SOLVES, DAMP_IN_KICK, FACTORIZATIONS, FALLBACKS,
+from .constrained_kernels import (ACC_SOLVES, CAPPED, DAMP_IN_KICK, FACTORIZATIONS, FALLBACKS,
                                   GEOMETRY, N_COUNTS, POS_ITERATIONS, RANK_DEFICIENT, RETRIES,
                                   SUBSTEPS, VEL_PROJECTIONS)
 from .effects import AppliedWrenches, Damping, Effect, Gravity, Kinematics, WrenchAccumulator
@@ -107,17 +107,22 @@ class WorkCounters(TalliedCounters):
     rotation_updates : int
         Body orientations updated by an exponential map.
     substeps : int
-        Sub-steps taken by steps that had to be split (see
-        ``Integrator.substeps``); 0 when every step was taken whole.
+        Sub-steps taken by steps that had to be split (see "Sub-steps" in
+        :mod:`.integrators`); 0 when every step was taken whole.
     retries : int
         Steps redone with twice as many sub-steps because the position
         projection (SHAKE) did not converge in them.
+    capped_steps : int
+        Steps whose bodies turned so fast that the sub-steps their rotation
+        called for exceeded ``Integrator.max_substeps``: they were taken in
+        ``max_substeps`` sub-steps, each turning by more than ``max_rotation``
+        (bounded work, lower accuracy; the node reports them on diagnostics).
 
     """
 
     SLOTS = {'steps': STEPS, 'rhs_evaluations': RHS, 'kick_evaluations': KICK,
              'gyroscopic_body_evaluations': GYRO, 'rotation_updates': ROT,
-             'substeps': SUBSTEPS, 'retries': RETRIES}
+             'substeps': SUBSTEPS, 'retries': RETRIES, 'capped_steps': CAPPED}
 
 
 class SolverCounters(TalliedCounters):

@@ -309,7 +309,7 @@ class ConstraintSolver:
         The constraint graph's connected components (bodies joined through
         constraints) are stepped separately, each with the sub-steps its own
         motion needs, and the bodies no constraint touches as free bodies
-        (see :meth:`.integrators.Integrator.substeps`). Generic rows (a user's
+        (see "Sub-steps" in :mod:`.integrators`). Generic rows (a user's
         Python function) are evaluated by Python from inside the compiled step
         (:data:`.constrained_kernels.GENERIC`). A component of at most
         :data:`KERNEL_DENSE_ROWS` rows without a closed loop is solved densely, a

@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 import math
 import re
-from typing import Any, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
@@ -41,14 +41,49 @@ class Rejected(ValueError):
         super().__init__(message)
 
 
-_TOKEN = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
+#: The longest fully qualified topic name ROS accepts (rmw's limit: 255 characters less
+#: the 8 that DDS topic prefixes and suffixes take).
+MAX_TOPIC_LENGTH = 247
+#: One token of a ROS name (ASCII letters, digits, underscores, not starting with a digit:
+#: the ROS rule), and here also starting with a letter and without a double underscore
+#: (ROS reserves ``__`` for its own names). Matched whole (``fullmatch``: a trailing
+#: newline is not ignored, as ``$`` would).
+_TOKEN = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
+NAME_RULE = ('ASCII letters, digits and single underscores, starting with a letter, '
+             f'and the longest topic it names at most {MAX_TOPIC_LENGTH} characters')
 
 
-def check_name_token(name: str, what: str) -> None:
-    """Raise SpecError unless ``name`` can be one token of a ROS topic name."""
-    if not isinstance(name, str) or not _TOKEN.match(name) or '__' in name:
-        raise SpecError(what, f'{name!r} cannot be part of a ROS topic name: use letters, '
-                              'digits and single underscores, starting with a letter')
+def shown(value: Any, limit: int = 80) -> str:
+    """``repr(value)``, shortened past ``limit`` characters (a reply never echoes 10 kB)."""
+    text = repr(value)
+    return text if len(text) <= limit else f'{text[:limit - 20]}... ({len(text)} characters)'
+
+
+def check_name_token(name: Any, what: str, topic: Optional[str] = None) -> None:
+    """
+    Raise SpecError unless ``name`` can be one token of a ROS name (:data:`NAME_RULE`).
+
+    The one rule for every name that becomes part of a ROS name: bodies,
+    constraints (and later joints and robots).
+
+    Parameters
+    ----------
+    name : str
+        The name to check.
+    what : str
+        The field, for the message.
+    topic : str, optional
+        The longest fully qualified topic name ``name`` becomes part of; checked
+        against :data:`MAX_TOPIC_LENGTH`.
+
+    """
+    if not isinstance(name, str) or _TOKEN.fullmatch(name) is None or '__' in name:
+        raise SpecError(what, f'{shown(name)} cannot be part of a ROS name: use {NAME_RULE}')
+    if topic is not None and len(topic) > MAX_TOPIC_LENGTH:
+        raise SpecError(what, f'{len(name)} characters make the topic {topic[:40]}... '
+                              f'{len(topic)} characters long; ROS allows '
+                              f'{MAX_TOPIC_LENGTH}: at most '
+                              f'{len(name) - (len(topic) - MAX_TOPIC_LENGTH)} characters here')
 
 
 def check_wrench(force: np.ndarray, torque: np.ndarray, frame_id: str, body: str,
@@ -86,13 +121,17 @@ def _optional_vector(value: Sequence[float], field: str) -> Any:
         return None
     if len(values) != 3:
         raise SpecError(field, f'expected [] or 3 values [x, y, z], got {len(values)}: '
-                               f'{values}')
+                               f'{shown(values)}')
     return np.array(values, dtype=float)
 
 
-def constraint_from_request(req: Any, body_names: Sequence[str]) -> Constraint:
+def constraint_from_request(req: Any, body_names: Sequence[str],
+                            topic_of: Optional[Callable[[str], str]] = None) -> Constraint:
     """
     Build a core :class:`Constraint` from an ``AddConstraint`` request.
+
+    ``topic_of(name)``: the longest fully qualified topic the constraint's name
+    becomes part of (its length is checked too).
 
     Raises
     ------
@@ -101,7 +140,11 @@ def constraint_from_request(req: Any, body_names: Sequence[str]) -> Constraint:
 
     """
     try:
-        check_name_token(req.name, 'name')
+        check_name_token(req.name, 'name',
+                         topic_of(req.name) if topic_of and isinstance(req.name, str) else None)
+        if not isinstance(req.type, str) or len(req.type) > 40:
+            raise SpecError('type', f'unknown constraint type {shown(req.type)}; known: '
+                                    f'{[t.value for t in JointType]}')
         kind = JointType.parse(req.type)
         if kind is JointType.GENERIC:
             raise SpecError('type', 'a generic constraint takes a Python function: add it '
@@ -111,9 +154,11 @@ def constraint_from_request(req: Any, body_names: Sequence[str]) -> Constraint:
             if field == 'body_b' and body in ('', 'world'):
                 continue
             if body not in body_names:
+                known = list(body_names)
                 raise Rejected(Rejection.UNKNOWN_BODY,
-                               f'{field}: unknown body {body!r}; known bodies: '
-                               f'{list(body_names)}')
+                               f'{field}: unknown body {shown(body)}; known bodies: '
+                               + (f'{known}' if len(known) <= 20 else
+                                  f'{known[:20]} and {len(known) - 20} more'))
         length = float(req.length)
         if length != length or length < 0.0 or length == float('inf'):
             raise SpecError('length', f'must be 0 (the current distance) or a positive '

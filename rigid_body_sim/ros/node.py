@@ -48,7 +48,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
-from .inputs import Rejected, Rejection
+from .inputs import Rejected, Rejection, shown
 from .outputs import body_topic, constraint_topic, MARKERS_TOPIC, METRICS_TOPIC, \
     STATES_TOPIC
 from .pacing import Pacer, WindowStats
@@ -108,7 +108,7 @@ class SimNode(Node):
         s = self.settings
         scene_path = s.scene or str(default_scene_path())
         scene = load_scene(scene_path)
-        self.session = Session(scene, s)
+        self.session = Session(scene, s, node_name=self.get_fully_qualified_name())
         self.sim = scene.simulation
         self._paused = s.start_paused
         self._running = True
@@ -163,26 +163,44 @@ class SimNode(Node):
                 (Step, 'step', self._on_step),
                 (AddConstraint, 'add_constraint', self._on_add_constraint),
                 (RemoveConstraint, 'remove_constraint', self._on_remove_constraint)):
-            service = self.create_service(srv_type, f'~/{name}', self._guarded(name, handler))
+            service = self.create_service(srv_type, f'~/{name}',
+                                          self._guarded(name, handler, srv_type))
             # Calls appear on ~/<name>/_service_event (request and response), so that a
             # recorded run holds its resets and constraint changes, as the runner's bags do.
             service.configure_introspection(self.get_clock(), qos_profile_services_default,
                                             ServiceIntrospectionState.CONTENTS)
 
-    def _guarded(self, name: str, handler):
-        """Wrap a service handler: an unexpected error is a refused request, not a crash."""
+    def _guarded(self, name: str, handler, srv_type):
+        """
+        Wrap a service handler: an unexpected error is a refused request, not a crash.
+
+        The error path cannot fail itself: it answers with a fresh response
+        (whatever the handler left in its own), and each of its other steps
+        (counting, logging, re-syncing the reaction publishers) is attempted on
+        its own.
+        """
         def serve(request, response):
             try:
                 return handler(request, response)
             except Exception as exc:  # noqa: B902 - no request may stop the node
-                self.session.totals.reject(Rejection.INTERNAL_ERROR.value)
-                self.get_logger().error(f'~/{name}: internal error: {exc!r}\n'
-                                        + traceback.format_exc())
-                self._sync_constraint_publishers()
-                response.success = False
-                response.message = f'internal error: {exc!r} (the node runs on; please ' \
-                                   f'report it)'
-                return response
+                try:
+                    text = repr(exc)
+                except Exception:  # noqa: B902 - a repr that raises
+                    text = type(exc).__name__
+                reply = srv_type.Response()
+                reply.success = False
+                reply.message = f'internal error: {text} (the node runs on; nothing was ' \
+                                f'changed unless the message says so; please report it)'
+                for action in (
+                        lambda: self.session.totals.reject(Rejection.INTERNAL_ERROR.value),
+                        lambda: self.get_logger().error(f'~/{name}: internal error: {text}\n'
+                                                        + traceback.format_exc()),
+                        self._sync_constraint_publishers):
+                    try:
+                        action()
+                    except Exception:  # noqa: B902 - the error path must not fail
+                        pass
+                return reply
         return serve
 
     def _sync_constraint_publishers(self) -> None:
@@ -191,13 +209,27 @@ class SimNode(Node):
         names = set(self.sim.constraint_names)
         for name in list(self._constraint_topics):
             if name not in names:
-                self.destroy_publisher(self._pubs.pop(constraint_topic(name)))
-                self._constraint_topics.discard(name)
+                self._drop_constraint_publisher(name)
         for name in self.sim.constraint_names:
             if name not in self._constraint_topics:
-                self._pubs[constraint_topic(name)] = self.create_publisher(
-                    WrenchStamped, constraint_topic(name), 10, event_callbacks=QUIET_PUB)
-                self._constraint_topics.add(name)
+                self._add_constraint_publisher(name, self._new_constraint_publisher(name))
+
+    def _new_constraint_publisher(self, name: str):
+        """Create (not yet register) constraint ``name``'s reaction publisher."""
+        return self.create_publisher(WrenchStamped, constraint_topic(name), 10,
+                                     event_callbacks=QUIET_PUB)
+
+    def _add_constraint_publisher(self, name: str, publisher) -> None:
+        self._pubs[constraint_topic(name)] = publisher
+        self._constraint_topics.add(name)
+        self._audience_expires = 0.0
+
+    def _drop_constraint_publisher(self, name: str) -> None:
+        self._constraint_topics.discard(name)
+        self._audience_expires = 0.0
+        publisher = self._pubs.pop(constraint_topic(name), None)
+        if publisher is not None:
+            self.destroy_publisher(publisher)
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -275,29 +307,56 @@ class SimNode(Node):
             response.message = self._reject(problem[0], '~/step', problem[1])
             return response
         published = False   # (0 steps: the current state is published)
+        done, failure = 0, None
         for _ in range(request.steps):
-            published = self._advance()
-            if session.diverged or not self._running:   # (SIGTERM ends a long request)
+            if not self._running:   # (SIGTERM or SIGINT ends a long request)
+                failure = f'stopped after {done} of {request.steps} steps: the node is ' \
+                          f'shutting down'
                 break
+            try:
+                published = self._advance()
+            except Exception as exc:  # noqa: B902 - reply, pause, say why
+                session.diverged = f'internal error in a step: {exc!r}'
+                self._paused = True
+                self.get_logger().error(f'paused: {session.diverged}\n'
+                                        + traceback.format_exc())
+            if session.diverged:
+                failure = f'stopped after {done} of {request.steps} steps: ' \
+                          f'{session.diverged}; call ~/reset'
+                break
+            done += 1
         if not published:
             self._publish_state()
         response.time = session.stamp()
         response.step_count = session.step_count
-        response.success = session.diverged is None
-        response.message = session.diverged or f'{request.steps} steps to t = ' \
-                                               f'{session.seconds():.9g} s'
+        response.success = failure is None
+        response.message = failure or f'{request.steps} steps to t = ' \
+                                      f'{session.seconds():.9g} s'
         return response
 
     def _on_add_constraint(self, request: AddConstraint.Request,
                            response: AddConstraint.Response):
+        # A transaction: check every field, create the reaction publisher, then add the
+        # constraint; a failure at any point leaves the node as it was.
+        where = f'~/add_constraint {shown(request.name)}'
         try:
-            rows = self.session.add_constraint(request)
+            spec = self.session.check_constraint(request)
         except Rejected as exc:
             response.success = False
-            response.message = self._rejected(exc.cause, f'~/add_constraint {request.name!r}',
-                                              str(exc))
+            response.message = self._rejected(exc.cause, where, str(exc))
             return response
-        self._sync_constraint_publishers()
+        publisher = self._new_constraint_publisher(spec.name)
+        try:
+            rows = self.session.commit_constraint(spec)
+        except Rejected as exc:
+            self.destroy_publisher(publisher)
+            response.success = False
+            response.message = self._rejected(exc.cause, where, str(exc))
+            return response
+        except BaseException:
+            self.destroy_publisher(publisher)
+            raise
+        self._add_constraint_publisher(spec.name, publisher)
         response.success = True
         response.rows_added = rows
         response.message = (f'added {request.type} constraint {request.name!r} ({rows} rows) '
@@ -313,7 +372,7 @@ class SimNode(Node):
             response.success = False
             response.message = self._rejected(exc.cause, '~/remove_constraint', str(exc))
             return response
-        self._sync_constraint_publishers()
+        self._drop_constraint_publisher(request.name)
         response.success = True
         response.rows_removed = rows
         response.message = f'removed constraint {request.name!r} ({rows} rows) at t = ' \
@@ -332,6 +391,14 @@ class SimNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params: list) -> None:
+        try:
+            self._apply_checked_parameters(params)
+        except Exception as exc:  # noqa: B902 - checked before: a bug, never a dead node
+            self.session.totals.reject(Rejection.INTERNAL_ERROR.value)
+            self.get_logger().error(f'applying parameters failed: {exc!r}\n'
+                                    + traceback.format_exc())
+
+    def _apply_checked_parameters(self, params: list) -> None:
         params = [p for p in params if p.name in BY_NAME]   # (not rclpy's use_sim_time, ...)
         if not params:
             return
@@ -408,7 +475,8 @@ class SimNode(Node):
         self._overruns += self._window.overruns
         self._window = WindowStats(wall_start=now, sim_start=self.session.seconds(),
                                    lag_resets_before=self._pacer.lag_resets,
-                                   accuracy_misses_before=self.sim.accuracy().misses)
+                                   accuracy_misses_before=self.sim.accuracy().misses,
+                                   capped_before=self.sim.work().get('capped_steps', 0))
 
     def _publish_diagnostics(self, now: float) -> None:
         w = self._window
@@ -428,10 +496,20 @@ class SimNode(Node):
             level, summary = DiagnosticStatus.WARN, \
                 f'{accuracy.misses - w.accuracy_misses_before} steps missed the tolerance ' \
                 f'{accuracy.tolerance:g} within {accuracy.budget} sub-steps'
+        elif work.get('capped_steps', 0) > w.capped_before:
+            level, summary = DiagnosticStatus.WARN, \
+                f'{work["capped_steps"] - w.capped_before} steps hit the work bound of ' \
+                f'{self.sim.integrator.max_substeps} sub-steps (a body turned by more than ' \
+                f'{self.sim.integrator.max_rotation:g} rad in each: less accurate)'
         elif w.overruns or self._pacer.lag_resets > w.lag_resets_before:
             level, summary = DiagnosticStatus.WARN, f'{w.overruns} steps over budget, ' \
                 f'{self._pacer.lag_resets - w.lag_resets_before} backlogs dropped'
         energy_change = d.total_energy - session.energy0
+        # The largest force a joint carries now (N): what the joints do, in the log line.
+        reaction_max = max((float(np.linalg.norm(r.force_world))
+                            for per_body in sim.reactions().values()
+                            for r in per_body.values()), default=0.0) \
+            if sim.constraint_names and not session.diverged else 0.0
         values = {
             'sim_time_s': f'{session.seconds():.9g}',
             'time_since_reset_s': f'{sim.time:.9g}',
@@ -454,8 +532,10 @@ class SimNode(Node):
             'energy_j': f'{d.total_energy:.12g}',
             'energy_change_j': f'{energy_change:.6g}',
             'constraint_violation': f'{d.constraint_violation:.3g}',
+            'reaction_force_max_n': f'{reaction_max:.6g}',
             'substeps_total': str(work.get('substeps', 0)),
             'retries_total': str(work.get('retries', 0)),
+            'capped_steps_total': str(work.get('capped_steps', 0)),
             'tolerance': 'off' if accuracy.tolerance is None else f'{accuracy.tolerance:.3g}',
             'error_estimate': f'{accuracy.error_estimate:.3g}',
             'tolerance_substeps': str(accuracy.substeps),
@@ -478,7 +558,8 @@ class SimNode(Node):
         self.get_logger().info(
             f't={session.seconds():.3f} s  rtf={rtf:.2f}  {w.steps / wall:.0f} steps/s  '
             f'E={d.total_energy:.6g} J  dE={energy_change:+.1e} J  '
-            f'violation={d.constraint_violation:.1e}'
+            + (f'violation={d.constraint_violation:.1e}  reaction_max={reaction_max:.3g} N'
+               if sim.constraint_names else '')
             + (f'  overruns={w.overruns}' if w.overruns else '') + f'  [{summary}]')
         self._new_window(now)
 

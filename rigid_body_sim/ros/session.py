@@ -19,8 +19,8 @@ import numpy as np
 
 from . import conversions as conv
 from .inputs import check_name_token, check_wrench, constraint_from_request, Rejected, \
-    Rejection
-from .outputs import Outputs
+    Rejection, shown
+from .outputs import body_topic, constraint_topic, Outputs
 from .pacing import output_due, Totals
 from ..core import DivergenceError, InconsistentConstraintError, SpecError
 from ..scene import Scene
@@ -37,6 +37,9 @@ class Session:
         The node's parameters (physics_rate, integrator, world_frame, limits, ...).
     dt : float, optional
         s: the step, exactly (the runner's ``--dt``); default ``1 / physics_rate``.
+    node_name : str
+        The fully qualified name of the node whose private topics carry the
+        bodies' and constraints' names (their lengths are checked against it).
 
     Raises
     ------
@@ -45,11 +48,15 @@ class Session:
 
     """
 
-    def __init__(self, scene: Scene, settings: Any, dt: Optional[float] = None) -> None:
+    def __init__(self, scene: Scene, settings: Any, dt: Optional[float] = None,
+                 node_name: str = '/rigid_body_sim') -> None:
+        self.node_name = node_name
         for name in scene.simulation.bodies.names:
-            check_name_token(name, f'scene {scene.source}: body name')
+            check_name_token(name, f'scene {scene.source}: body name',
+                             self.full_topic(body_topic(name, 'wrench')))
         for name in scene.simulation.constraint_names:
-            check_name_token(name, f'scene {scene.source}: constraint name')
+            check_name_token(name, f'scene {scene.source}: constraint name',
+                             self.full_topic(constraint_topic(name)))
         self.scene = scene
         self.sim = scene.simulation
         self.settings = settings
@@ -74,6 +81,10 @@ class Session:
         self.sim.set_tolerance(s.tolerance or self.scene_tolerance)
         if hasattr(self, 'outputs'):
             self.outputs.world_frame = s.world_frame
+
+    def full_topic(self, private: str) -> str:
+        """Return the fully qualified name of a private topic ``~/...`` of the node."""
+        return self.node_name.rstrip('/') + private[1:]
 
     # -- time -----------------------------------------------------------------------------
 
@@ -133,42 +144,70 @@ class Session:
         self.step_count = 0
         self.energy0 = self.sim.diagnostics().total_energy
 
-    def add_constraint(self, request: Any) -> int:
+    def check_constraint(self, request: Any):
         """
-        Add a constraint from an ``AddConstraint`` request; return its rows.
+        Check every field of an ``AddConstraint`` request; return its core spec.
+
+        Changes nothing: the caller creates what the constraint needs (its
+        reaction publisher), then :meth:`commit_constraint`.
 
         Raises
         ------
         Rejected
-            Unknown body, malformed or inconsistent constraint (counted).
+            Unknown body, a malformed field, a duplicate name (counted).
 
         """
         try:
-            spec = constraint_from_request(request, self.sim.bodies.names)
+            spec = constraint_from_request(
+                request, self.sim.bodies.names,
+                lambda name: self.full_topic(constraint_topic(name)))
             if spec.name in self.sim.constraint_names:
                 raise Rejected(Rejection.BAD_CONSTRAINT,
                                f'name: a constraint {spec.name!r} exists already')
-            try:
-                self.sim.add_constraint(spec)
-            except SpecError as exc:
-                cause = Rejection.INCONSISTENT_CONSTRAINT \
-                    if isinstance(exc, InconsistentConstraintError) else Rejection.BAD_CONSTRAINT
-                raise Rejected(cause, str(exc)) from None
-            except BaseException:   # (a bug: leave no half-added constraint behind)
-                if spec.name in self.sim.constraint_names:
-                    self.sim.remove_constraint(spec.name)
-                raise
         except Rejected as exc:
             self.totals.reject(exc.cause.value)
             raise
-        return len(self.sim.dynamics.solver.constraints.rows_of(spec.name))
+        return spec
+
+    def commit_constraint(self, spec: Any) -> int:
+        """
+        Add a checked constraint (:meth:`check_constraint`); return its rows.
+
+        All or nothing: on any error the simulation is as before.
+
+        Raises
+        ------
+        Rejected
+            Inconsistent with the constraints present, or refused by the core
+            (an anchor out of range, coinciding anchors; counted).
+
+        """
+        sim = self.sim
+        before = sim.state
+        try:
+            sim.add_constraint(spec)
+        except SpecError as exc:
+            cause = Rejection.INCONSISTENT_CONSTRAINT \
+                if isinstance(exc, InconsistentConstraintError) else Rejection.BAD_CONSTRAINT
+            self.totals.reject(cause.value)
+            raise Rejected(cause, str(exc)) from None
+        except BaseException:   # (a bug: leave no half-added constraint behind)
+            if spec.name in sim.constraint_names:
+                sim.remove_constraint(spec.name)
+            sim.state = before
+            raise
+        return len(sim.dynamics.solver.constraints.rows_of(spec.name))
+
+    def add_constraint(self, request: Any) -> int:
+        """Check and add a constraint from an ``AddConstraint`` request; return its rows."""
+        return self.commit_constraint(self.check_constraint(request))
 
     def remove_constraint(self, name: str) -> int:
         """Remove a constraint; return its rows. Raises Rejected if there is none."""
         if name not in self.sim.constraint_names:
             self.totals.reject(Rejection.UNKNOWN_CONSTRAINT.value)
             raise Rejected(Rejection.UNKNOWN_CONSTRAINT,
-                           f'name: no constraint {name!r}; present: '
+                           f'name: no constraint {shown(name)}; present: '
                            f'{self.sim.constraint_names}')
         rows = len(self.sim.dynamics.solver.constraints.rows_of(name))
         self.sim.remove_constraint(name)

@@ -34,6 +34,20 @@ def _positive(limit: float) -> Callable:
     return check
 
 
+#: Hz: the slowest rate (a step or an output period of 11.6 days); a subnormal rate's
+#: period would be infinite.
+SLOWEST_RATE = 1e-6
+
+
+def _rate(limit: float) -> Callable:
+    def check(name: str, value: Any) -> float:
+        x = _number(name, value)
+        if not SLOWEST_RATE <= x <= limit:
+            raise SpecError(name, f'must be in [{SLOWEST_RATE:g}, {limit:g}] Hz, got {value!r}')
+        return x
+    return check
+
+
 def _non_negative(name: str, value: Any) -> float:
     x = _number(name, value)
     if x < 0.0:
@@ -61,11 +75,20 @@ def _integrator(name: str, value: Any) -> str:
     return value
 
 
+#: The longest frame name accepted (tf2 itself sets none; a frame_id is repeated in
+#: every message header).
+MAX_FRAME_LENGTH = 256
+
+
 def _frame(name: str, value: Any) -> str:
     value = _string(name, value)
-    if not value or value.startswith('/') or any(c.isspace() for c in value):
-        raise SpecError(name, f'must be a non-empty frame name without spaces or a leading '
-                              f"'/', got {value!r}")
+    if not value or value.startswith('/') or len(value) > MAX_FRAME_LENGTH \
+            or not (value.isascii() and value.isprintable()) \
+            or any(c.isspace() for c in value):
+        shown = repr(value) if len(value) <= 80 else f'{value[:40]!r}... ({len(value)} ' \
+                                                     f'characters)'
+        raise SpecError(name, f'must be a frame name of 1 to {MAX_FRAME_LENGTH} printable '
+                              f"ASCII characters without spaces or a leading '/', got {shown}")
     return value
 
 
@@ -83,13 +106,13 @@ class Parameter:
 PARAMETERS = (
     Parameter('scene', '', _string,
               "scene YAML file; '' for the installed default scene", read_only=True),
-    Parameter('physics_rate', 1000.0, _positive(1e6),
+    Parameter('physics_rate', 1000.0, _rate(1e6),
               'Hz: physics steps per simulated second (dt = 1 / physics_rate; overrides the '
               "scene's dt)"),
-    Parameter('publish_rate', 100.0, _positive(1e6),
+    Parameter('publish_rate', 100.0, _rate(1e6),
               'Hz of simulated time: poses, twists, body states, reactions (every step if '
               '>= physics_rate)'),
-    Parameter('clock_rate', 1000.0, _positive(1e6),
+    Parameter('clock_rate', 1000.0, _rate(1e6),
               'Hz of simulated time: /clock (every step if >= physics_rate)'),
     Parameter('integrator', '', _integrator,
               f"{', '.join(sorted(INTEGRATORS))}; '' for the scene's"),
