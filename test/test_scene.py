@@ -28,8 +28,8 @@ def test_shipped_scene_loads_and_steps(path):
     assert d.constraint_violation < 1e-11
 
 
-def test_default_scene_bodies_in_user_frame():
-    sim = load_scene(CONFIG / 'default_scene.yaml').simulation
+def test_thrown_bodies_scene_bodies_in_user_frame():
+    sim = load_scene(CONFIG / 'thrown_bodies.yaml').simulation
     pos, quat = sim.pose('tumbling_box')
     # bound: to the centre of mass and back, ~4 roundings of |x| <= 1.05 m: 5e-16; x20
     np.testing.assert_allclose(pos, [-0.15, -0.1, 1.05], rtol=0, atol=1e-14)
@@ -49,7 +49,7 @@ def test_shape_inertia_matches_formula():
 
 
 def _default():
-    return yaml.safe_load((CONFIG / 'default_scene.yaml').read_text())
+    return yaml.safe_load((CONFIG / 'thrown_bodies.yaml').read_text())
 
 
 @pytest.mark.parametrize('edit, message', [
