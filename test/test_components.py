@@ -58,6 +58,7 @@ def test_components_move_as_they_do_alone(integrator):
              'bob': run([bob], [pivot], integrator),
              'box': run([box], [], integrator)}
     for name, sim in alone.items():
+        # Exact: the same compiled arithmetic on the same numbers, on this machine in this run.
         np.testing.assert_array_equal(state_of(together, name), state_of(sim, name))
     # Only the top is sub-stepped: 100 rad/s * 1e-2 s / 0.25 rad = 4 sub-steps a step.
     assert alone['top'].work()['substeps'] >= 4 * STEPS
@@ -84,8 +85,10 @@ def test_a_closed_loop_beyond_the_dense_size_keeps_its_joints_and_energy():
     e0 = sim.diagnostics().total_energy
     sim.step(300)
     d = sim.diagnostics()
+    # bound: SHAKE stops at 1e-13 m (or 16 sqrt(m) eps |x| = 3e-14); measured 2e-14; x1000
     assert d.constraint_violation < 1e-10
     # lie_poisson2's bounded O(dt²) energy error, measured 1.0e-5 J: 1e-7 of m g R n.
+    # bound: C dt² = 1.0e-5 J (4.0x less at dt / 2), rounding 300 eps 118 J = 8e-12 J; x11
     assert abs(d.total_energy - e0) < 1e-6 * n * 9.81 * radius
     assert sim.dynamics.solver.counters.rank_deficient_solves > 0   # the redundant rows
 
@@ -108,10 +111,12 @@ def test_a_closed_loop_solved_through_its_spanning_tree_moves_as_when_solved_den
         dense.step(50)
         for field in ('pos_com_world', 'quat_principal_world', 'vel_com_world',
                       'ang_vel_principal'):
+            # bound: solve rounding (1.1e-12 in a step) grown <= 32x: measured 7.7e-12; x130
             np.testing.assert_allclose(getattr(loop.state, field), getattr(dense.state, field),
                                        rtol=0, atol=1e-9)
     # The same violation (rkmk4 has no position projection: ~1e-10 m; the others ~1e-13).
     v_loop, v_dense = (s.diagnostics().constraint_violation for s in (loop, dense))
+    # bound: rkmk4's O(dt⁴) drift 1.3e-10 (x7); the states' difference moves it 2e-14 (x500)
     assert v_loop < 1e-9 and abs(v_loop - v_dense) < 1e-11
     # The redundant rows are found in the closing joint's block, as the dense solve finds them.
     assert loop.dynamics.solver.counters.rank_deficient_solves > 0
@@ -133,6 +138,7 @@ def test_outputs_computed_inside_a_constrained_step_equal_those_computed_when_re
         assert every.bodies.outputs_cache.key[0] is every.state
         got = read(every)
         if k % 7 == 0:
+            # Exact: the step's kernel and the read call the same compiled outputs function.
             assert np.array_equal(got, read(late))
     assert np.array_equal(read(every), read(late))
 
@@ -166,7 +172,9 @@ def test_mid_sized_components_take_the_tree_solve_unless_they_close_a_loop(name,
     assert dense.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
     for sim in (tree, dense, twice, once):
         sim.step(400)   # 0.4 s of a falling chain
+    # bound: the solves' rounding grown by the chain (a 1e-12 push grows 130x): 1e-12; x1000
     np.testing.assert_allclose(tree.state.y, dense.state.y, rtol=0, atol=1e-9)
+    # bound: the copy's rows split the load by a truncated SVD (1e-13 of s[0]): 1.7e-11; x60
     np.testing.assert_allclose(twice.state.y, once.state.y, rtol=0, atol=1e-9)
     assert twice.dynamics.solver.counters.rank_deficient_solves > 0
 
@@ -186,5 +194,6 @@ def test_a_loop_through_the_world_is_closed_like_one_among_bodies(name, monkeypa
     assert dense.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
     for sim in (loop, dense):
         sim.step(1000)
+    # bound: rounding grown <= 150x: 1e-11; rkmk4's drift, split otherwise: 2.5e-10; x4
     np.testing.assert_allclose(loop.state.y, dense.state.y, rtol=0, atol=1e-9)
     assert loop.dynamics.solver.counters.rank_deficient_solves > 0

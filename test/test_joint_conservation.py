@@ -6,6 +6,8 @@ import pytest
 from rigid_body_sim.core import Constraint, INTEGRATORS, Simulation
 from rigid_body_sim.core import rotation as so3
 
+EPS = np.finfo(float).eps
+
 
 def hand_distance(x_a, R_a, x_b, R_b):
     """Return a generic constraint: the centres of mass 0.7 m apart (invariant)."""
@@ -92,14 +94,18 @@ def test_momenta_conserved(kind, name, rng):
     sim.step(300)
     d = sim.diagnostics()
     p0, l0 = d0.linear_momentum_world, d0.angular_momentum_world
-    # Constraint forces are internal: measured drift at most 1e-12 relative.
+    # Constraint forces are internal: measured drift at most 1.2e-12 relative.
+    # bound: 300 k eps = 3e-13; generic: G's rounding (1e-10) over N random steps ~5e-12; x20
     assert np.linalg.norm(d.linear_momentum_world - p0) <= 1e-10 * np.linalg.norm(p0)
     assert np.linalg.norm(d.angular_momentum_world - l0) <= 1e-10 * np.linalg.norm(l0)
+    # bound: SHAKE's 1e-13, or the unprojected O(dt^3..4) drift 3.7e-11 (not rounding); x2.7
     assert d.constraint_violation < 1e-10
-    # Ideal constraints do no work: the energy error is the method's (measured at most
-    # 3.7e-5 relative for symplectic Euler, 1.6e-8 for the others, over 0.3 s).
+    # Ideal constraints do no work: the energy error is the method's C T dt^p (measured at
+    # most 3.7e-5 relative for symplectic Euler, 1.6e-8 for lie_poisson2 and 1e-11 for the
+    # fourth order, over 0.3 s; 2x, 4x, 16x less at dt / 2), + rounding 300 k eps = 3e-13.
     e0 = d0.total_energy
-    assert abs(d.total_energy - e0) < (2e-4 if name == 'symplectic_euler' else 1e-7) * e0
+    tol = {1: 2e-4, 2: 1e-7, 4: 1e-10}[INTEGRATORS[name].order]   # bound: C T dt^p; x5 to x10
+    assert abs(d.total_energy - e0) < tol * e0
 
 
 def finite_difference_jacobian(cs, s, h=1e-6):
@@ -131,10 +137,13 @@ def test_jacobian_velocity_and_bias_terms(kind, rng):
                      s.ang_vel_principal)
     G = ev.jacobian.toarray()
     # Analytic (and, for generic, automatic) G against central differences: the
-    # difference error is O(h²) ~ 1e-12 plus rounding / h ~ 1e-10.
-    np.testing.assert_allclose(G, finite_difference_jacobian(cs, s), atol=2e-9)
+    # difference error is O(h²) ~ 1e-12 plus rounding / h.
+    # bound: Φ± round by ~5 eps of 3 m: / h = 3.3e-9, twice for generic (G a difference); x10
+    np.testing.assert_allclose(G, finite_difference_jacobian(cs, s), rtol=0, atol=7e-8)
     nu = np.hstack([s.vel_com_world, s.ang_vel_principal]).ravel()
-    np.testing.assert_allclose(ev.phi_dot, G @ nu, atol=1e-13)
+    # bound: each of Φ̇ and G ν within γ_12 |G||ν| (12 terms): 24 eps; x10
+    np.testing.assert_allclose(ev.phi_dot, G @ nu, rtol=0,
+                               atol=240 * EPS * np.max(np.abs(G) @ np.abs(nu)))
 
     # γ = Ġν is the second derivative of Φ along x(t) = x + t v, R(t) = R exp(t Ω).
     def phi_at(t):
@@ -144,8 +153,11 @@ def test_jacobian_velocity_and_bias_terms(kind, rng):
     h = 1e-4
     second = (phi_at(h) - 2 * phi_at(0.0) + phi_at(-h)) / h**2
     first = (phi_at(h) - phi_at(-h)) / (2 * h)
-    np.testing.assert_allclose(ev.phi_dot, first, atol=1e-6)
-    np.testing.assert_allclose(ev.gamma, second, atol=2e-5 * max(1.0, np.abs(second).max()))
+    # bound: h² |d³Φ| / 6 ~ 2e-8 (|Ω|, |v| ~ 2) + rounding 5 eps 3 m / h = 3e-11; x50
+    np.testing.assert_allclose(ev.phi_dot, first, rtol=0, atol=1e-6)
+    # bound: h² |d⁴Φ| / 12 ~ 1e-8 + 4 (5 eps 3 m) / h² = 1.3e-6, twice for generic rows; x8
+    np.testing.assert_allclose(ev.gamma, second, rtol=0,
+                               atol=2e-5 * max(1.0, np.abs(second).max()))
 
 
 def test_generic_with_and_without_jacobian_move_alike(rng):
@@ -157,4 +169,5 @@ def test_generic_with_and_without_jacobian_move_alike(rng):
     for sim in sims:
         sim.step(200)
     # Same physics, Jacobians differing by finite-difference error only.
-    np.testing.assert_allclose(sims[0].pose()[0], sims[1].pose()[0], atol=1e-8)
+    # bound: G off by eps |Φ| / h ~ 1e-10 relative deflects v so: 1e-10 |v| T = 4e-11 m; x10
+    np.testing.assert_allclose(sims[0].pose()[0], sims[1].pose()[0], rtol=0, atol=5e-10)

@@ -16,6 +16,7 @@ from rigid_body_sim.core.row_kernels import (KIND_DISTANCE, KIND_DOT, KIND_LINE,
 
 JOINTS = ('ball', 'hinge', 'slider', 'fixed', 'distance')
 N_BODIES = 4
+EPS = np.finfo(float).eps
 
 
 def random_constraint_set(seed):
@@ -151,7 +152,8 @@ def reference_phi(rows, pos, quat):
 @pytest.mark.parametrize('case', CASES, ids=IDS)
 def test_phi_matches_the_row_definitions(case):
     _, rows, pos, quat, _, _ = case
-    assert_close(geometry(rows, pos, quat)[0], reference_phi(rows, pos, quat), 1e-14)
+    # bound: ~7 eps of terms (x + R p, R 4 eps off) summing to <= 3.3 max|Φ|, twice: 46 eps; x10
+    assert_close(geometry(rows, pos, quat)[0], reference_phi(rows, pos, quat), 1e-13)
 
 
 def test_joints_hold_where_they_were_added():
@@ -164,11 +166,12 @@ def test_joints_hold_where_they_were_added():
             # Anchors given in the world frame, and the axis rows, start satisfied.
             held = rows if spec.anchor_world is not None else rows[cs.row_kind[
                 cs.rows_of(name)] == KIND_DOT]
+            # bound: rounding only (anchors to body frames and back): ~8 eps of 3 m = 5e-15
             assert np.max(np.abs(held)) < 1e-12, name
         if spec.type.value == 'distance' and spec.length is None:
-            assert abs(rows[0]) < 1e-12
+            assert abs(rows[0]) < 1e-12   # bound: as above
         if spec.type.value == 'distance' and spec.length is not None:
-            assert abs(rows[0]) > 1e-3
+            assert abs(rows[0]) > 1e-3   # violated: the length 0.7 is not the distance
 
 
 @pytest.mark.parametrize('case', CASES, ids=IDS)
@@ -199,6 +202,7 @@ def test_jacobian_is_the_derivative_of_phi(case):
         expected = np.zeros_like(fd)
         expected[a == i] = ga[a == i]
         expected[b == i] = gb[b == i]
+        # bound: h² |d³Φ| / 6 ~ 1e-12 + rounding of Φ± (~5 eps of 12 m) / h = 1.3e-8; x8
         assert_close(expected, fd, 1e-7)
 
 
@@ -209,7 +213,8 @@ def test_phi_dot_is_the_rate_of_phi(case):
     fd = (geometry(rows, *along(pos, quat, vel, omega, h))[0]
           - geometry(rows, *along(pos, quat, vel, omega, -h))[0]) / (2 * h)
     phi_dot, gamma = rates(rows, pos, quat, vel, omega, need_gamma=False)
-    assert_close(phi_dot, fd, 1e-7)
+    assert_close(phi_dot, fd, 1e-7)   # bound: as the Jacobian's (h = 1e-6): 1.3e-8; x8
+    # Exact: γ is not computed, and Φ̇ is the same kernel's arithmetic either way (same run).
     assert np.array_equal(gamma, np.zeros_like(gamma))
     assert np.array_equal(rates(rows, pos, quat, vel, omega)[0], phi_dot)
 
@@ -222,6 +227,7 @@ def test_gamma_is_the_second_derivative_along_zero_acceleration(case):
     fd = (geometry(rows, *along(pos, quat, vel, omega, h))[0] - 2.0 * phi0
           + geometry(rows, *along(pos, quat, vel, omega, -h))[0]) / h**2
     gamma = rates(rows, pos, quat, vel, omega)[1]
+    # bound: h² |d⁴Φ| / 12 ~ 1e-7 + rounding 4 (5 eps of 12 m) / h² = 5e-6 (worst case); x2
     assert_close(gamma, fd, 1e-5)
     # Not trivially satisfied: γ is of order one here.
     assert np.max(np.abs(gamma)) > 0.1
@@ -241,6 +247,7 @@ def test_constraint_set_assembles_kernel_rows_and_generic_rows():
     assert list(cs.rows_of('gen')) == [mb, mb + 1] and list(cs.rows_of('gen_world')) == [mb + 2]
     geo = cs.geometry(pos, quat)
     phi, ga, gb = geometry(row_arrays(cs), pos, quat)
+    # Exact here and below: the same compiled kernel on the same rows (same run), copied.
     np.testing.assert_array_equal(geo.phi[:mb], phi)
     G = geo.jacobian.toarray()
     n = len(pos)
@@ -257,8 +264,10 @@ def test_constraint_set_assembles_kernel_rows_and_generic_rows():
           + cs.geometry(*along(pos, quat, vel, omega, -h)).phi) / h**2
     phi_dot, gamma = geo.rates(vel, omega)
     nu = np.hstack([vel, omega]).ravel()
-    assert_close(phi_dot, G @ nu, 1e-14)
-    assert_close(gamma[:mb], fd[:mb], 1e-5)
+    # bound: each of the kernel's Φ̇ and G ν within γ_12 |G||ν| (12 terms): 24 eps; x10
+    assert np.max(np.abs(phi_dot - G @ nu)) <= 240 * EPS * np.max(np.abs(G) @ np.abs(nu))
+    assert_close(gamma[:mb], fd[:mb], 1e-5)   # bound: as in the γ test: 5e-6; x2
+    # bound: + the generic γ's own second difference (h = 1e-4 / |ν|): ~3e-5 (worst case); x3
     assert_close(gamma[mb:], fd[mb:], 1e-4)
     assert np.array_equal(geo.rates(vel, omega, need_gamma=False)[1], np.zeros(cs.n_rows))
 
@@ -304,4 +313,5 @@ def test_kernels_run_unchanged_without_jit():
     for label, rows, pos, quat, vel, omega in CASES:
         compiled = (*geometry(rows, pos, quat), *rates(rows, pos, quat, vel, omega))
         for got, want in zip(plain[label], compiled):
-            np.testing.assert_allclose(np.array(got), want, rtol=1e-13, atol=1e-13)
+            # bound: same operations and order (no fastmath); libm/FMA: 8 eps of terms <= 40; x10
+            np.testing.assert_allclose(np.array(got), want, rtol=0, atol=7e-13)
