@@ -253,6 +253,15 @@ def test_every_field_of_every_request_is_checked_and_refusals_change_nothing(ros
     print(f'{refused} requests refused, each answered naming its field')
 
 
+def _next_node(ros, node):
+    """Stop ``node``; forget the client's service clients and messages (a fresh start)."""
+    assert node.stop() == 0
+    for client in getattr(ros.client, '_clients', {}).values():
+        ros.client.node.destroy_client(client)   # (new ones match only the next node)
+    ros.client._clients = {}
+    ros.client.received.clear()
+
+
 def _faulty(ros, scene, faults):
     program = ['env', f'FAULTS={",".join(faults)}', python(),
                str(Path(__file__).with_name('faulty_node.py'))]
@@ -285,8 +294,7 @@ def test_a_request_that_fails_inside_the_node_is_answered_and_changes_nothing(ro
     _assert_as_the_core(ros, node, states, scene, 300)
     ros.client.wait_for(lambda: diags and _values(diags[-1])['rejected_internal_error'] == '4',
                         'four internal errors counted', node=node)
-    assert node.stop() == 0
-    ros.client.received.clear()
+    _next_node(ros, node)
     states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
     # 2. The core fails after the constraint joined the set (reconciling the velocities):
     # it is taken out again and the state is as before.
@@ -295,8 +303,7 @@ def test_a_request_that_fails_inside_the_node_is_answered_and_changes_nothing(ro
                   _request(name='tie', body_a='free', anchor_world=[0.0, 2.0, 0.0]))
     assert not reply.success and 'injected fault' in reply.message, reply.message
     _assert_as_the_core(ros, node, states, scene, 300)
-    assert node.stop() == 0
-    ros.client.received.clear()
+    _next_node(ros, node)
     states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
     # 3. A step that raises: ~/step answers, says after how many steps, and pauses.
     node = _faulty(ros, scene, ['core.simulation:Simulation.step'])
