@@ -1,8 +1,8 @@
 """
 Side by side with MuJoCo: the same scenes in one run, cost per step next to the error.
 
-Issue 8's comparison: every step is compiled (numba: ``core/step_kernels.py`` for free
-bodies, ``core/constrained_kernels.py`` per component of the constraint graph). Each
+Issue 8's comparison: every step is compiled (numba: ``core/kernels/free_step.py`` for free
+bodies, ``core/kernels/constrained_step.py`` per component of the constraint graph). Each
 scene is built twice with the same masses, inertias, gravity, joint geometry and step
 size, and no contacts: as an MJCF string for MuJoCo (PyPI ``mujoco``, a benchmark-only
 dependency: ``bench/requirements.txt``) and as a :class:`Simulation` of this core. Both

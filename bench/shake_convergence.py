@@ -7,7 +7,7 @@ off (``max_rotation = None``) so every step turns it by ``|Ω| dt``. Printed:
 position iterations and SHAKE's factorizations per (sub)step (the cap is 6: a
 step that reaches it ends unconverged), retries and last-resort fallbacks, for
 the anisotropic top and an isotropic body. With the rotor's sensitivity in the
-Newton matrix (see ``constrained_kernels._rotor_jacobians``) the first
+Newton matrix (see ``kernels.constrained_step._rotor_jacobians``) the first
 iteration is Newton's, and its factorization serves the later ones while they
 converge fast: 1 to 2 iterations up to 0.25 rad a step, 2.5 at 1 rad, one
 factorization. Run: ``./dev.sh python bench/shake_convergence.py``.

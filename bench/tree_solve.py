@@ -6,8 +6,8 @@ per joint, the first body hinged to the world), with random Jacobian blocks
 and realistic masses (0.1..10) and inertias (1e-4..1), times per call (median
 of several repetitions, after a first call that compiles):
 
-* ``tree``: :func:`rigid_body_sim.core.tree_solve.tree_factor` then
-  :func:`~rigid_body_sim.core.tree_solve.tree_solve` (numba, no allocation);
+* ``tree``: :func:`rigid_body_sim.core.kernels.tree_solve.tree_factor` then
+  :func:`~rigid_body_sim.core.kernels.tree_solve.tree_solve` (numba, no allocation);
 * ``build A``: assembling the sparse ``A = G M⁻¹ Gᵀ`` (CSC) from the blocks
   with scipy.sparse, which the SuperLU path needs before factorizing;
 * ``splu``: ``scipy.sparse.linalg.splu(A, permc_spec='MMD_AT_PLUS_A')`` and one
@@ -25,7 +25,8 @@ from pathlib import Path
 import time
 
 import numpy as np
-from rigid_body_sim.core.tree_solve import factor_arrays, tree_factor, tree_solve, tree_structure
+from rigid_body_sim.core.kernels.tree_solve import (factor_arrays, tree_factor, tree_solve,
+                                                    tree_structure)
 from scipy import sparse
 from scipy.sparse.linalg import norm as spnorm, splu
 

@@ -99,7 +99,8 @@ def test_a_closed_loop_solved_through_its_spanning_tree_moves_as_when_solved_den
     # A ring of 12 hinged rods closed by a ball joint (63 rows, 3 redundant): the tree
     # solve of its spanning chain plus the Schur complement of the closing joint's rows
     # must give the motion of the dense solve (which it replaced for closed loops).
-    from rigid_body_sim.core import constrained_kernels as ck, solver
+    from rigid_body_sim.core import solver
+    from rigid_body_sim.core.kernels import constrained_step as ck
     loop = ring(12, name)
     assert loop.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_LOOP
     monkeypatch.setattr(solver, 'DENSE_ROWS', 1000)
@@ -160,7 +161,8 @@ def test_mid_sized_components_take_the_tree_solve_unless_they_close_a_loop(name,
     # 25 to 48 rows: an open chain takes the tree solve (faster there) and moves as under
     # the dense solve; the same chain with a joint added twice (a loop of two, redundant
     # rows) keeps the dense solve and its truncated SVD, and moves as without the copy.
-    from rigid_body_sim.core import constrained_kernels as ck, solver
+    from rigid_body_sim.core import solver
+    from rigid_body_sim.core.kernels import constrained_step as ck
     tree = _hinge_chain(6, name)
     twice = _hinge_chain(5, name, again=True)
     assert tree.dynamics.solver.constraints.n_rows == twice.dynamics.solver.constraints.n_rows
@@ -185,7 +187,8 @@ def test_a_loop_through_the_world_is_closed_like_one_among_bodies(name, monkeypa
     # last joint to the world closes the loop, and its 3 redundant rows meet the
     # closure block's truncated SVD. It must move as under the dense solve of the whole
     # system, as unbiased (the tree solve's Tikhonov term would not be).
-    from rigid_body_sim.core import constrained_kernels as ck, solver
+    from rigid_body_sim.core import solver
+    from rigid_body_sim.core.kernels import constrained_step as ck
     from rigid_body_sim.core.mechanisms import four_bar
     loop = four_bar(name, 1e-3)
     assert loop.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_LOOP

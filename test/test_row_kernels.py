@@ -11,8 +11,8 @@ from rigid_body_sim.core import Constraint, RigidBody
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core.bodies import BodySet
 from rigid_body_sim.core.constraints import ConstraintSet
-from rigid_body_sim.core.row_kernels import (KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT,
-                                             pack_rows, rows_geometry, rows_rates)
+from rigid_body_sim.core.kernels.rows import (KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT,
+                                              pack_rows, rows_geometry, rows_rates)
 
 JOINTS = ('ball', 'hinge', 'slider', 'fixed', 'distance')
 N_BODIES = 4

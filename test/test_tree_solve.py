@@ -7,8 +7,8 @@ import sys
 
 import numpy as np
 import pytest
-from rigid_body_sim.core.tree_solve import (factor_arrays, tree_factor, tree_solve,
-                                            tree_structure, TreeSolver)
+from rigid_body_sim.core.kernels.tree_solve import (factor_arrays, tree_factor, tree_solve,
+                                                    tree_structure, TreeSolver)
 
 EPS = np.finfo(float).eps
 
@@ -327,7 +327,7 @@ def test_without_jit():
     """The kernels run unchanged as plain Python (NUMBA_DISABLE_JIT=1)."""
     code = (
         'import numpy as np\n'
-        'from rigid_body_sim.core.tree_solve import TreeSolver\n'
+        'from rigid_body_sim.core.kernels.tree_solve import TreeSolver\n'
         'rng = np.random.default_rng(1)\n'
         'a = np.repeat(np.arange(5), 5); b = np.repeat(np.arange(-1, 4), 5); b[b < 0] = 5\n'
         'Ga, Gb, Ha = rng.normal(size=(3, 25, 6)); minv6 = 1 + rng.random((5, 6))\n'

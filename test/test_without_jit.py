@@ -2,8 +2,8 @@
 The compiled steps run unchanged as plain Python (``NUMBA_DISABLE_JIT=1``).
 
 The design promises it for debugging. The kernels pass views without reference
-counts (``step_kernels.raw``) and tables of array addresses
-(``step_kernels.Pinned``); under plain Python these must be ordinary numpy
+counts (``kernels.views.raw``) and tables of array addresses
+(``kernels.views.Pinned``); under plain Python these must be ordinary numpy
 views, and the steps must give what the compiled ones give.
 """
 

@@ -8,17 +8,18 @@ the integrator registry :data:`INTEGRATORS`, :class:`Constraint` joints, and
 and :class:`DivergenceError`, raised by a step that would leave a non-finite state.
 """
 
-from . import kernel_cache, step_kernels
+from . import kernel_cache
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, JointType
 from .diagnostics import Diagnostics
 from .effects import AppliedWrenches, Damping, EFFECTS, Frame, Gravity
 from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import INTEGRATORS, Invariant
+from .kernels import free_step
 from .simulation import Reaction, Simulation
 
 # Before any kernel runs: drop cached machine code compiled from older kernel sources.
-kernel_cache.check(step_kernels.free_step)
+kernel_cache.check(free_step.free_step)
 
 __all__ = [
     'AppliedWrenches', 'BodySet', 'Constraint', 'Damping', 'Diagnostics', 'DivergenceError',

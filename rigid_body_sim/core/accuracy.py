@@ -13,7 +13,7 @@ Two estimators:
 ``embedded`` (``rkmk4``, the method with an embedded pair)
     Each sub-step also evaluates the slopes at its end (first same as last) and
     compares its fourth-order result with the embedded third-order one,
-    ``h/6 (k4 − k5)`` (:func:`.step_kernels.rkmk4_embedded_error`); the step's
+    ``h/6 (k4 − k5)`` (:func:`.kernels.free_step.rkmk4_embedded_error`); the step's
     estimate is the largest over its sub-steps, divided by ``h``. That is the
     third-order solution's error; the fourth-order result is kept (local
     extrapolation, as in Dormand–Prince), so its error is smaller still, by a
@@ -56,7 +56,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from . import step_kernels as kern
+from .kernels import free_step as kern
 from .bodies import State
 from .errors import SpecError
 
@@ -104,7 +104,7 @@ def state_distance(a: State, b: State) -> float:
 
     Over all bodies: centre-of-mass position (m), orientation (rad, the angle of
     the relative rotation), velocity (m/s) and angular velocity (rad/s).
-    Compiled (:func:`.step_kernels.state_distance`): step doubling compares two
+    Compiled (:func:`.kernels.free_step.state_distance`): step doubling compares two
     states every step.
     """
     return float(kern.state_distance(*a.parts, *b.parts))

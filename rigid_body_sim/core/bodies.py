@@ -31,7 +31,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from . import rotation as so3
-from . import step_kernels
+from .kernels import free_step
 from .errors import SpecError
 from .validate import finite_array, positive_scalar, unit_quaternion
 
@@ -385,7 +385,7 @@ class BodySet:
 
     def outputs(self, state: State, body: Optional[int] = None) -> tuple:
         """
-        Poses and twists in the user's body frames; see ``step_kernels.outputs``.
+        Poses and twists in the user's body frames; see ``kernels.free_step.outputs``.
 
         Returns views (into one (n, 19) array) of the body-origin positions,
         orientations (xyzw), world origin velocities, world angular velocities,
@@ -398,7 +398,7 @@ class BodySet:
         c.wanted = True
         k = c.key
         if not (k[0] is state and k[1] is state.y):
-            step_kernels.state_outputs(state.y, c.frames, c.out)
+            free_step.state_outputs(state.y, c.frames, c.out)
             c.adopt(state)
         return c.views[-1 if body is None else body]
 

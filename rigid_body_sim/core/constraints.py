@@ -13,7 +13,7 @@ Jacobian ``G``. Differentiating ``Φ`` twice gives ``G ν̇ + γ = Φ̈`` with t
 velocity-product term ``γ = Ġ ν``.
 
 Joint types are built from four row primitives, evaluated for all rows at once
-by the compiled kernels of :mod:`.row_kernels` (no Python loop over
+by the compiled kernels of :mod:`.kernels.rows` (no Python loop over
 constraints):
 
 * ``point``: ``P_a − P_b`` (3 rows), anchor points ``P = x_g + R r``;
@@ -51,8 +51,8 @@ import scipy.sparse as sp
 from . import rotation as so3
 from .bodies import BodySet, State
 from .errors import SpecError
-from .row_kernels import (KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT, pack_rows,
-                          rows_geometry, rows_rates)
+from .kernels.rows import (KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT, pack_rows,
+                           rows_geometry, rows_rates)
 from .validate import finite_array, positive_scalar
 
 
@@ -299,7 +299,7 @@ class Geometry:
     jacobian : RowJacobian
     g_builtin : ndarray, shape (2, m_builtin, 6)
         Jacobian blocks of the built-in rows on body a (``[0]``) and body b
-        (``[1]``, also computed for the world), as :func:`.row_kernels.rows_geometry`
+        (``[1]``, also computed for the world), as :func:`.kernels.rows.rows_geometry`
         returns them.
     g_generic : list of ndarray, shape (k, 12)
         Jacobians of the generic constraints, in row order.
@@ -408,8 +408,8 @@ class ConstraintSet:
     n_builtin_rows : int
         The point, dot, line and distance rows (in this order).
     row_kind, row_comp, row_a, row_b : ndarray, shape (n_builtin_rows,), int64
-    row_par : ndarray, shape (n_builtin_rows, row_kernels.PAR_WIDTH)
-        The built-in rows as :mod:`.row_kernels` takes them (layout there).
+    row_par : ndarray, shape (n_builtin_rows, kernels.rows.PAR_WIDTH)
+        The built-in rows as :mod:`.kernels.rows` takes them (layout there).
 
     """
 
@@ -561,7 +561,7 @@ class ConstraintSet:
         table += [(KIND_LINE, 0, r.a, r.b, ln[0], ln[1], None, ln[2], 0.0) for r, ln in lines]
         table += [(KIND_DISTANCE, 0, r.a, r.b, r.distance[0], r.distance[1], None, None,
                    r.distance[2]) for r in dists]
-        # Flat row arrays for the kernels of .row_kernels (and a compiled step).
+        # Flat row arrays for the kernels of .kernels.rows (and a compiled step).
         self.row_kind, self.row_comp, self.row_a, self.row_b, self.row_par = pack_rows(table)
         self.n_builtin_rows = len(table)
         self._gen = gens

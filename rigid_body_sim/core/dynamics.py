@@ -23,19 +23,19 @@ import numpy as np
 
 from . import rotation as so3
 from .bodies import BodySet
-from .constrained_kernels import (ACC_SOLVES, CAPPED, DAMP_IN_KICK, FACTORIZATIONS, FALLBACKS,
-                                  GEOMETRY, N_COUNTS, POS_ITERATIONS, RANK_DEFICIENT, RETRIES,
-                                  SUBSTEPS, VEL_PROJECTIONS)
 from .effects import AppliedWrenches, Damping, Effect, Gravity, Kinematics, WrenchAccumulator
 from .errors import SpecError
-from .step_kernels import FLOW, GYRO, HAS_DAMPING, HAS_POSITION_FORCES, KICK, RHS, ROT
+from .kernels.constrained_step import (ACC_SOLVES, CAPPED, DAMP_IN_KICK, FACTORIZATIONS,
+                                       FALLBACKS, GEOMETRY, N_COUNTS, POS_ITERATIONS,
+                                       RANK_DEFICIENT, RETRIES, SUBSTEPS, VEL_PROJECTIONS)
+from .kernels.free_step import FLOW, GYRO, HAS_DAMPING, HAS_POSITION_FORCES, KICK, RHS, ROT
 
-#: The effects the compiled kernels evaluate (see :mod:`.step_kernels`).
+#: The effects the compiled kernels evaluate (see :mod:`.kernels.free_step`).
 KERNEL_EFFECTS = (Gravity, Damping, AppliedWrenches)
 
 
 #: Slot of the steps in a work tally; the slots before it are the compiled kernels'
-#: count slots (:mod:`.step_kernels`, :mod:`.constrained_kernels`).
+#: count slots (:mod:`.kernels.free_step`, :mod:`.kernels.constrained_step`).
 STEPS = N_COUNTS
 #: Length of a work tally.
 N_TALLY = N_COUNTS + 1
@@ -181,7 +181,7 @@ class Dynamics:
 
     def kernel_model(self, time_mid: float) -> tuple:
         """
-        Return the effects as the arrays of :mod:`.step_kernels`: (body, gforce, wrench, flags).
+        Return the effects as :mod:`.kernels.free_step` takes them: (body, gforce, wrench, flags).
 
         Rebuilt only when the model changed (``version``); ``time_mid`` picks the
         active wrenches of an AppliedWrenches table that no Simulation switched

@@ -380,7 +380,7 @@ class AppliedWrenches(Effect):
         -------
         ndarray, shape (k, 11)
             ``body, in_body, force (3), torque (3), point (3)`` (see
-            :mod:`.step_kernels`); ``time_mid`` decides which entries are active
+            :mod:`.kernels.free_step`); ``time_mid`` decides which entries are active
             when no :meth:`begin_step` did.
 
         """

@@ -89,8 +89,8 @@ not depend on the other bodies.
 Compiled kernels
 ----------------
 A step is one compiled call (numba) per component of the constraint graph
-(:mod:`.constrained_kernels`) and one for the bodies no constraint couples
-(:mod:`.step_kernels`): these modules hold the arithmetic of the methods above.
+(:mod:`.kernels.constrained_step`) and one for the bodies no constraint couples
+(:mod:`.kernels.free_step`): these modules hold the arithmetic of the methods above.
 Generic constraint rows (a user's Python function) are evaluated by Python from
 inside the compiled step; closed loops by the tree solve of a spanning forest and
 the Schur complement of the rows that close them.
@@ -104,8 +104,10 @@ from typing import ClassVar, Optional
 
 import numpy as np
 
-from . import constrained_kernels as ckern
-from . import step_kernels as kern
+from .kernels import constrained_step as ckern
+from .kernels import free_step as kern
+from .kernels import methods
+from .kernels.views import Pinned
 from .bodies import State
 from .dynamics import Dynamics, STEPS
 from .errors import SpecError
@@ -140,7 +142,7 @@ class Integrator:
     name: ClassVar[str] = ''
     order: ClassVar[int] = 0
     conserves: ClassVar[frozenset] = frozenset()
-    #: The method's code in :mod:`.step_kernels`.
+    #: The method's code in :mod:`.kernels.free_step`.
     KERNEL: ClassVar[int] = -1
     #: Order of the embedded solution whose difference estimates the error (None:
     #: no embedded pair; the accuracy knob then uses step doubling).
@@ -164,7 +166,7 @@ class Integrator:
         # The free-body kernel's workspace, sized for every body of the scene.
         self._ws = np.empty(kern.workspace_size(len(dynamics.bodies)))
         # The arrays of a whole-scene step that persist across steps, as one table.
-        self._table: Optional[kern.Pinned] = None
+        self._table: Optional[Pinned] = None
         #: Whether the state the last :meth:`step` returned is finite everywhere
         #: (checked inside the kernels), or None when that step did not check.
         self.finite: Optional[bool] = None
@@ -206,7 +208,7 @@ class Integrator:
 
         The common case (a mechanism, a chain) of :meth:`_constrained_step`, without
         its bookkeeping of subsets; the arrays that persist across steps go to the
-        kernel as one table (:class:`.step_kernels.Pinned`).
+        kernel as one table (:class:`.kernels.views.Pinned`).
         """
         dyn = self.dynamics
         model = dyn.kernel_model(state.time + 0.5 * dt)
@@ -328,7 +330,7 @@ class Integrator:
         return new
 
 # ----------------------------------------------------------------------------------------
-# The methods (their arithmetic: step_kernels.py and constrained_kernels.py)
+# The methods (their arithmetic: kernels/free_step.py and kernels/constrained_step.py)
 
 
 class RKMK4(Integrator):
@@ -340,7 +342,7 @@ class RKMK4(Integrator):
     """
 
     name = 'rkmk4'
-    KERNEL = kern.RKMK4
+    KERNEL = methods.RKMK4
     order = 4
     EMBEDDED_ORDER = 3
     B_HAT = np.array([1.0, 2.0, 2.0, 0.0, 1.0]) / 6.0
@@ -373,7 +375,7 @@ class SymplecticEuler(Splitting):
     """First-order symplectic (semi-implicit) Euler: kick, then drift."""
 
     name = 'symplectic_euler'
-    KERNEL = kern.SYMPLECTIC_EULER
+    KERNEL = methods.SYMPLECTIC_EULER
     order = 1
     conserves = frozenset({Invariant.ORIENTATION_ON_SO3, Invariant.LINEAR_MOMENTUM,
                            Invariant.ANGULAR_MOMENTUM, Invariant.SYMPLECTIC,
@@ -385,22 +387,19 @@ class LiePoisson2(Splitting):
     """Second-order symplectic Lie–Poisson splitting (Strang, rotor 1-2-3-2-1)."""
 
     name = 'lie_poisson2'
-    KERNEL = kern.LIE_POISSON2
+    KERNEL = methods.LIE_POISSON2
     order = 2
     conserves = SymplecticEuler.conserves
-
-
-_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 
 
 class LiePoisson4(Splitting):
     """Fourth-order symplectic splitting: Yoshida's triple jump of lie_poisson2."""
 
     name = 'lie_poisson4'
-    KERNEL = kern.LIE_POISSON4
+    KERNEL = methods.LIE_POISSON4
     order = 4
     conserves = SymplecticEuler.conserves
-    COMPOSITION = (_W1, 1.0 - 2.0 * _W1, _W1)
+    COMPOSITION = (methods._W1, 1.0 - 2.0 * methods._W1, methods._W1)
 
 
 INTEGRATORS: dict[str, type] = {

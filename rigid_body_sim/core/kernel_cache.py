@@ -20,17 +20,22 @@ from pathlib import Path
 
 import numba
 
-#: The modules whose compiled kernels call one another.
-KERNEL_MODULES = ('step_kernels', 'row_kernels', 'tree_solve', 'loop_solve', 'constrained_kernels')
+#: The package whose compiled kernels call one another: every module of it is one unit.
+KERNELS = Path(__file__).resolve().parent / 'kernels'
 STAMP = 'kernel-sources.sha256'
 
 
+def kernel_modules() -> list[str]:
+    """Names of the modules of the kernel package (every one, found on disk)."""
+    return sorted(p.stem for p in KERNELS.glob('*.py'))
+
+
 def sources_digest() -> str:
-    """Hash of the kernel modules' sources and the numba version."""
-    here = Path(__file__).resolve().parent
+    """Hash of the kernel modules' sources (names and texts) and the numba version."""
     h = hashlib.sha256(numba.__version__.encode())
-    for name in KERNEL_MODULES:
-        h.update((here / f'{name}.py').read_bytes())
+    for name in kernel_modules():
+        h.update(name.encode() + b'\0')
+        h.update((KERNELS / f'{name}.py').read_bytes())
     return h.hexdigest()
 
 
@@ -38,7 +43,7 @@ def check(dispatcher) -> bool:
     """
     Delete the kernels' cached code if any kernel source changed since it was cached.
 
-    ``dispatcher``: any cached kernel of these modules (they share one cache
+    ``dispatcher``: any cached kernel of the package (its modules share one cache
     directory). Returns whether stale code was deleted. Does nothing when the
     kernels are not compiled (``NUMBA_DISABLE_JIT=1``) or the cache cannot be
     written (numba then compiles in memory).
@@ -55,7 +60,7 @@ def check(dispatcher) -> bool:
             return False
     except OSError:
         pass
-    stale = [f for name in KERNEL_MODULES for f in directory.glob(f'{name}.*.nb[ic]')]
+    stale = [f for name in kernel_modules() for f in directory.glob(f'{name}.*.nb[ic]')]
     try:
         for f in stale:
             f.unlink(missing_ok=True)

@@ -27,7 +27,7 @@ from typing import Any, Iterator, Optional, Sequence
 import numpy as np
 
 from . import rotation as so3
-from . import step_kernels
+from .kernels import free_step
 from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, ConstraintSet
@@ -42,7 +42,7 @@ from .validate import positive_scalar
 
 def _finite(s: State) -> bool:
     """Tell whether every number of a state is finite."""
-    return step_kernels.all_finite(*s.parts)
+    return free_step.all_finite(*s.parts)
 
 
 def _non_finite_bodies(s: State) -> np.ndarray:

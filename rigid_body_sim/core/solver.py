@@ -23,7 +23,7 @@ tridiagonal for chains, tree-shaped for trees. Chains and trees are eliminated
 in tree order by :mod:`.tree_solve` (Baraff 1996; linear in the number of
 links, compiled); systems of at most :data:`.constraints.DENSE_ROWS` rows use a
 dense Cholesky factorization, which is faster at that size. A step does this in
-compiled code (:mod:`.constrained_kernels`: dense up to :data:`KERNEL_DENSE_ROWS`
+compiled code (:mod:`.kernels.constrained_step`: dense up to :data:`KERNEL_DENSE_ROWS`
 rows; a closed loop, among bodies or through the world, by the tree solve of a
 spanning forest and the Schur complement of the rows that close the loops,
 :mod:`.loop_solve`); the
@@ -67,14 +67,14 @@ import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constrained_kernels import (dense_storage, GENERIC, pack, SOLVE_DENSE, SOLVE_LOOP,
-                                  SOLVE_TREE, tree_storage, workspace)
 from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geometry,
                           RowJacobian)
 from .dynamics import SolverCounters
 from .errors import SpecError
-from .loop_solve import loop_structure
-from .tree_solve import tree_structure, TreeSolver
+from .kernels.constrained_step import (dense_storage, GENERIC, pack, SOLVE_DENSE, SOLVE_LOOP,
+                                       SOLVE_TREE, tree_storage, workspace)
+from .kernels.loop_solve import loop_structure
+from .kernels.tree_solve import tree_structure, TreeSolver
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -124,7 +124,7 @@ class _GenericRows:
     A component's generic rows, evaluated for the compiled step.
 
     The constrained kernel calls :meth:`geometry` and :meth:`gamma` (through
-    ``constrained_kernels.generic_geometry`` and ``generic_gamma``) with the
+    ``kernels.constrained_step.generic_geometry`` and ``generic_gamma``) with the
     component's own state arrays; rows are written after its built-in rows.
     """
 
@@ -215,7 +215,7 @@ class ConstraintSolver:
         self._geometry_cache: Optional[tuple] = None
         self._tree_cache: Optional[tuple] = None
         self._kernel_cache: Optional[tuple] = None
-        # Keys of this solver's generic rows in constrained_kernels.GENERIC, dropped
+        # Keys of this solver's generic rows in kernels.constrained_step.GENERIC, dropped
         # when the setup is rebuilt or the solver is collected.
         self._generic_keys: list = []
         weakref.finalize(self, _drop_generic, self._generic_keys)
@@ -311,15 +311,15 @@ class ConstraintSolver:
         motion needs, and the bodies no constraint touches as free bodies
         (see "Sub-steps" in :mod:`.integrators`). Generic rows (a user's
         Python function) are evaluated by Python from inside the compiled step
-        (:data:`.constrained_kernels.GENERIC`). A component of at most
+        (:data:`.kernels.constrained_step.GENERIC`). A component of at most
         :data:`KERNEL_DENSE_ROWS` rows without a closed loop is solved densely, a
         larger one by the tree solve, and one whose joints close loops (through the
         world too, :data:`LOOP_DENSE_ROWS`) by the tree solve of a spanning forest
         and the Schur complement of the loop-closing rows (:mod:`.loop_solve`). Returns
         ``(free, components)``: the indices of the free bodies, and per component
         ``(bodies, rows_global, packed, solve, multipliers)``, ``solve`` one of
-        ``constrained_kernels.SOLVE_*`` and ``packed`` the arguments of
-        :func:`.constrained_kernels.packed_step` (its rows in the component's own
+        ``kernels.constrained_step.SOLVE_*`` and ``packed`` the arguments of
+        :func:`.kernels.constrained_step.packed_step` (its rows in the component's own
         body numbering, workspace and factor storages). Rebuilt only when the
         constraint set changes.
         """
@@ -381,7 +381,7 @@ class ConstraintSolver:
                 st = tree_structure(ra, rb, len(bodies))
                 solve, d = SOLVE_TREE, 0
             # Two storages each: general, and the symmetric factor kept for the
-            # current geometry (see constrained_kernels._sym_factor).
+            # current geometry (see kernels.constrained_step._sym_factor).
             trees = (tree_storage(st, closure, mc), tree_storage(st, closure, mc))
             body = np.zeros((len(bodies), 8))
             body[:, 1] = self.bodies.inv_mass[bodies]
@@ -406,7 +406,7 @@ class ConstraintSolver:
 
     def kernel_parameters(self, max_rotation: Optional[float], max_substeps: int,
                           closing: float) -> np.ndarray:
-        """Return the ``par`` array of :mod:`.constrained_kernels` for the settings now."""
+        """Return the ``par`` array of :mod:`.kernels.constrained_step` for the settings now."""
         return np.array([self.time_constant, self.omega, self.position_tolerance,
                          float(self.max_iterations), self.rank_rtol, self.regularization,
                          closing, np.inf if max_rotation is None else float(max_rotation),

@@ -1,12 +1,12 @@
 """
 Compiled kernels: a whole step of a constrained scene in one call.
 
-The methods are those of :mod:`.integrators` (RATTLE with SHAKE's Newton
+The methods are those of :mod:`..integrators` (RATTLE with SHAKE's Newton
 iterations in the splittings, Baumgarte-stabilized multipliers at every stage
 and a velocity projection in ``rkmk4``) and the linear algebra that of
-:mod:`.solver`, written over flat arrays and compiled by numba
+:mod:`..solver`, written over flat arrays and compiled by numba
 (``@njit(cache=True)``; ``NUMBA_DISABLE_JIT=1`` runs it as Python). The
-constraint rows are those of :mod:`.row_kernels` (point, dot, line, distance);
+constraint rows are those of :mod:`.rows` (point, dot, line, distance);
 the systems ``G M⁻¹ Hᵀ`` are solved densely (Cholesky, LU, or a truncated SVD
 for redundant rows) for small components and by the tree solve of
 :mod:`.tree_solve` for larger ones; a component whose joints close loops is
@@ -15,17 +15,17 @@ that close the loops (their Schur complement, :mod:`.loop_solve`). The solver
 chooses (:data:`.solver.KERNEL_DENSE_ROWS`, :data:`.solver.LOOP_DENSE_ROWS`).
 
 A step is split into sub-steps when a constrained body turns fast, and redone
-with twice as many when SHAKE stops converging (see :mod:`.integrators`); both
+with twice as many when SHAKE stops converging (see :mod:`..integrators`); both
 happen inside the call.
 
 Parameters array ``par`` (float64)
 ----------------------------------
 ``[time_constant, omega, position_tolerance, max_iterations, rank_rtol,
 regularization, closing, max_rotation, max_substeps]`` (see
-:class:`.solver.ConstraintSolver` and :class:`.integrators.Integrator`).
+:class:`..solver.ConstraintSolver` and :class:`..integrators.Integrator`).
 
 Work counts (``counts``: the simulation's int64 tally of work counters, which
-the kernels add to; see :class:`.dynamics.Dynamics`): the slots below.
+the kernels add to; see :class:`..dynamics.Dynamics`): the slots below.
 """
 
 from __future__ import annotations
@@ -35,17 +35,17 @@ import math
 from numba import njit, objmode
 import numpy as np
 
+from .free_step import (all_finite, damping_flow, drift, finish_accelerations, HAS_DAMPING, KICK,
+                        outputs, position_wrench, RHS, rkmk4_embedded_error, rkmk4_finish,
+                        rkmk4_slopes, rkmk4_stage, state_parts)
 from .loop_solve import loop_back, loop_forward, loop_schur
-from .row_kernels import framed_geometry, framed_rates, frames
-from .step_kernels import (all_finite, damping_flow, drift, finish_accelerations,
-                           HAS_DAMPING, KICK, LIE_POISSON4, normalize_quaternions,
-                           outputs, Pinned, pinned, pinned_int, position_wrench,
-                           positive_product, quat_exp_multiply, raw, raw_slice, RHS, RKMK4,
-                           rkmk4_embedded_error, rkmk4_finish, rkmk4_slopes, rkmk4_stage,
-                           state_parts, SYMPLECTIC_EULER)
+from .methods import _W1, LIE_POISSON4, RKMK4, SYMPLECTIC_EULER
+from .rows import framed_geometry, framed_rates, frames
+from .so3 import normalize_quaternions, positive_product, quat_exp_multiply
 from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_solve
+from .views import Pinned, pinned, pinned_int, raw, raw_slice
 
-# Counter slots beyond step_kernels' five.
+# Counter slots beyond free_step's five.
 DAMP_IN_KICK, GEOMETRY, FACTORIZATIONS, RANK_DEFICIENT, FALLBACKS = 5, 6, 7, 8, 9
 ACC_SOLVES, POS_ITERATIONS, VEL_PROJECTIONS, SUBSTEPS, RETRIES = 10, 11, 12, 13, 14
 # Steps whose sub-steps were capped at max_substeps (each then turns by more than
@@ -66,8 +66,6 @@ CHOLESKY, LU, SVD, TREE = 0, 1, 2, 3
 # the tree solve (a forest), or by the tree solve of a spanning forest and the Schur
 # complement of the rows that close loops (:mod:`.loop_solve`).
 SOLVE_DENSE, SOLVE_TREE, SOLVE_LOOP = 0, 1, 2
-
-_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 
 
 @njit(cache=True, inline='always')
@@ -331,7 +329,7 @@ def _g_times(Ga, Gb, a, b, x6, out):
 # words copied (perf: most of a pendulum step), the context 25.
 #
 # Slots of the layout (see _SLOTS): the rows ``(kind, comp, a, b, par)`` of
-# :mod:`.row_kernels`, the workspace (see :func:`workspace`) and the scratch arrays (see
+# :mod:`.rows`, the workspace (see :func:`workspace`) and the scratch arrays (see
 # :func:`scratch`), then the dense and the tree storages.
 KIND, COMP, ROW_A, ROW_B, ROW_PAR = range(5)
 PHI, JAC, VM, GT_LAMBDA, FREE_ACC, FORCE, TORQUE, MINV, FACTOR_STATE, WATCH = range(5, 15)
@@ -375,7 +373,7 @@ def _i1(cx, k):
 
 @njit(cache=True)
 def _rows(cx):
-    """Return the rows ``(kind, comp, a, b, par)`` (see :mod:`.row_kernels`)."""
+    """Return the rows ``(kind, comp, a, b, par)`` (see :mod:`.rows`)."""
     return _i1(cx, KIND), _i1(cx, COMP), _i1(cx, ROW_A), _i1(cx, ROW_B), _f2(cx, ROW_PAR)
 
 
@@ -681,7 +679,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
     the end: for an isotropic body ``J_r(u)`` (see :func:`_right_jacobians`, which
     fills every body first); for an anisotropic one, the derivative carried
     through the drift's rotor flows about the principal axes, each a rotation by
-    ``φ = τ L_k / J_k`` that also turns ``L`` (see ``step_kernels.axis_flow``).
+    ``φ = τ L_k / J_k`` that also turns ``L`` (see ``free_step.axis_flow``).
     ``scratch`` (6, 3) is overwritten.
     """
     _right_jacobians(quat_s, quat_e, Jr)
@@ -922,7 +920,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
 
     With ``err`` of length 1, the slopes at the end (constraint forces included,
     before the velocity projection) give the embedded estimate
-    (:func:`.step_kernels.rkmk4_embedded_error`), raising ``err[0]``. The solves
+    (:func:`.free_step.rkmk4_embedded_error`), raising ``err[0]``. The solves
     use the symmetric factor (see :func:`_sym_factor`).
     """
     n = pos.shape[0]
@@ -981,13 +979,13 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
     Parameters
     ----------
     method : int
-        A method code of :mod:`.step_kernels`.
+        A method code of :mod:`.methods`.
     pos0, quat0, vel0, om0 : ndarray
         The state at the start (not modified); shapes (n, 3), (n, 4), (n, 3), (n, 3).
     dt : float
         s.
     body, gforce, wrench, flags
-        The effects (see :mod:`.step_kernels`).
+        The effects (see :mod:`.free_step`).
     cx : tuple
         The component's context ``(floats, ints, layout, key, solve)``: its rows,
         workspace (whose current geometry persists between calls), scratch and
@@ -1222,7 +1220,7 @@ def packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
     ``key, floats, ints, layout`` replace ``rows, watch, tree, dense, ws``;
     ``solve`` (``SOLVE_DENSE``, ``SOLVE_TREE`` or ``SOLVE_LOOP``) says which
     storages are in use. With ``n`` rows, ``out`` (n, 19) gets the
-    :func:`.step_kernels.outputs` of the new state (``frames`` (n, 7)); with none,
+    :func:`.free_step.outputs` of the new state (``frames`` (n, 7)); with none,
     nothing. Returns whether every entry of the new state is finite.
     """
     finite = _packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
@@ -1237,7 +1235,7 @@ def component_table(method: int, model: tuple, par: np.ndarray, solve: int, pack
                     lam: np.ndarray, counts: np.ndarray, frames: np.ndarray, out: np.ndarray,
                     key: object) -> Pinned:
     """
-    Pin the arrays of :func:`pinned_packed_step` (a :class:`.step_kernels.Pinned`).
+    Pin the arrays of :func:`pinned_packed_step` (a :class:`.views.Pinned`).
 
     ``model`` is ``(body, gforce, wrench, flags)``, ``packed`` the ``(key, floats,
     ints, layout)`` of :func:`pack`; the others are arguments of

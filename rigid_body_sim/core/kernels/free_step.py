@@ -1,14 +1,14 @@
 """
 Compiled kernels: a whole step of bodies that no constraint couples, in one call.
 
-The integrators of :mod:`.integrators` take a step of an unconstrained scene
+The integrators of :mod:`..integrators` take a step of an unconstrained scene
 here, compiled by numba (``@njit(cache=True)``: the first run compiles and
 caches to ``__pycache__``; ``NUMBA_DISABLE_JIT=1`` runs the same code as plain
 Python for debugging). The arithmetic is that of the methods documented in
-:mod:`.integrators`, written as loops over bodies instead of ~1,000 small numpy
+:mod:`..integrators`, written as loops over bodies instead of ~1,000 small numpy
 calls a step; the results agree with the former numpy code to rounding.
 
-Model arrays (built by :meth:`.dynamics.Dynamics.kernel_model` when the scene
+Model arrays (built by :meth:`..dynamics.Dynamics.kernel_model` when the scene
 changes, never per step)
 ---------------------------------------------------------------------------
 ``body`` : (n, 8)
@@ -37,203 +37,18 @@ damping flows.
 from __future__ import annotations
 
 import math
-import weakref
 
-import numba
-from numba import carray, njit, types
-from numba.extending import intrinsic
+from numba import njit
 import numpy as np
 
-SYMPLECTIC_EULER, LIE_POISSON2, LIE_POISSON4, RKMK4 = 0, 1, 2, 3
+from .methods import _W1, LIE_POISSON4, RKMK4, SYMPLECTIC_EULER
+from .so3 import (_matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply,
+                  quat_matrix)
+from .views import Pinned, pinned, pinned_int, raw, raw_slice
 HAS_POSITION_FORCES, HAS_DAMPING = 1, 2
 RHS, KICK, GYRO, ROT, FLOW = 0, 1, 2, 3, 4
 # Bits of free_step's result.
 KICK_VALID, FINITE = 1, 2
-
-# Below this angle (rad) exp uses its series (as rotation.exp_quat).
-_SMALL_ANGLE = 1e-4
-_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
-
-
-@intrinsic
-def _address(typingctx, arr, offset):
-    """Pointer to element ``offset`` of the C-contiguous array ``arr`` (compiled code only)."""
-    if not isinstance(arr, types.Array) or arr.layout != 'C':
-        return None
-    sig = types.CPointer(arr.dtype)(arr, offset)
-
-    def codegen(context, builder, signature, args):
-        ary = context.make_array(signature.args[0])(context, builder, args[0])
-        return builder.gep(ary.data, [args[1]])
-    return sig, codegen
-
-
-def _pointer_at(dtype):
-    """Return an intrinsic: the ``dtype`` pointer at an integer address (compiled code only)."""
-    @intrinsic
-    def pointer_at(typingctx, address):
-        if not isinstance(address, types.Integer):
-            return None
-        sig = types.CPointer(dtype)(address)
-
-        def codegen(context, builder, signature, args):
-            return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
-        return sig, codegen
-    return pointer_at
-
-
-_float_at, _int_at = _pointer_at(types.float64), _pointer_at(types.int64)
-
-
-@njit(cache=True)
-def raw(a: np.ndarray) -> np.ndarray:
-    """
-    Return ``a`` (C-contiguous) as a view that carries no reference count.
-
-    numba counts references to every array a compiled function passes on or
-    slices, with an atomic increment and decrement each: in the many small
-    calls of a step they cost as much as the arithmetic (measured with perf:
-    20 % of a pendulum step in ``NRT_incref``/``NRT_decref``). A view made from
-    the data pointer has no memory-info object, so the counting is skipped. The
-    caller keeps ``a`` alive while the view is used: a kernel's arguments are
-    alive for the whole call, and no view outlives it.
-    """
-    return carray(_address(a, 0), a.shape)
-
-
-@njit(cache=True)
-def raw_slice(a: np.ndarray, start: int, shape: tuple) -> np.ndarray:
-    """Return ``a.ravel()[start:start + prod(shape)].reshape(shape)`` as a :func:`raw` view."""
-    return carray(_address(a, start), shape)
-
-
-@njit(cache=True)
-def pinned(table: np.ndarray, slot: int, shape: tuple) -> np.ndarray:
-    """Return the float64 array of :class:`Pinned` ``table``'s ``slot`` as a :func:`raw` view."""
-    return carray(_float_at(table[slot]), shape)
-
-
-@njit(cache=True)
-def pinned_int(table: np.ndarray, slot: int, shape: tuple) -> np.ndarray:
-    """Return the int64 array of :class:`Pinned` ``table``'s ``slot`` as a :func:`raw` view."""
-    return carray(_int_at(table[slot]), shape)
-
-
-if numba.config.DISABLE_JIT:
-    # Plain Python (debugging): the views are ordinary numpy views, and a pinned
-    # table's addresses are looked up among the arrays the tables keep (alive).
-    _PINNED = weakref.WeakValueDictionary()
-
-    def raw(a: np.ndarray) -> np.ndarray:   # noqa: F811
-        return a
-
-    def raw_slice(a: np.ndarray, start: int, shape: tuple) -> np.ndarray:   # noqa: F811
-        return a.reshape(-1)[start:start + math.prod(shape)].reshape(shape)
-
-    def pinned(table: np.ndarray, slot: int, shape: tuple) -> np.ndarray:   # noqa: F811
-        return _PINNED[int(table[slot])].reshape(-1)[:math.prod(shape)].reshape(shape)
-
-    pinned_int = pinned   # noqa: F811
-
-
-class Pinned:
-    """
-    Arrays that a kernel uses across many calls, passed as one int64 table.
-
-    Every array argument costs a compiled call about 65 ns to unbox (measured:
-    a call with 14 small arrays takes 0.95 µs, one with a table and 4 arrays
-    0.5 µs), more than the arithmetic of a small step. The arrays a step reads
-    or writes in place across calls (model, workspaces, work tally, outputs)
-    are therefore passed as a table: slot ``k < len(arrays)`` holds the address
-    of ``arrays[k]``, the slots after them the integers of ``values``. The
-    kernel makes :func:`raw` views of them with :func:`pinned`. This object
-    keeps the arrays alive: the table is valid while it exists, and the arrays
-    must never be resized (none of them ever is: they are replaced).
-
-    Parameters
-    ----------
-    arrays : sequence of ndarray
-        C-contiguous float64 or int64 arrays.
-    values : sequence of int
-        Sizes, flags and codes the kernel reads from the slots after them.
-    key : object
-        What the table was built for (the caller's identity check).
-
-    """
-
-    __slots__ = ('arrays', 'table', 'key')
-
-    def __init__(self, arrays, values=(), key=None) -> None:
-        for k, a in enumerate(arrays):
-            if a.dtype not in (np.float64, np.int64) or not a.flags.c_contiguous:
-                raise ValueError(f'arrays[{k}]: expected a C-contiguous float64 or int64 '
-                                 f'array, got {a.dtype} with flags {a.flags}')
-        self.arrays = tuple(arrays)
-        self.key = key
-        addresses = [a.__array_interface__['data'][0] for a in self.arrays]
-        self.table = np.array(addresses + [int(v) for v in values], dtype=np.int64)
-        if numba.config.DISABLE_JIT:
-            _PINNED.update(zip(addresses, self.arrays))
-
-
-@njit(cache=True)
-def quat_exp_multiply(q: np.ndarray, u0: float, u1: float, u2: float, out: np.ndarray) -> None:
-    """``out = q ⊗ exp(u)`` for one body (q, out: (4,), may be the same array)."""
-    theta = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-    half = 0.5 * theta
-    if theta < _SMALL_ANGLE:
-        t2 = theta * theta
-        coef = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
-    else:
-        coef = math.sin(half) / theta
-    bx, by, bz, bw = coef * u0, coef * u1, coef * u2, math.cos(half)
-    ax, ay, az, aw = q[0], q[1], q[2], q[3]
-    out[0] = aw * bx + ax * bw + ay * bz - az * by
-    out[1] = aw * by - ax * bz + ay * bw + az * bx
-    out[2] = aw * bz + ax * by - ay * bx + az * bw
-    out[3] = aw * bw - ax * bx - ay * by - az * bz
-
-
-@njit(cache=True)
-def _matrix(x: float, y: float, z: float, w: float) -> tuple:
-    """Rotation matrix of the unit quaternion (x, y, z, w), row by row (9 floats)."""
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    return (1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
-            2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
-            2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy))
-
-
-@njit(cache=True)
-def positive_product(ax: float, ay: float, az: float, aw: float, bx: float, by: float,
-                     bz: float, bw: float) -> tuple:
-    """Return the quaternion product ``a ⊗ b`` (xyzw), its sign chosen so that ``w >= 0``."""
-    x = aw * bx + ax * bw + ay * bz - az * by
-    y = aw * by - ax * bz + ay * bw + az * bx
-    z = aw * bz + ax * by - ay * bx + az * bw
-    w = aw * bw - ax * bx - ay * by - az * bz
-    if w < 0.0:
-        return -x, -y, -z, -w
-    return x, y, z, w
-
-
-@njit(cache=True)
-def quat_matrix(q: np.ndarray, R: np.ndarray) -> None:
-    """Rotation matrix ``R`` (3, 3) of the unit quaternion ``q`` (4,, xyzw)."""
-    x, y, z, w = q[0], q[1], q[2], q[3]
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    R[0, 0] = 1.0 - 2.0 * (yy + zz)
-    R[0, 1] = 2.0 * (xy - wz)
-    R[0, 2] = 2.0 * (xz + wy)
-    R[1, 0] = 2.0 * (xy + wz)
-    R[1, 1] = 1.0 - 2.0 * (xx + zz)
-    R[1, 2] = 2.0 * (yz - wx)
-    R[2, 0] = 2.0 * (xz - wy)
-    R[2, 1] = 2.0 * (yz + wx)
-    R[2, 2] = 1.0 - 2.0 * (xx + yy)
 
 
 @njit(cache=True)
@@ -312,25 +127,6 @@ def accelerations(quat: np.ndarray, vel: np.ndarray, om: np.ndarray, body: np.nd
     position_wrench(quat, body, gforce, wrench, acc, om_dot)
     counts[RHS] += 1
     finish_accelerations(vel, om, body, flags, acc, om_dot, counts)
-
-
-@njit(cache=True)
-def dexpinv(u: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
-    """
-    Inverse right-trivialized ``dexp`` to second order, row by row.
-
-    ``du/dt = w + u × w / 2 + u × (u × w) / 12 + O(|u|⁴)`` for ``R(t) = R0
-    exp(hat(u(t)))`` with ``dR/dt = R hat(w)``: enough for order 4 (Hairer,
-    Lubich & Wanner, Geometric Numerical Integration, IV.8.2).
-    """
-    for i in range(u.shape[0]):
-        a0, a1, a2 = u[i, 0], u[i, 1], u[i, 2]
-        b0, b1, b2 = w[i, 0], w[i, 1], w[i, 2]
-        c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-        d0, d1, d2 = a1 * c2 - a2 * c1, a2 * c0 - a0 * c2, a0 * c1 - a1 * c0
-        out[i, 0] = b0 + 0.5 * c0 + d0 / 12.0
-        out[i, 1] = b1 + 0.5 * c1 + d1 / 12.0
-        out[i, 2] = b2 + 0.5 * c2 + d2 / 12.0
 
 
 @njit(cache=True)
@@ -580,15 +376,6 @@ def splitting_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarr
 
 
 @njit(cache=True)
-def normalize_quaternions(quat: np.ndarray) -> None:
-    """Remove the rounding error of the unit quaternions (n, 4), in place."""
-    for i in range(quat.shape[0]):
-        s = math.sqrt(quat[i, 0] ** 2 + quat[i, 1] ** 2 + quat[i, 2] ** 2 + quat[i, 3] ** 2)
-        for c in range(4):
-            quat[i, c] /= s
-
-
-@njit(cache=True)
 def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
               om: np.ndarray, dt: float, body: np.ndarray, gforce: np.ndarray,
               wrench: np.ndarray, flags: int, kick: np.ndarray, kick_valid: bool,
@@ -668,7 +455,7 @@ def state_parts(y: np.ndarray) -> tuple:
     """
     Return ``pos, quat, vel, om`` of a state's buffer ``y`` (13 n) as :func:`raw` views.
 
-    The layout of :class:`.bodies.State`: positions (n, 3), quaternions (n, 4),
+    The layout of :class:`..bodies.State`: positions (n, 3), quaternions (n, 4),
     velocities (n, 3), Ω (n, 3), one after the other.
     """
     n = y.shape[0] // 13

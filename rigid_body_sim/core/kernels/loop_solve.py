@@ -25,7 +25,7 @@ impulse response ``M⁻¹ H_jᵀ``, non-zero only on the forest rows that share 
 body with closure row ``j``. The cost is a tree factorization plus ``c`` tree
 solves and the products with ``X`` and ``A_CT`` (kept as (c, m) arrays, so a
 solve needs no blocks), ``O(c² m)``, and a dense ``c³``
-factorization of ``S`` (by the caller: :mod:`.constrained_kernels` factors it
+factorization of ``S`` (by the caller: :mod:`.constrained_step` factors it
 as it factors a small dense system, with a truncated SVD when closure rows are
 redundant, as in a planar loop modelled in 3D); linear in the size of the
 mechanism for a fixed number of loops, where a dense solve is ``O(m³)``.

@@ -40,7 +40,7 @@ Rows, with anchors ``P = x + R r``, ``d = P_a − P_b``, ``u = R_a s``,
 The Jacobian rows are with respect to ``(δx_com_world, δΘ_principal)`` of each
 body (``δR = R hat(δΘ)``): ``Ga`` (m, 6) on body a, ``Gb`` (m, 6) on body b
 (computed for the world too; the caller drops those entries). Rotations are
-those of :func:`.rotation.quat_to_matrix` (quaternions ``(x, y, z, w)``,
+those of :func:`..rotation.quat_to_matrix` (quaternions ``(x, y, z, w)``,
 principal frame to world).
 """
 
@@ -49,7 +49,7 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
-from .step_kernels import quat_matrix
+from .so3 import quat_matrix
 
 KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE = 0, 1, 2, 3
 PAR_RA, PAR_RB, PAR_S, PAR_E, PAR_SCALAR = 0, 3, 6, 9, 12

@@ -1,0 +1,24 @@
+"""
+The compiled kernels (numba): plain functions over flat float64 and int64 arrays.
+
+They import only one another, numba, numpy and math; never the classes of
+:mod:`rigid_body_sim.core` that call them (a test checks). One module per concern:
+
+``views``
+    Views of arrays without reference counting, tables of array addresses.
+``so3``
+    Unit quaternions and rotation matrices, one body at a time.
+``methods``
+    The integration methods' codes and coefficients (the one copy).
+``free_step``
+    A whole step of bodies no constraint couples; outputs, state distances.
+``rows``
+    The constraint rows' geometry and rates (point, dot, line, distance).
+``tree_solve``, ``loop_solve``
+    The constraint system of a forest in tree order, and of a spanning forest
+    plus the Schur complement of the rows that close loops.
+``constrained_step``
+    A whole step of one component of the constraint graph (RATTLE and SHAKE).
+
+:mod:`..kernel_cache` treats every module of this package as one unit.
+"""
