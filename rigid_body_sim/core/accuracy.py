@@ -56,9 +56,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .kernels import free_step as kern
 from .bodies import State
 from .errors import SpecError
+from .kernels import free_step as kern
 
 #: Default most sub-steps a step may take under the knob.
 DEFAULT_BUDGET = 1024

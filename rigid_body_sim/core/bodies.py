@@ -31,8 +31,8 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from . import rotation as so3
-from .kernels import free_step
 from .errors import SpecError
+from .kernels import free_step
 from .validate import finite_array, positive_scalar, unit_quaternion
 
 # Relative tolerances for properties of the inertia tensor given by a user in

@@ -104,13 +104,13 @@ from typing import ClassVar, Optional
 
 import numpy as np
 
+from .bodies import State
+from .dynamics import Dynamics, STEPS
+from .errors import SpecError
 from .kernels import constrained_step as ckern
 from .kernels import free_step as kern
 from .kernels import methods
 from .kernels.views import Pinned
-from .bodies import State
-from .dynamics import Dynamics, STEPS
-from .errors import SpecError
 
 
 #: ``error`` argument of the kernels when no estimate is asked for.

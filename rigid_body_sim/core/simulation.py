@@ -27,7 +27,6 @@ from typing import Any, Iterator, Optional, Sequence
 import numpy as np
 
 from . import rotation as so3
-from .kernels import free_step
 from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, ConstraintSet
@@ -36,6 +35,7 @@ from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
 from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
+from .kernels import free_step
 from .solver import ConstraintSolver
 from .validate import positive_scalar
 
