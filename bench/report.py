@@ -124,7 +124,7 @@ def _table_text(path: Path, since: float) -> Optional[str]:
     lines = text.splitlines()
     if lines and lines[0].startswith('# '):
         text = '\n'.join(lines[1:]).strip()
-    return _demote(text, 2)
+    return _demote(text, 1)
 
 
 def performance_page(sections: list, out: Path, since: float, command: str,
