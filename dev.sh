@@ -17,7 +17,8 @@
 #   ./dev.sh plot BAG [-o out.png]        plot a bag
 #   ./dev.sh test [pytest args]           run the whole test suite
 #   ./dev.sh bench [--quick]              run the benchmarks (installs bench/requirements.txt:
-#                                         MuJoCo; tables and plots in bench/out/)
+#                                         MuJoCo; tables and plots in bench/out/, all the
+#                                         tables in docs/performance.md)
 #   ./dev.sh python [ARGS]                python in the environment (with bench/requirements.txt),
 #                                         e.g. one benchmark: ./dev.sh python bench/node.py
 #   ./dev.sh setup                        set up only
@@ -180,7 +181,7 @@ case "$cmd" in
         exec python "$@"
         ;;
     *)
-        sed -n '2,23p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'
         exit 2
         ;;
 esac

@@ -29,18 +29,15 @@ and the ratio of the two.
 
 Run: ``python bench/accuracy_study.py [--quick]`` in the environment of ``./dev.sh``
 with ``bench/requirements.txt`` installed (``./dev.sh bench`` does both). Writes
-``docs/accuracy_study.md`` and ``docs/accuracy_study.png`` (committed: the README
-shows them) with the machine, versions and date (``--quick``: to ``bench/out``).
+``docs/accuracy_study.md`` and ``docs/accuracy_study.png`` (committed: the README links
+them) headed by ``report.header()``, the machine, versions, commit and date (``--quick``:
+to ``bench/out``).
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
 from pathlib import Path
-import platform
-import subprocess
 import sys
 
 import numpy as np
@@ -50,6 +47,7 @@ from rigid_body_sim.core.reference import dop853_trajectory, free_body_reference
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import mujoco_peer as peer  # noqa: E402, I100
+from report import header  # noqa: E402
 
 DOCS = Path(__file__).resolve().parents[1] / 'docs'
 TARGETS = (1e-2, 1e-4, 1e-6, 1e-8)
@@ -457,22 +455,6 @@ def plot(rows: list, path: Path) -> None:
         ax.axis('off')
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-
-
-def header() -> str:
-    import mujoco
-    import numba
-    import scipy
-    try:
-        commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
-                                text=True, cwd=DOCS.parent).stdout.strip()
-    except OSError:
-        commit = '?'
-    cpu = platform.processor() or platform.machine()
-    return (f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC; {cpu}, '
-            f'{os.cpu_count()} cores, {platform.system()} {platform.release()}; python '
-            f'{platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, '
-            f'numba {numba.__version__}, mujoco {mujoco.__version__}; rigid_body_sim {commit}')
 
 
 def main(argv=None) -> None:

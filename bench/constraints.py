@@ -141,9 +141,14 @@ def accuracy(dts, integrators):
     return rows
 
 
+def _cell(f, v):
+    # NaN: not measured in this run (an exponent over N >= 100 in a --quick run).
+    return '-' if isinstance(v, float) and v != v else f.format(v)
+
+
 def _table(path, header, rows, fmt):
     lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
-    lines += ['| ' + ' | '.join(f.format(v) for f, v in zip(fmt, r)) + ' |' for r in rows]
+    lines += ['| ' + ' | '.join(_cell(f, v) for f, v in zip(fmt, r)) + ' |' for r in rows]
     path.write_text('\n'.join(lines) + '\n')
 
 

@@ -8,13 +8,19 @@ Benchmarks: what accuracy costs in time (not tests; timings are for reading, not
    effects a scene lists cost: gravity on/off, isotropic vs anisotropic bodies.
    Speeds are compared as ratios measured side by side in one run.
 
-Then ``bench/constraints.py`` (chains, trees, joints) and ``bench/knob_estimators.py`` (the
-accuracy knob's estimators; ``--skip-constraints`` skips both), and
-``bench/node.py`` (the ROS node through DDS: rates, costs, latency; ``--skip-node`` to skip).
+Then ``bench/constraints.py`` (chains, trees, rings, joints), ``bench/knob_estimators.py``
+(the accuracy knob's estimators), ``bench/tree_solve.py`` (the tree solve against SuperLU)
+and ``bench/shake_convergence.py`` (SHAKE's iterations; ``--skip-constraints`` skips these
+four), ``bench/mujoco_peer.py`` and ``bench/accuracy_study.py`` (beside MuJoCo;
+``--skip-mujoco``), and ``bench/node.py`` (the ROS node through DDS: rates, costs,
+latency; ``--skip-node``). A benchmark that fails is reported and the others run on.
 
 Writes ``bench/out/*.md`` (the tables) and, when matplotlib is installed,
-``bench/out/*.png`` (log-log plots). Run: ``./dev.sh bench`` (``--quick`` for a
-short run).
+``bench/out/*.png`` (log-log plots), then assembles the tables into
+``docs/performance.md`` (committed) under a header of date, machine, versions and
+commit (``report.py``); with a ``--skip-*`` flag the page goes to
+``bench/out/performance.md`` instead, so that a partial run never replaces the
+committed page. Run: ``./dev.sh bench`` (``--quick`` for a short run).
 """
 
 from __future__ import annotations
@@ -24,13 +30,18 @@ from pathlib import Path
 import platform
 import sys
 import time
+import traceback
 
 import numpy as np
 from rigid_body_sim.core import Gravity, INTEGRATORS, RigidBody, Simulation
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core.reference import free_body_reference
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import report  # noqa: E402, I100
+
 OUT = Path(__file__).resolve().parent / 'out'
+DOCS = Path(__file__).resolve().parents[1] / 'docs'
 
 # Free-body scenes: (name, principal moments in ascending order, so that the principal
 # frame is the body frame, Ω0 in it, duration).
@@ -191,22 +202,9 @@ def _plots(wp_rows, sc_rows):
     print(f'plots: {OUT / "work_precision.png"}, {OUT / "scaling.png"}')
 
 
-def main(argv=None) -> int:
-    """Run the benchmarks; ``--quick`` for a short smoke run."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument('--quick', action='store_true', help='fewer step sizes and bodies')
-    p.add_argument('--skip-constraints', action='store_true',
-                   help='free bodies only (bench/constraints.py runs the rest)')
-    p.add_argument('--skip-node', action='store_true',
-                   help='no ROS node benchmark (bench/node.py runs it)')
-    p.add_argument('--skip-mujoco', action='store_true',
-                   help='no side-by-side with MuJoCo (bench/mujoco_peer.py and '
-                        'bench/accuracy_study.py run it)')
-    args = p.parse_args(argv)
-    OUT.mkdir(exist_ok=True)
-    print(f'python {platform.python_version()}, numpy {np.__version__}, '
-          f'{platform.machine()}, {platform.processor() or "cpu"}')
-    if args.quick:
+def free_bodies(quick: bool) -> int:
+    """Work-precision, scaling and effect costs of free bodies (tables in bench/out)."""
+    if quick:
         dts, max_steps, ns, repeats = (1e-1, 1e-2), 2000, (1, 100), 20
     else:
         dts, max_steps, ns, repeats = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4), 10 ** 5, \
@@ -216,7 +214,7 @@ def main(argv=None) -> int:
     _write_table(OUT / 'work_precision.md',
                  ('scene', 'integrator', 'dt [s]', 'error at end', 'max rel. dE',
                   'max rel. d|L|', 'wall s / sim s'), wp,
-                 ('{}', '{}', '{:.0e}', '{:.1e}', '{:.1e}', '{:.1e}', '{:.4f}'))
+                 ('{}', '{}', '{:.0e}', '{:.1e}', '{:.1e}', '{:.1e}', '{:.3g}'))
     print('\n== cost per step vs number of bodies (anisotropic bodies, gravity) ==')
     sc = scaling(ns, repeats)
     _write_table(OUT / 'scaling.md', ('integrator', 'bodies', 'us / step', 'us / body-step'),
@@ -229,20 +227,110 @@ def main(argv=None) -> int:
                  ('{}', '{}', '{:.1f}', '{:.2f}', '{}', '{}'))
     _plots(wp, sc)
     print(f'tables: {OUT}/work_precision.md, scaling.md, effects.md')
-    if not args.skip_constraints:
-        import constraints
-        constraints.main(['--quick'] if args.quick else [])
-        import knob_estimators
-        knob_estimators.main(['--quick'] if args.quick else [])
-    if not args.skip_mujoco:
-        import mujoco_peer
-        mujoco_peer.main(['--quick'] if args.quick else [])
-        import accuracy_study
-        accuracy_study.main(['--quick'] if args.quick else [])
-    if not args.skip_node:
-        import node
-        node.main(['--quick'] if args.quick else [])
     return 0
+
+
+def sections(quick: bool, node_args: list) -> list:
+    """Return the page's sections in order: (flag that skips it, module, argv, Section)."""
+    q = ' --quick' if quick else ''
+    T = report.Table
+    return [
+        (None, None, None, report.Section(
+            'Free bodies', f'./dev.sh bench{q} --skip-constraints --skip-mujoco --skip-node',
+            [T('work_precision.md', 'Work-precision: error against DOP853 (rtol 1e-12), '
+                                    'energy and |L| drift, wall time per simulated second'),
+             T('scaling.md', 'Cost per step against the number of bodies (anisotropic, '
+                             'gravity)'),
+             T('effects.md', 'What each effect costs, side by side (ratio to isotropic '
+                             'bodies without gravity; the work counters beside)')])),
+        ('skip_constraints', 'constraints', ['--quick'] if quick else [], report.Section(
+            'Constraints', f'./dev.sh python bench/constraints.py{q}',
+            [T('constraints_scaling.md', 'Cost per step: chains and binary trees of rods on '
+                                         'ball joints, rings of hinged rods closed by a '
+                                         'ball joint'),
+             T('constraints_growth.md', 'Growth exponent p of time ∝ N^p'),
+             T('constraints_whip.md', '100-link chains whipping (lie_poisson2, dt 1e-3)'),
+             T('constraints_accuracy.md', 'Pendulum (60° release: period error) and four-bar '
+                                          '(crank angle at 2.1 s) across integrators')])),
+        ('skip_constraints', 'knob_estimators', ['--quick'] if quick else [], report.Section(
+            'Accuracy knob estimators', f'./dev.sh python bench/knob_estimators.py{q}',
+            [T('knob_estimators.md')],
+            about='`rkmk4` at dt 1e-2 under each tolerance: the default (embedded pair for '
+                  'steps of one sub-step, doubling beyond), the embedded pair alone, step '
+                  'doubling alone.')),
+        ('skip_constraints', 'tree_solve', ['--quick'] if quick else [], report.Section(
+            'The tree solve against SuperLU', f'./dev.sh python bench/tree_solve.py{q}',
+            [T('tree_solve.md')])),
+        ('skip_constraints', 'shake_convergence', [], report.Section(
+            'SHAKE iterations', './dev.sh python bench/shake_convergence.py',
+            [T('shake_convergence.md')],
+            about='A top on a ball joint, the up-front sub-steps switched off, so that every '
+                  'step turns it by the angle in the first column; 200 steps.')),
+        ('skip_mujoco', 'mujoco_peer', ['--quick'] if quick else [], report.Section(
+            'Side by side with MuJoCo', f'./dev.sh python bench/mujoco_peer.py{q}',
+            [T('mujoco_peer.md')])),
+        ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
+            'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
+            [],
+            about='The study sweeps step sizes and the accuracy knob in both simulators and '
+                  'writes its own page, [accuracy_study.md](accuracy_study.md), with its '
+                  'own header (machine, versions, commit, date); the full run writes it, a '
+                  '`--quick` run only `bench/out/accuracy_study.md` (not copied here).')),
+        ('skip_node', 'node', node_args, report.Section(
+            'The ROS node', f'./dev.sh python bench/node.py{q}', [T('node.md')])),
+    ]
+
+
+def main(argv=None) -> int:
+    """Run the benchmarks and write docs/performance.md; ``--quick`` for a short run."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    p.add_argument('--quick', action='store_true', help='fewer step sizes and bodies')
+    p.add_argument('--skip-constraints', action='store_true',
+                   help='free bodies only (bench/constraints.py, knob_estimators.py, '
+                        'tree_solve.py and shake_convergence.py run the rest)')
+    p.add_argument('--skip-node', action='store_true',
+                   help='no ROS node benchmark (bench/node.py runs it)')
+    p.add_argument('--skip-mujoco', action='store_true',
+                   help='no side-by-side with MuJoCo (bench/mujoco_peer.py and '
+                        'bench/accuracy_study.py run it)')
+    p.add_argument('--max-wait', type=float, metavar='S',
+                   help='passed to bench/node.py (how long it waits for a quiet machine)')
+    args = p.parse_args(argv)
+    OUT.mkdir(exist_ok=True)
+    since = time.time()
+    started, load_start = report.header(), report.load()
+    print(started)
+    print(f'python {platform.python_version()}, numpy {np.__version__}, '
+          f'{platform.machine()}, {platform.processor() or "cpu"}')
+    node_args = (['--quick'] if args.quick else []) + (
+        ['--max-wait', f'{args.max_wait:g}'] if args.max_wait is not None else [])
+    page, failures = [], 0
+    for flag, module, module_args, section in sections(args.quick, node_args):
+        page.append(section)
+        if flag and getattr(args, flag):
+            section.skipped = '--' + flag.replace('_', '-')
+            continue
+        try:
+            if module is None:
+                rc = free_bodies(args.quick)
+            else:
+                rc = __import__(module).main(module_args)
+        except SystemExit as exc:   # (a benchmark that exits: MuJoCo missing, ...)
+            rc = exc.code
+        except Exception as exc:  # noqa: B902 - report it, run the others
+            traceback.print_exc()
+            rc = f'{type(exc).__name__}: {exc}'.splitlines()[0]
+        if rc not in (None, 0):
+            failures += 1
+            section.failed = rc if isinstance(rc, str) else f'exit code {rc}'
+            print(f'** {section.title}: {section.failed}', flush=True)
+    partial = args.skip_constraints or args.skip_mujoco or args.skip_node
+    target = (OUT if partial else DOCS) / 'performance.md'
+    given = argv if argv is not None else sys.argv[1:]
+    command = ' '.join(['./dev.sh bench', *given])
+    target.write_text(report.performance_page(page, OUT, since, command, started, load_start))
+    print(f'\nwrote {target}' + (f' ({failures} benchmark(s) failed)' if failures else ''))
+    return 1 if failures else 0
 
 
 if __name__ == '__main__':

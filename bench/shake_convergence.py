@@ -10,12 +10,17 @@ the anisotropic top and an isotropic body. With the rotor's sensitivity in the
 Newton matrix (see ``kernels.constrained_step._rotor_jacobians``) the first
 iteration is Newton's, and its factorization serves the later ones while they
 converge fast: 1 to 2 iterations up to 0.25 rad a step, 2.5 at 1 rad, one
-factorization. Run: ``./dev.sh python bench/shake_convergence.py``.
+factorization. Run: ``./dev.sh python bench/shake_convergence.py`` (``./dev.sh bench``
+runs it too); writes ``bench/out/shake_convergence.md``.
 """
+
+from pathlib import Path
 
 import numpy as np
 from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation
 from rigid_body_sim.core import rotation as so3
+
+OUT = Path(__file__).resolve().parent / 'out'
 
 
 def top(dt: float, rate: float, isotropic: bool) -> Simulation:
@@ -30,9 +35,12 @@ def top(dt: float, rate: float, isotropic: bool) -> Simulation:
     return sim
 
 
-def main() -> None:
-    print('rotation per step | SHAKE iterations and factorizations per step: anisotropic top '
-          '| isotropic body')
+def main(argv=None) -> None:
+    """Print the table and write it to ``bench/out/shake_convergence.md``."""
+    header = ('| rotation per step | anisotropic top: SHAKE iterations, factorizations per '
+              '(sub)step | isotropic body: the same |')
+    lines = [header, '|---|---|---|']
+    print(header)
     for rate, dt in ((10.0, 1e-3), (100.0, 1e-3), (100.0, 2.5e-3), (100.0, 1e-2)):
         cells = []
         for isotropic in (False, True):
@@ -46,7 +54,11 @@ def main() -> None:
             cells.append(f'{counters.position_iterations / steps:.2f}, {shake:.2f} factorized '
                          f"(retries {work['retries']}, fallbacks "
                          f'{counters.projection_fallbacks})')
-        print(f'{rate * dt:.3f} rad | ' + ' | '.join(cells))
+        lines.append(f'| {rate * dt:.3f} rad | ' + ' | '.join(cells) + ' |')
+        print(lines[-1], flush=True)
+    OUT.mkdir(exist_ok=True)
+    (OUT / 'shake_convergence.md').write_text('\n'.join(lines) + '\n')
+    print(f'wrote {OUT / "shake_convergence.md"}')
 
 
 if __name__ == '__main__':

@@ -136,12 +136,12 @@ def table(rows):
     return '\n'.join(lines)
 
 
-def main():
+def main(argv=None):
     """Run the benchmark, print the table and write bench/out/tree_solve.md."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--quick', action='store_true', help='fewer repetitions')
     parser.add_argument('--repeats', type=int, default=None, help='repetitions per timing')
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     repeats = args.repeats or (3 if args.quick else 9)
     ns = [10, 30, 100, 300, 1000]
     text = (f'# Tree solver (Baraff 1996) vs SuperLU: hinges, 5 rows per joint, median of '
