@@ -56,7 +56,7 @@ order of the gravity force of the body. Step sizes above
 from __future__ import annotations
 
 import itertools
-from typing import Callable, Optional, Sequence, TYPE_CHECKING
+from typing import Callable, NamedTuple, Optional, Sequence, TYPE_CHECKING
 import warnings
 import weakref
 
@@ -71,8 +71,8 @@ from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geo
                           RowJacobian)
 from .dynamics import SolverCounters
 from .errors import SpecError
-from .kernels.constrained_step import (dense_storage, GENERIC, pack, SOLVE_DENSE, SOLVE_LOOP,
-                                       SOLVE_TREE, tree_storage, workspace)
+from .kernels.constrained_step import dense_storage, GENERIC, pack, tree_storage, workspace
+from .kernels.layout import BODY, PAR, Solve
 from .kernels.loop_solve import loop_structure
 from .kernels.tree_solve import tree_structure, TreeSolver
 from .validate import positive_scalar
@@ -168,6 +168,34 @@ class _GenericRows:
                                                     need_jacobian=False)[2]
             gamma[r0:r0 + len(values)] = values
             r0 += len(values)
+
+
+class ComponentSetup(NamedTuple):
+    """What the compiled step of one connected component of the constraint graph works with."""
+
+    #: Indices (k,) of the component's bodies.
+    bodies: np.ndarray
+    #: Indices (m,) of its rows in the constraint set.
+    rows: np.ndarray
+    #: ``(key, floats, ints, layout)``: the arguments of
+    #: :func:`.kernels.constrained_step.packed_step` (its rows in the component's own
+    #: body numbering, workspace and factor storages).
+    packed: tuple
+    #: The packed arrays by name (:data:`.kernels.layout.COMPONENT`), as views.
+    views: dict
+    #: How its systems are solved.
+    solve: Solve
+    #: λ (m,) of its rows, written by the kernels.
+    multipliers: np.ndarray
+
+
+class KernelSetup(NamedTuple):
+    """The compiled step's data: the free bodies and the constraint graph's components."""
+
+    #: Indices of the bodies no constraint touches.
+    free: np.ndarray
+    #: One per connected component.
+    components: tuple
 
 
 class ConstraintSolver:
@@ -302,7 +330,7 @@ class ConstraintSolver:
         self._tree_cache = (cs, cs.version, tree)
         return tree
 
-    def kernel_setup(self) -> tuple:
+    def kernel_setup(self) -> KernelSetup:
         """
         Return what the compiled constrained step works with, per component.
 
@@ -316,12 +344,7 @@ class ConstraintSolver:
         larger one by the tree solve, and one whose joints close loops (through the
         world too, :data:`LOOP_DENSE_ROWS`) by the tree solve of a spanning forest
         and the Schur complement of the loop-closing rows (:mod:`.loop_solve`). Returns
-        ``(free, components)``: the indices of the free bodies, and per component
-        ``(bodies, rows_global, packed, solve, multipliers)``, ``solve`` one of
-        ``kernels.constrained_step.SOLVE_*`` and ``packed`` the arguments of
-        :func:`.kernels.constrained_step.packed_step` (its rows in the component's own
-        body numbering, workspace and factor storages). Rebuilt only when the
-        constraint set changes.
+        a :class:`KernelSetup`. Rebuilt only when the constraint set changes.
         """
         cs = self.constraints
         c = self._kernel_cache
@@ -373,19 +396,20 @@ class ConstraintSolver:
                 # Closed loops: the tree solve of a spanning forest and a dense
                 # system of the rows that close the loops.
                 st, closure = loops
-                solve, d = SOLVE_LOOP, len(closure)
+                solve, d = Solve.LOOP, len(closure)
             elif mc <= (DENSE_ROWS if closes else KERNEL_DENSE_ROWS):
-                solve, d = SOLVE_DENSE, mc
+                solve, d = Solve.DENSE, mc
                 st = tree_structure(ra[:0], rb[:0], len(bodies))
             else:
                 st = tree_structure(ra, rb, len(bodies))
-                solve, d = SOLVE_TREE, 0
+                solve, d = Solve.TREE, 0
             # Two storages each: general, and the symmetric factor kept for the
             # current geometry (see kernels.constrained_step._sym_factor).
             trees = (tree_storage(st, closure, mc), tree_storage(st, closure, mc))
-            body = np.zeros((len(bodies), 8))
-            body[:, 1] = self.bodies.inv_mass[bodies]
-            body[:, 2:5] = self.bodies.moments[bodies]
+            body = np.zeros((len(bodies), BODY.width))
+            body[:, BODY.start['inv_mass']] = self.bodies.inv_mass[bodies]
+            j = BODY.start['moments']
+            body[:, j:j + 3] = self.bodies.moments[bodies]
             # Built-in rows first (compiled), then generic ones (Python, object mode).
             builtin = rows_global[rows_global < mb]
             generic = [res for res in cs._gen if label[res.a] == lab]
@@ -394,23 +418,25 @@ class ConstraintSolver:
                 key = next(_KEYS)
                 GENERIC[key] = _GenericRows(cs, bodies, generic, len(builtin))
                 self._generic_keys.append(key)
-            rows = (cs.row_kind[builtin], cs.row_comp[builtin], ra, rb,
-                    np.ascontiguousarray(cs.row_par[builtin]), key)
-            ws = workspace(len(bodies), mc, body)
-            packed, _ = pack(rows, (*ws[:9], ws[9].astype(np.int64)),
-                             (dense_storage(d), dense_storage(d)), trees)
-            components.append((bodies, rows_global, packed, solve, np.zeros(mc)))
-        setup = (np.flatnonzero(~touched), components)
+            rows = {'kind': cs.row_kind[builtin], 'comp': cs.row_comp[builtin], 'row_a': ra,
+                    'row_b': rb, 'row_par': np.ascontiguousarray(cs.row_par[builtin]),
+                    'key': key}
+            packed, views = pack(rows, workspace(len(bodies), mc, body),
+                                 (dense_storage(d), dense_storage(d)), trees)
+            components.append(ComponentSetup(bodies, rows_global, packed, views, solve,
+                                             np.zeros(mc)))
+        setup = KernelSetup(np.flatnonzero(~touched), tuple(components))
         self._kernel_cache = (cs, cs.version, setup)
         return setup
 
     def kernel_parameters(self, max_rotation: Optional[float], max_substeps: int,
                           closing: float) -> np.ndarray:
         """Return the ``par`` array of :mod:`.kernels.constrained_step` for the settings now."""
-        return np.array([self.time_constant, self.omega, self.position_tolerance,
-                         float(self.max_iterations), self.rank_rtol, self.regularization,
-                         closing, np.inf if max_rotation is None else float(max_rotation),
-                         float(max_substeps)])
+        return PAR.row(tau=self.time_constant, omega=self.omega,
+                       pos_tol=self.position_tolerance, max_it=float(self.max_iterations),
+                       rank_rtol=self.rank_rtol, reg=self.regularization, closing=closing,
+                       max_rot=np.inf if max_rotation is None else float(max_rotation),
+                       max_sub=float(max_substeps))
 
     def _tree_factor(self, tree: TreeSolver, G: RowJacobian,
                      H: Optional[RowJacobian]) -> Callable:
