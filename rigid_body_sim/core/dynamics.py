@@ -351,17 +351,18 @@ class Dynamics:
 
     def accelerations(self, time: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                       omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Linear acceleration (n, 3, world) and dΩ/dt (n, 3, principal) of every body."""
+        """
+        Free accelerations: linear (n, 3, world) and dΩ/dt (n, 3, principal) of every body.
+
+        Every effect and the gyroscopic term, evaluated in numpy, without the
+        constraints' forces (those come from the compiled solve in a step, and from
+        :func:`.reference.constrained_accelerations` for references and tests).
+        """
         self.counters.rhs_evaluations += 1
         kin = self.kinematics(time, pos, quat, vel, omega)
         force, torque = self.wrench(kin, self.effects)
         torque = torque - self.gyroscopic(omega)
-        acc, om_dot = force * self.bodies.inv_mass[:, None], torque / self.bodies.moments
-        if not self.constrained:
-            return acc, om_dot
-        a6, self.last_multipliers, _ = self.solver.constrained(
-            pos, quat, vel, omega, np.hstack([acc, om_dot]))
-        return a6[:, :3], a6[:, 3:]
+        return force * self.bodies.inv_mass[:, None], torque / self.bodies.moments
 
 
 def check_kernel_effect(effect: Effect, field_name: str) -> None:

@@ -161,7 +161,6 @@ class Integrator:
         # last) while the model and the configuration it was evaluated at are current.
         self._kick_buffer = np.zeros((len(dynamics.bodies), 6))
         self._kick_at: Optional[tuple] = None
-        self._geometry_at: Optional[tuple] = None
         self._parameters: Optional[tuple] = None
         # The free-body kernel's workspace, sized for every body of the scene.
         self._ws = np.empty(kern.workspace_size(len(dynamics.bodies)))
@@ -218,8 +217,7 @@ class Integrator:
         if key is None or key[0] is not model or key[1] is not par or key[2] is not setup:
             table = self._component_table(model, par, setup)
         y0 = state.y
-        at = self._geometry_at
-        valid = at is not None and at[0] is setup and at[1] is y0
+        valid = setup.geometry_of[0] is y0
         # A new buffer (a copy: the cheapest fresh array), overwritten by the kernel.
         y = y0.copy()
         before = dyn.defer_effect_work() if dyn.effects else None
@@ -230,7 +228,7 @@ class Integrator:
         if before is not None:
             dyn.count_effect_work_since(before)
         # The component's workspace now holds the geometry of its new configuration.
-        self._geometry_at = (setup, y)
+        setup.geometry_of[0] = y
         dyn.tally[STEPS] += 1
         new = State.of(t_end, y)
         if with_outputs:
@@ -306,8 +304,7 @@ class Integrator:
             pos[free], quat[free], vel[free], om[free] = p, q, v, o
             if counting:
                 dyn.count_effect_work_since(before, acting)
-        at = self._geometry_at
-        valid = at is not None and at[0] is setup and at[1] is state.y
+        valid = setup.geometry_of[0] is state.y
         lam = dyn.last_multipliers
         if len(lam) != solver.constraints.n_rows or lam is components[0].multipliers:
             lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)
@@ -327,7 +324,7 @@ class Integrator:
             if counting:
                 dyn.count_effect_work_since(before, acting)
         # Each component's workspace now holds the geometry of its new configuration.
-        self._geometry_at = (setup, new.y)
+        setup.geometry_of[0] = new.y
         self.finite = finite
         tally[STEPS] += 1
         return new

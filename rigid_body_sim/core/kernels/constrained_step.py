@@ -3,8 +3,7 @@ Compiled kernels: a whole step of a constrained scene in one call.
 
 The methods are those of :mod:`..integrators` (RATTLE with SHAKE's Newton
 iterations in the splittings, Baumgarte-stabilized multipliers at every stage
-and a velocity projection in ``rkmk4``) and the linear algebra that of
-:mod:`..solver`, written over flat arrays and compiled by numba
+and a velocity projection in ``rkmk4``), written over flat arrays and compiled by numba
 (``@njit(cache=True)``; ``NUMBA_DISABLE_JIT=1`` runs it as Python). The
 constraint rows are those of :mod:`.rows` (point, dot, line, distance);
 the systems ``G M⁻¹ Hᵀ`` are solved densely (Cholesky, LU, or a truncated SVD
@@ -12,7 +11,12 @@ for redundant rows) for small components and by the tree solve of
 :mod:`.tree_solve` for larger ones; a component whose joints close loops is
 solved by the tree solve of a spanning forest and a dense system of the rows
 that close the loops (their Schur complement, :mod:`.loop_solve`). The solver
-chooses (:data:`.solver.KERNEL_DENSE_ROWS`, :data:`.solver.LOOP_DENSE_ROWS`).
+chooses (:data:`..solver.KERNEL_DENSE_ROWS`, :data:`..solver.LOOP_DENSE_ROWS`).
+This is the one implementation of the constraint solve: besides the step,
+:class:`..solver.ConstraintSolver` calls it for the multipliers at a state
+(:func:`component_multipliers`: the reactions a user reads), the velocity
+projection (:func:`component_project_velocities`) and the consistency search
+(:func:`component_reach`).
 
 A step is split into sub-steps when a constrained body turns fast, and redone
 with twice as many when SHAKE stops converging (see :mod:`..integrators`); both
@@ -1197,6 +1201,107 @@ def tree_storage(structure, closure: np.ndarray, m: int) -> dict:
     if len(arrays) != len(TREE_FIELDS):
         raise ValueError(f'tree storage: expected {len(TREE_FIELDS)} arrays, got {len(arrays)}')
     return dict(zip((f.name for f in TREE_FIELDS.fields), arrays))
+
+
+# ----------------------------------------------------------------------------------------
+# The other uses of a component's solve, outside a step: the multipliers at a state (the
+# reactions a user reads), the velocity projection (reset, a new joint) and the Gauss-Newton
+# search that decides whether constraints can hold together. Each is the step's own code
+# (its geometry, factorizations and solves) on the component's packed buffers.
+
+
+@njit(cache=True)
+def component_multipliers(pos, quat, vel, om, body, gforce, wrench, flags, par, solve, key,
+                          floats, ints, layout, c_valid, lam, counts):
+    """
+    λ (m,) at a state: the acceleration-level multipliers a kick there would use.
+
+    Free accelerations of every effect (:func:`_free_accelerations`), then
+    :func:`_multipliers`, as in :func:`_kick`. ``c_valid``: the workspace's
+    current geometry is of ``pos, quat`` (a step ended there), so it is reused,
+    with the symmetric factor if the step left one; otherwise both are computed
+    here. Afterwards the workspace holds the geometry ``G`` (slot ``JAC``,
+    ``CURRENT``) and ``Gᵀλ`` (``GT_LAMBDA``) of this state.
+    """
+    cx = (raw(floats), raw(ints), raw(layout), key, solve)   # CONTEXT's order
+    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, _f2(cx, FREE_ACC),
+                        _f2(cx, FORCE), _f2(cx, TORQUE), counts)
+    if not c_valid:
+        _geometry(pos, quat, cx, CURRENT, counts)
+    _multipliers(pos, quat, vel, om, cx, par, lam, counts)
+
+
+@njit(cache=True)
+def component_project_velocities(pos, quat, vel, om, body, par, solve, key, floats, ints,
+                                 layout, c_valid, counts):
+    """
+    Project ``vel``, ``om`` (in place) onto ``Φ̇ = −ωΦ``: the step's :func:`_project_velocities`.
+
+    The mass-weighted minimum-norm change (a perfectly inelastic impact, which
+    conserves momenta). ``c_valid`` as for :func:`component_multipliers`.
+    """
+    cx = (raw(floats), raw(ints), raw(layout), key, solve)   # CONTEXT's order
+    if not c_valid:
+        _geometry(pos, quat, cx, CURRENT, counts)
+    mom = _f3(cx, BODY_VECTORS)[0]
+    n = pos.shape[0]
+    for i in range(n):
+        for c in range(3):
+            mom[i, c] = om[i, c] * body[i, B_MOMENTS + c]
+    _project_velocities(pos, quat, vel, mom, body, cx, par, counts)
+    for i in range(n):
+        for c in range(3):
+            om[i, c] = mom[i, c] / body[i, B_MOMENTS + c]
+
+
+@njit(cache=True)
+def component_reach(pos, quat, tolerance, max_iterations, par, solve, key, floats, ints,
+                    layout, counts):
+    """
+    Smallest ``max |Φ|`` Gauss–Newton reaches from ``pos, quat`` (not modified).
+
+    Minimum-norm steps ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁺ Φ`` (redundant rows: the
+    truncated SVD of a dense system, the Tikhonov term of the tree solve, as in
+    a step) converge quadratically to ``Φ = 0`` when the constraints can hold
+    together; for an inconsistent set they stall at the least-squares
+    compromise. Stops below ``tolerance``, after three iterations that do not
+    reduce the residual, or after ``max_iterations``. Leaves the workspace's
+    current geometry at the last iterate (not of the state).
+    """
+    cx = (raw(floats), raw(ints), raw(layout), key, solve)   # CONTEXT's order
+    pos, quat = pos.copy(), quat.copy()
+    n = pos.shape[0]
+    vm, g6, minv6 = _f2(cx, VM), _f2(cx, GT_LAMBDA), _f2(cx, MINV)
+    phi3, G = _f2(cx, PHI), _f4(cx, JAC)
+    a, b = _i1(cx, ROW_A), _i1(cx, ROW_B)
+    best, stalled = np.inf, 0
+    for _ in range(max_iterations + 1):
+        _geometry(pos, quat, cx, CURRENT, counts)
+        phi, Ga, Gb = phi3[CURRENT], G[CURRENT, 0], G[CURRENT, 1]
+        norm = 0.0
+        for r in range(phi.shape[0]):
+            if not abs(phi[r]) < np.inf:
+                return best   # not finite: the last finite iterate's residual
+            norm = max(norm, abs(phi[r]))
+        if norm <= tolerance:
+            return min(best, norm)
+        # Far from the solution one step may overshoot; three without progress stall.
+        stalled = stalled + 1 if norm >= (1.0 - 1e-6) * best else 0
+        best = min(best, norm)
+        if stalled == 3:
+            return best
+        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, GENERAL, counts)
+        _sol(mode, phi, vm[3], cx, GENERAL)
+        _gt_lambda(Ga, Gb, a, b, vm[3], g6)
+        for i in range(n):
+            for c in range(3):
+                pos[i, c] -= minv6[i, c] * g6[i, c]
+            quat_exp_multiply(quat[i], -minv6[i, 3] * g6[i, 3], -minv6[i, 4] * g6[i, 4],
+                              -minv6[i, 5] * g6[i, 5], quat[i])
+            s = math.sqrt(quat[i, 0] ** 2 + quat[i, 1] ** 2 + quat[i, 2] ** 2 + quat[i, 3] ** 2)
+            for c in range(4):
+                quat[i, c] /= s
+    return best
 
 
 @njit(cache=True)
