@@ -3,6 +3,7 @@
 import ast
 from pathlib import Path
 
+from joint_scenes import pendulum
 import numpy as np
 import pytest
 from rigid_body_sim.core import Constraint, Damping, Gravity, RigidBody, Simulation
@@ -10,13 +11,11 @@ from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core.mechanisms import chain, four_bar, ring, tree
 from rigid_body_sim.core.reference import constrained_accelerations
 
-from joint_scenes import pendulum
-
 EPS = np.finfo(float).eps
 
 
 def two_components(name, damping=False):
-    """A pendulum, a separate hinged pair and a free body: the per-component path."""
+    """Build a pendulum, a separate hinged pair and a free body: the per-component path."""
     bodies = [RigidBody('bob', 1.0, [1e-3, 2e-3, 3e-3], position_world=[0.3, 0.0, -0.4],
                         linear_velocity_world=[0.0, 0.5, 0.0]),
               RigidBody('p', 2.0, [0.02, 0.03, 0.04], position_world=[2.0, 0.0, 0.0],
@@ -41,7 +40,7 @@ SCENES = {
 
 
 def oracle(sim):
-    """The naive dense oracle at the state: generalized constraint force, cond(G M⁻¹ Gᵀ)."""
+    """Return the naive oracle's constraint wrench on each body now, and cond(G M⁻¹ Gᵀ)."""
     s, dyn = sim.state, sim.dynamics
     args = (s.time, s.pos_com_world, s.quat_principal_world, s.vel_com_world,
             s.ang_vel_principal)
