@@ -127,7 +127,7 @@ activate() {
 compile_kernels() {
     # numba compiles the core's kernels at their first call and caches them next to the
     # sources: do it here, once (about 130 s), not in the node's first start or a test.
-    if ! ls "$ROOT"/rigid_body_sim/core/__pycache__/*.nbi >/dev/null 2>&1; then
+    if ! ls "$ROOT"/rigid_body_sim/core/kernels/__pycache__/*.nbi >/dev/null 2>&1; then
         say "compiling the step kernels (numba, about 2 minutes the first time)"
     fi
     python -m rigid_body_sim.core.warmup >&2

@@ -100,13 +100,13 @@ def test_a_closed_loop_solved_through_its_spanning_tree_moves_as_when_solved_den
     # solve of its spanning chain plus the Schur complement of the closing joint's rows
     # must give the motion of the dense solve (which it replaced for closed loops).
     from rigid_body_sim.core import solver
-    from rigid_body_sim.core.kernels import constrained_step as ck
+    from rigid_body_sim.core.kernels.layout import Solve
     loop = ring(12, name)
-    assert loop.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_LOOP
+    assert loop.dynamics.solver.kernel_setup().components[0].solve == Solve.LOOP
     monkeypatch.setattr(solver, 'DENSE_ROWS', 1000)
     monkeypatch.setattr(solver, 'LOOP_DENSE_ROWS', 1000)
     dense = ring(12, name)
-    assert dense.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
+    assert dense.dynamics.solver.kernel_setup().components[0].solve == Solve.DENSE
     for _ in range(4):
         loop.step(50)
         dense.step(50)
@@ -162,16 +162,16 @@ def test_mid_sized_components_take_the_tree_solve_unless_they_close_a_loop(name,
     # the dense solve; the same chain with a joint added twice (a loop of two, redundant
     # rows) keeps the dense solve and its truncated SVD, and moves as without the copy.
     from rigid_body_sim.core import solver
-    from rigid_body_sim.core.kernels import constrained_step as ck
+    from rigid_body_sim.core.kernels.layout import Solve
     tree = _hinge_chain(6, name)
     twice = _hinge_chain(5, name, again=True)
     assert tree.dynamics.solver.constraints.n_rows == twice.dynamics.solver.constraints.n_rows
-    assert tree.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_TREE
-    assert twice.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
+    assert tree.dynamics.solver.kernel_setup().components[0].solve == Solve.TREE
+    assert twice.dynamics.solver.kernel_setup().components[0].solve == Solve.DENSE
     once = _hinge_chain(5, name)
     monkeypatch.setattr(solver, 'KERNEL_DENSE_ROWS', 48)
     dense = _hinge_chain(6, name)
-    assert dense.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
+    assert dense.dynamics.solver.kernel_setup().components[0].solve == Solve.DENSE
     for sim in (tree, dense, twice, once):
         sim.step(400)   # 0.4 s of a falling chain
     # bound: the solves' rounding grown by the chain (a 1e-12 push grows 130x): 1e-12; x1000
@@ -188,13 +188,13 @@ def test_a_loop_through_the_world_is_closed_like_one_among_bodies(name, monkeypa
     # closure block's truncated SVD. It must move as under the dense solve of the whole
     # system, as unbiased (the tree solve's Tikhonov term would not be).
     from rigid_body_sim.core import solver
-    from rigid_body_sim.core.kernels import constrained_step as ck
+    from rigid_body_sim.core.kernels.layout import Solve
     from rigid_body_sim.core.mechanisms import four_bar
     loop = four_bar(name, 1e-3)
-    assert loop.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_LOOP
+    assert loop.dynamics.solver.kernel_setup().components[0].solve == Solve.LOOP
     monkeypatch.setattr(solver, 'LOOP_DENSE_ROWS', 1000)
     dense = four_bar(name, 1e-3)
-    assert dense.dynamics.solver.kernel_setup()[1][0][3] == ck.SOLVE_DENSE
+    assert dense.dynamics.solver.kernel_setup().components[0].solve == Solve.DENSE
     for sim in (loop, dense):
         sim.step(1000)
     # bound: rounding grown <= 150x: 1e-11; rkmk4's drift, split otherwise: 2.5e-10; x4

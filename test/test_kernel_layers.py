@@ -53,3 +53,65 @@ def test_the_kernel_cache_hashes_every_module_of_the_package():
     names = kernel_cache.kernel_modules()
     assert names == sorted(p.stem for p in _modules())
     assert {'free_step', 'constrained_step', 'rows', 'tree_solve', 'loop_solve'} <= set(names)
+
+
+def test_slot_indices_are_generated_from_the_one_declaration():
+    from rigid_body_sim.core.kernels import layout
+    for k, f in enumerate(layout.COMPONENT.fields):
+        assert getattr(layout, f.name.upper()) == k
+    assert layout.TREE0 + layout.TREE_SLOTS * 2 == len(layout.COMPONENT)
+    assert layout.COMPONENT.fields[layout.DENSE0 + layout.DENSE_SLOTS + layout.D_VT].name == (
+        'symmetric_dense_vt')
+    assert layout.BODY.width == layout.B_WIDTH == 8
+    assert layout.N_COUNTS == len(layout.Count)
+
+
+def _component(m=3, n=2):
+    from rigid_body_sim.core.kernels import constrained_step as ck
+    from rigid_body_sim.core.kernels.tree_solve import tree_structure
+    import numpy as np
+    a, b = np.zeros(m, dtype=np.int64), np.full(m, n, dtype=np.int64)
+    st = tree_structure(a[:0], b[:0], n)
+    rows = {'kind': a.copy(), 'comp': a.copy(), 'row_a': a, 'row_b': b,
+            'row_par': np.zeros((m, 13)), 'key': -1}
+    body = np.ones((n, 8))
+    trees = tuple(ck.tree_storage(st, np.zeros(0, dtype=np.int64), m) for _ in range(2))
+    return ck, rows, ck.workspace(n, m, body), (ck.dense_storage(m), ck.dense_storage(m)), trees
+
+
+def test_pack_takes_arrays_by_name_and_returns_named_views():
+    ck, rows, ws, dense, trees = _component()
+    packed, views = ck.pack(rows, ws, dense, trees)
+    assert packed[0] == -1
+    views['phi'][1, 2] = 7.0
+    from rigid_body_sim.core.kernels.layout import PHI
+    start = packed[3][PHI, 0]
+    assert packed[1][start + 1 * 3 + 2] == 7.0   # phi (3, m) row-major in the float buffer
+
+
+def test_pack_refuses_a_missing_or_misshapen_array_naming_it():
+    ck, rows, ws, dense, trees = _component()
+    del ws['vm']
+    with pytest.raises(ValueError, match=r"missing \['vm'\]"):
+        ck.pack(rows, ws, dense, trees)
+    ck, rows, ws, dense, trees = _component()
+    ws['minv'] = ws['minv'].ravel()
+    with pytest.raises(ValueError, match=r'component\.minv: expected 2 dimensions'):
+        ck.pack(rows, ws, dense, trees)
+    ck, rows, ws, dense, trees = _component()
+    ws['watch'] = ws['watch'].astype(float)
+    with pytest.raises(ValueError, match=r'component\.watch: expected int64'):
+        ck.pack(rows, ws, dense, trees)
+
+
+def test_a_layout_refuses_a_name_declared_twice_and_a_table_an_unknown_slot():
+    import numpy as np
+    from rigid_body_sim.core.kernels import layout
+    with pytest.raises(ValueError, match=r"declared twice: \['phi'\]"):
+        layout.Layout('x', (('phi', 'f', 1), ('phi', 'f', 2)))
+    with pytest.raises(ValueError, match=r"unknown slots \['bodies'\], missing \['body'\]"):
+        layout.FREE_TABLE.pin(bodies=np.zeros(1), gforce=0, wrench=0, kick=0, counts=0, ws=0,
+                              frames=0, out=0, n_wrench=0, flags=0, method=0, n_counts=0,
+                              n_ws=0)
+    with pytest.raises(ValueError, match=r"unknown columns \['dt'\]"):
+        layout.PAR.row(dt=1.0)

@@ -8,9 +8,105 @@ import sys
 import numpy as np
 import pytest
 from rigid_body_sim.core.kernels.tree_solve import (factor_arrays, tree_factor, tree_solve,
-                                                    tree_structure, TreeSolver)
+                                                    tree_structure)
 
 EPS = np.finfo(float).eps
+
+
+class TreeSolver:
+    """
+    The compiled tree solve for these tests: structure, preallocated factors, factor, solve.
+
+    Parameters
+    ----------
+    a, b : array_like of int, shape (m,)
+        Bodies of each row (``b == n_bodies``: the world), see :func:`tree_structure`.
+    n_bodies : int
+        Number of bodies.
+
+    Raises
+    ------
+    ValueError
+        If the body/group graph has a cycle (use a general sparse solver).
+
+    """
+
+    def __init__(self, a, b, n_bodies: int):
+        structure = tree_structure(a, b, n_bodies)
+        if structure is None:
+            raise ValueError('the constraint graph has a closed loop: not a tree')
+        self.structure = structure
+        self.m = int(np.size(a))
+        self.S, self.piv, self.P, self.Q, self.B, self.W, self.E, self.tmp = \
+            factor_arrays(structure)
+        self.pivot = np.nan
+
+    def factor(self, Ga, Gb, minv6, Ha=None, Hb=None, reg: float = 0.0) -> float:
+        """
+        Factorize ``G M⁻¹ Hᵀ + reg I`` (``H = G`` when ``Ha``/``Hb`` are omitted).
+
+        Parameters
+        ----------
+        Ga, Gb : array_like, shape (m, 6)
+            Blocks of ``G`` on bodies ``a`` and ``b``.
+        minv6 : array_like, shape (n_bodies, 6)
+            Diagonal inverse masses.
+        Ha, Hb : array_like, shape (m, 6), optional
+            Blocks of ``H``.
+        reg : float
+            Tikhonov term ``>= 0``.
+
+        Returns
+        -------
+        float
+            Smallest relative pivot (see :func:`tree_factor`).
+
+        """
+        Ga = np.ascontiguousarray(Ga, dtype=np.float64)
+        Gb = np.ascontiguousarray(Gb, dtype=np.float64)
+        Ha = Ga if Ha is None else np.ascontiguousarray(Ha, dtype=np.float64)
+        Hb = Gb if Hb is None else np.ascontiguousarray(Hb, dtype=np.float64)
+        minv6 = np.ascontiguousarray(minv6, dtype=np.float64)
+        m, n = self.m, self.structure.n_bodies
+        for name, x, shape in (('Ga', Ga, (m, 6)), ('Gb', Gb, (m, 6)), ('Ha', Ha, (m, 6)),
+                               ('Hb', Hb, (m, 6)), ('minv6', minv6, (n, 6))):
+            if x.shape != shape:
+                raise ValueError(f'{name} must have shape {shape}, got {x.shape}')
+        if not reg >= 0.0:
+            raise ValueError(f'reg must be >= 0, got {reg}')
+        self.pivot = tree_factor(*self.structure.arrays, Ga, Gb, Ha, Hb, minv6, float(reg),
+                                 self.S, self.piv, self.P, self.Q, self.B, self.W,
+                                 Ha is Ga and Hb is Gb)
+        return self.pivot
+
+    def solve(self, rhs) -> np.ndarray:
+        """
+        Solve with the last factorization.
+
+        Parameters
+        ----------
+        rhs : array_like, shape (m,) or (m, q)
+            One or ``q`` right-hand sides.
+
+        Returns
+        -------
+        ndarray, shape of ``rhs``
+            ``x`` with ``(A + reg I) x = rhs``.
+
+        """
+        rhs = np.asarray(rhs, dtype=np.float64)
+        if rhs.ndim not in (1, 2) or rhs.shape[0] != self.m:
+            raise ValueError(f'rhs must have shape ({self.m},) or ({self.m}, q)')
+        args = (*self.structure.arrays[:4], self.S, self.piv, self.P, self.Q, self.B, self.E,
+                self.tmp)
+        if rhs.ndim == 1:
+            out = np.empty(self.m)
+            tree_solve(*args, np.ascontiguousarray(rhs), out)
+            return out
+        out = np.empty((rhs.shape[1], self.m))
+        for q in range(rhs.shape[1]):
+            tree_solve(*args, np.ascontiguousarray(rhs[:, q]), out[q])
+        return out.T.copy()
 
 
 def random_minv6(rng, n):
@@ -327,7 +423,8 @@ def test_without_jit():
     """The kernels run unchanged as plain Python (NUMBA_DISABLE_JIT=1)."""
     code = (
         'import numpy as np\n'
-        'from rigid_body_sim.core.kernels.tree_solve import TreeSolver\n'
+        'import sys; sys.path.insert(0, "test")\n'
+        'from test_tree_solve import TreeSolver\n'
         'rng = np.random.default_rng(1)\n'
         'a = np.repeat(np.arange(5), 5); b = np.repeat(np.arange(-1, 4), 5); b[b < 0] = 5\n'
         'Ga, Gb, Ha = rng.normal(size=(3, 25, 6)); minv6 = 1 + rng.random((5, 6))\n'

@@ -33,6 +33,7 @@ import numpy as np
 from . import rotation as so3
 from .errors import SpecError
 from .kernels import free_step
+from .kernels.layout import OUTPUT
 from .validate import finite_array, positive_scalar, unit_quaternion
 
 # Relative tolerances for properties of the inertia tensor given by a user in
@@ -193,11 +194,12 @@ class _Outputs:
     replaces a state's buffer, it does not modify it.
     """
 
-    _PARTS = ((0, 3), (3, 7), (7, 10), (10, 13), (13, 16), (16, 19))
+    #: The column ranges of ``out`` (:data:`.kernels.layout.OUTPUT`), in its order.
+    _PARTS = tuple((k, k + w) for k, w in zip(OUTPUT.start.values(), (3, 4, 3, 3, 3, 3)))
     NOTHING = (None, None)
 
     def __init__(self, n: int, quat_body_principal: np.ndarray, com_body: np.ndarray) -> None:
-        self.out = np.empty((n, 19))
+        self.out = np.empty((n, OUTPUT.width))
         self.views = [tuple(self.out[i, a:b] for a, b in self._PARTS) for i in range(n)]
         self.views.append(tuple(self.out[:, a:b] for a, b in self._PARTS))
         self.frames = np.ascontiguousarray(np.hstack([quat_body_principal, com_body]))

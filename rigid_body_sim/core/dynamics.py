@@ -25,10 +25,8 @@ from . import rotation as so3
 from .bodies import BodySet
 from .effects import AppliedWrenches, Damping, Effect, Gravity, Kinematics, WrenchAccumulator
 from .errors import SpecError
-from .kernels.constrained_step import (ACC_SOLVES, CAPPED, DAMP_IN_KICK, FACTORIZATIONS,
-                                       FALLBACKS, GEOMETRY, N_COUNTS, POS_ITERATIONS,
-                                       RANK_DEFICIENT, RETRIES, SUBSTEPS, VEL_PROJECTIONS)
-from .kernels.free_step import FLOW, GYRO, HAS_DAMPING, HAS_POSITION_FORCES, KICK, RHS, ROT
+from .kernels.free_step import HAS_DAMPING, HAS_POSITION_FORCES
+from .kernels.layout import Count, N_COUNTS
 
 #: The effects the compiled kernels evaluate (see :mod:`.kernels.free_step`).
 KERNEL_EFFECTS = (Gravity, Damping, AppliedWrenches)
@@ -120,18 +118,19 @@ class WorkCounters(TalliedCounters):
 
     """
 
-    SLOTS = {'steps': STEPS, 'rhs_evaluations': RHS, 'kick_evaluations': KICK,
-             'gyroscopic_body_evaluations': GYRO, 'rotation_updates': ROT,
-             'substeps': SUBSTEPS, 'retries': RETRIES, 'capped_steps': CAPPED}
+    SLOTS = {'steps': STEPS, 'rhs_evaluations': Count.RHS, 'kick_evaluations': Count.KICK,
+             'gyroscopic_body_evaluations': Count.GYRO, 'rotation_updates': Count.ROT,
+             'substeps': Count.SUBSTEPS, 'retries': Count.RETRIES, 'capped_steps': Count.CAPPED}
 
 
 class SolverCounters(TalliedCounters):
     """Work of the constraint solver: factorizations and projection iterations."""
 
-    SLOTS = {'geometry_evaluations': GEOMETRY, 'factorizations': FACTORIZATIONS,
-             'rank_deficient_solves': RANK_DEFICIENT, 'projection_fallbacks': FALLBACKS,
-             'acceleration_solves': ACC_SOLVES, 'position_iterations': POS_ITERATIONS,
-             'velocity_projections': VEL_PROJECTIONS}
+    SLOTS = {'geometry_evaluations': Count.GEOMETRY, 'factorizations': Count.FACTORIZATIONS,
+             'rank_deficient_solves': Count.RANK_DEFICIENT,
+             'projection_fallbacks': Count.FALLBACKS, 'acceleration_solves': Count.ACC_SOLVES,
+             'position_iterations': Count.POS_ITERATIONS,
+             'velocity_projections': Count.VEL_PROJECTIONS}
 
 
 class Dynamics:
@@ -318,8 +317,9 @@ class Dynamics:
         ``before``: ``tally.tolist()`` before the kernel calls.
         """
         n = self.tally.tolist()
-        self.count_effect_work(n[RHS] - before[RHS], n[KICK] - before[KICK],
-                               n[FLOW] + n[DAMP_IN_KICK] - before[FLOW] - before[DAMP_IN_KICK],
+        rhs, kick, flow, damp = Count.RHS, Count.KICK, Count.FLOW, Count.DAMP_IN_KICK
+        self.count_effect_work(n[rhs] - before[rhs], n[kick] - before[kick],
+                               n[flow] + n[damp] - before[flow] - before[damp],
                                acting)
 
     @property
@@ -351,17 +351,18 @@ class Dynamics:
 
     def accelerations(self, time: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                       omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Linear acceleration (n, 3, world) and dΩ/dt (n, 3, principal) of every body."""
+        """
+        Free accelerations: linear (n, 3, world) and dΩ/dt (n, 3, principal) of every body.
+
+        Every effect and the gyroscopic term, evaluated in numpy, without the
+        constraints' forces (those come from the compiled solve in a step, and from
+        :func:`.reference.constrained_accelerations` for references and tests).
+        """
         self.counters.rhs_evaluations += 1
         kin = self.kinematics(time, pos, quat, vel, omega)
         force, torque = self.wrench(kin, self.effects)
         torque = torque - self.gyroscopic(omega)
-        acc, om_dot = force * self.bodies.inv_mass[:, None], torque / self.bodies.moments
-        if not self.constrained:
-            return acc, om_dot
-        a6, self.last_multipliers, _ = self.solver.constrained(
-            pos, quat, vel, omega, np.hstack([acc, om_dot]))
-        return a6[:, :3], a6[:, 3:]
+        return force * self.bodies.inv_mass[:, None], torque / self.bodies.moments
 
 
 def check_kernel_effect(effect: Effect, field_name: str) -> None:

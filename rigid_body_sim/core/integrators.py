@@ -142,7 +142,7 @@ class Integrator:
     name: ClassVar[str] = ''
     order: ClassVar[int] = 0
     conserves: ClassVar[frozenset] = frozenset()
-    #: The method's code in :mod:`.kernels.free_step`.
+    #: The method's code (:class:`.kernels.methods.Method`).
     KERNEL: ClassVar[int] = -1
     #: Order of the embedded solution whose difference estimates the error (None:
     #: no embedded pair; the accuracy knob then uses step doubling).
@@ -161,7 +161,6 @@ class Integrator:
         # last) while the model and the configuration it was evaluated at are current.
         self._kick_buffer = np.zeros((len(dynamics.bodies), 6))
         self._kick_at: Optional[tuple] = None
-        self._geometry_at: Optional[tuple] = None
         self._parameters: Optional[tuple] = None
         # The free-body kernel's workspace, sized for every body of the scene.
         self._ws = np.empty(kern.workspace_size(len(dynamics.bodies)))
@@ -187,7 +186,7 @@ class Integrator:
         if not self.dynamics.constrained:
             return self._free_step(state, dt, t_end, err)
         setup = self.dynamics.solver.kernel_setup()
-        if not len(setup[0]) and len(setup[1]) == 1:
+        if not len(setup.free) and len(setup.components) == 1:
             return self._whole_step(state, dt, t_end, setup, err)
         return self._constrained_step(state, dt, t_end, setup, err)
 
@@ -218,19 +217,18 @@ class Integrator:
         if key is None or key[0] is not model or key[1] is not par or key[2] is not setup:
             table = self._component_table(model, par, setup)
         y0 = state.y
-        at = self._geometry_at
-        valid = at is not None and at[0] is setup and at[1] is y0
+        valid = setup.geometry_of[0] is y0
         # A new buffer (a copy: the cheapest fresh array), overwritten by the kernel.
         y = y0.copy()
         before = dyn.defer_effect_work() if dyn.effects else None
         with_outputs = dyn.bodies.want_outputs()
         self.finite = ckern.pinned_packed_step(y0, y, dt, valid, with_outputs, err,
                                                table.table)
-        dyn.last_multipliers = setup[1][0][4]
+        dyn.last_multipliers = setup.components[0].multipliers
         if before is not None:
             dyn.count_effect_work_since(before)
         # The component's workspace now holds the geometry of its new configuration.
-        self._geometry_at = (setup, y)
+        setup.geometry_of[0] = y
         dyn.tally[STEPS] += 1
         new = State.of(t_end, y)
         if with_outputs:
@@ -240,10 +238,11 @@ class Integrator:
     def _component_table(self, model: tuple, par: np.ndarray, setup: tuple):
         """Pin the arrays of :meth:`_whole_step` (kept until one of them changes)."""
         dyn = self.dynamics
-        _, _, packed, solve, lam = setup[1][0]
+        comp = setup.components[0]
         c = dyn.bodies.outputs_cache
-        self._table = ckern.component_table(self.KERNEL, model, par, solve, packed, lam,
-                                            dyn.tally, c.frames, c.out, (model, par, setup))
+        self._table = ckern.component_table(self.KERNEL, model, par, comp.solve, comp.packed,
+                                            comp.multipliers, dyn.tally, c.frames, c.out,
+                                            (model, par, setup))
         return self._table
 
     def _free_step(self, state: State, dt: float, t_end: float, err: np.ndarray) -> State:
@@ -283,7 +282,7 @@ class Integrator:
         """
         dyn = self.dynamics
         solver = dyn.solver
-        free, components = setup
+        free, components = setup.free, setup.components
         finite = True
         mid = state.time + 0.5 * dt
         new = State.of(t_end, state.y.copy())
@@ -298,33 +297,34 @@ class Integrator:
             body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, free)
             p, q, v, o = pos[free], quat[free], vel[free], om[free]
             before = tally.tolist() if counting else None
-            code = kern.free_step(self.KERNEL, p, q, v, o, dt, body, gforce, wrench, flags,
+            code = kern.free_step(int(self.KERNEL), p, q, v, o, dt, body, gforce, wrench, flags,
                                   np.zeros((len(free), 6)), False, tally, err, self._ws,
                                   _NO_FRAMES, _NO_OUTPUTS)
             finite = bool(code & kern.FINITE)
             pos[free], quat[free], vel[free], om[free] = p, q, v, o
             if counting:
                 dyn.count_effect_work_since(before, acting)
-        at = self._geometry_at
-        valid = at is not None and at[0] is setup and at[1] is state.y
+        valid = setup.geometry_of[0] is state.y
         lam = dyn.last_multipliers
-        if len(lam) != solver.constraints.n_rows or lam is components[0][4]:
+        if len(lam) != solver.constraints.n_rows or lam is components[0].multipliers:
             lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)
-        for bodies, rows_global, packed, solve, lam_c in components:
+        for comp in components:
+            bodies, lam_c = comp.bodies, comp.multipliers
             body, gforce, wrench, flags, acting = dyn.kernel_submodel(mid, bodies)
             p0, q0, v0, o0 = pos[bodies], quat[bodies], vel[bodies], om[bodies]
             p, q, v, o = (np.empty_like(p0), np.empty_like(q0), np.empty_like(v0),
                           np.empty_like(o0))
             before = tally.tolist() if counting else None
-            finite &= ckern.packed_step(self.KERNEL, p0, q0, v0, o0, dt, body, gforce, wrench,
-                                        flags, par, solve, *packed, p, q, v, o, lam_c, valid,
+            finite &= ckern.packed_step(int(self.KERNEL), p0, q0, v0, o0, dt, body, gforce, wrench,
+                                        flags, par, int(comp.solve), *comp.packed, p, q, v, o,
+                                        lam_c, valid,
                                         tally, err, _NO_FRAMES, _NO_OUTPUTS)
             pos[bodies], quat[bodies], vel[bodies], om[bodies] = p, q, v, o
-            lam[rows_global] = lam_c
+            lam[comp.rows] = lam_c
             if counting:
                 dyn.count_effect_work_since(before, acting)
         # Each component's workspace now holds the geometry of its new configuration.
-        self._geometry_at = (setup, new.y)
+        setup.geometry_of[0] = new.y
         self.finite = finite
         tally[STEPS] += 1
         return new
@@ -342,7 +342,7 @@ class RKMK4(Integrator):
     """
 
     name = 'rkmk4'
-    KERNEL = methods.RKMK4
+    KERNEL = methods.Method.RKMK4
     order = 4
     EMBEDDED_ORDER = 3
     B_HAT = np.array([1.0, 2.0, 2.0, 0.0, 1.0]) / 6.0
@@ -375,7 +375,7 @@ class SymplecticEuler(Splitting):
     """First-order symplectic (semi-implicit) Euler: kick, then drift."""
 
     name = 'symplectic_euler'
-    KERNEL = methods.SYMPLECTIC_EULER
+    KERNEL = methods.Method.SYMPLECTIC_EULER
     order = 1
     conserves = frozenset({Invariant.ORIENTATION_ON_SO3, Invariant.LINEAR_MOMENTUM,
                            Invariant.ANGULAR_MOMENTUM, Invariant.SYMPLECTIC,
@@ -387,7 +387,7 @@ class LiePoisson2(Splitting):
     """Second-order symplectic Lie–Poisson splitting (Strang, rotor 1-2-3-2-1)."""
 
     name = 'lie_poisson2'
-    KERNEL = methods.LIE_POISSON2
+    KERNEL = methods.Method.LIE_POISSON2
     order = 2
     conserves = SymplecticEuler.conserves
 
@@ -396,10 +396,11 @@ class LiePoisson4(Splitting):
     """Fourth-order symplectic splitting: Yoshida's triple jump of lie_poisson2."""
 
     name = 'lie_poisson4'
-    KERNEL = methods.LIE_POISSON4
+    KERNEL = methods.Method.LIE_POISSON4
     order = 4
     conserves = SymplecticEuler.conserves
-    COMPOSITION = (methods._W1, 1.0 - 2.0 * methods._W1, methods._W1)
+    W1 = methods.YOSHIDA_W1
+    COMPOSITION = (W1, 1.0 - 2.0 * W1, W1)
 
 
 INTEGRATORS: dict[str, type] = {

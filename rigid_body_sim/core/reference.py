@@ -4,7 +4,11 @@ High-precision references, independent of the integrators they check.
 * :func:`dop853_trajectory`: the equations of motion of a :class:`Simulation`
   integrated by scipy's DOP853 at tight tolerances, in another formulation
   (quaternion kinematics ``dq/dt = q ⊗ (Ω, 0) / 2``, no exponential map, no
-  splitting), through the simulation's own right-hand side.
+  splitting), through the simulation's right-hand side and, for constraints,
+  :func:`constrained_accelerations`.
+* :func:`constrained_accelerations`: the labelled oracle of the constraint
+  solve: the Baumgarte-stabilized multipliers by a dense pseudo-inverse, the
+  naive way, as independent as possible of the compiled solve the steps use.
 * :func:`free_body_reference`: the torque-free Euler equations alone.
 * :func:`intermediate_axis_period`: the analytic period of the torque-free
   asymmetric body (Landau & Lifshitz, Mechanics, §37), the period of the
@@ -63,7 +67,7 @@ def dop853_trajectory(sim, t_eval: Sequence[float], rtol: float = 1e-12,
     def rhs(t, y):
         pos, quat, vel, om = unpack(y)
         qn = so3.quat_normalize(quat)
-        acc, om_dot = dyn.accelerations(t, pos, qn, vel, om)
+        acc, om_dot = constrained_accelerations(dyn, t, pos, qn, vel, om)[:2]
         return np.concatenate([vel.ravel(), _quat_rate(quat, om).ravel(), acc.ravel(),
                                om_dot.ravel()])
 
@@ -79,6 +83,52 @@ def dop853_trajectory(sim, t_eval: Sequence[float], rtol: float = 1e-12,
         pos, quat, vel, om = unpack(sol.y[:, k])
         out.append(State(float(t), pos.copy(), so3.quat_normalize(quat), vel.copy(), om.copy()))
     return out
+
+
+def constrained_accelerations(dyn, time: float, pos: np.ndarray, quat: np.ndarray,
+                              vel: np.ndarray, omega: np.ndarray) -> tuple:
+    """
+    Accelerations of every body with the constraints' forces: the naive dense oracle.
+
+    ``λ = (G M⁻¹ Gᵀ)⁺ (G a_u + γ + 2 ω Φ̇ + ω² Φ)`` by ``numpy.linalg.pinv`` of the
+    assembled matrix (the minimum-norm multipliers when rows are redundant),
+    ``a = a_u − M⁻¹ Gᵀ λ``, with ``a_u`` the free accelerations of
+    :meth:`.dynamics.Dynamics.accelerations` and ``ω`` the solver's Baumgarte
+    rate. Cubic in the rows: for references and tests only.
+
+    Parameters
+    ----------
+    dyn : Dynamics
+        The bodies, effects and constraint solver.
+    time : float
+        s.
+    pos, quat, vel, omega : ndarray
+        The state: (n, 3) world, (n, 4) xyzw, (n, 3) world, (n, 3) principal.
+
+    Returns
+    -------
+    acc : ndarray, shape (n, 3)
+        m/s², world.
+    omega_dot : ndarray, shape (n, 3)
+        dΩ/dt, rad/s², principal frames.
+    lam : ndarray, shape (m,)
+        The multipliers (empty without constraints).
+
+    """
+    acc, om_dot = dyn.accelerations(time, pos, quat, vel, omega)
+    if not dyn.constrained:
+        return acc, om_dot, np.zeros(0)
+    solver = dyn.solver
+    ev = solver.constraints.evaluate(pos, quat, vel, omega)
+    G = ev.jacobian.toarray()
+    minv = np.concatenate([np.repeat(dyn.bodies.inv_mass[:, None], 3, axis=1),
+                           1.0 / dyn.bodies.moments], axis=1).ravel()
+    w = solver.omega
+    a6 = np.concatenate([acc, om_dot], axis=1)
+    rhs = G @ a6.ravel() + ev.gamma + 2.0 * w * ev.phi_dot + w * w * ev.phi
+    lam = np.linalg.pinv((G * minv) @ G.T, rcond=1e-13) @ rhs   # by SVD (eigh lost 1e-6 here)
+    a6 = a6 - (minv * (G.T @ lam)).reshape(-1, 6)
+    return a6[:, :3], a6[:, 3:], lam
 
 
 def free_body_reference(moments: Sequence[float], omega0: Sequence[float],

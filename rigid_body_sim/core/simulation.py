@@ -19,10 +19,9 @@ as given); the core works in principal frames internally (see
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, replace
 import math
-from typing import Any, Iterator, Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -371,8 +370,7 @@ class Simulation:
         if not self.dynamics.constrained:
             return
         s = self.state
-        vel, om = self.dynamics.solver.project_velocities(
-            s.pos_com_world, s.quat_principal_world, s.vel_com_world, s.ang_vel_principal)
+        vel, om = self.dynamics.solver.project_velocities(s)
         self.state = State(s.time, s.pos_com_world, s.quat_principal_world, vel, om)
 
     def remove_constraint(self, name: str) -> Constraint:
@@ -415,8 +413,7 @@ class Simulation:
         d = diagnose(self.bodies, self.dynamics.effects, self.state)
         d = replace(d, accuracy=self.accuracy())
         if self.dynamics.constrained:
-            with self._uncounted():
-                phi = self.dynamics.solver.violation(self.state)
+            phi = self.dynamics.solver.violation(self.state)
             d = replace(d, constraint_violation=float(np.max(np.abs(phi))))
         return d
 
@@ -425,8 +422,7 @@ class Simulation:
         solver = self.dynamics.solver
         if not self.dynamics.constrained:
             return {}
-        with self._uncounted():
-            phi = solver.violation(self.state)
+        phi = solver.violation(self.state)
         return {name: float(np.max(np.abs(phi[solver.constraints.rows_of(name)])))
                 for name in solver.constraints.names}
 
@@ -446,35 +442,9 @@ class Simulation:
         """
         if not self.dynamics.constrained:
             return {}
-        with self._uncounted():
-            fields = self.dynamics.solver.reactions(self.dynamics, self.state)
+        fields = self.dynamics.solver.reactions(self.dynamics, self.state)
         return {name: {body: Reaction(**f) for body, f in per_body.items()}
                 for name, per_body in fields.items()}
-
-    @contextlib.contextmanager
-    def _uncounted(self) -> Iterator[None]:
-        """
-        Leave the work counters and the geometry cache as they were.
-
-        Reading outputs is not stepping: it must neither count as work nor evict
-        the configuration the next step would reuse.
-        """
-        dyn = self.dynamics
-        dyn.settle_effect_work()
-        counters = (dyn.counters, dyn.solver.counters)
-        saved = ([c.as_dict() for c in counters],
-                 [(e.evaluations, e.body_evaluations) for e in dyn.effects],
-                 dyn.solver._geometry_cache)
-        try:
-            yield
-        finally:
-            # In place: callers may hold references to the counter objects.
-            for live, old in zip(counters, saved[0]):
-                live.__init__(**old)
-            dyn.solver._geometry_cache = saved[2]
-            for effect, (evaluations, body_evaluations) in zip(dyn.effects, saved[1]):
-                effect.evaluations, effect.body_evaluations = evaluations, body_evaluations
-            dyn.discard_effect_work()
 
     def joint_anchors(self) -> dict:
         """

@@ -13,23 +13,27 @@ the multipliers solve::
 i.e. ``Φ̈ = −2 ω Φ̇ − ω² Φ`` (critically damped Baumgarte stabilization with
 ``ω = 1 / time_constant``). Redundant rows (closed loops, a joint added twice)
 make ``G M⁻¹ Gᵀ`` singular; a vanishing pivot reveals it, and the
-minimum-norm multipliers are then taken (truncated SVD for small systems, a
-1e-12 relative Tikhonov term for large sparse ones). A full-rank system is
+minimum-norm multipliers are then taken (truncated SVD of a dense system or of
+a loop's closure block, a 1e-12 relative Tikhonov term in the tree solve). A full-rank system is
 solved as it is: no regularization biases the reaction forces, however
 ill-conditioned the mass ratios make it (a point mass on a rod: 1e9).
 
 The matrix ``G M⁻¹ Gᵀ`` couples only constraints that share a body: block
 tridiagonal for chains, tree-shaped for trees. Chains and trees are eliminated
-in tree order by :mod:`.tree_solve` (Baraff 1996; linear in the number of
-links, compiled); systems of at most :data:`.constraints.DENSE_ROWS` rows use a
-dense Cholesky factorization, which is faster at that size. A step does this in
-compiled code (:mod:`.kernels.constrained_step`: dense up to :data:`KERNEL_DENSE_ROWS`
-rows; a closed loop, among bodies or through the world, by the tree solve of a
-spanning forest and the Schur complement of the rows that close the loops,
-:mod:`.loop_solve`); the
-solves of this class (reactions, consistency, velocity reconciliation when a
-constraint is added) factorize a closed loop by SuperLU with a minimum-degree
-ordering of ``A + Aᵀ``.
+in tree order by :mod:`.kernels.tree_solve` (Baraff 1996; linear in the number
+of links); components of at most :data:`KERNEL_DENSE_ROWS` rows are factorized
+densely, which is faster at that size; a closed loop, among bodies or through
+the world, is solved by the tree solve of a spanning forest and the Schur
+complement of the rows that close the loops (:mod:`.kernels.loop_solve`).
+
+There is one implementation of this solve: the compiled kernels of
+:mod:`.kernels.constrained_step`. A step calls it, and so does this class for
+the multipliers a user reads (:meth:`ConstraintSolver.reactions`: the λ a kick
+at that state uses), the velocity projection when a constraint is added or the
+scene reset, and the Gauss–Newton search that decides whether constraints can
+hold together. The one other solve is the labelled naive oracle of
+:func:`.reference.constrained_accelerations` (a pseudo-inverse), which the
+DOP853 reference and the tests use.
 
 Position and velocity level (every step)
 ----------------------------------------
@@ -56,25 +60,22 @@ order of the gravity force of the body. Step sizes above
 from __future__ import annotations
 
 import itertools
-from typing import Callable, Optional, Sequence, TYPE_CHECKING
-import warnings
+from typing import NamedTuple, Optional, Sequence, TYPE_CHECKING
 import weakref
 
 import numpy as np
-import scipy.linalg as sla
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constraints import (Constraint, ConstraintSet, DENSE_ROWS, Evaluation, Geometry,
-                          RowJacobian)
+from .constraints import Constraint, ConstraintSet
 from .dynamics import SolverCounters
 from .errors import SpecError
-from .kernels.constrained_step import (dense_storage, GENERIC, pack, SOLVE_DENSE, SOLVE_LOOP,
-                                       SOLVE_TREE, tree_storage, workspace)
+from .kernels.constrained_step import (component_multipliers, component_project_velocities,
+                                       component_reach, CURRENT, dense_storage, GENERIC, pack,
+                                       tree_storage, workspace)
+from .kernels.layout import BODY, PAR, Solve
 from .kernels.loop_solve import loop_structure
-from .kernels.tree_solve import tree_structure, TreeSolver
+from .kernels.tree_solve import tree_structure
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -82,6 +83,11 @@ if TYPE_CHECKING:
 
 
 _KEYS = itertools.count()
+
+#: A component whose rows are redundant without a loop of distinct joints (a joint
+#: added twice) is solved densely up to this many rows (the truncated SVD: minimum-norm
+#: multipliers, unbiased), a larger one by the tree solve with its Tikhonov term.
+DENSE_ROWS = 48
 
 #: A component of the compiled step with at most this many rows and no closed loop
 #: is solved densely (Cholesky or LU), a larger one by the tree solve. Measured per
@@ -170,6 +176,40 @@ class _GenericRows:
             r0 += len(values)
 
 
+class ComponentSetup(NamedTuple):
+    """What the compiled step of one connected component of the constraint graph works with."""
+
+    #: Indices (k,) of the component's bodies.
+    bodies: np.ndarray
+    #: Indices (m,) of its rows in the constraint set.
+    rows: np.ndarray
+    #: ``(key, floats, ints, layout)``: the arguments of
+    #: :func:`.kernels.constrained_step.packed_step` (its rows in the component's own
+    #: body numbering, workspace and factor storages).
+    packed: tuple
+    #: The packed arrays by name (:data:`.kernels.layout.COMPONENT`), as views.
+    views: dict
+    #: How its systems are solved.
+    solve: Solve
+    #: λ (m,) of its rows, written by the kernels.
+    multipliers: np.ndarray
+    #: Its bodies' masses and moments as ``body`` columns (:data:`.kernels.layout.BODY`).
+    inertia: np.ndarray
+
+
+class KernelSetup(NamedTuple):
+    """The compiled step's data: the free bodies and the constraint graph's components."""
+
+    #: Indices of the bodies no constraint touches.
+    free: np.ndarray
+    #: One per connected component.
+    components: tuple
+    #: ``[y]``: the state buffer whose geometry every component's workspace holds as
+    #: its current one (a step ended there), or ``[None]``. Whoever computes in the
+    #: workspaces says what they hold now.
+    geometry_of: list
+
+
 class ConstraintSolver:
     """
     Multipliers, reaction forces and projections for a :class:`ConstraintSet`.
@@ -212,15 +252,11 @@ class ConstraintSolver:
         self.max_iterations = int(max_iterations)
         self.counters = SolverCounters(tally=tally)
         self.dt: Optional[float] = None
-        self._geometry_cache: Optional[tuple] = None
-        self._tree_cache: Optional[tuple] = None
         self._kernel_cache: Optional[tuple] = None
         # Keys of this solver's generic rows in kernels.constrained_step.GENERIC, dropped
         # when the setup is rebuilt or the solver is collected.
         self._generic_keys: list = []
         weakref.finalize(self, _drop_generic, self._generic_keys)
-        self.inv_mass_6 = np.hstack([np.repeat(bodies.inv_mass[:, None], 3, axis=1),
-                                     1.0 / bodies.moments])
 
     @property
     def omega(self) -> float:
@@ -228,81 +264,7 @@ class ConstraintSolver:
         w = 1.0 / self.time_constant
         return w if self.dt is None else min(w, 0.5 / abs(self.dt))
 
-    # -- linear algebra --------------------------------------------------------------------
-
-    def _factor(self, G: RowJacobian, H: Optional[RowJacobian] = None) -> Callable:
-        """
-        Return a solve function for ``A = G M⁻¹ Hᵀ`` (``H = G``: symmetric).
-
-        Full-rank systems are factorized as they are (Cholesky or LU, no
-        regularization, so no bias however ill-conditioned the masses make
-        them). A pivot below ``rank_rtol`` times the largest diagonal entry
-        reveals redundant rows; then dense systems are solved by a truncated
-        eigen- or singular-value decomposition (minimum-norm multipliers), and
-        sparse ones with ``A + regularization · max|diag A| · I``.
-        """
-        self.counters.factorizations += 1
-        if G.m == 0:
-            return lambda b: np.zeros(0)
-        if not G.dense_mode and G.blocks is not None and (H is None or H.blocks is not None):
-            tree = self._tree()
-            if tree is not None:
-                return self._tree_factor(tree, G, H)
-        A = G.schur(self.inv_mass_6, H)
-        diag = np.abs(A.diagonal())
-        scale = float(diag.max()) if diag.max() > 0.0 else 1.0
-        tiny = self.rank_rtol * scale
-        if G.dense_mode:
-            try:
-                with warnings.catch_warnings():
-                    # A zero pivot is expected for redundant rows and handled below.
-                    warnings.simplefilter('ignore', sla.LinAlgWarning)
-                    factors = (sla.cho_factor(A, check_finite=False) if H is None
-                               else sla.lu_factor(A, check_finite=False))
-                if H is None:
-                    if np.min(np.diag(factors[0])) ** 2 > tiny:
-                        return lambda b: sla.cho_solve(factors, b, check_finite=False)
-                elif np.min(np.abs(np.diag(factors[0]))) > tiny:
-                    return lambda b: sla.lu_solve(factors, b, check_finite=False)
-            except (np.linalg.LinAlgError, ValueError):
-                pass
-            self.counters.rank_deficient_solves += 1
-            U, s, Vt = np.linalg.svd(A)
-            keep = s > 1e-13 * s[0]
-            U, s, Vt = U[:, keep], s[keep], Vt[keep]
-            return lambda b: Vt.T @ ((U.T @ b) / s)
-        A = A.tocsc()
-        try:
-            if H is None:
-                lu = spla.splu(A, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
-                               options={'SymmetricMode': True})
-            else:
-                lu = spla.splu(A, permc_spec='COLAMD')
-            if np.min(np.abs(lu.U.diagonal())) > tiny:
-                return lu.solve
-        except RuntimeError:   # exactly singular
-            pass
-        self.counters.rank_deficient_solves += 1
-        A = (A + sp.identity(A.shape[0], format='csc') * (self.regularization * scale)).tocsc()
-        if H is None:
-            return spla.splu(A, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
-                             options={'SymmetricMode': True}).solve
-        return spla.splu(A, permc_spec='COLAMD').solve
-
-    def _tree(self) -> Optional[TreeSolver]:
-        """Return the tree solve of the constraint graph, or None if it has a closed loop."""
-        cs = self.constraints
-        c = self._tree_cache
-        if c is not None and c[0] is cs and c[1] == cs.version:
-            return c[2]
-        try:
-            tree = TreeSolver(cs.all_row_a, cs.all_row_b, len(self.bodies))
-        except ValueError:   # a closed loop: the general sparse path
-            tree = None
-        self._tree_cache = (cs, cs.version, tree)
-        return tree
-
-    def kernel_setup(self) -> tuple:
+    def kernel_setup(self) -> KernelSetup:
         """
         Return what the compiled constrained step works with, per component.
 
@@ -316,12 +278,7 @@ class ConstraintSolver:
         larger one by the tree solve, and one whose joints close loops (through the
         world too, :data:`LOOP_DENSE_ROWS`) by the tree solve of a spanning forest
         and the Schur complement of the loop-closing rows (:mod:`.loop_solve`). Returns
-        ``(free, components)``: the indices of the free bodies, and per component
-        ``(bodies, rows_global, packed, solve, multipliers)``, ``solve`` one of
-        ``kernels.constrained_step.SOLVE_*`` and ``packed`` the arguments of
-        :func:`.kernels.constrained_step.packed_step` (its rows in the component's own
-        body numbering, workspace and factor storages). Rebuilt only when the
-        constraint set changes.
+        a :class:`KernelSetup`. Rebuilt only when the constraint set changes.
         """
         cs = self.constraints
         c = self._kernel_cache
@@ -373,19 +330,20 @@ class ConstraintSolver:
                 # Closed loops: the tree solve of a spanning forest and a dense
                 # system of the rows that close the loops.
                 st, closure = loops
-                solve, d = SOLVE_LOOP, len(closure)
+                solve, d = Solve.LOOP, len(closure)
             elif mc <= (DENSE_ROWS if closes else KERNEL_DENSE_ROWS):
-                solve, d = SOLVE_DENSE, mc
+                solve, d = Solve.DENSE, mc
                 st = tree_structure(ra[:0], rb[:0], len(bodies))
             else:
                 st = tree_structure(ra, rb, len(bodies))
-                solve, d = SOLVE_TREE, 0
+                solve, d = Solve.TREE, 0
             # Two storages each: general, and the symmetric factor kept for the
             # current geometry (see kernels.constrained_step._sym_factor).
             trees = (tree_storage(st, closure, mc), tree_storage(st, closure, mc))
-            body = np.zeros((len(bodies), 8))
-            body[:, 1] = self.bodies.inv_mass[bodies]
-            body[:, 2:5] = self.bodies.moments[bodies]
+            body = np.zeros((len(bodies), BODY.width))
+            body[:, BODY.start['inv_mass']] = self.bodies.inv_mass[bodies]
+            j = BODY.start['moments']
+            body[:, j:j + 3] = self.bodies.moments[bodies]
             # Built-in rows first (compiled), then generic ones (Python, object mode).
             builtin = rows_global[rows_global < mb]
             generic = [res for res in cs._gen if label[res.a] == lab]
@@ -394,107 +352,77 @@ class ConstraintSolver:
                 key = next(_KEYS)
                 GENERIC[key] = _GenericRows(cs, bodies, generic, len(builtin))
                 self._generic_keys.append(key)
-            rows = (cs.row_kind[builtin], cs.row_comp[builtin], ra, rb,
-                    np.ascontiguousarray(cs.row_par[builtin]), key)
-            ws = workspace(len(bodies), mc, body)
-            packed, _ = pack(rows, (*ws[:9], ws[9].astype(np.int64)),
-                             (dense_storage(d), dense_storage(d)), trees)
-            components.append((bodies, rows_global, packed, solve, np.zeros(mc)))
-        setup = (np.flatnonzero(~touched), components)
+            rows = {'kind': cs.row_kind[builtin], 'comp': cs.row_comp[builtin], 'row_a': ra,
+                    'row_b': rb, 'row_par': np.ascontiguousarray(cs.row_par[builtin]),
+                    'key': key}
+            packed, views = pack(rows, workspace(len(bodies), mc, body),
+                                 (dense_storage(d), dense_storage(d)), trees)
+            components.append(ComponentSetup(bodies, rows_global, packed, views, solve,
+                                             np.zeros(mc), body))
+        setup = KernelSetup(np.flatnonzero(~touched), tuple(components), [None])
         self._kernel_cache = (cs, cs.version, setup)
         return setup
 
     def kernel_parameters(self, max_rotation: Optional[float], max_substeps: int,
                           closing: float) -> np.ndarray:
         """Return the ``par`` array of :mod:`.kernels.constrained_step` for the settings now."""
-        return np.array([self.time_constant, self.omega, self.position_tolerance,
-                         float(self.max_iterations), self.rank_rtol, self.regularization,
-                         closing, np.inf if max_rotation is None else float(max_rotation),
-                         float(max_substeps)])
+        return PAR.row(tau=self.time_constant, omega=self.omega,
+                       pos_tol=self.position_tolerance, max_it=float(self.max_iterations),
+                       rank_rtol=self.rank_rtol, reg=self.regularization, closing=closing,
+                       max_rot=np.inf if max_rotation is None else float(max_rotation),
+                       max_sub=float(max_substeps))
 
-    def _tree_factor(self, tree: TreeSolver, G: RowJacobian,
-                     H: Optional[RowJacobian]) -> Callable:
+    # -- the compiled solve outside a step ----------------------------------------------
+
+    def _settings(self) -> np.ndarray:
+        """``par`` of the compiled kernels for the solver's own uses (no sub-steps)."""
+        return self.kernel_parameters(None, 1, 0.0)
+
+    def multipliers(self, dynamics: Dynamics, state: State) -> np.ndarray:
         """
-        Factorize ``G M⁻¹ Hᵀ`` of a chain or tree in linear time (:mod:`.tree_solve`).
+        λ (m,) at ``state``: the multipliers a step's kick there uses, from its own kernels.
 
-        Redundant rows (a joint added twice) show as a pivot below ``rank_rtol``;
-        the system is then solved with the Tikhonov term as the sparse path does.
-        The returned solve uses the solver's workspace: call it before the next
-        factorization.
+        Per component, :func:`.kernels.constrained_step.component_multipliers`:
+        the free accelerations of every effect of ``dynamics`` (gravity,
+        damping, applied wrenches, gyroscopic terms) and the acceleration-level
+        solve ``G M⁻¹ Gᵀ λ = G a_u + γ + 2ωΦ̇ + ω²Φ`` of the step. When the last
+        step ended at ``state`` (:attr:`KernelSetup.geometry_of`) its geometry,
+        and its factor if it left one, are reused: reading λ after a step costs
+        the rates, the free accelerations and one solve. Counts no work.
+        Afterwards each component's workspace holds G and Gᵀλ of ``state``.
         """
-        Ga, Gb = G.blocks
-        Ha, Hb = (None, None) if H is None else H.blocks
-        minv = self.inv_mass_6
-        if not tree.factor(Ga, Gb, minv, Ha, Hb) > self.rank_rtol:
-            self.counters.rank_deficient_solves += 1
-            Ha, Hb = (Ga, Gb) if H is None else (Ha, Hb)
-            cs = self.constraints
-            a, b = cs.all_row_a, cs.all_row_b
-            on_b = b < len(self.bodies)
-            diag = np.sum(Ga * Ha * minv[a], axis=1)
-            diag[on_b] += np.sum(Gb[on_b] * Hb[on_b] * minv[b[on_b]], axis=1)
-            peak = float(np.max(np.abs(diag)))
-            scale = peak if peak > 0.0 else 1.0
-            tree.factor(Ga, Gb, minv, Ha, Hb, reg=self.regularization * scale)
-        return tree.solve
-
-    # -- acceleration level ----------------------------------------------------------------
-
-    def multipliers(self, ev: Evaluation, acc_free: np.ndarray) -> np.ndarray:
-        """λ (m,) for unconstrained accelerations ``acc_free`` (n, 6: linear, dΩ/dt)."""
-        self.counters.acceleration_solves += 1
-        w = self.omega
-        rhs = ev.jacobian.matvec(acc_free) + ev.gamma + 2.0 * w * ev.phi_dot + w * w * ev.phi
-        return self._factor(ev.jacobian)(rhs)
-
-    def constrained(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-                    omega: np.ndarray, acc_free: np.ndarray) -> tuple:
-        """Constrained accelerations (n, 6), λ (m,) and the evaluation used."""
-        geo = self.geometry(pos, quat)
-        phi_dot, gamma = geo.rates(vel, omega)
-        ev = Evaluation(geo.phi, geo.jacobian, phi_dot, gamma)
-        lam = self.multipliers(ev, acc_free)
-        return acc_free - self.inv_mass_6 * ev.jacobian.rmatvec(lam), lam, ev
-
-    # -- position and velocity level -------------------------------------------------------
-
-    def geometry(self, pos: np.ndarray, quat: np.ndarray) -> Geometry:
-        """
-        Φ and G at a configuration, reusing the last one if it is the same.
-
-        A step evaluates the same configuration several times (the kick after a
-        projection, the velocity projection); the one-entry cache is keyed on the
-        constraint set and the values of ``pos`` and ``quat``.
-        """
-        c = self._geometry_cache
-        cs = self.constraints
-        if (c is not None and c[0] is cs and c[1] == cs.version
-                and np.array_equal(c[2], pos) and np.array_equal(c[3], quat)):
-            return c[4]
-        geo = cs.geometry(pos, quat)
-        self.counters.geometry_evaluations += 1
-        self._geometry_cache = (cs, cs.version, pos.copy(), quat.copy(), geo)
-        return geo
-
-    def evaluate(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-                 omega: np.ndarray) -> Evaluation:
-        """Φ, G and Φ̇ (no γ) at a state."""
-        geo = self.geometry(pos, quat)
-        phi_dot, gamma = geo.rates(vel, omega, need_gamma=False)
-        return Evaluation(geo.phi, geo.jacobian, phi_dot, gamma)
+        setup = self.kernel_setup()
+        current = setup.geometry_of[0] is state.y
+        par = self._settings()
+        lam = np.zeros(self.constraints.n_rows)
+        tally = np.zeros_like(self.counters.tally)   # reading is not stepping
+        s = state
+        for comp in setup.components:
+            b = comp.bodies
+            body, gforce, wrench, flags, _ = dynamics.kernel_submodel(s.time, b)
+            lam_c = np.zeros(len(comp.rows))
+            component_multipliers(
+                np.ascontiguousarray(s.pos_com_world[b]),
+                np.ascontiguousarray(s.quat_principal_world[b]),
+                np.ascontiguousarray(s.vel_com_world[b]),
+                np.ascontiguousarray(s.ang_vel_principal[b]), body, gforce, wrench, flags, par,
+                int(comp.solve), *comp.packed, current, lam_c, tally)
+            lam[comp.rows] = lam_c
+        setup.geometry_of[0] = state.y   # every workspace now holds the geometry of state
+        return lam
 
     def violation(self, state: State) -> np.ndarray:
         """Φ (m,) at ``state``."""
-        return self.evaluate(state.pos_com_world, state.quat_principal_world,
-                             state.vel_com_world, state.ang_vel_principal).phi
+        return self.constraints.geometry(state.pos_com_world, state.quat_principal_world).phi
 
     def closest_reach(self, pos: np.ndarray, quat: np.ndarray, tolerance: float,
                       max_iterations: int = 50) -> float:
         """
         Smallest ``max |Φ|`` that Gauss–Newton reaches from a configuration.
 
-        Minimum-norm steps ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁺ Φ`` (redundant rows get
-        the pseudo-inverse, see :meth:`_factor`) converge quadratically to a
+        Minimum-norm steps ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁺ Φ`` (the step's own
+        factorizations, per connected component:
+        :func:`.kernels.constrained_step.component_reach`) converge quadratically to a
         configuration with ``Φ = 0`` when the constraints can hold together; for
         an inconsistent set (say one body point pinned to two world points) they
         stall at the least-squares compromise, whose residual is returned. Stops
@@ -518,21 +446,17 @@ class ConstraintSolver:
             The smallest ``max |Φ|`` of the iterates.
 
         """
-        best, stalled = np.inf, 0
-        for _ in range(max_iterations + 1):
-            geo = self.constraints.geometry(pos, quat)
-            norm = float(np.max(np.abs(geo.phi), initial=0.0))
-            if not np.isfinite(norm) or norm <= tolerance:
-                break
-            # Far from the solution one step may overshoot; three without progress stall.
-            stalled = stalled + 1 if norm >= (1.0 - 1e-6) * best else 0
-            best = min(best, norm)
-            if stalled == 3:
-                break
-            d = -self.inv_mass_6 * geo.jacobian.rmatvec(self._factor(geo.jacobian)(geo.phi))
-            pos = pos + d[:, :3]
-            quat = so3.quat_normalize(so3.quat_multiply(quat, so3.exp_quat(d[:, 3:])))
-        return min(best, norm)
+        setup = self.kernel_setup()
+        par = self._settings()
+        tally = np.zeros_like(self.counters.tally)   # a question, not work
+        worst = 0.0
+        for comp in setup.components:
+            b = comp.bodies
+            worst = max(worst, component_reach(
+                np.ascontiguousarray(pos[b]), np.ascontiguousarray(quat[b]), float(tolerance),
+                int(max_iterations), par, int(comp.solve), *comp.packed, tally))
+        setup.geometry_of[0] = None   # the workspaces hold the last iterates
+        return worst
 
     # -- consistency -----------------------------------------------------------------------
 
@@ -547,7 +471,7 @@ class ConstraintSolver:
         re-orientations of growing size (0.3, 1 and 3 rad, the same every call):
         a singular start, such as a straight chain asked to fold, stalls where a
         solution exists, and only a residual left from every start marks the set
-        inconsistent. Counts no work (:attr:`counters` are left as they were).
+        inconsistent. Counts no work.
 
         Parameters
         ----------
@@ -566,7 +490,6 @@ class ConstraintSolver:
         tol = self.CONSISTENCY_TOLERANCE
         rng = np.random.default_rng(0)   # the same verdict every time
         best = np.inf
-        saved = self.counters.as_dict()
         try:
             for scale in (0.0, 0.3, 1.0, 3.0):
                 quat = state.quat_principal_world
@@ -578,9 +501,6 @@ class ConstraintSolver:
                     break
         except SpecError:
             return 0.0
-        finally:
-            # In place: callers may hold a reference to the counter object.
-            self.counters.__init__(**saved)
         return best
 
     def consistent(self, state: State) -> bool:
@@ -628,44 +548,43 @@ class ConstraintSolver:
             constraints.add(spec, state)
         return constraints
 
-    def project_velocities(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-                           omega: np.ndarray) -> tuple:
+    def project_velocities(self, state: State) -> tuple:
         """
         Project velocities onto ``Φ̇ = −ω Φ`` (mass-orthogonally); returns (vel, omega).
 
         ``ω`` is :attr:`omega`: ``1 / τ``, capped at ``1 / (2 dt)`` so that a
         method without a position correction (``rkmk4``) still shrinks a
         violation by a factor of about 2 per step however large ``dt / τ`` is.
+        The step's own projection, per component
+        (:func:`.kernels.constrained_step.component_project_velocities`); the
+        work is counted.
         """
-        self.counters.velocity_projections += 1
-        geo = self.geometry(pos, quat)
-        r = geo.jacobian.matvec(np.hstack([vel, omega])) + self.omega * geo.phi
-        d = -self.inv_mass_6 * geo.jacobian.rmatvec(self._factor(geo.jacobian)(r))
-        return vel + d[:, :3], omega + d[:, 3:]
+        setup = self.kernel_setup()
+        par = self._settings()
+        s = state
+        vel, om = s.vel_com_world.copy(), s.ang_vel_principal.copy()
+        for comp in setup.components:
+            b = comp.bodies
+            v, w = np.ascontiguousarray(vel[b]), np.ascontiguousarray(om[b])
+            component_project_velocities(
+                np.ascontiguousarray(s.pos_com_world[b]),
+                np.ascontiguousarray(s.quat_principal_world[b]), v, w, comp.inertia, par,
+                int(comp.solve), *comp.packed, False, self.counters.tally)
+            vel[b], om[b] = v, w
+        setup.geometry_of[0] = None   # of the positions, but not of the new state's buffer
+        return vel, om
 
     # -- reaction wrenches -----------------------------------------------------------------
-
-    def generalized_forces(self, ev: Evaluation, lam: np.ndarray) -> np.ndarray:
-        """Per-constraint generalized constraint force ``−G_cᵀ λ_c``: (n_constraints, n, 6)."""
-        cs = self.constraints
-        out = np.zeros((len(cs), len(self.bodies), 6))
-        for i, name in enumerate(cs.names):
-            lam_c = np.zeros_like(lam)
-            rows = cs.rows_of(name)
-            lam_c[rows] = lam[rows]
-            out[i] = -ev.jacobian.rmatvec(lam_c)
-        return out
 
     def reactions(self, dynamics: Dynamics, state: State) -> dict:
         """
         Wrench each constraint exerts on each of its bodies at ``state`` (world frame).
 
-        λ is solved from the full accelerations (every effect of ``dynamics``,
-        gyroscopic terms, applied wrenches, see :meth:`multipliers`), so these are
-        the forces the joints carry at this instant; each constraint's share is
-        :meth:`generalized_forces`. The work is counted as usual (in the counters
-        of ``dynamics``, its effects and this solver): a caller reading outputs
-        restores them.
+        λ is :meth:`multipliers` at ``state`` (every effect of ``dynamics``,
+        gyroscopic terms, applied wrenches: the multipliers a step's kick there
+        uses), so these are the forces the joints carry at this instant. A
+        constraint's share is ``−G_cᵀ λ_c`` of its own rows, on each of its two
+        bodies. Counts no work.
 
         Parameters
         ----------
@@ -685,29 +604,32 @@ class ConstraintSolver:
             anchor on the body) and ``anchor_world`` (m, where that anchor is).
 
         """
-        s = state
-        kin = dynamics.kinematics(s.time, s.pos_com_world, s.quat_principal_world,
-                                  s.vel_com_world, s.ang_vel_principal)
-        force, torque = dynamics.wrench(kin, dynamics.effects)
-        torque = torque - dynamics.gyroscopic(s.ang_vel_principal)
-        a6 = np.hstack([force * self.bodies.inv_mass[:, None], torque / self.bodies.moments])
-        ev = self.constraints.evaluate(s.pos_com_world, s.quat_principal_world,
-                                       s.vel_com_world, s.ang_vel_principal)
-        lam = self.multipliers(ev, a6)
-        gen = self.generalized_forces(ev, lam)
-        R = kin.R_principal_world
+        lam = self.multipliers(dynamics, state)
+        cs = self.constraints
+        n = len(self.bodies)
+        # Per row: the constraint it belongs to, its bodies, and −G_row λ_row on each.
+        owner = np.empty(cs.n_rows, dtype=np.int64)
+        for i, name in enumerate(cs.names):
+            owner[cs.rows_of(name)] = i
+        gen = np.zeros((len(cs), 2, 6))   # per constraint: on its body a, on its body b
+        for comp in self.kernel_setup().components:
+            jac = comp.views['jac'][CURRENT]   # (2, m, 6): G of the state, bodies a and b
+            lam_c = lam[comp.rows][:, None]
+            np.add.at(gen[:, 0], owner[comp.rows], -jac[0] * lam_c)
+            np.add.at(gen[:, 1], owner[comp.rows], -jac[1] * lam_c)
+        R = so3.quat_to_matrix(state.quat_principal_world)
         out = {}
-        for i, name in enumerate(self.constraints.names):
+        for i, name in enumerate(cs.names):
             per_body = {}
-            for body, r_p in self.constraints.anchors(name):
-                if body >= len(self.bodies):
+            for side, (body, r_p) in enumerate(cs.anchors(name)):
+                if body >= n:
                     continue
-                f = gen[i, body, :3]
-                tau_com = R[body] @ gen[i, body, 3:]
+                f = gen[i, side, :3]
+                tau_com = R[body] @ gen[i, side, 3:]
                 lever = R[body] @ r_p
                 per_body[self.bodies.names[body]] = {
                     'force_world': f, 'torque_com_world': tau_com,
                     'torque_anchor_world': tau_com - so3.cross(lever, f),
-                    'anchor_world': s.pos_com_world[body] + lever}
+                    'anchor_world': state.pos_com_world[body] + lever}
             out[name] = per_body
         return out

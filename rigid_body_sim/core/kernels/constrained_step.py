@@ -3,8 +3,7 @@ Compiled kernels: a whole step of a constrained scene in one call.
 
 The methods are those of :mod:`..integrators` (RATTLE with SHAKE's Newton
 iterations in the splittings, Baumgarte-stabilized multipliers at every stage
-and a velocity projection in ``rkmk4``) and the linear algebra that of
-:mod:`..solver`, written over flat arrays and compiled by numba
+and a velocity projection in ``rkmk4``), written over flat arrays and compiled by numba
 (``@njit(cache=True)``; ``NUMBA_DISABLE_JIT=1`` runs it as Python). The
 constraint rows are those of :mod:`.rows` (point, dot, line, distance);
 the systems ``G M⁻¹ Hᵀ`` are solved densely (Cholesky, LU, or a truncated SVD
@@ -12,7 +11,12 @@ for redundant rows) for small components and by the tree solve of
 :mod:`.tree_solve` for larger ones; a component whose joints close loops is
 solved by the tree solve of a spanning forest and a dense system of the rows
 that close the loops (their Schur complement, :mod:`.loop_solve`). The solver
-chooses (:data:`.solver.KERNEL_DENSE_ROWS`, :data:`.solver.LOOP_DENSE_ROWS`).
+chooses (:data:`..solver.KERNEL_DENSE_ROWS`, :data:`..solver.LOOP_DENSE_ROWS`).
+This is the one implementation of the constraint solve: besides the step,
+:class:`..solver.ConstraintSolver` calls it for the multipliers at a state
+(:func:`component_multipliers`: the reactions a user reads), the velocity
+projection (:func:`component_project_velocities`) and the consistency search
+(:func:`component_reach`).
 
 A step is split into sub-steps when a constrained body turns fast, and redone
 with twice as many when SHAKE stops converging (see :mod:`..integrators`); both
@@ -35,37 +39,35 @@ import math
 from numba import njit, objmode
 import numpy as np
 
-from .free_step import (all_finite, damping_flow, drift, finish_accelerations, HAS_DAMPING, KICK,
-                        outputs, position_wrench, RHS, rkmk4_embedded_error, rkmk4_finish,
+from .free_step import (all_finite, damping_flow, drift, finish_accelerations, HAS_DAMPING,
+                        outputs, position_wrench, rkmk4_embedded_error, rkmk4_finish,
                         rkmk4_slopes, rkmk4_stage, state_parts)
+from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS, COMP, COMPONENT,
+                     COMPONENT_TABLE, Count, CT_BODY, CT_COUNTS, CT_FLAGS, CT_FLOATS, CT_FRAMES,
+                     CT_GENERIC, CT_GFORCE, CT_INTS, CT_LAM, CT_LAYOUT, CT_METHOD, CT_N_COUNTS,
+                     CT_N_FLOATS, CT_N_INTS, CT_N_LAM, CT_N_LAYOUT, CT_N_PAR, CT_N_WRENCH, CT_OUT,
+                     CT_PAR, CT_SOLVE, CT_WRENCH, CX_FLOATS, CX_INTS, CX_KEY, CX_LAYOUT, CX_SOLVE,
+                     D_F, D_PIV, D_S, D_U, D_VT, DENSE0, DENSE_SLOTS, FACTOR_STATE, FORCE,
+                     FR_WIDTH, FRAMES, FREE_ACC, G2, GENERAL, GT_LAMBDA, JAC, JR, KIND, MINV,
+                     O_WIDTH, OMEGA_WORLD, P_CLOSING, P_MAX_IT, P_MAX_ROT, P_MAX_SUB, P_OMEGA,
+                     P_POS_TOL, P_RANK_RTOL, P_REG, P_TAU, PHI, QUATS, ROTOR, ROW_A, ROW_B,
+                     ROW_PAR, Solve, STAGES, STORAGES, SYMMETRIC, T_B, T_CLOSURE, T_E, T_G,
+                     T_GROUP_CHILD, T_GROUP_PARENT, T_GROUP_PTR, T_GROUP_ROWS, T_P, T_PIV, T_Q,
+                     T_ROW_SIDE, T_S, T_TMP, T_W, T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE, TREE0,
+                     TREE_SLOTS, VECTORS, VM, W_WIDTH, WATCH)
+from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
-from .methods import _W1, LIE_POISSON4, RKMK4, SYMPLECTIC_EULER
+from .methods import Method, YOSHIDA_W1
 from .rows import framed_geometry, framed_rates, frames
 from .so3 import normalize_quaternions, positive_product, quat_exp_multiply
 from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_solve
 from .views import Pinned, pinned, pinned_int, raw, raw_slice
 
-# Counter slots beyond free_step's five.
-DAMP_IN_KICK, GEOMETRY, FACTORIZATIONS, RANK_DEFICIENT, FALLBACKS = 5, 6, 7, 8, 9
-ACC_SOLVES, POS_ITERATIONS, VEL_PROJECTIONS, SUBSTEPS, RETRIES = 10, 11, 12, 13, 14
-# Steps whose sub-steps were capped at max_substeps (each then turns by more than
-# max_rotation): the bound on the work of one step, reported, never silent.
-CAPPED = 15
-N_COUNTS = 16
-
-# par slots
-P_TAU, P_OMEGA, P_POS_TOL, P_MAX_IT, P_RANK_RTOL, P_REG, P_CLOSING = 0, 1, 2, 3, 4, 5, 6
 # SHAKE's rounding floor in units of the coordinates' rounding (see _rounding_floor).
 ROUNDING_ULPS = 16.0
-P_MAX_ROT, P_MAX_SUB = 7, 8
 
-# Factorization modes.
+# Factorization modes (internal: what _fac returns and _sol reads).
 CHOLESKY, LU, SVD, TREE = 0, 1, 2, 3
-
-# How a component's systems are solved (packed_step's ``solve``): densely (few rows), by
-# the tree solve (a forest), or by the tree solve of a spanning forest and the Schur
-# complement of the rows that close loops (:mod:`.loop_solve`).
-SOLVE_DENSE, SOLVE_TREE, SOLVE_LOOP = 0, 1, 2
 
 
 @njit(cache=True, inline='always')
@@ -119,26 +121,28 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     ``slot`` as a small dense system, with the truncated SVD when closure rows
     are redundant. Returns the mode for :func:`_sol`.
     """
-    counts[FACTORIZATIONS] += 1
+    counts[Count.FACTORIZATIONS] += 1
     rtol = par[P_RANK_RTOL]
     tree = _tree(cx, slot)
-    tg_ptr, tg_rows, tg_child, tg_parent, t_side = tree[0], tree[1], tree[2], tree[3], tree[4]
-    tS, tpiv, tP, tQ, tB, tW = tree[5], tree[6], tree[7], tree[8], tree[9], tree[10]
+    tg_ptr, tg_rows, tg_child = tree[T_GROUP_PTR], tree[T_GROUP_ROWS], tree[T_GROUP_CHILD]
+    tg_parent, t_side = tree[T_GROUP_PARENT], tree[T_ROW_SIDE]
+    tS, tpiv, tP, tQ, tB, tW = tree[T_S], tree[T_PIV], tree[T_P], tree[T_Q], tree[T_B], tree[T_W]
     pivot = tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
                         minv6, 0.0, tS, tpiv, tP, tQ, tB, tW, symmetric)
     reg = 0.0
     peak = 0.0   # the largest |diagonal entry|, computed once if needed
     if not pivot > rtol:
-        counts[RANK_DEFICIENT] += 1
+        counts[Count.RANK_DEFICIENT] += 1
         peak = _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
         reg = par[P_REG] * peak
         tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
                     minv6, reg, tS, tpiv, tP, tQ, tB, tW, symmetric)
-    if cx[4] != SOLVE_LOOP:
+    if cx[CX_SOLVE] != Solve.LOOP:
         return TREE
-    closure, X, Y, work, g = tree[13], tree[14], tree[15], tree[16], tree[17]
-    loop_schur(tg_ptr, tg_rows, tg_child, tg_parent, tS, tpiv, tP, tQ, tB, tree[11], tree[12],
-               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y, _f2(cx, _DENSE + 5 * slot),
+    closure, X, Y, work, g = tree[T_CLOSURE], tree[T_X], tree[T_Y], tree[T_WORK], tree[T_G]
+    loop_schur(tg_ptr, tg_rows, tg_child, tg_parent, tS, tpiv, tP, tQ, tB, tree[T_E], tree[T_TMP],
+               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y,
+               _f2(cx, DENSE0 + DENSE_SLOTS * slot + D_F),
                work, g)
     # Pivots of S are measured against the whole system's scale: a redundant closure row
     # leaves only rounding in S.
@@ -154,10 +158,10 @@ def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``) into the storages ``slot``.
 
     ``slot`` is ``GENERAL`` or ``SYMMETRIC`` (see :func:`constrained_step`); the
-    component's ``solve`` (``cx[4]``) says which storages are in use. Returns
+    component's ``solve`` (``cx[CX_SOLVE]``) says which storages are in use. Returns
     the mode for :func:`_sol`.
     """
-    if cx[4] == SOLVE_DENSE:
+    if cx[CX_SOLVE] == Solve.DENSE:
         return _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
     return _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
 
@@ -165,21 +169,22 @@ def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
 @njit(cache=True, inline='always')
 def _sol(mode, rhs, out, cx, slot):
     """Solve with the factors in the storages ``slot`` (see :func:`_fac`)."""
-    solve = cx[4]
-    if solve == SOLVE_DENSE:
+    solve = cx[CX_SOLVE]
+    if solve == Solve.DENSE:
         _solve_dense(mode, rhs, out, cx, slot)
         return
     t = _tree(cx, slot)
-    if solve == SOLVE_TREE:
-        tree_solve(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
-                   rhs, out)
+    if solve == Solve.TREE:
+        tree_solve(t[T_GROUP_PTR], t[T_GROUP_ROWS], t[T_GROUP_CHILD], t[T_GROUP_PARENT],
+                   t[T_S], t[T_PIV], t[T_P], t[T_Q], t[T_B], t[T_E], t[T_TMP], rhs, out)
         return
     # Closed loops: forest, then the closure rows' Schur complement, then back.
-    z, xc = t[18], t[19]
-    loop_forward(t[0], t[1], t[2], t[3], t[5], t[6], t[7], t[8], t[9], t[11], t[12],
-                 t[13], t[15], rhs, out, z)
+    z, xc = t[T_Z], t[T_XC]
+    loop_forward(t[T_GROUP_PTR], t[T_GROUP_ROWS], t[T_GROUP_CHILD], t[T_GROUP_PARENT],
+                 t[T_S], t[T_PIV], t[T_P], t[T_Q], t[T_B], t[T_E], t[T_TMP], t[T_CLOSURE],
+                 t[T_Y], rhs, out, z)
     _solve_dense(mode, z, xc, cx, slot)
-    loop_back(t[1], t[13], t[14], xc, out)
+    loop_back(t[T_GROUP_ROWS], t[T_CLOSURE], t[T_X], xc, out)
 
 
 @njit(cache=True, inline='always')
@@ -191,9 +196,9 @@ def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
     ``rank_rtol`` times the largest diagonal entry marks redundant rows, which
     get the truncated SVD (minimum-norm solution).
     """
-    counts[FACTORIZATIONS] += 1
+    counts[Count.FACTORIZATIONS] += 1
     m = Ga.shape[0]
-    F = _f2(cx, _DENSE + 5 * slot)
+    F = _f2(cx, DENSE0 + DENSE_SLOTS * slot + D_F)
     _schur(Ga, Gb, Ha, Hb, a, b, minv6, F)
     scale = 0.0
     for i in range(m):
@@ -238,7 +243,7 @@ def _factor_matrix(m, symmetric, tiny, floor, cx, slot, counts):
             return CHOLESKY
     elif _lu(F, dpiv, m, tiny) > tiny:   # LU with partial pivoting (tree_solve's)
         return LU
-    counts[RANK_DEFICIENT] += 1
+    counts[Count.RANK_DEFICIENT] += 1
     u, s, vt = np.linalg.svd(U)   # the copy: F now holds a partial factorization
     U[:, :] = u
     Vt[:, :] = vt
@@ -323,52 +328,47 @@ def _g_times(Ga, Gb, a, b, x6, out):
 
 # A component's arrays live in the buffers of :func:`pack`; the compiled step passes them
 # on as one context ``cx = (floats, ints, layout, key, solve)`` (``key``: the component's
-# generic rows, -1 if none; ``solve``: SOLVE_DENSE, SOLVE_TREE or SOLVE_LOOP), and each
+# generic rows, -1 if none; ``solve``: a :class:`.layout.Solve`), and each
 # function takes the views it uses from it with the accessors below. A tuple of arrays is
 # passed by value: the ~75 arrays of a component as tuples cost each call ~400 machine
 # words copied (perf: most of a pendulum step), the context 25.
 #
-# Slots of the layout (see _SLOTS): the rows ``(kind, comp, a, b, par)`` of
-# :mod:`.rows`, the workspace (see :func:`workspace`) and the scratch arrays (see
-# :func:`scratch`), then the dense and the tree storages.
-KIND, COMP, ROW_A, ROW_B, ROW_PAR = range(5)
-PHI, JAC, VM, GT_LAMBDA, FREE_ACC, FORCE, TORQUE, MINV, FACTOR_STATE, WATCH = range(5, 15)
-FRAMES, OMEGA_WORLD, JR, G2, VECTORS, BODY_VECTORS, QUATS, STAGES, ROTOR = range(15, 24)
+# The slots (KIND, PHI, ...) are those of :data:`.layout.COMPONENT`: the rows ``(kind,
+# comp, a, b, par)`` of :mod:`.rows`, the workspace (see :func:`workspace`) and the scratch
+# arrays (see :func:`scratch`), then the dense and the tree storages (GENERAL: SHAKE's
+# factorizations; SYMMETRIC: the factor kept for the current geometry, see _sym_factor).
 # Which geometry, in the workspace's Φ (3, m) and G (3, 2, m, 6).
 START, CURRENT, END = 0, 1, 2
-# Which storages (dense and tree): the general factorizations (SHAKE's), and the symmetric
-# factor kept for the current geometry (see _sym_factor).
-GENERAL, SYMMETRIC = 0, 1
 
 
 @njit(cache=True)
 def _f1(cx, k):
     """Float slot ``k`` (1-D) of the context ``cx``."""
-    return _v1(cx[0], cx[2], k)
+    return _v1(cx[CX_FLOATS], cx[CX_LAYOUT], k)
 
 
 @njit(cache=True)
 def _f2(cx, k):
     """Float slot ``k`` (2-D) of the context ``cx``."""
-    return _v2(cx[0], cx[2], k)
+    return _v2(cx[CX_FLOATS], cx[CX_LAYOUT], k)
 
 
 @njit(cache=True)
 def _f3(cx, k):
     """Float slot ``k`` (3-D) of the context ``cx``."""
-    return _v3(cx[0], cx[2], k)
+    return _v3(cx[CX_FLOATS], cx[CX_LAYOUT], k)
 
 
 @njit(cache=True)
 def _f4(cx, k):
     """Float slot ``k`` (4-D) of the context ``cx``."""
-    return _v4(cx[0], cx[2], k)
+    return _v4(cx[CX_FLOATS], cx[CX_LAYOUT], k)
 
 
 @njit(cache=True)
 def _i1(cx, k):
     """Integer slot ``k`` (1-D) of the context ``cx``."""
-    return _v1(cx[1], cx[2], k)
+    return _v1(cx[CX_INTS], cx[CX_LAYOUT], k)
 
 
 @njit(cache=True)
@@ -380,14 +380,15 @@ def _rows(cx):
 @njit(cache=True)
 def _dense(cx, slot):
     """Dense storage ``slot``: ``(F, piv, U, s, Vt)`` (see :func:`dense_storage`)."""
-    d = _DENSE + 5 * slot
-    return _f2(cx, d), _i1(cx, d + 1), _f2(cx, d + 2), _f1(cx, d + 3), _f2(cx, d + 4)
+    d = DENSE0 + DENSE_SLOTS * slot
+    return (_f2(cx, d + D_F), _i1(cx, d + D_PIV), _f2(cx, d + D_U), _f1(cx, d + D_S),
+            _f2(cx, d + D_VT))
 
 
 @njit(cache=True)
 def _tree(cx, slot):
     """Tree storage ``slot`` (see :func:`tree_storage`)."""
-    return _tree_views(cx[0], cx[1], cx[2], _TREES + _TREE_SLOTS * slot)
+    return _tree_views(cx[CX_FLOATS], cx[CX_INTS], cx[CX_LAYOUT], TREE0 + TREE_SLOTS * slot)
 
 
 # Generic rows (a user's Python function) are evaluated by Python from inside the
@@ -440,7 +441,7 @@ def _geometry(pos, quat, cx, which, counts):
     """
     Φ and G of every row at ``pos, quat`` into slot ``which`` of the workspace's Φ, G.
 
-    The built-in rows are the first ``len(kind)``; with ``key >= 0`` (``cx[3]``)
+    The built-in rows are the first ``len(kind)``; with ``key >= 0`` (``cx[CX_KEY]``)
     the generic rows after them are filled by :func:`generic_geometry` (Python,
     in object mode). The rotations go to the scratch ``FRAMES``.
     """
@@ -449,9 +450,9 @@ def _geometry(pos, quat, cx, which, counts):
     frames(quat, R)
     kind, comp, a, b, rpar = _rows(cx)
     framed_geometry(pos, R, kind, comp, a, b, rpar, phi_w, Ga_w, Gb_w)
-    if cx[3] >= 0:
-        _generic_geometry(cx[3], pos, quat, phi_w, Ga_w, Gb_w)
-    counts[GEOMETRY] += 1
+    if cx[CX_KEY] >= 0:
+        _generic_geometry(cx[CX_KEY], pos, quat, phi_w, Ga_w, Gb_w)
+    counts[Count.GEOMETRY] += 1
     if which == CURRENT:
         _i1(cx, FACTOR_STATE)[0] = 0   # the symmetric factor was of the geometry replaced
 
@@ -491,14 +492,14 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
     frames(quat, R)
     framed_rates(pos, vel, om, R, _f2(cx, OMEGA_WORLD), kind, comp, a, b, rpar, Ga, Gb,
                  True, vm[0], vm[1])
-    if cx[3] >= 0:
-        _generic_rates(cx[3], pos, quat, vel, om, Ga, Gb, a, b, kind.shape[0], vm)
+    if cx[CX_KEY] >= 0:
+        _generic_rates(cx[CX_KEY], pos, quat, vel, om, Ga, Gb, a, b, kind.shape[0], vm)
     w = par[P_OMEGA]
     _g_times(Ga, Gb, a, b, a6, vm[2])
     for r in range(phi.shape[0]):
         vm[2, r] += vm[1, r] + 2.0 * w * vm[0, r] + w * w * phi[r]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
-    counts[ACC_SOLVES] += 1
+    counts[Count.ACC_SOLVES] += 1
     _sol(mode, vm[2], lam, cx, SYMMETRIC)
     _gt_lambda(Ga, Gb, a, b, lam, g6)
 
@@ -532,13 +533,13 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, cx, par, lam, c
     :func:`_sym_factor`). Returns True (the current geometry is valid).
     """
     n = pos.shape[0]
-    counts[KICK] += 1
+    counts[Count.KICK] += 1
     if flags & HAS_DAMPING:
-        counts[DAMP_IN_KICK] += 1
+        counts[Count.DAMP_IN_KICK] += 1
     om = _f3(cx, BODY_VECTORS)[1]
     for i in range(n):
         for c in range(3):
-            om[i, c] = mom[i, c] / body[i, 2 + c]
+            om[i, c] = mom[i, c] / body[i, B_MOMENTS + c]
     force, torque, g6 = _f2(cx, FORCE), _f2(cx, TORQUE), _f2(cx, GT_LAMBDA)
     _free_accelerations(quat, vel, om, body, gforce, wrench, flags, _f2(cx, FREE_ACC), force,
                         torque, counts)
@@ -547,7 +548,7 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, cx, par, lam, c
     _multipliers(pos, quat, vel, om, cx, par, lam, counts)
     for i in range(n):
         for c in range(3):
-            vel[i, c] += tau * body[i, 1] * (force[i, c] - g6[i, c])
+            vel[i, c] += tau * body[i, B_INV_MASS] * (force[i, c] - g6[i, c])
             mom[i, c] += tau * (torque[i, c] - g6[i, 3 + c])
     return True
 
@@ -563,11 +564,11 @@ def _free_kick(quat, vel, mom, tau, body, gforce, wrench, force, torque, counts)
     changes nothing but the rounding, and its acceleration-level solve is skipped.
     ``force``, ``torque`` (n, 3): scratch (the workspace's ``ws[5]``, ``ws[6]``).
     """
-    counts[KICK] += 1
+    counts[Count.KICK] += 1
     position_wrench(quat, body, gforce, wrench, force, torque)
     for i in range(vel.shape[0]):
         for c in range(3):
-            vel[i, c] += tau * body[i, 1] * force[i, c]
+            vel[i, c] += tau * body[i, B_INV_MASS] * force[i, c]
             mom[i, c] += tau * torque[i, c]
 
 
@@ -579,7 +580,7 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     The solve uses the symmetric factor (see :func:`_sym_factor`).
     """
     n = pos.shape[0]
-    counts[VEL_PROJECTIONS] += 1
+    counts[Count.VEL_PROJECTIONS] += 1
     phi, G = _f2(cx, PHI)[CURRENT], _f4(cx, JAC)
     Ga, Gb = G[CURRENT, 0], G[CURRENT, 1]
     vm, g6, x6, minv6 = _f2(cx, VM), _f2(cx, GT_LAMBDA), _f2(cx, FREE_ACC), _f2(cx, MINV)
@@ -587,7 +588,7 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     for i in range(n):
         for c in range(3):
             x6[i, c] = vel[i, c]
-            x6[i, 3 + c] = mom[i, c] / body[i, 2 + c]
+            x6[i, 3 + c] = mom[i, c] / body[i, B_MOMENTS + c]
     _g_times(Ga, Gb, a, b, x6, vm[2])
     w = par[P_OMEGA]
     for r in range(phi.shape[0]):
@@ -598,7 +599,7 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     for i in range(n):
         for c in range(3):
             vel[i, c] = x6[i, c] - minv6[i, c] * g6[i, c]
-            mom[i, c] = (x6[i, 3 + c] - minv6[i, 3 + c] * g6[i, 3 + c]) * body[i, 2 + c]
+            mom[i, c] = (x6[i, 3 + c] - minv6[i, 3 + c] * g6[i, 3 + c]) * body[i, B_MOMENTS + c]
 
 
 @njit(cache=True)
@@ -625,7 +626,7 @@ def _project_positions(pos, quat, target, cx, par, counts):
             norm = max(norm, abs(vm[2, r]))
         if norm <= par[P_POS_TOL] or it == max_it:
             break
-        counts[POS_ITERATIONS] += 1
+        counts[Count.POS_ITERATIONS] += 1
         mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, GENERAL, counts)
         _sol(mode, vm[2], vm[3], cx, GENERAL)
         _gt_lambda(Ga, Gb, a, b, vm[3], g6)
@@ -689,7 +690,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
     else:
         axes, weights = (0, 1, 2, 0, 0), (1.0, 1.0, 1.0, 0.0, 0.0)
     for i in range(quat_s.shape[0]):
-        if body[i, 7] == 0.0:
+        if body[i, B_ANISOTROPIC] == 0.0:
             continue
         dT = Jr[i]   # the derivative of the end rotation, scaled into J_r at the end
         for r in range(3):
@@ -700,7 +701,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
         for f in range(5 if symmetric else 3):
             k = axes[f]
             tau = weights[f] * h
-            gain = tau / body[i, 2 + k]
+            gain = tau / body[i, B_MOMENTS + k]
             phi = gain * L[k]
             cs, sn = math.cos(phi), math.sin(phi)
             j, kk = (k + 1) % 3, (k + 2) % 3
@@ -726,7 +727,7 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
                     dL[r, c] -= ex[r] * row[c]
         for r in range(3):
             for c in range(3):
-                dT[r, c] = dT[r, c] * body[i, 2 + c] / h
+                dT[r, c] = dT[r, c] * body[i, B_MOMENTS + c] / h
 
 
 @njit(cache=True, inline='always')
@@ -805,13 +806,13 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
                 break   # converged as far as the coordinates resolve
             if not closing and not last_resort:
                 return False
-            counts[FALLBACKS] += 1
+            counts[Count.FALLBACKS] += 1
             _project_positions(pos, quat, target, cx, par, counts)
             break
         # Refactor unless the last iteration cut the residual a hundredfold.
         refactor = mode < 0 or norm > 1e-2 * previous
         previous = norm
-        counts[POS_ITERATIONS] += 1
+        counts[Count.POS_ITERATIONS] += 1
         # Φ(end) responds to a start impulse κ like h G_end D M⁻¹ G_startᵀ κ, where D
         # is, per body, the right Jacobian of exp at its rotation u over the drift: an
         # impulse changes u by δu and the end orientation by J_r(u) δu, not by δu.
@@ -829,7 +830,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
         for i in range(n):
             for c in range(3):
                 vel[i, c] += -minv6[i, c] * g6[i, c] / h
-                mom_s[i, c] += (-minv6[i, 3 + c] * g6[i, 3 + c] / h) * body[i, 2 + c]
+                mom_s[i, c] += (-minv6[i, 3 + c] * g6[i, 3 + c] / h) * body[i, B_MOMENTS + c]
     return True
 
 
@@ -868,18 +869,18 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
     projection solve with the symmetric factor in ``SYMMETRIC``.
     """
     n = pos.shape[0]
-    symmetric = method != SYMPLECTIC_EULER
-    if method == LIE_POISSON4:
-        weights = (_W1, 1.0 - 2.0 * _W1, _W1)
+    symmetric = method != Method.SYMPLECTIC_EULER
+    if method == Method.LIE_POISSON4:
+        weights = (YOSHIDA_W1, 1.0 - 2.0 * YOSHIDA_W1, YOSHIDA_W1)
     else:
         weights = (1.0, 0.0, 0.0)
-    n_sub = 3 if method == LIE_POISSON4 else 1
+    n_sub = 3 if method == Method.LIE_POISSON4 else 1
     damping = flags & HAS_DAMPING
     mom = _f3(cx, BODY_VECTORS)[0]
     phi, G = _f2(cx, PHI), _f4(cx, JAC)
     for i in range(n):
         for c in range(3):
-            mom[i, c] = om[i, c] * body[i, 2 + c]
+            mom[i, c] = om[i, c] * body[i, B_MOMENTS + c]
     for sub in range(n_sub):
         h = weights[sub] * dt
         if not c_valid:
@@ -908,7 +909,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
         _project_velocities(pos, quat, vel, mom, body, cx, par, counts)
     for i in range(n):
         for c in range(3):
-            om[i, c] = mom[i, c] / body[i, 2 + c]
+            om[i, c] = mom[i, c] / body[i, B_MOMENTS + c]
     return True, True
 
 
@@ -934,7 +935,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
         rkmk4_stage(s, h, pos, quat, vel, om, kp, kv, kw, kr, p, q, v, w, u, counts)
         if s:
             c_valid = False
-        counts[RHS] += 1
+        counts[Count.RHS] += 1
         _free_accelerations(q, v, w, body, gforce, wrench, flags, a6, force, torque, counts)
         if not c_valid:
             _geometry(p, q, cx, CURRENT, counts)
@@ -950,7 +951,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
     if estimate:
         # The fifth stage (its factorization is the projection's): λ to scratch, so
         # the reported multipliers are those of the step without the estimate.
-        counts[RHS] += 1
+        counts[Count.RHS] += 1
         _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, torque,
                             counts)
         _multipliers(pos, quat, vel, om, cx, par, _f2(cx, VECTORS)[1], counts)
@@ -962,11 +963,11 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
     mom = vectors[0]
     for i in range(n):
         for c in range(3):
-            mom[i, c] = om[i, c] * body[i, 2 + c]
+            mom[i, c] = om[i, c] * body[i, B_MOMENTS + c]
     _project_velocities(pos, quat, vel, mom, body, cx, par, counts)
     for i in range(n):
         for c in range(3):
-            om[i, c] = mom[i, c] / body[i, 2 + c]
+            om[i, c] = mom[i, c] / body[i, B_MOMENTS + c]
     return True
 
 
@@ -1031,7 +1032,7 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
     if want <= max_sub:
         k = max(1, int(math.ceil(want)))
     else:
-        counts[CAPPED] += 1   # the work of one step stays bounded; the caller reports it
+        counts[Count.CAPPED] += 1   # the work of one step stays bounded; the caller reports it
         k = max_sub
     valid0 = c_valid
     while True:
@@ -1043,10 +1044,10 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         c_valid = valid0
         ok = True
         if k > 1:
-            counts[SUBSTEPS] += k
+            counts[Count.SUBSTEPS] += k
         h = dt / k
         for _ in range(k):
-            if method == RKMK4:
+            if method == Method.RKMK4:
                 _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam,
                        c_valid, counts, err)
             else:
@@ -1057,50 +1058,51 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
             c_valid = True
         if ok:
             break
-        counts[RETRIES] += 1
+        counts[Count.RETRIES] += 1
         k = min(2 * k, max_sub)
         valid0 = False   # the failed attempt overwrote the workspace's geometry
     normalize_quaternions(quat)
     return all_finite(pos, quat, vel, om)
 
 
-def workspace(n: int, m: int, body: np.ndarray) -> tuple:
+def workspace(n: int, m: int, body: np.ndarray) -> dict:
     """
-    Arrays the constrained step works in (allocated once per constraint set).
+    Arrays the constrained step works in, by name (allocated once per constraint set).
 
-    ``(phi (3, m), G (3, 2, m, 6), vectors (4, m), Gᵀλ (n, 6), free
-    accelerations (n, 6), force (n, 3), torque (n, 3), M⁻¹ (n, 6), factor
-    state (2,): [the symmetric factor is of the current geometry, its mode],
-    watch (n,): every body of the component)``;
-    the geometry slots are START, CURRENT and END.
+    ``phi`` (3, m), ``jac`` (3, 2, m, 6): Φ and G of the geometries START,
+    CURRENT and END; ``vm`` (4, m) vectors; ``gt_lambda`` (n, 6) Gᵀλ;
+    ``free_acc`` (n, 6) free accelerations; ``force``, ``torque`` (n, 3);
+    ``minv`` (n, 6) M⁻¹; ``factor_state`` (2,): [the symmetric factor is of the
+    current geometry, its mode]; ``watch`` (n,): every body of the component.
     """
     minv6 = np.empty((n, 6))
-    minv6[:, :3] = body[:, 1:2]
-    minv6[:, 3:] = 1.0 / body[:, 2:5]
-    return (np.zeros((3, m)), np.zeros((3, 2, m, 6)), np.zeros((4, m)), np.zeros((n, 6)),
-            np.zeros((n, 6)), np.zeros((n, 3)), np.zeros((n, 3)), minv6,
-            np.zeros(2, dtype=np.int64), np.ones(n, dtype=bool))
+    minv6[:, :3] = body[:, B_INV_MASS:B_INV_MASS + 1]
+    minv6[:, 3:] = 1.0 / body[:, B_MOMENTS:B_MOMENTS + 3]
+    return {'phi': np.zeros((3, m)), 'jac': np.zeros((3, 2, m, 6)), 'vm': np.zeros((4, m)),
+            'gt_lambda': np.zeros((n, 6)), 'free_acc': np.zeros((n, 6)),
+            'force': np.zeros((n, 3)), 'torque': np.zeros((n, 3)), 'minv': minv6,
+            'factor_state': np.zeros(2, dtype=np.int64), 'watch': np.ones(n, dtype=np.int64)}
 
 
-def scratch(n: int, m: int) -> tuple:
+def scratch(n: int, m: int) -> dict:
     """
-    Scratch arrays of the constrained step, after the workspace's in ``ws``.
+    Scratch arrays of the constrained step, by name: nothing in them outlives a call.
 
-    ``(rotations (n + 1, 3, 3), world angular velocities (n + 1, 3), J_r
-    (n, 3, 3), G diag(I, J_r) (2, m, 6), vectors (2, m), body vectors (4, n, 3),
-    quaternions (n, 4), RKMK4 stages (4, 5, n, 3), rotor flow (6, 3))``, slots
-    FRAMES to ROTOR: nothing in them outlives a call, they spare the step its
-    allocations.
+    ``frames`` (n + 1, 3, 3) rotations, ``omega_world`` (n + 1, 3), ``jr`` (n, 3, 3)
+    J_r, ``g2`` (2, m, 6) G diag(I, J_r), ``vectors`` (2, m), ``body_vectors``
+    (4, n, 3), ``quats`` (n, 4), ``stages`` (4, 5, n, 3) RKMK4 stages, ``rotor``
+    (6, 3) rotor flow; they spare the step its allocations.
     """
-    return (np.zeros((n + 1, 3, 3)), np.zeros((n + 1, 3)), np.zeros((n, 3, 3)),
-            np.zeros((2, m, 6)), np.zeros((2, m)), np.zeros((4, n, 3)), np.zeros((n, 4)),
-            np.zeros((4, 5, n, 3)), np.zeros((6, 3)))
+    return {'frames': np.zeros((n + 1, 3, 3)), 'omega_world': np.zeros((n + 1, 3)),
+            'jr': np.zeros((n, 3, 3)), 'g2': np.zeros((2, m, 6)), 'vectors': np.zeros((2, m)),
+            'body_vectors': np.zeros((4, n, 3)), 'quats': np.zeros((n, 4)),
+            'stages': np.zeros((4, 5, n, 3)), 'rotor': np.zeros((6, 3))}
 
 
-def dense_storage(d: int) -> tuple:
-    """Dense factor storage ``(F (d, d), piv (d,), U (d, d), s (d,), Vt (d, d))``."""
-    return (np.zeros((d, d)), np.zeros(d, dtype=np.int64), np.zeros((d, d)), np.zeros(d),
-            np.zeros((d, d)))
+def dense_storage(d: int) -> dict:
+    """Dense factor storage by name: ``f``, ``u``, ``vt`` (d, d), ``piv``, ``s`` (d,)."""
+    return {'f': np.zeros((d, d)), 'piv': np.zeros(d, dtype=np.int64), 'u': np.zeros((d, d)),
+            's': np.zeros(d), 'vt': np.zeros((d, d))}
 
 
 # ----------------------------------------------------------------------------------------
@@ -1108,62 +1110,46 @@ def dense_storage(d: int) -> tuple:
 # unboxed, typed and released: about 70 ns): a component's rows, workspace, scratch and two
 # dense and two tree storages, 74 arrays, live in one float64 and one int64 buffer described
 # by a layout table, and the compiled step takes views of them (see the context ``cx``).
-
-_SLOTS = (
-    # rows: kind, comp, a, b, par
-    'i1', 'i1', 'i1', 'i1', 'f2',
-    # workspace (see workspace())
-    'f2', 'f4', 'f2', 'f2', 'f2', 'f2', 'f2', 'f2', 'i1', 'i1',
-    # scratch (see scratch())
-    'f3', 'f2', 'f3', 'f3', 'f2', 'f3', 'f2', 'f4', 'f2',
-    # two dense storages (F, piv, U, s, Vt)
-    'f2', 'i1', 'f2', 'f1', 'f2', 'f2', 'i1', 'f2', 'f1', 'f2',
-    # two tree storages (group_ptr, group_rows, group_child, group_parent, row_side, S, piv,
-    # P, Q, B, W, E, tmp; then for closed loops: closure, X, Y, work, g, z, xc, see
-    # tree_storage())
-    'i1', 'i1', 'i1', 'i1', 'i1', 'f3', 'i2', 'f3', 'f3', 'f4', 'f3', 'f3', 'f1',
-    'i1', 'f2', 'f2', 'f1', 'f2', 'f1', 'f1',
-    'i1', 'i1', 'i1', 'i1', 'i1', 'f3', 'i2', 'f3', 'f3', 'f4', 'f3', 'f3', 'f1',
-    'i1', 'f2', 'f2', 'f1', 'f2', 'f1', 'f1')
-# Where the dense and the tree storages start in _SLOTS, and a tree storage's length.
-_DENSE, _TREES, _TREE_SLOTS = 24, 34, 20
+# What is where: :data:`.layout.COMPONENT`.
 
 
-def pack(rows: tuple, ws: tuple, dense: tuple, trees: tuple) -> tuple:
+def pack(rows: dict, ws: dict, dense: tuple, trees: tuple) -> tuple:
     """
     Copy a component's arrays into two buffers; return ``(packed, views)``.
 
-    ``ws`` is the workspace of :func:`workspace`, to which the scratch arrays of
-    :func:`scratch` are added. ``packed`` is ``(key, floats, ints, layout)``, the
-    arguments of :func:`packed_step`; ``views`` the same nested tuples as given
-    (``ws`` with the scratch), as views into the buffers (what the compiled step
-    reads and writes). Boolean arrays become int64 (the workspace's ``watch``).
+    ``rows`` holds ``kind, comp, row_a, row_b, row_par`` (see :mod:`.rows`) and
+    ``key`` (its generic rows, -1 if none); ``ws`` the workspace of
+    :func:`workspace`, to which the scratch arrays of :func:`scratch` are added;
+    ``dense`` and ``trees`` two storages each (:data:`.layout.STORAGES` order)
+    of :func:`dense_storage` and :func:`tree_storage`. Every array is checked
+    against :data:`.layout.COMPONENT` by name. ``packed`` is ``(key, floats,
+    ints, layout)``, the arguments of :func:`packed_step`; ``views`` a dict of
+    the same names, as views into the buffers (what the compiled step reads
+    and writes).
     """
-    n, m = ws[3].shape[0], ws[0].shape[1]
-    arrays = [*rows[:5], *ws, *scratch(n, m), *dense[0], *dense[1], *trees[0], *trees[1]]
-    if len(arrays) != len(_SLOTS):
-        raise ValueError(f'expected {len(_SLOTS)} arrays, got {len(arrays)}')
+    n, m = ws['gt_lambda'].shape[0], ws['phi'].shape[1]
+    named = {k: v for k, v in rows.items() if k != 'key'}
+    named.update(ws)
+    named.update(scratch(n, m))
+    for st, storage in zip(STORAGES, dense):
+        named.update({f'{st}_dense_{k}': v for k, v in storage.items()})
+    for st, storage in zip(STORAGES, trees):
+        named.update({f'{st}_tree_{k}': v for k, v in storage.items()})
+    arrays = COMPONENT.check(named)
     layout = np.zeros((len(arrays), 6), dtype=np.int64)
     sizes = {'f': 0, 'i': 0}
-    for k, (x, slot) in enumerate(zip(arrays, _SLOTS)):
-        if x.ndim != int(slot[1]):
-            raise ValueError(f'slot {k}: expected {slot[1]} dimensions, got {x.ndim}')
-        layout[k, 0] = sizes[slot[0]]
+    for k, (x, field) in enumerate(zip(arrays, COMPONENT.fields)):
+        layout[k, 0] = sizes[field.kind]
         layout[k, 1:1 + x.ndim] = x.shape
-        sizes[slot[0]] += x.size
+        sizes[field.kind] += x.size
     floats, ints = np.zeros(sizes['f']), np.zeros(sizes['i'], dtype=np.int64)
-    views = []
-    for k, (x, slot) in enumerate(zip(arrays, _SLOTS)):
-        buf = floats if slot[0] == 'f' else ints
+    views = {}
+    for k, (x, field) in enumerate(zip(arrays, COMPONENT.fields)):
+        buf = floats if field.kind == 'f' else ints
         v = buf[layout[k, 0]:layout[k, 0] + x.size].reshape(x.shape)
         v[...] = x
-        views.append(v)
-    rows_v = (*views[:5], rows[5])
-    ws_v = tuple(views[5:_DENSE])
-    dense_v = (tuple(views[_DENSE:_DENSE + 5]), tuple(views[_DENSE + 5:_TREES]))
-    trees_v = (tuple(views[_TREES:_TREES + _TREE_SLOTS]),
-               tuple(views[_TREES + _TREE_SLOTS:_TREES + 2 * _TREE_SLOTS]))
-    return (rows[5], floats, ints, layout), (rows_v, ws_v, dense_v, trees_v)
+        views[field.name] = v
+    return (rows['key'], floats, ints, layout), views
 
 
 @njit(cache=True)
@@ -1188,26 +1174,134 @@ def _v4(buf, L, k):
 
 @njit(cache=True)
 def _tree_views(f, i, L, k):
-    return (_v1(i, L, k), _v1(i, L, k + 1), _v1(i, L, k + 2), _v1(i, L, k + 3),
-            _v1(i, L, k + 4), _v3(f, L, k + 5), _v2(i, L, k + 6), _v3(f, L, k + 7),
-            _v3(f, L, k + 8), _v4(f, L, k + 9), _v3(f, L, k + 10), _v3(f, L, k + 11),
-            _v1(f, L, k + 12), _v1(i, L, k + 13), _v2(f, L, k + 14), _v2(f, L, k + 15),
-            _v1(f, L, k + 16), _v2(f, L, k + 17), _v1(f, L, k + 18), _v1(f, L, k + 19))
+    """Return the tree storage starting at slot ``k``, a tuple indexed by the ``T_*`` slots."""
+    return (_v1(i, L, k + T_GROUP_PTR), _v1(i, L, k + T_GROUP_ROWS),
+            _v1(i, L, k + T_GROUP_CHILD), _v1(i, L, k + T_GROUP_PARENT),
+            _v1(i, L, k + T_ROW_SIDE), _v3(f, L, k + T_S), _v2(i, L, k + T_PIV),
+            _v3(f, L, k + T_P), _v3(f, L, k + T_Q), _v4(f, L, k + T_B), _v3(f, L, k + T_W),
+            _v3(f, L, k + T_E), _v1(f, L, k + T_TMP), _v1(i, L, k + T_CLOSURE),
+            _v2(f, L, k + T_X), _v2(f, L, k + T_Y), _v1(f, L, k + T_WORK), _v2(f, L, k + T_G),
+            _v1(f, L, k + T_Z), _v1(f, L, k + T_XC))
 
 
-def tree_storage(structure, closure: np.ndarray, m: int) -> tuple:
+def tree_storage(structure, closure: np.ndarray, m: int) -> dict:
     """
-    One tree storage of a component with ``m`` rows: arrays and factors of its forest.
+    One tree storage of a component with ``m`` rows, by name (:data:`.layout.TREE`).
 
-    ``structure``: the :class:`.tree_solve.TreeStructure` of the forest;
-    ``closure``: the rows that close loops (empty for a forest), for which the
-    storage also holds ``X``, ``Y`` (c, m), a work vector (m,), ``g`` (2, 6) and
-    the vectors ``z``, ``xc`` (c,) of :mod:`.loop_solve`.
+    ``structure``: the :class:`.tree_solve.TreeStructure` of the forest (its
+    arrays and the factors of :func:`.tree_solve.factor_arrays`); ``closure``:
+    the rows that close loops (empty for a forest), for which the storage also
+    holds ``x``, ``y`` (c, m), ``work`` (m,), ``g`` (2, 6) and the vectors
+    ``z``, ``xc`` (c,) of :mod:`.loop_solve`.
     """
     c = closure.shape[0]
-    return (*structure.arrays, *factor_arrays(structure), closure.astype(np.int64),
-            np.zeros((c, m)), np.zeros((c, m)), np.zeros(m), np.zeros((2, 6)), np.zeros(c),
-            np.zeros(c))
+    arrays = (*structure.arrays, *factor_arrays(structure), closure.astype(np.int64),
+              np.zeros((c, m)), np.zeros((c, m)), np.zeros(m), np.zeros((2, 6)), np.zeros(c),
+              np.zeros(c))
+    if len(arrays) != len(TREE_FIELDS):
+        raise ValueError(f'tree storage: expected {len(TREE_FIELDS)} arrays, got {len(arrays)}')
+    return dict(zip((f.name for f in TREE_FIELDS.fields), arrays))
+
+
+# ----------------------------------------------------------------------------------------
+# The other uses of a component's solve, outside a step: the multipliers at a state (the
+# reactions a user reads), the velocity projection (reset, a new joint) and the Gauss-Newton
+# search that decides whether constraints can hold together. Each is the step's own code
+# (its geometry, factorizations and solves) on the component's packed buffers.
+
+
+@njit(cache=True)
+def component_multipliers(pos, quat, vel, om, body, gforce, wrench, flags, par, solve, key,
+                          floats, ints, layout, c_valid, lam, counts):
+    """
+    λ (m,) at a state: the acceleration-level multipliers a kick there would use.
+
+    Free accelerations of every effect (:func:`_free_accelerations`), then
+    :func:`_multipliers`, as in :func:`_kick`. ``c_valid``: the workspace's
+    current geometry is of ``pos, quat`` (a step ended there), so it is reused,
+    with the symmetric factor if the step left one; otherwise both are computed
+    here. Afterwards the workspace holds the geometry ``G`` (slot ``JAC``,
+    ``CURRENT``) and ``Gᵀλ`` (``GT_LAMBDA``) of this state.
+    """
+    cx = (raw(floats), raw(ints), raw(layout), key, solve)   # CONTEXT's order
+    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, _f2(cx, FREE_ACC),
+                        _f2(cx, FORCE), _f2(cx, TORQUE), counts)
+    if not c_valid:
+        _geometry(pos, quat, cx, CURRENT, counts)
+    _multipliers(pos, quat, vel, om, cx, par, lam, counts)
+
+
+@njit(cache=True)
+def component_project_velocities(pos, quat, vel, om, body, par, solve, key, floats, ints,
+                                 layout, c_valid, counts):
+    """
+    Project ``vel``, ``om`` (in place) onto ``Φ̇ = −ωΦ``: the step's :func:`_project_velocities`.
+
+    The mass-weighted minimum-norm change (a perfectly inelastic impact, which
+    conserves momenta). ``c_valid`` as for :func:`component_multipliers`.
+    """
+    cx = (raw(floats), raw(ints), raw(layout), key, solve)   # CONTEXT's order
+    if not c_valid:
+        _geometry(pos, quat, cx, CURRENT, counts)
+    mom = _f3(cx, BODY_VECTORS)[0]
+    n = pos.shape[0]
+    for i in range(n):
+        for c in range(3):
+            mom[i, c] = om[i, c] * body[i, B_MOMENTS + c]
+    _project_velocities(pos, quat, vel, mom, body, cx, par, counts)
+    for i in range(n):
+        for c in range(3):
+            om[i, c] = mom[i, c] / body[i, B_MOMENTS + c]
+
+
+@njit(cache=True)
+def component_reach(pos, quat, tolerance, max_iterations, par, solve, key, floats, ints,
+                    layout, counts):
+    """
+    Smallest ``max |Φ|`` Gauss–Newton reaches from ``pos, quat`` (not modified).
+
+    Minimum-norm steps ``δ = −M⁻¹ Gᵀ (G M⁻¹ Gᵀ)⁺ Φ`` (redundant rows: the
+    truncated SVD of a dense system, the Tikhonov term of the tree solve, as in
+    a step) converge quadratically to ``Φ = 0`` when the constraints can hold
+    together; for an inconsistent set they stall at the least-squares
+    compromise. Stops below ``tolerance``, after three iterations that do not
+    reduce the residual, or after ``max_iterations``. Leaves the workspace's
+    current geometry at the last iterate (not of the state).
+    """
+    cx = (raw(floats), raw(ints), raw(layout), key, solve)   # CONTEXT's order
+    pos, quat = pos.copy(), quat.copy()
+    n = pos.shape[0]
+    vm, g6, minv6 = _f2(cx, VM), _f2(cx, GT_LAMBDA), _f2(cx, MINV)
+    phi3, G = _f2(cx, PHI), _f4(cx, JAC)
+    a, b = _i1(cx, ROW_A), _i1(cx, ROW_B)
+    best, stalled = np.inf, 0
+    for _ in range(max_iterations + 1):
+        _geometry(pos, quat, cx, CURRENT, counts)
+        phi, Ga, Gb = phi3[CURRENT], G[CURRENT, 0], G[CURRENT, 1]
+        norm = 0.0
+        for r in range(phi.shape[0]):
+            if not abs(phi[r]) < np.inf:
+                return best   # not finite: the last finite iterate's residual
+            norm = max(norm, abs(phi[r]))
+        if norm <= tolerance:
+            return min(best, norm)
+        # Far from the solution one step may overshoot; three without progress stall.
+        stalled = stalled + 1 if norm >= (1.0 - 1e-6) * best else 0
+        best = min(best, norm)
+        if stalled == 3:
+            return best
+        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, GENERAL, counts)
+        _sol(mode, phi, vm[3], cx, GENERAL)
+        _gt_lambda(Ga, Gb, a, b, vm[3], g6)
+        for i in range(n):
+            for c in range(3):
+                pos[i, c] -= minv6[i, c] * g6[i, c]
+            quat_exp_multiply(quat[i], -minv6[i, 3] * g6[i, 3], -minv6[i, 4] * g6[i, 4],
+                              -minv6[i, 5] * g6[i, 5], quat[i])
+            s = math.sqrt(quat[i, 0] ** 2 + quat[i, 1] ** 2 + quat[i, 2] ** 2 + quat[i, 3] ** 2)
+            for c in range(4):
+                quat[i, c] /= s
+    return best
 
 
 @njit(cache=True)
@@ -1235,7 +1329,7 @@ def component_table(method: int, model: tuple, par: np.ndarray, solve: int, pack
                     lam: np.ndarray, counts: np.ndarray, frames: np.ndarray, out: np.ndarray,
                     key: object) -> Pinned:
     """
-    Pin the arrays of :func:`pinned_packed_step` (a :class:`.views.Pinned`).
+    Pin the arrays of :func:`pinned_packed_step` (:data:`.layout.COMPONENT_TABLE`).
 
     ``model`` is ``(body, gforce, wrench, flags)``, ``packed`` the ``(key, floats,
     ints, layout)`` of :func:`pack`; the others are arguments of
@@ -1243,9 +1337,12 @@ def component_table(method: int, model: tuple, par: np.ndarray, solve: int, pack
     """
     body, gforce, wrench, flags = model
     generic, floats, ints, layout = packed
-    return Pinned((body, gforce, wrench, par, floats, ints, layout, lam, counts, frames, out),
-                  (len(wrench), flags, method, solve, generic, len(par), len(floats),
-                   len(ints), len(layout), len(lam), len(counts)), key=key)
+    return COMPONENT_TABLE.pin(
+        key, body=body, gforce=gforce, wrench=wrench, par=par, floats=floats, ints=ints,
+        layout=layout, lam=lam, counts=counts, frames=frames, out=out, n_wrench=len(wrench),
+        flags=flags, method=method, solve=solve, generic=generic, n_par=len(par),
+        n_floats=len(floats), n_ints=len(ints), n_layout=len(layout), n_lam=len(lam),
+        n_counts=len(counts))
 
 
 @njit(cache=True)
@@ -1260,12 +1357,15 @@ def pinned_packed_step(y0, y, dt, c_valid, with_outputs, err, table):
     pos0, quat0, vel0, om0 = state_parts(y0)
     pos, quat, vel, om = state_parts(y)
     n, t = pos0.shape[0], table
-    return packed_step(t[13], pos0, quat0, vel0, om0, dt, pinned(t, 0, (n, 8)),
-                       pinned(t, 1, (n, 3)), pinned(t, 2, (t[11], 11)), t[12],
-                       pinned(t, 3, (t[16],)), t[14], t[15], pinned(t, 4, (t[17],)),
-                       pinned_int(t, 5, (t[18],)), pinned_int(t, 6, (t[19], 6)), pos, quat,
-                       vel, om, pinned(t, 7, (t[20],)), c_valid, pinned_int(t, 8, (t[21],)),
-                       err, pinned(t, 9, (n, 7)), pinned(t, 10, (n if with_outputs else 0, 19)))
+    return packed_step(
+        t[CT_METHOD], pos0, quat0, vel0, om0, dt, pinned(t, CT_BODY, (n, B_WIDTH)),
+        pinned(t, CT_GFORCE, (n, 3)), pinned(t, CT_WRENCH, (t[CT_N_WRENCH], W_WIDTH)),
+        t[CT_FLAGS], pinned(t, CT_PAR, (t[CT_N_PAR],)), t[CT_SOLVE], t[CT_GENERIC],
+        pinned(t, CT_FLOATS, (t[CT_N_FLOATS],)), pinned_int(t, CT_INTS, (t[CT_N_INTS],)),
+        pinned_int(t, CT_LAYOUT, (t[CT_N_LAYOUT], 6)), pos, quat, vel, om,
+        pinned(t, CT_LAM, (t[CT_N_LAM],)), c_valid, pinned_int(t, CT_COUNTS, (t[CT_N_COUNTS],)),
+        err, pinned(t, CT_FRAMES, (n, FR_WIDTH)),
+        pinned(t, CT_OUT, (n if with_outputs else 0, O_WIDTH)))
 
 
 @njit(cache=True)
@@ -1277,6 +1377,6 @@ def _packed_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags
     pos, quat, vel, om = raw(pos), raw(quat), raw(vel), raw(om)
     body, gforce, wrench, par = raw(body), raw(gforce), raw(wrench), raw(par)
     lam, counts, err = raw(lam), raw(counts), raw(err)
-    cx = (raw(floats), raw(ints), raw(layout), key, solve)
+    cx = (raw(floats), raw(ints), raw(layout), key, solve)   # CONTEXT's order
     return constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, flags,
                             cx, par, pos, quat, vel, om, lam, c_valid, counts, err)

@@ -26,12 +26,15 @@ changes, never per step)
     Bit ``HAS_POSITION_FORCES``: a kick has something to add (gravity or an
     active wrench); bit ``HAS_DAMPING``: damping acts.
 
-Work counts (``counts``: the simulation's int64 tally; its first five slots)
+Work counts (``counts``: the simulation's int64 tally, :class:`.layout.Count`)
 ---------------------------------------------------------------------------
 ``RHS`` full right-hand sides, ``KICK`` kick evaluations (position-dependent
 wrenches), ``GYRO`` bodies whose gyroscopic term or free-rotor sub-flow was
 computed, ``ROT`` orientations updated by an exponential map, ``FLOW`` exact
 damping flows.
+
+The columns of ``body`` and ``wrench`` and the slots of the tables are named in
+:mod:`.layout`.
 """
 
 from __future__ import annotations
@@ -41,12 +44,19 @@ import math
 from numba import njit
 import numpy as np
 
-from .methods import _W1, LIE_POISSON4, RKMK4, SYMPLECTIC_EULER
+from .layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MOMENTS, B_WIDTH, Count,
+                     FR_COM_BODY, FR_QUAT_BODY_PRINCIPAL, FR_WIDTH, FREE_TABLE, FT_BODY,
+                     FT_COUNTS, FT_FLAGS, FT_FRAMES, FT_GFORCE, FT_KICK, FT_METHOD, FT_N_COUNTS,
+                     FT_N_WRENCH, FT_N_WS, FT_OUT, FT_WRENCH, FT_WS, O_ANG_VEL_BODY,
+                     O_ANG_VEL_WORLD, O_ORIGIN_VEL_BODY, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD,
+                     O_QUAT_BODY_WORLD, O_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_POINT, W_TORQUE,
+                     W_WIDTH)
+from .methods import Method, YOSHIDA_W1
 from .so3 import (_matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply,
                   quat_matrix)
 from .views import Pinned, pinned, pinned_int, raw, raw_slice
+
 HAS_POSITION_FORCES, HAS_DAMPING = 1, 2
-RHS, KICK, GYRO, ROT, FLOW = 0, 1, 2, 3, 4
 # Bits of free_step's result.
 KICK_VALID, FINITE = 1, 2
 
@@ -65,12 +75,12 @@ def position_wrench(quat: np.ndarray, body: np.ndarray, gforce: np.ndarray,
         return
     R = np.empty((3, 3))
     for e in range(wrench.shape[0]):
-        i = int(wrench[e, 0])
+        i = int(wrench[e, W_BODY])
         quat_matrix(quat[i], R)
-        f0, f1, f2 = wrench[e, 2], wrench[e, 3], wrench[e, 4]
-        t0, t1, t2 = wrench[e, 5], wrench[e, 6], wrench[e, 7]
-        r0, r1, r2 = wrench[e, 8], wrench[e, 9], wrench[e, 10]
-        if wrench[e, 1] != 0.0:
+        f0, f1, f2 = wrench[e, W_FORCE], wrench[e, W_FORCE + 1], wrench[e, W_FORCE + 2]
+        t0, t1, t2 = wrench[e, W_TORQUE], wrench[e, W_TORQUE + 1], wrench[e, W_TORQUE + 2]
+        r0, r1, r2 = wrench[e, W_POINT], wrench[e, W_POINT + 1], wrench[e, W_POINT + 2]
+        if wrench[e, W_IN_BODY] != 0.0:
             # Principal-frame force at a principal-frame point: torque τ + r × f.
             for a in range(3):
                 force[i, a] += R[a, 0] * f0 + R[a, 1] * f1 + R[a, 2] * f2
@@ -104,19 +114,20 @@ def finish_accelerations(vel: np.ndarray, om: np.ndarray, body: np.ndarray, flag
     for i in range(acc.shape[0]):
         if flags & HAS_DAMPING:
             for a in range(3):
-                acc[i, a] -= body[i, 5] * vel[i, a]
-                om_dot[i, a] -= body[i, 6] * om[i, a]
-        if body[i, 7] != 0.0:
+                acc[i, a] -= body[i, B_C_LIN] * vel[i, a]
+                om_dot[i, a] -= body[i, B_C_ANG] * om[i, a]
+        if body[i, B_ANISOTROPIC] != 0.0:
             # The gyroscopic term Ω × JΩ.
             w0, w1, w2 = om[i, 0], om[i, 1], om[i, 2]
-            l0, l1, l2 = body[i, 2] * w0, body[i, 3] * w1, body[i, 4] * w2
+            J0, J1, J2 = body[i, B_MOMENTS], body[i, B_MOMENTS + 1], body[i, B_MOMENTS + 2]
+            l0, l1, l2 = J0 * w0, J1 * w1, J2 * w2
             om_dot[i, 0] -= w1 * l2 - w2 * l1
             om_dot[i, 1] -= w2 * l0 - w0 * l2
             om_dot[i, 2] -= w0 * l1 - w1 * l0
-            counts[GYRO] += 1
+            counts[Count.GYRO] += 1
         for a in range(3):
-            acc[i, a] *= body[i, 1]
-            om_dot[i, a] /= body[i, 2 + a]
+            acc[i, a] *= body[i, B_INV_MASS]
+            om_dot[i, a] /= body[i, B_MOMENTS + a]
 
 
 @njit(cache=True)
@@ -125,7 +136,7 @@ def accelerations(quat: np.ndarray, vel: np.ndarray, om: np.ndarray, body: np.nd
                   om_dot: np.ndarray, counts: np.ndarray) -> None:
     """Free (unconstrained) linear acceleration (n, 3) and dΩ/dt (n, 3): every effect."""
     position_wrench(quat, body, gforce, wrench, acc, om_dot)
-    counts[RHS] += 1
+    counts[Count.RHS] += 1
     finish_accelerations(vel, om, body, flags, acc, om_dot, counts)
 
 
@@ -157,7 +168,7 @@ def rkmk4_stage(s: int, h: float, pos: np.ndarray, quat: np.ndarray, vel: np.nda
         else:
             quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], q[i])
     if s:
-        counts[ROT] += n
+        counts[Count.ROT] += n
 
 
 @njit(cache=True)
@@ -185,7 +196,7 @@ def rkmk4_finish(h: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
             om[i, c] += b0 * (kw[0, i, c] + kw[3, i, c]) + b1 * (kw[1, i, c] + kw[2, i, c])
             u[i, c] = b0 * (kr[0, i, c] + kr[3, i, c]) + b1 * (kr[1, i, c] + kr[2, i, c])
         quat_exp_multiply(quat[i], u[i, 0], u[i, 1], u[i, 2], quat[i])
-    counts[ROT] += n
+    counts[Count.ROT] += n
 
 
 @njit(cache=True)
@@ -283,26 +294,27 @@ def drift(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, mom: np.ndarray,
     for i in range(n):
         for c in range(3):
             pos[i, c] += tau * vel[i, c]
-        if body[i, 7] != 0.0:
+        if body[i, B_ANISOTROPIC] != 0.0:
             if symmetric:
-                axis_flow(quat[i], mom[i], body[i, 2], 0, 0.5 * tau)
-                axis_flow(quat[i], mom[i], body[i, 3], 1, 0.5 * tau)
-                axis_flow(quat[i], mom[i], body[i, 4], 2, tau)
-                axis_flow(quat[i], mom[i], body[i, 3], 1, 0.5 * tau)
-                axis_flow(quat[i], mom[i], body[i, 2], 0, 0.5 * tau)
-                counts[GYRO] += 5
-                counts[ROT] += 5
+                axis_flow(quat[i], mom[i], body[i, B_MOMENTS], 0, 0.5 * tau)
+                axis_flow(quat[i], mom[i], body[i, B_MOMENTS + 1], 1, 0.5 * tau)
+                axis_flow(quat[i], mom[i], body[i, B_MOMENTS + 2], 2, tau)
+                axis_flow(quat[i], mom[i], body[i, B_MOMENTS + 1], 1, 0.5 * tau)
+                axis_flow(quat[i], mom[i], body[i, B_MOMENTS], 0, 0.5 * tau)
+                counts[Count.GYRO] += 5
+                counts[Count.ROT] += 5
             else:
                 for a in range(3):
-                    axis_flow(quat[i], mom[i], body[i, 2 + a], a, tau)
-                counts[GYRO] += 3
-                counts[ROT] += 3
+                    axis_flow(quat[i], mom[i], body[i, B_MOMENTS + a], a, tau)
+                counts[Count.GYRO] += 3
+                counts[Count.ROT] += 3
         else:
             # Isotropic: Ω is constant during the drift and exp is exact.
-            quat_exp_multiply(quat[i], tau * mom[i, 0] / body[i, 2],
-                              tau * mom[i, 1] / body[i, 3], tau * mom[i, 2] / body[i, 4],
+            quat_exp_multiply(quat[i], tau * mom[i, 0] / body[i, B_MOMENTS],
+                              tau * mom[i, 1] / body[i, B_MOMENTS + 1],
+                              tau * mom[i, 2] / body[i, B_MOMENTS + 2],
                               quat[i])
-            counts[ROT] += 1
+            counts[Count.ROT] += 1
 
 
 @njit(cache=True)
@@ -310,11 +322,11 @@ def damping_flow(vel: np.ndarray, mom: np.ndarray, body: np.ndarray, tau: float,
                  counts: np.ndarray) -> None:
     """Exact flow of linear damping over ``tau``, in place (velocities and momenta)."""
     for i in range(vel.shape[0]):
-        fv = math.exp(-body[i, 5] * body[i, 1] * tau)
+        fv = math.exp(-body[i, B_C_LIN] * body[i, B_INV_MASS] * tau)
         for a in range(3):
             vel[i, a] *= fv
-            mom[i, a] *= math.exp(-body[i, 6] * tau / body[i, 2 + a])
-    counts[FLOW] += 1
+            mom[i, a] *= math.exp(-body[i, B_C_ANG] * tau / body[i, B_MOMENTS + a])
+    counts[Count.FLOW] += 1
 
 
 @njit(cache=True)
@@ -331,16 +343,16 @@ def splitting_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarr
     configuration the step ends at. ``ws``: workspace (:func:`workspace_size`).
     """
     n = pos.shape[0]
-    symmetric = method != SYMPLECTIC_EULER
-    if method == LIE_POISSON4:
-        weights = (_W1, 1.0 - 2.0 * _W1, _W1)
+    symmetric = method != Method.SYMPLECTIC_EULER
+    if method == Method.LIE_POISSON4:
+        weights = (YOSHIDA_W1, 1.0 - 2.0 * YOSHIDA_W1, YOSHIDA_W1)
     else:
         weights = (1.0, 0.0, 0.0)
-    n_sub = 3 if method == LIE_POISSON4 else 1
+    n_sub = 3 if method == Method.LIE_POISSON4 else 1
     mom = raw_slice(ws, 0, (n, 3))
     for i in range(n):
         for a in range(3):
-            mom[i, a] = om[i, a] * body[i, 2 + a]
+            mom[i, a] = om[i, a] * body[i, B_MOMENTS + a]
     force = kick[:, :3]
     torque = kick[:, 3:]
     forces = flags & HAS_POSITION_FORCES
@@ -358,11 +370,11 @@ def splitting_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarr
             if forces:
                 if not kick_valid:
                     position_wrench(quat, body, gforce, wrench, force, torque)
-                    counts[KICK] += 1
+                    counts[Count.KICK] += 1
                     kick_valid = True
                 for i in range(n):
                     for a in range(3):
-                        vel[i, a] += tau * body[i, 1] * force[i, a]
+                        vel[i, a] += tau * body[i, B_INV_MASS] * force[i, a]
                         mom[i, a] += tau * torque[i, a]
             if damping and half == 1:
                 damping_flow(vel, mom, body, tau, counts)
@@ -371,7 +383,7 @@ def splitting_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarr
             kick_valid = False
     for i in range(n):
         for a in range(3):
-            om[i, a] = mom[i, a] / body[i, 2 + a]
+            om[i, a] = mom[i, a] / body[i, B_MOMENTS + a]
     return kick_valid
 
 
@@ -422,7 +434,7 @@ def free_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
     """
     if ws.shape[0] < workspace_size(pos.shape[0]):
         raise ValueError('free_step: ws is smaller than workspace_size(n)')
-    if method == RKMK4:
+    if method == Method.RKMK4:
         # Its many small calls pass the arrays on: views without reference counts.
         pos, quat, vel, om = raw(pos), raw(quat), raw(vel), raw(om)
         rkmk4_step(pos, quat, vel, om, dt, raw(body), raw(gforce), raw(wrench), flags,
@@ -446,8 +458,9 @@ def free_table(method: int, model: tuple, kick: np.ndarray, counts: np.ndarray,
     of :func:`free_step`, ``out`` with all ``n`` rows.
     """
     body, gforce, wrench, flags = model
-    return Pinned((body, gforce, wrench, kick, counts, ws, frames, out),
-                  (len(wrench), flags, method, len(counts), len(ws)), key=model)
+    return FREE_TABLE.pin(model, body=body, gforce=gforce, wrench=wrench, kick=kick,
+                          counts=counts, ws=ws, frames=frames, out=out, n_wrench=len(wrench),
+                          flags=flags, method=method, n_counts=len(counts), n_ws=len(ws))
 
 
 @njit(cache=True)
@@ -476,10 +489,12 @@ def pinned_free_step(y: np.ndarray, dt: float, kick_valid: bool, with_outputs: b
     pos, quat, vel, om = state_parts(y)
     n = pos.shape[0]
     t = table
-    return free_step(t[10], pos, quat, vel, om, dt, pinned(t, 0, (n, 8)), pinned(t, 1, (n, 3)),
-                     pinned(t, 2, (t[8], 11)), t[9], pinned(t, 3, (n, 6)), kick_valid,
-                     pinned_int(t, 4, (t[11],)), err, pinned(t, 5, (t[12],)),
-                     pinned(t, 6, (n, 7)), pinned(t, 7, (n if with_outputs else 0, 19)))
+    return free_step(t[FT_METHOD], pos, quat, vel, om, dt, pinned(t, FT_BODY, (n, B_WIDTH)),
+                     pinned(t, FT_GFORCE, (n, 3)), pinned(t, FT_WRENCH, (t[FT_N_WRENCH], W_WIDTH)),
+                     t[FT_FLAGS], pinned(t, FT_KICK, (n, 6)), kick_valid,
+                     pinned_int(t, FT_COUNTS, (t[FT_N_COUNTS],)), err,
+                     pinned(t, FT_WS, (t[FT_N_WS],)), pinned(t, FT_FRAMES, (n, FR_WIDTH)),
+                     pinned(t, FT_OUT, (n if with_outputs else 0, O_WIDTH)))
 
 
 @njit(cache=True)
@@ -506,29 +521,32 @@ def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
     ----------
     pos, vel, om, quat
         The state (see :func:`free_step`).
-    frames : ndarray, shape (n, 7)
+    frames : ndarray, shape (n, FR_WIDTH)
         Principal frame in the body frame (xyzw), then the centre of mass in the
-        body frame (m).
-    out : ndarray, shape (n, 19)
-        Written: body-origin position (3, world), body orientation (4, xyzw,
-        w >= 0), origin velocity (3, world), angular velocity (3, world),
-        origin velocity (3, body), angular velocity (3, body).
+        body frame (m): :data:`.layout.FRAME`.
+    out : ndarray, shape (n, O_WIDTH)
+        Written (:data:`.layout.OUTPUT`): body-origin position (3, world), body
+        orientation (4, xyzw, w >= 0), origin velocity (3, world), angular
+        velocity (3, world), origin velocity (3, body), angular velocity (3, body).
 
     """
+    fq, fc = FR_QUAT_BODY_PRINCIPAL, FR_COM_BODY
+    op, oq, ov, ow = O_ORIGIN_WORLD, O_QUAT_BODY_WORLD, O_ORIGIN_VEL_WORLD, O_ANG_VEL_WORLD
+    ovb, owb = O_ORIGIN_VEL_BODY, O_ANG_VEL_BODY
     for i in range(pos.shape[0]):
         # q_wb = q_wp ⊗ conj(q_bp), sign fixed to w >= 0.
         ax, ay, az, aw = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
-        q0, q1, q2, q3 = positive_product(ax, ay, az, aw, -frames[i, 0], -frames[i, 1],
-                                          -frames[i, 2], frames[i, 3])
-        out[i, 3], out[i, 4], out[i, 5], out[i, 6] = q0, q1, q2, q3
+        q0, q1, q2, q3 = positive_product(ax, ay, az, aw, -frames[i, fq], -frames[i, fq + 1],
+                                          -frames[i, fq + 2], frames[i, fq + 3])
+        out[i, oq], out[i, oq + 1], out[i, oq + 2], out[i, oq + 3] = q0, q1, q2, q3
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(q0, q1, q2, q3)
-        c0, c1, c2 = frames[i, 4], frames[i, 5], frames[i, 6]
+        c0, c1, c2 = frames[i, fc], frames[i, fc + 1], frames[i, fc + 2]
         f0 = r00 * c0 + r01 * c1 + r02 * c2
         f1 = r10 * c0 + r11 * c1 + r12 * c2
         f2 = r20 * c0 + r21 * c1 + r22 * c2
-        out[i, 0] = pos[i, 0] - f0
-        out[i, 1] = pos[i, 1] - f1
-        out[i, 2] = pos[i, 2] - f2
+        out[i, op] = pos[i, 0] - f0
+        out[i, op + 1] = pos[i, 1] - f1
+        out[i, op + 2] = pos[i, 2] - f2
         # World angular velocity ω = R_wp Ω; origin velocity v − ω × offset.
         p00, p01, p02, p10, p11, p12, p20, p21, p22 = _matrix(ax, ay, az, aw)
         o0, o1, o2 = om[i, 0], om[i, 1], om[i, 2]
@@ -538,14 +556,14 @@ def outputs(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray,
         v0 = vel[i, 0] + (w1 * -f2 - w2 * -f1)
         v1 = vel[i, 1] + (w2 * -f0 - w0 * -f2)
         v2 = vel[i, 2] + (w0 * -f1 - w1 * -f0)
-        out[i, 7], out[i, 8], out[i, 9] = v0, v1, v2
-        out[i, 10], out[i, 11], out[i, 12] = w0, w1, w2
-        out[i, 13] = r00 * v0 + r10 * v1 + r20 * v2
-        out[i, 14] = r01 * v0 + r11 * v1 + r21 * v2
-        out[i, 15] = r02 * v0 + r12 * v1 + r22 * v2
-        out[i, 16] = r00 * w0 + r10 * w1 + r20 * w2
-        out[i, 17] = r01 * w0 + r11 * w1 + r21 * w2
-        out[i, 18] = r02 * w0 + r12 * w1 + r22 * w2
+        out[i, ov], out[i, ov + 1], out[i, ov + 2] = v0, v1, v2
+        out[i, ow], out[i, ow + 1], out[i, ow + 2] = w0, w1, w2
+        out[i, ovb] = r00 * v0 + r10 * v1 + r20 * v2
+        out[i, ovb + 1] = r01 * v0 + r11 * v1 + r21 * v2
+        out[i, ovb + 2] = r02 * v0 + r12 * v1 + r22 * v2
+        out[i, owb] = r00 * w0 + r10 * w1 + r20 * w2
+        out[i, owb + 1] = r01 * w0 + r11 * w1 + r21 * w2
+        out[i, owb + 2] = r02 * w0 + r12 * w1 + r22 * w2
 
 
 @njit(cache=True)

@@ -1,0 +1,310 @@
+"""
+Every buffer layout the kernels share with Python, declared once.
+
+The kernels read their data from flat arrays: a component's ~75 arrays packed
+into one float64 and one int64 buffer, tables of array addresses, and model
+arrays whose columns mean different things. Each layout is declared here once,
+as names (and, for packed arrays, dtype and dimensions), and everything that
+depends on the order is generated from the declaration at import:
+
+* the slot and column indices, as module integers (``PHI``, ``P_OMEGA``,
+  ``B_INV_MASS``, ...) imported by the kernels by name; numba reads module
+  integers as compile-time constants, so a named index costs nothing at run
+  time, and a misspelt one fails at import;
+* the checks of :meth:`Layout.check` and :meth:`Table.pin`, which take arrays
+  by name and refuse a missing, extra or mis-shaped one naming it.
+
+The codes Python and the kernels exchange are :class:`enum.IntEnum`:
+:class:`Count` (the work tally's slots), :class:`Solve` (how a component's
+systems are solved); the method codes are :class:`.methods.Method`.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import Mapping, NamedTuple, Sequence
+
+import numpy as np
+
+from .views import Pinned
+
+
+class Field(NamedTuple):
+    """One array of a packed layout: its name, ``'f'`` (float64) or ``'i'`` (int64), ndim."""
+
+    name: str
+    kind: str
+    ndim: int
+
+
+class Layout:
+    """
+    Named arrays packed one after another into a float64 and an int64 buffer.
+
+    Parameters
+    ----------
+    name : str
+        What the layout is of (error messages).
+    fields : sequence of (name, kind, ndim)
+        In packing order; names unique.
+
+    """
+
+    def __init__(self, name: str, fields: Sequence[tuple]) -> None:
+        self.name = name
+        self.fields = tuple(Field(*f) for f in fields)
+        names = [f.name for f in self.fields]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f'{name}: fields declared twice: {twice}')
+        for f in self.fields:
+            if f.kind not in ('f', 'i') or not 1 <= f.ndim <= 4:
+                raise ValueError(f'{name}.{f.name}: kind must be f or i and ndim 1 to 4')
+        self.index = {f.name: k for k, f in enumerate(self.fields)}
+
+    def __len__(self) -> int:
+        return len(self.fields)
+
+    def constants(self, prefix: str = '') -> dict:
+        """``{PREFIX + NAME: slot}`` for every field (upper-case names)."""
+        return {prefix + f.name.upper(): k for k, f in enumerate(self.fields)}
+
+    def check(self, arrays: Mapping[str, np.ndarray]) -> list:
+        """
+        Return ``arrays`` in layout order, after checking names, dtypes and dimensions.
+
+        Raises ValueError naming the first missing, unknown or mis-shaped array.
+        Boolean arrays are accepted for int64 fields (as 0 and 1).
+        """
+        unknown = sorted(set(arrays) - set(self.index))
+        missing = [f.name for f in self.fields if f.name not in arrays]
+        if unknown or missing:
+            raise ValueError(f'{self.name}: unknown arrays {unknown}, missing {missing}')
+        out = []
+        for f in self.fields:
+            a = np.asarray(arrays[f.name])
+            if a.ndim != f.ndim:
+                raise ValueError(f'{self.name}.{f.name}: expected {f.ndim} dimensions, '
+                                 f'got shape {a.shape}')
+            kinds = ('f',) if f.kind == 'f' else ('i', 'b')
+            if a.dtype.kind not in kinds:
+                raise ValueError(f'{self.name}.{f.name}: expected '
+                                 f'{"float64" if f.kind == "f" else "int64"}, got {a.dtype}')
+            out.append(a)
+        return out
+
+
+class Table:
+    """
+    The slots of an address table (:class:`.views.Pinned`): arrays, then integers.
+
+    Parameters
+    ----------
+    name : str
+        What the table is for (error messages).
+    arrays : sequence of str
+        The arrays whose addresses come first, in order.
+    values : sequence of str
+        The integers after them, in order.
+
+    """
+
+    def __init__(self, name: str, arrays: Sequence[str], values: Sequence[str]) -> None:
+        self.name = name
+        self.arrays, self.values = tuple(arrays), tuple(values)
+        names = self.arrays + self.values
+        if len(set(names)) != len(names):
+            raise ValueError(f'{name}: a slot is declared twice')
+
+    def constants(self, prefix: str) -> dict:
+        """``{PREFIX + NAME: slot}`` for every array and value."""
+        return {prefix + n.upper(): k for k, n in enumerate(self.arrays + self.values)}
+
+    def pin(self, key: object = None, **named):
+        """Return a :class:`.views.Pinned` of the named arrays and values, in table order."""
+        given = set(named)
+        want = set(self.arrays) | set(self.values)
+        if given != want:
+            raise ValueError(f'{self.name}: unknown slots {sorted(given - want)}, '
+                             f'missing {sorted(want - given)}')
+        return Pinned([named[n] for n in self.arrays], [int(named[n]) for n in self.values],
+                      key=key)
+
+
+class Columns:
+    """
+    Named column ranges of a model array: ``(name, width)`` one after another.
+
+    Generates ``PREFIX + NAME`` (the first column of each) and ``PREFIX + 'WIDTH'``.
+    """
+
+    def __init__(self, name: str, columns: Sequence[tuple]) -> None:
+        self.name = name
+        self.start, k = {}, 0
+        for column, width in columns:
+            self.start[column] = k
+            k += int(width)
+        self.width = k
+
+    def row(self, **values) -> np.ndarray:
+        """Return the named scalar columns as an array (width,); ValueError names a wrong one."""
+        given, want = set(values), set(self.start)
+        if given != want:
+            raise ValueError(f'{self.name}: unknown columns {sorted(given - want)}, '
+                             f'missing {sorted(want - given)}')
+        out = np.empty(self.width)
+        for name, k in self.start.items():
+            out[k] = values[name]
+        return out
+
+    def constants(self, prefix: str) -> dict:
+        """``{PREFIX + NAME: first column}`` and ``{PREFIX + 'WIDTH': width}``."""
+        out = {prefix + n.upper(): k for n, k in self.start.items()}
+        out[prefix + 'WIDTH'] = self.width
+        return out
+
+
+class Count(IntEnum):
+    """Slots of the work tally (an int64 array the kernels add to)."""
+
+    #: Full right-hand sides.
+    RHS = 0
+    #: Kick evaluations (position-dependent wrenches).
+    KICK = 1
+    #: Bodies whose gyroscopic term or free-rotor sub-flow was computed.
+    GYRO = 2
+    #: Orientations updated by an exponential map.
+    ROT = 3
+    #: Exact damping flows.
+    FLOW = 4
+    #: Kicks that applied damping (the constrained splittings).
+    DAMP_IN_KICK = 5
+    #: Constraint geometry evaluations.
+    GEOMETRY = 6
+    #: Factorizations of ``G M⁻¹ Hᵀ``.
+    FACTORIZATIONS = 7
+    #: Factorizations that found redundant rows.
+    RANK_DEFICIENT = 8
+    #: SHAKE's last-resort projections.
+    FALLBACKS = 9
+    #: Acceleration-level solves.
+    ACC_SOLVES = 10
+    #: SHAKE's Newton iterations.
+    POS_ITERATIONS = 11
+    #: Velocity projections.
+    VEL_PROJECTIONS = 12
+    #: Sub-steps taken.
+    SUBSTEPS = 13
+    #: Steps redone with twice the sub-steps.
+    RETRIES = 14
+    #: Steps whose sub-steps were capped at max_substeps (each then turns by more than
+    #: max_rotation): the bound on the work of one step, reported, never silent.
+    CAPPED = 15
+
+
+N_COUNTS = len(Count)
+
+
+class Solve(IntEnum):
+    """How a component's systems are solved."""
+
+    #: Densely (few rows).
+    DENSE = 0
+    #: By the tree solve (a forest).
+    TREE = 1
+    #: By the tree solve of a spanning forest and the Schur complement of the rows
+    #: that close loops (:mod:`.loop_solve`).
+    LOOP = 2
+
+
+# -- model arrays (built by Dynamics.kernel_model) -----------------------------------------
+
+#: ``body`` (n, B_WIDTH): mass, 1/mass, principal moments J (3), damping coefficients,
+#: and 1.0 if the gyroscopic term is non-zero.
+BODY = Columns('body', [('mass', 1), ('inv_mass', 1), ('moments', 3), ('c_lin', 1),
+                        ('c_ang', 1), ('anisotropic', 1)])
+#: ``wrench`` (k, W_WIDTH): body index, 1.0 if force and torque are in the principal
+#: frame, force (3), torque (3), point of application (3, principal, from the centre).
+WRENCH = Columns('wrench', [('body', 1), ('in_body', 1), ('force', 3), ('torque', 3),
+                            ('point', 3)])
+#: ``frames`` (n, FR_WIDTH): the principal frame in the user's body frame (xyzw), then
+#: the centre of mass in the body frame (m).
+FRAME = Columns('frame', [('quat_body_principal', 4), ('com_body', 3)])
+#: ``out`` (n, O_WIDTH) of free_step.outputs: poses and twists in the user's body frames.
+OUTPUT = Columns('output', [('origin_world', 3), ('quat_body_world', 4),
+                            ('origin_vel_world', 3), ('ang_vel_world', 3),
+                            ('origin_vel_body', 3), ('ang_vel_body', 3)])
+#: ``par`` of the constrained kernels: the solver's and the integrator's settings.
+PAR = Columns('par', [('tau', 1), ('omega', 1), ('pos_tol', 1), ('max_it', 1),
+                      ('rank_rtol', 1), ('reg', 1), ('closing', 1), ('max_rot', 1),
+                      ('max_sub', 1)])
+
+# -- a component's packed arrays (constrained_step.pack) ------------------------------------
+
+#: The rows ``(kind, comp, a, b, par)`` of :mod:`.rows`.
+ROWS = (('kind', 'i', 1), ('comp', 'i', 1), ('row_a', 'i', 1), ('row_b', 'i', 1),
+        ('row_par', 'f', 2))
+#: The workspace (constrained_step.workspace).
+WORKSPACE = (('phi', 'f', 2), ('jac', 'f', 4), ('vm', 'f', 2), ('gt_lambda', 'f', 2),
+             ('free_acc', 'f', 2), ('force', 'f', 2), ('torque', 'f', 2), ('minv', 'f', 2),
+             ('factor_state', 'i', 1), ('watch', 'i', 1))
+#: The scratch arrays (constrained_step.scratch).
+SCRATCH = (('frames', 'f', 3), ('omega_world', 'f', 2), ('jr', 'f', 3), ('g2', 'f', 3),
+           ('vectors', 'f', 2), ('body_vectors', 'f', 3), ('quats', 'f', 2),
+           ('stages', 'f', 4), ('rotor', 'f', 2))
+#: A dense factor storage (constrained_step.dense_storage).
+DENSE = Layout('dense storage', (('f', 'f', 2), ('piv', 'i', 1), ('u', 'f', 2),
+                                 ('s', 'f', 1), ('vt', 'f', 2)))
+#: A tree storage (constrained_step.tree_storage): the forest's structure, its
+#: factors, and for closed loops the closure rows and the Schur complement's arrays.
+TREE = Layout('tree storage', (
+    ('group_ptr', 'i', 1), ('group_rows', 'i', 1), ('group_child', 'i', 1),
+    ('group_parent', 'i', 1), ('row_side', 'i', 1), ('s', 'f', 3), ('piv', 'i', 2),
+    ('p', 'f', 3), ('q', 'f', 3), ('b', 'f', 4), ('w', 'f', 3), ('e', 'f', 3),
+    ('tmp', 'f', 1), ('closure', 'i', 1), ('x', 'f', 2), ('y', 'f', 2), ('work', 'f', 1),
+    ('g', 'f', 2), ('z', 'f', 1), ('xc', 'f', 1)))
+#: Which of a component's two storages of each kind: the general factorizations
+#: (SHAKE's), and the symmetric factor kept for the current geometry.
+STORAGES = ('general', 'symmetric')
+COMPONENT = Layout('component', ROWS + WORKSPACE + SCRATCH + tuple(
+    (f'{st}_dense_{f.name}', f.kind, f.ndim) for st in STORAGES for f in DENSE.fields)
+    + tuple((f'{st}_tree_{f.name}', f.kind, f.ndim) for st in STORAGES for f in TREE.fields))
+
+#: The context a constrained step passes to its helpers: the component's packed buffers and
+#: their layout table (see constrained_step.pack), the key of its generic rows (-1 if none)
+#: and its :class:`Solve`.
+CONTEXT = ('floats', 'ints', 'layout', 'key', 'solve')
+
+# -- address tables ---------------------------------------------------------------------------
+
+#: free_step.free_table / pinned_free_step.
+FREE_TABLE = Table('free-step table',
+                   ('body', 'gforce', 'wrench', 'kick', 'counts', 'ws', 'frames', 'out'),
+                   ('n_wrench', 'flags', 'method', 'n_counts', 'n_ws'))
+#: constrained_step.component_table / pinned_packed_step.
+COMPONENT_TABLE = Table('component table',
+                        ('body', 'gforce', 'wrench', 'par', 'floats', 'ints', 'layout', 'lam',
+                         'counts', 'frames', 'out'),
+                        ('n_wrench', 'flags', 'method', 'solve', 'generic', 'n_par',
+                         'n_floats', 'n_ints', 'n_layout', 'n_lam', 'n_counts'))
+
+# The generated indices, as module integers (compile-time constants to numba).
+_CONSTANTS = {
+    **BODY.constants('B_'), **WRENCH.constants('W_'), **PAR.constants('P_'),
+    **FRAME.constants('FR_'), **OUTPUT.constants('O_'),
+    **COMPONENT.constants(), **DENSE.constants('D_'), **TREE.constants('T_'),
+    **{'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},
+    **FREE_TABLE.constants('FT_'), **COMPONENT_TABLE.constants('CT_'),
+    # Where each storage starts in COMPONENT, and how many slots one takes.
+    'DENSE0': COMPONENT.index['general_dense_f'], 'DENSE_SLOTS': len(DENSE),
+    'TREE0': COMPONENT.index['general_tree_group_ptr'], 'TREE_SLOTS': len(TREE),
+    # Which storage (GENERAL or SYMMETRIC).
+    **{st.upper(): k for k, st in enumerate(STORAGES)},
+}
+_clash = set(_CONSTANTS) & set(globals())
+if _clash:
+    raise ValueError(f'generated names clash with the module: {sorted(_clash)}')
+globals().update(_CONSTANTS)
+__all__ = ['BODY', 'COMPONENT', 'COMPONENT_TABLE', 'CONTEXT', 'Columns', 'Count', 'DENSE',
+           'Field', 'FRAME', 'FREE_TABLE', 'Layout', 'N_COUNTS', 'OUTPUT', 'PAR', 'Solve',
+           'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]
