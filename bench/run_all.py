@@ -9,11 +9,12 @@ Benchmarks: what accuracy costs in time (not tests; timings are for reading, not
    Speeds are compared as ratios measured side by side in one run.
 
 Then ``bench/constraints.py`` (chains, trees, rings, joints), ``bench/knob_estimators.py``
-(the accuracy knob's estimators), ``bench/tree_solve.py`` (the tree solve against SuperLU)
-and ``bench/shake_convergence.py`` (SHAKE's iterations; ``--skip-constraints`` skips these
-four), ``bench/mujoco_peer.py`` and ``bench/accuracy_study.py`` (beside MuJoCo;
-``--skip-mujoco``), and ``bench/node.py`` (the ROS node through DDS: rates, costs,
-latency; ``--skip-node``). A benchmark that fails is reported and the others run on.
+(the accuracy knob's estimators), ``bench/tree_solve.py`` (the tree solve against SuperLU),
+``bench/shake_convergence.py`` (SHAKE's iterations) and ``bench/reactions.py`` (reading
+the reactions after a step; ``--skip-constraints`` skips these five),
+``bench/mujoco_peer.py`` and ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
+and ``bench/node.py`` (the ROS node through DDS: rates, costs, latency; ``--skip-node``).
+A benchmark that fails is reported and the others run on.
 
 Writes ``bench/out/*.md`` (the tables) and, when matplotlib is installed,
 ``bench/out/*.png`` (log-log plots), then assembles the tables into
@@ -266,6 +267,11 @@ def sections(quick: bool, node_args: list) -> list:
             [T('shake_convergence.md')],
             about='A top on a ball joint, the up-front sub-steps switched off, so that every '
                   'step turns it by the angle in the first column; 200 steps.')),
+        ('skip_constraints', 'reactions', ['--quick'] if quick else [], report.Section(
+            'Reading the reactions', f'./dev.sh python bench/reactions.py{q}',
+            [T('reactions.md')],
+            about='The cost of `reactions()` after a step (the solve of the step at the '
+                  'state, reusing its geometry and factor), next to the step.')),
         ('skip_mujoco', 'mujoco_peer', ['--quick'] if quick else [], report.Section(
             'Side by side with MuJoCo', f'./dev.sh python bench/mujoco_peer.py{q}',
             [T('mujoco_peer.md')])),
@@ -287,7 +293,7 @@ def main(argv=None) -> int:
     p.add_argument('--quick', action='store_true', help='fewer step sizes and bodies')
     p.add_argument('--skip-constraints', action='store_true',
                    help='free bodies only (bench/constraints.py, knob_estimators.py, '
-                        'tree_solve.py and shake_convergence.py run the rest)')
+                        'tree_solve.py, shake_convergence.py and reactions.py run the rest)')
     p.add_argument('--skip-node', action='store_true',
                    help='no ROS node benchmark (bench/node.py runs it)')
     p.add_argument('--skip-mujoco', action='store_true',

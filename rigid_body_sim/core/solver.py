@@ -197,6 +197,17 @@ class ComponentSetup(NamedTuple):
     inertia: np.ndarray
 
 
+class _ReactionPlan(NamedTuple):
+    """Per (constraint, side on a body): where :meth:`ConstraintSolver.reactions` reads."""
+
+    owner: tuple             # per component: the constraint index of each of its rows
+    constraint: np.ndarray   # (k,) constraint index
+    side: np.ndarray         # (k,) 0: its body a, 1: its body b
+    body: np.ndarray         # (k,) body index
+    lever: np.ndarray        # (k, 3) anchor from the centre of mass, principal frame (m)
+    names: list              # (constraint name, body name) per entry
+
+
 class KernelSetup(NamedTuple):
     """The compiled step's data: the free bodies and the constraint graph's components."""
 
@@ -253,6 +264,8 @@ class ConstraintSolver:
         self.counters = SolverCounters(tally=tally)
         self.dt: Optional[float] = None
         self._kernel_cache: Optional[tuple] = None
+        self._plan: Optional[tuple] = None
+        self._par: Optional[tuple] = None
         # Keys of this solver's generic rows in kernels.constrained_step.GENERIC, dropped
         # when the setup is rebuilt or the solver is collected.
         self._generic_keys: list = []
@@ -376,7 +389,11 @@ class ConstraintSolver:
 
     def _settings(self) -> np.ndarray:
         """``par`` of the compiled kernels for the solver's own uses (no sub-steps)."""
-        return self.kernel_parameters(None, 1, 0.0)
+        key = (self.time_constant, self.dt, self.position_tolerance, self.max_iterations,
+               self.rank_rtol, self.regularization)
+        if self._par is None or self._par[0] != key:
+            self._par = (key, self.kernel_parameters(None, 1, 0.0))
+        return self._par[1]
 
     def multipliers(self, dynamics: Dynamics, state: State) -> np.ndarray:
         """
@@ -605,31 +622,48 @@ class ConstraintSolver:
 
         """
         lam = self.multipliers(dynamics, state)
-        cs = self.constraints
-        n = len(self.bodies)
-        # Per row: the constraint it belongs to, its bodies, and −G_row λ_row on each.
-        owner = np.empty(cs.n_rows, dtype=np.int64)
-        for i, name in enumerate(cs.names):
-            owner[cs.rows_of(name)] = i
-        gen = np.zeros((len(cs), 2, 6))   # per constraint: on its body a, on its body b
-        for comp in self.kernel_setup().components:
+        plan = self._reaction_plan()
+        gen = np.zeros((len(self.constraints), 2, 6))   # per constraint: on its a, on its b
+        for comp, owner in zip(self.kernel_setup().components, plan.owner):
             jac = comp.views['jac'][CURRENT]   # (2, m, 6): G of the state, bodies a and b
             lam_c = lam[comp.rows][:, None]
-            np.add.at(gen[:, 0], owner[comp.rows], -jac[0] * lam_c)
-            np.add.at(gen[:, 1], owner[comp.rows], -jac[1] * lam_c)
-        R = so3.quat_to_matrix(state.quat_principal_world)
-        out = {}
-        for i, name in enumerate(cs.names):
-            per_body = {}
-            for side, (body, r_p) in enumerate(cs.anchors(name)):
-                if body >= n:
-                    continue
-                f = gen[i, side, :3]
-                tau_com = R[body] @ gen[i, side, 3:]
-                lever = R[body] @ r_p
-                per_body[self.bodies.names[body]] = {
-                    'force_world': f, 'torque_com_world': tau_com,
-                    'torque_anchor_world': tau_com - so3.cross(lever, f),
-                    'anchor_world': state.pos_com_world[body] + lever}
-            out[name] = per_body
+            np.add.at(gen[:, 0], owner, -jac[0] * lam_c)
+            np.add.at(gen[:, 1], owner, -jac[1] * lam_c)
+        # Every (constraint, side) on a body at once: forces, torques, levers, anchors.
+        g = gen[plan.constraint, plan.side]
+        R = so3.quat_to_matrix(state.quat_principal_world[plan.body])
+        f = g[:, :3]
+        tau_com = np.einsum('kij,kj->ki', R, g[:, 3:])
+        lever = np.einsum('kij,kj->ki', R, plan.lever)
+        tau_anchor = tau_com - so3.cross(lever, f)
+        anchor = state.pos_com_world[plan.body] + lever
+        out = {name: {} for name in self.constraints.names}
+        for k, (name, body) in enumerate(plan.names):
+            out[name][body] = {'force_world': f[k], 'torque_com_world': tau_com[k],
+                               'torque_anchor_world': tau_anchor[k], 'anchor_world': anchor[k]}
         return out
+
+    def _reaction_plan(self) -> '_ReactionPlan':
+        """Return where :meth:`reactions` reads, per constraint set (built once per change)."""
+        setup = self.kernel_setup()
+        c = self._plan
+        if c is not None and c[0] is setup:
+            return c[1]
+        cs, n = self.constraints, len(self.bodies)
+        row_owner = np.empty(cs.n_rows, dtype=np.int64)
+        constraint, side, body, lever, names = [], [], [], [], []
+        for i, name in enumerate(cs.names):
+            row_owner[cs.rows_of(name)] = i
+            for s, (b, r_p) in enumerate(cs.anchors(name)):
+                if b < n:   # the world is not listed
+                    constraint.append(i)
+                    side.append(s)
+                    body.append(b)
+                    lever.append(r_p)
+                    names.append((name, self.bodies.names[b]))
+        plan = _ReactionPlan(tuple(row_owner[comp.rows] for comp in setup.components),
+                             np.array(constraint, dtype=np.int64),
+                             np.array(side, dtype=np.int64), np.array(body, dtype=np.int64),
+                             np.array(lever, dtype=float).reshape(-1, 3), names)
+        self._plan = (setup, plan)
+        return plan
