@@ -33,7 +33,7 @@ import numpy as np
 from . import rotation as so3
 from .errors import SpecError
 from .kernels import free_step
-from .kernels.layout import OUTPUT
+from .kernels.layout import OUTPUT, STATE
 from .validate import finite_array, positive_scalar, unit_quaternion
 
 # Relative tolerances for properties of the inertia tensor given by a user in
@@ -195,7 +195,7 @@ class _Outputs:
     """
 
     #: The column ranges of ``out`` (:data:`.kernels.layout.OUTPUT`), in its order.
-    _PARTS = tuple((k, k + w) for k, w in zip(OUTPUT.start.values(), (3, 4, 3, 3, 3, 3)))
+    _PARTS = tuple(OUTPUT.ranges())
     NOTHING = (None, None)
 
     def __init__(self, n: int, quat_body_principal: np.ndarray, com_body: np.ndarray) -> None:
@@ -262,9 +262,9 @@ class State:
         p = self._parts
         if p is None:
             y = self.y
-            n = len(y) // 13
-            p = self._parts = (y[:3 * n].reshape(n, 3), y[3 * n:7 * n].reshape(n, 4),
-                               y[7 * n:10 * n].reshape(n, 3), y[10 * n:].reshape(n, 3))
+            n = len(y) // STATE.width
+            p = self._parts = tuple(y[k * n:end * n].reshape(n, end - k)
+                                    for k, end in STATE.ranges())
         return p
 
     def _replaced(self, k: int, value: Any) -> None:

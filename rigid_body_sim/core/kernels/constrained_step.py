@@ -48,13 +48,14 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      CT_N_FLOATS, CT_N_INTS, CT_N_LAM, CT_N_LAYOUT, CT_N_PAR, CT_N_WRENCH, CT_OUT,
                      CT_PAR, CT_SOLVE, CT_WRENCH, CX_FLOATS, CX_INTS, CX_KEY, CX_LAYOUT, CX_SOLVE,
                      D_F, D_PIV, D_S, D_U, D_VT, DENSE0, DENSE_SLOTS, FACTOR_STATE, FORCE,
-                     FR_WIDTH, FRAMES, FREE_ACC, G2, GENERAL, GT_LAMBDA, JAC, JR, KIND, MINV,
-                     O_WIDTH, OMEGA_WORLD, P_CLOSING, P_MAX_IT, P_MAX_ROT, P_MAX_SUB, P_OMEGA,
-                     P_POS_TOL, P_RANK_RTOL, P_REG, P_TAU, PHI, QUATS, ROTOR, ROW_A, ROW_B,
-                     ROW_PAR, Solve, STAGES, STORAGES, SYMMETRIC, T_B, T_CLOSURE, T_E, T_G,
-                     T_GROUP_CHILD, T_GROUP_PARENT, T_GROUP_PTR, T_GROUP_ROWS, T_P, T_PIV, T_Q,
-                     T_ROW_SIDE, T_S, T_TMP, T_W, T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE, TREE0,
-                     TREE_SLOTS, VECTORS, VM, W_WIDTH, WATCH)
+                     FR_WIDTH, FRAMES, FREE_ACC, FS_MODE, FS_VALID, G2, GENERAL, GT_LAMBDA, JAC,
+                     JR, KIND, MINV, O_WIDTH, OMEGA_WORLD, P_CLOSING, P_MAX_IT, P_MAX_ROT,
+                     P_MAX_SUB, P_OMEGA, P_POS_TOL, P_RANK_RTOL, P_REG, P_TAU, PHI, QUATS, ROTOR,
+                     ROW_A, ROW_B, ROW_PAR, Solve, STAGES, STORAGES, SYMMETRIC, T_B, T_CLOSURE,
+                     T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT, T_GROUP_PTR, T_GROUP_ROWS, T_P,
+                     T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W, T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE,
+                     TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT, V_RHS, V_SOLUTION, VECTORS, VM,
+                     W_WIDTH, WATCH)
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
 from .methods import Method, YOSHIDA_W1
@@ -419,7 +420,7 @@ def _generic_geometry(key, pos, quat, phi, Ga, Gb):
 @njit(cache=True)
 def _generic_rates(key, pos, quat, vel, om, Ga, Gb, a, b, first, vm):
     """
-    Φ̇ and γ of the generic rows (from row ``first``) into ``vm[0]``, ``vm[1]``.
+    Φ̇ and γ of the generic rows (from row ``first``) into ``vm[V_PHI_DOT]``, ``vm[V_GAMMA]``.
 
     Φ̇ = G ν here, γ from the user's function (:func:`generic_gamma`, in object mode).
     """
@@ -430,8 +431,8 @@ def _generic_rates(key, pos, quat, vel, om, Ga, Gb, a, b, first, vm):
             rate += Ga[r, c] * vel[a[r], c] + Ga[r, 3 + c] * om[a[r], c]
             if b[r] < n:
                 rate += Gb[r, c] * vel[b[r], c] + Gb[r, 3 + c] * om[b[r], c]
-        vm[0, r] = rate
-    gamma = vm[1]
+        vm[V_PHI_DOT, r] = rate
+    gamma = vm[V_GAMMA]
     with objmode():
         generic_gamma(key, pos, quat, vel, om, gamma)
 
@@ -454,7 +455,7 @@ def _geometry(pos, quat, cx, which, counts):
         _generic_geometry(cx[CX_KEY], pos, quat, phi_w, Ga_w, Gb_w)
     counts[Count.GEOMETRY] += 1
     if which == CURRENT:
-        _i1(cx, FACTOR_STATE)[0] = 0   # the symmetric factor was of the geometry replaced
+        _i1(cx, FACTOR_STATE)[FS_VALID] = 0   # the symmetric factor was of the geometry replaced
 
 
 @njit(cache=True, inline='always')
@@ -468,11 +469,11 @@ def _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts):
     state (``FACTOR_STATE``) is [the factors are of the current geometry, their mode].
     """
     fs = _i1(cx, FACTOR_STATE)
-    if fs[0] == 1:
-        return fs[1]
+    if fs[FS_VALID] == 1:
+        return fs[FS_MODE]
     mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, SYMMETRIC, counts)
-    fs[0] = 1
-    fs[1] = mode
+    fs[FS_VALID] = 1
+    fs[FS_MODE] = mode
     return mode
 
 
@@ -491,16 +492,16 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
     R = _f3(cx, FRAMES)
     frames(quat, R)
     framed_rates(pos, vel, om, R, _f2(cx, OMEGA_WORLD), kind, comp, a, b, rpar, Ga, Gb,
-                 True, vm[0], vm[1])
+                 True, vm[V_PHI_DOT], vm[V_GAMMA])
     if cx[CX_KEY] >= 0:
         _generic_rates(cx[CX_KEY], pos, quat, vel, om, Ga, Gb, a, b, kind.shape[0], vm)
     w = par[P_OMEGA]
-    _g_times(Ga, Gb, a, b, a6, vm[2])
+    _g_times(Ga, Gb, a, b, a6, vm[V_RHS])
     for r in range(phi.shape[0]):
-        vm[2, r] += vm[1, r] + 2.0 * w * vm[0, r] + w * w * phi[r]
+        vm[V_RHS, r] += vm[V_GAMMA, r] + 2.0 * w * vm[V_PHI_DOT, r] + w * w * phi[r]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
     counts[Count.ACC_SOLVES] += 1
-    _sol(mode, vm[2], lam, cx, SYMMETRIC)
+    _sol(mode, vm[V_RHS], lam, cx, SYMMETRIC)
     _gt_lambda(Ga, Gb, a, b, lam, g6)
 
 
@@ -589,13 +590,13 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
         for c in range(3):
             x6[i, c] = vel[i, c]
             x6[i, 3 + c] = mom[i, c] / body[i, B_MOMENTS + c]
-    _g_times(Ga, Gb, a, b, x6, vm[2])
+    _g_times(Ga, Gb, a, b, x6, vm[V_RHS])
     w = par[P_OMEGA]
     for r in range(phi.shape[0]):
-        vm[2, r] += w * phi[r]
+        vm[V_RHS, r] += w * phi[r]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
-    _sol(mode, vm[2], vm[3], cx, SYMMETRIC)
-    _gt_lambda(Ga, Gb, a, b, vm[3], g6)
+    _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, SYMMETRIC)
+    _gt_lambda(Ga, Gb, a, b, vm[V_SOLUTION], g6)
     for i in range(n):
         for c in range(3):
             vel[i, c] = x6[i, c] - minv6[i, c] * g6[i, c]
@@ -622,14 +623,14 @@ def _project_positions(pos, quat, target, cx, par, counts):
         phi, Ga, Gb = phi3[CURRENT], G[CURRENT, 0], G[CURRENT, 1]
         norm = 0.0
         for r in range(phi.shape[0]):
-            vm[2, r] = phi[r] - target[r]
-            norm = max(norm, abs(vm[2, r]))
+            vm[V_RHS, r] = phi[r] - target[r]
+            norm = max(norm, abs(vm[V_RHS, r]))
         if norm <= par[P_POS_TOL] or it == max_it:
             break
         counts[Count.POS_ITERATIONS] += 1
         mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, GENERAL, counts)
-        _sol(mode, vm[2], vm[3], cx, GENERAL)
-        _gt_lambda(Ga, Gb, a, b, vm[3], g6)
+        _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, GENERAL)
+        _gt_lambda(Ga, Gb, a, b, vm[V_SOLUTION], g6)
         for i in range(n):
             for c in range(3):
                 pos[i, c] -= minv6[i, c] * g6[i, c]
@@ -797,8 +798,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
         phiE, GaE, GbE = phi3[CURRENT], G[CURRENT, 0], G[CURRENT, 1]
         norm = 0.0
         for r in range(m):
-            vm[2, r] = phiE[r] - target[r]
-            norm = max(norm, abs(vm[2, r]))
+            vm[V_RHS, r] = phiE[r] - target[r]
+            norm = max(norm, abs(vm[V_RHS, r]))
         if norm <= par[P_POS_TOL] or it == max_it:
             break
         if norm > 0.5 * previous:
@@ -825,8 +826,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
             _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, _f2(cx, ROTOR))
             _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
             mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, cx, GENERAL, counts)
-        _sol(mode, vm[2], vm[3], cx, GENERAL)
-        _gt_lambda(GaS, GbS, a, b, vm[3], g6)
+        _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, GENERAL)
+        _gt_lambda(GaS, GbS, a, b, vm[V_SOLUTION], g6)
         for i in range(n):
             for c in range(3):
                 vel[i, c] += -minv6[i, c] * g6[i, c] / h
@@ -1291,8 +1292,8 @@ def component_reach(pos, quat, tolerance, max_iterations, par, solve, key, float
         if stalled == 3:
             return best
         mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, GENERAL, counts)
-        _sol(mode, phi, vm[3], cx, GENERAL)
-        _gt_lambda(Ga, Gb, a, b, vm[3], g6)
+        _sol(mode, phi, vm[V_SOLUTION], cx, GENERAL)
+        _gt_lambda(Ga, Gb, a, b, vm[V_SOLUTION], g6)
         for i in range(n):
             for c in range(3):
                 pos[i, c] -= minv6[i, c] * g6[i, c]

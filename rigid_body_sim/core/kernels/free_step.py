@@ -45,12 +45,12 @@ from numba import njit
 import numpy as np
 
 from .layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MOMENTS, B_WIDTH, Count,
-                     FR_COM_BODY, FR_QUAT_BODY_PRINCIPAL, FR_WIDTH, FREE_TABLE, FT_BODY,
-                     FT_COUNTS, FT_FLAGS, FT_FRAMES, FT_GFORCE, FT_KICK, FT_METHOD, FT_N_COUNTS,
-                     FT_N_WRENCH, FT_N_WS, FT_OUT, FT_WRENCH, FT_WS, O_ANG_VEL_BODY,
-                     O_ANG_VEL_WORLD, O_ORIGIN_VEL_BODY, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD,
-                     O_QUAT_BODY_WORLD, O_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_POINT, W_TORQUE,
-                     W_WIDTH)
+                     FR_COM_BODY, FR_QUAT_BODY_PRINCIPAL, FR_WIDTH, FREE_TABLE, FT_BODY, FT_COUNTS,
+                     FT_FLAGS, FT_FRAMES, FT_GFORCE, FT_KICK, FT_METHOD, FT_N_COUNTS, FT_N_WRENCH,
+                     FT_N_WS, FT_OUT, FT_WRENCH, FT_WS, O_ANG_VEL_BODY, O_ANG_VEL_WORLD,
+                     O_ORIGIN_VEL_BODY, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD, O_QUAT_BODY_WORLD,
+                     O_WIDTH, S_OM, S_POS, S_QUAT, S_VEL, S_WIDTH, W_BODY, W_FORCE, W_IN_BODY,
+                     W_POINT, W_TORQUE, W_WIDTH)
 from .methods import Method, YOSHIDA_W1
 from .so3 import (_matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply,
                   quat_matrix)
@@ -471,9 +471,9 @@ def state_parts(y: np.ndarray) -> tuple:
     The layout of :class:`..bodies.State`: positions (n, 3), quaternions (n, 4),
     velocities (n, 3), Ω (n, 3), one after the other.
     """
-    n = y.shape[0] // 13
-    return (raw_slice(y, 0, (n, 3)), raw_slice(y, 3 * n, (n, 4)),
-            raw_slice(y, 7 * n, (n, 3)), raw_slice(y, 10 * n, (n, 3)))
+    n = y.shape[0] // S_WIDTH
+    return (raw_slice(y, S_POS * n, (n, 3)), raw_slice(y, S_QUAT * n, (n, 4)),
+            raw_slice(y, S_VEL * n, (n, 3)), raw_slice(y, S_OM * n, (n, 3)))
 
 
 @njit(cache=True)

@@ -140,11 +140,15 @@ class Columns:
 
     def __init__(self, name: str, columns: Sequence[tuple]) -> None:
         self.name = name
-        self.start, k = {}, 0
+        self.start, self.widths, k = {}, {}, 0
         for column, width in columns:
-            self.start[column] = k
+            self.start[column], self.widths[column] = k, int(width)
             k += int(width)
         self.width = k
+
+    def ranges(self) -> list:
+        """``(first, end)`` column of each named range, in order."""
+        return [(k, k + self.widths[n]) for n, k in self.start.items()]
 
     def row(self, **values) -> np.ndarray:
         """Return the named scalar columns as an array (width,); ValueError names a wrong one."""
@@ -239,6 +243,10 @@ PAR = Columns('par', [('tau', 1), ('omega', 1), ('pos_tol', 1), ('max_it', 1),
                       ('rank_rtol', 1), ('reg', 1), ('closing', 1), ('max_rot', 1),
                       ('max_sub', 1)])
 
+#: A state buffer ``y`` (13 n) of :class:`..bodies.State`: blocks of n rows each, in
+#: this order (``S_POS`` etc. are each block's first entry divided by n).
+STATE = Columns('state', [('pos', 3), ('quat', 4), ('vel', 3), ('om', 3)])
+
 # -- a component's packed arrays (constrained_step.pack) ------------------------------------
 
 #: The rows ``(kind, comp, a, b, par)`` of :mod:`.rows`.
@@ -248,6 +256,11 @@ ROWS = (('kind', 'i', 1), ('comp', 'i', 1), ('row_a', 'i', 1), ('row_b', 'i', 1)
 WORKSPACE = (('phi', 'f', 2), ('jac', 'f', 4), ('vm', 'f', 2), ('gt_lambda', 'f', 2),
              ('free_acc', 'f', 2), ('force', 'f', 2), ('torque', 'f', 2), ('minv', 'f', 2),
              ('factor_state', 'i', 1), ('watch', 'i', 1))
+#: The rows of the workspace's ``vm`` (4, m): Φ̇ and γ of the rows, a right-hand side,
+#: and a solution; and the entries of its ``factor_state`` (2,): whether the symmetric
+#: factor is of the current geometry, and its mode.
+VM_ROWS = ('phi_dot', 'gamma', 'rhs', 'solution')
+FACTOR_STATE_ENTRIES = ('valid', 'mode')
 #: The scratch arrays (constrained_step.scratch).
 SCRATCH = (('frames', 'f', 3), ('omega_world', 'f', 2), ('jr', 'f', 3), ('g2', 'f', 3),
            ('vectors', 'f', 2), ('body_vectors', 'f', 3), ('quats', 'f', 2),
@@ -291,7 +304,9 @@ COMPONENT_TABLE = Table('component table',
 # The generated indices, as module integers (compile-time constants to numba).
 _CONSTANTS = {
     **BODY.constants('B_'), **WRENCH.constants('W_'), **PAR.constants('P_'),
-    **FRAME.constants('FR_'), **OUTPUT.constants('O_'),
+    **FRAME.constants('FR_'), **OUTPUT.constants('O_'), **STATE.constants('S_'),
+    **{'V_' + n.upper(): k for k, n in enumerate(VM_ROWS)},
+    **{'FS_' + n.upper(): k for k, n in enumerate(FACTOR_STATE_ENTRIES)},
     **COMPONENT.constants(), **DENSE.constants('D_'), **TREE.constants('T_'),
     **{'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},
     **FREE_TABLE.constants('FT_'), **COMPONENT_TABLE.constants('CT_'),
@@ -307,4 +322,4 @@ if _clash:
 globals().update(_CONSTANTS)
 __all__ = ['BODY', 'COMPONENT', 'COMPONENT_TABLE', 'CONTEXT', 'Columns', 'Count', 'DENSE',
            'Field', 'FRAME', 'FREE_TABLE', 'Layout', 'N_COUNTS', 'OUTPUT', 'PAR', 'Solve',
-           'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]
+           'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]
