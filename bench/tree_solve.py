@@ -25,8 +25,8 @@ from pathlib import Path
 import time
 
 import numpy as np
-from rigid_body_sim.core.kernels.tree_solve import (factor_arrays, tree_factor, tree_solve,
-                                                    tree_structure)
+from rigid_body_sim.core.graph import tree_structure
+from rigid_body_sim.core.kernels.tree_solve import factor_arrays, tree_factor, tree_solve
 from scipy import sparse
 from scipy.sparse.linalg import norm as spnorm, splu
 

@@ -68,7 +68,7 @@ def test_slot_indices_are_generated_from_the_one_declaration():
 
 def _component(m=3, n=2):
     from rigid_body_sim.core.kernels import constrained_step as ck
-    from rigid_body_sim.core.kernels.tree_solve import tree_structure
+    from rigid_body_sim.core.graph import tree_structure
     import numpy as np
     a, b = np.zeros(m, dtype=np.int64), np.full(m, n, dtype=np.int64)
     st = tree_structure(a[:0], b[:0], n)

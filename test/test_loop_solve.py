@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-from rigid_body_sim.core.kernels.loop_solve import (loop_back, loop_forward, loop_schur,
-                                                    loop_structure)
+from rigid_body_sim.core.graph import loop_structure
+from rigid_body_sim.core.kernels.loop_solve import loop_back, loop_forward, loop_schur
 from rigid_body_sim.core.kernels.tree_solve import factor_arrays, tree_factor
 from test_tree_solve import assert_solves, draw, EPS, rows_of
 

@@ -7,8 +7,8 @@ import sys
 
 import numpy as np
 import pytest
-from rigid_body_sim.core.kernels.tree_solve import (factor_arrays, tree_factor, tree_solve,
-                                                    tree_structure)
+from rigid_body_sim.core.graph import tree_structure
+from rigid_body_sim.core.kernels.tree_solve import factor_arrays, tree_factor, tree_solve
 
 EPS = np.finfo(float).eps
 

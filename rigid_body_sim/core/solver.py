@@ -70,12 +70,11 @@ from .bodies import BodySet, State
 from .constraints import Constraint, ConstraintSet
 from .dynamics import SolverCounters
 from .errors import SpecError
+from .graph import closes_loop, component_labels, loop_structure, tree_structure
 from .kernels.constrained_step import (component_multipliers, component_project_velocities,
                                        component_reach, CURRENT, dense_storage, GENERIC, pack,
                                        tree_storage, workspace)
 from .kernels.layout import BODY, PAR, Solve
-from .kernels.loop_solve import loop_structure
-from .kernels.tree_solve import tree_structure
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -106,18 +105,6 @@ KERNEL_DENSE_ROWS = 24
 #: knob's tolerances of 1e-7 and 1e-9). A joint added twice is redundant without a
 #: loop of distinct joints: it stays dense up to ``DENSE_ROWS`` rows.
 LOOP_DENSE_ROWS = 0
-
-
-def _closes_loop(joints: list, n: int) -> bool:
-    """
-    Tell whether the joints of a connected component close a loop.
-
-    ``joints``: a ``(a, b)`` pair of body indices per constraint, the world ``n``.
-    A joint added twice counts as a loop of two (its rows are redundant too).
-    """
-    edges = [(i, j) for i, j in joints if i != j]
-    nodes = n + (1 if any(n in e for e in edges) else 0)
-    return len(edges) > nodes - 1
 
 
 def _drop_generic(keys: list) -> None:
@@ -303,21 +290,7 @@ class ConstraintSolver:
         self._generic_keys.clear()
         n, mb = len(self.bodies), cs.n_builtin_rows
         a, b = cs.all_row_a, cs.all_row_b
-        # Connected components by union-find over the rows between two bodies.
-        root = np.arange(n)
-
-        def find(i: int) -> int:
-            while root[i] != i:
-                root[i] = root[root[i]]
-                i = root[i]
-            return i
-
-        for i, j in zip(a.tolist(), b.tolist()):
-            if j < n:
-                ri, rj = find(i), find(j)
-                if ri != rj:
-                    root[max(ri, rj)] = min(ri, rj)
-        label = np.array([find(i) for i in range(n)])
+        label = component_labels(a, b, n)   # connected components, by their least body
         touched = np.zeros(n, dtype=bool)
         touched[cs.touched] = True
         components = []
@@ -333,8 +306,8 @@ class ConstraintSolver:
             ra, rb = local[a[rows_global]], local[b[rows_global]]
             mc = len(rows_global)
             closure = np.zeros(0, dtype=np.int64)
-            closes = _closes_loop([(local[i], local[j]) for i, j in joints_of[lab]],
-                                  len(bodies))
+            ja, jb = np.array(joints_of[lab]).T
+            closes = closes_loop(local[ja], local[jb], len(bodies))
             # A loop through the world counts: its redundant rows go to the closure
             # (beyond DENSE_ROWS a loop among bodies must: the tree solve needs a tree).
             loops = (loop_structure(ra, rb, len(bodies), through_world=True)

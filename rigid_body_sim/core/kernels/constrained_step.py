@@ -1189,7 +1189,7 @@ def tree_storage(structure, closure: np.ndarray, m: int) -> dict:
     """
     One tree storage of a component with ``m`` rows, by name (:data:`.layout.TREE`).
 
-    ``structure``: the :class:`.tree_solve.TreeStructure` of the forest (its
+    ``structure``: the :class:`..graph.TreeStructure` of the forest (its
     arrays and the factors of :func:`.tree_solve.factor_arrays`); ``closure``:
     the rows that close loops (empty for a forest), for which the storage also
     holds ``x``, ``y`` (c, m), ``work`` (m,), ``g`` (2, 6) and the vectors

@@ -9,11 +9,12 @@ Method
 ------
 The groups of rows between two bodies (joints) form a graph on the bodies; a
 closed loop is a cycle of it (rows to the world never close one: the world does
-not move, so it couples no rows). :func:`loop_structure` takes a spanning forest
-of that graph, whose rows ``T`` the tree solve of :mod:`.tree_solve` factorizes
-in linear time, and leaves out the ``c`` rows ``C`` of the groups that close the
-loops. With ``A = G M⁻¹ Hᵀ + reg I`` partitioned accordingly, block elimination
-(the Schur complement of ``A_TT``, as in the capacitance-matrix method) gives::
+not move, so it couples no rows). :func:`..graph.loop_structure` takes a
+spanning forest of that graph, whose rows ``T`` the tree solve of
+:mod:`.tree_solve` factorizes in linear time, and leaves out the ``c`` rows
+``C`` of the groups that close the loops. With ``A = G M⁻¹ Hᵀ + reg I``
+partitioned accordingly, block elimination (the Schur complement of ``A_TT``,
+as in the capacitance-matrix method) gives::
 
     X = A_TT⁻¹ A_TC                       (c tree solves)
     S = A_CC − A_CT X                     (c x c, dense)
@@ -36,79 +37,9 @@ and scalars, and allocate nothing.
 
 from __future__ import annotations
 
-from typing import NamedTuple, Optional
-
 from numba import njit
-import numpy as np
 
-from .tree_solve import tree_solve, tree_structure, TreeStructure
-
-
-class LoopStructure(NamedTuple):
-    """
-    A spanning forest of the constraint graph and the rows that close its loops.
-
-    Attributes
-    ----------
-    tree : TreeStructure
-        The tree solve's structure of the forest's rows, in the numbering of
-        all ``m`` rows (the closure rows are in no group).
-    closure : ndarray of int64, shape (c,)
-        The rows of the groups left out of the forest, ascending.
-
-    """
-
-    tree: TreeStructure
-    closure: np.ndarray
-
-
-def loop_structure(a, b, n_bodies: int, through_world: bool = False) -> Optional[LoopStructure]:
-    """
-    Split the rows into a spanning forest and loop-closing rows (plain Python, per set).
-
-    Groups are taken in the order of their first row; a group whose two bodies
-    are already connected closes a loop. Returns None when there is no loop
-    (use :func:`.tree_solve.tree_structure` alone). The world couples no rows, so
-    a loop through it leaves the system tree-structured; with ``through_world``
-    it is a node all the same, and a second joint to the world closes a loop:
-    the redundant rows of such a loop (a four-bar's three) then meet the closure
-    block's truncated SVD instead of the tree solve's Tikhonov term.
-    """
-    a = np.asarray(a, dtype=np.int64).ravel()
-    b = np.asarray(b, dtype=np.int64).ravel()
-    n = int(n_bodies)
-    root = list(range(n + 1))
-
-    def find(i: int) -> int:
-        while root[i] != i:
-            root[i] = root[root[i]]
-            i = root[i]
-        return i
-
-    closing: dict = {}   # pair -> closes a loop
-    for ar, br in zip(a.tolist(), b.tolist()):
-        if (br == n and not through_world) or br == ar:
-            continue
-        key = (min(ar, br), max(ar, br))
-        if key in closing:
-            continue
-        ri, rj = find(ar), find(br)
-        closing[key] = ri == rj
-        if ri != rj:
-            root[ri] = rj
-    closure = np.array([r for r in range(a.size)
-                        if (b[r] != n or through_world) and b[r] != a[r]
-                        and closing[(min(a[r], b[r]), max(a[r], b[r]))]], dtype=np.int64)
-    if not closure.size:
-        return None
-    keep = np.setdiff1d(np.arange(a.size), closure)
-    sub = tree_structure(a[keep], b[keep], n)
-    side = np.zeros(a.size, dtype=np.int64)
-    side[keep] = sub.row_side
-    group = np.full(a.size, -1, dtype=np.int64)
-    group[keep] = sub.row_group
-    tree = sub._replace(group_rows=keep[sub.group_rows], row_side=side, row_group=group)
-    return LoopStructure(tree, closure)
+from .tree_solve import tree_solve
 
 
 @njit(cache=True)
@@ -147,7 +78,7 @@ def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B
         The forest's structure and its factors (:func:`.tree_solve.tree_factor` of
         the same ``G, H, minv6, reg``) and the solve's workspace.
     closure : ndarray of int64, shape (c,)
-        The closure rows (:class:`LoopStructure`).
+        The closure rows (:class:`..graph.LoopStructure`).
     a, b, Ga, Gb, Ha, Hb, minv6, reg
         The system (see the module docstring).
     X : ndarray, shape (c, m)

@@ -22,7 +22,7 @@ redundant); the rows of a body to the world (or to itself) form one group of
 that body. As in D. Baraff, "Linear-time dynamics using Lagrange multipliers",
 SIGGRAPH 1996, the graph has one node per body and one per group, with an edge
 between a group and each of its bodies. When it is a forest
-(:func:`tree_structure` returns ``None`` otherwise: a closed loop), each tree
+(:func:`..graph.tree_structure` returns ``None`` otherwise: a closed loop), each tree
 is rooted at a body, and every group gets a *parent* body (the one nearer the
 root, or its only body) and, between two bodies, a *child* body.
 
@@ -70,201 +70,24 @@ is 0).
 
 The kernels are compiled with numba (``@njit(cache=True)``), take only numpy
 arrays and scalars (callable from other compiled code), allocate nothing, and
-run unchanged as plain Python with ``NUMBA_DISABLE_JIT=1``.
-
+run unchanged as plain Python with ``NUMBA_DISABLE_JIT=1``. The structure
+of the graph they take is built by :func:`..graph.tree_structure`.
 """
 
 from __future__ import annotations
-
-from typing import NamedTuple, Optional
 
 from numba import njit
 import numpy as np
 
 
-class TreeStructure(NamedTuple):
-    """
-    Elimination structure of a constraint forest (built by :func:`tree_structure`).
-
-    Groups are numbered in elimination order.
-
-    Attributes
-    ----------
-    group_ptr : ndarray of int64, shape (n_groups + 1,)
-        CSR pointer: the rows of group ``x`` are
-        ``group_rows[group_ptr[x]:group_ptr[x + 1]]``.
-    group_rows : ndarray of int64, shape (m,)
-        Row indices grouped by group (a permutation of ``0 .. m − 1``).
-    group_child : ndarray of int64, shape (n_groups,)
-        Child body of a group between two bodies (farther from the root),
-        ``-1`` for the group of a body's rows to the world (or to itself).
-    group_parent : ndarray of int64, shape (n_groups,)
-        Parent body (nearer the root), or the only body of a world group.
-    row_side : ndarray of int64, shape (m,)
-        Where the block of row ``r`` on its group's parent body is: 0 in
-        ``Ga``/``Ha`` (the block on the child body is then in ``Gb``/``Hb``),
-        1 in ``Gb``/``Hb`` (child block in ``Ga``/``Ha``), 2 in the sum
-        ``Ga + Gb`` (``a[r] == b[r]``, no child).
-    row_group : ndarray of int64, shape (m,)
-        Group of each row.
-    group_body_parent : ndarray of int64, shape (n_bodies,)
-        For information: the group linking each body to its parent body
-        (``-1`` for roots and bodies in no group).
-    block_size : int
-        ``K``: the largest group (at least 1); pivot blocks are padded to (K, K).
-    n_bodies : int
-        Number of bodies ``n``.
-
-    """
-
-    group_ptr: np.ndarray
-    group_rows: np.ndarray
-    group_child: np.ndarray
-    group_parent: np.ndarray
-    row_side: np.ndarray
-    row_group: np.ndarray
-    group_body_parent: np.ndarray
-    block_size: int
-    n_bodies: int
-
-    @property
-    def n_groups(self) -> int:
-        """Return the number of groups."""
-        return int(self.group_child.shape[0])
-
-    @property
-    def arrays(self) -> tuple:
-        """``(group_ptr, group_rows, group_child, group_parent, row_side)``: kernel arguments."""
-        return self.group_ptr, self.group_rows, self.group_child, self.group_parent, self.row_side
-
-
-def tree_structure(a, b, n_bodies: int) -> Optional[TreeStructure]:
-    """
-    Group the rows, build Baraff's body/group graph and order the groups leaves first.
-
-    Runs in plain Python when the constraint set changes (not per step).
-
-    Parameters
-    ----------
-    a : array_like of int, shape (m,)
-        First body of each row, ``0 <= a[r] < n_bodies``.
-    b : array_like of int, shape (m,)
-        Second body of each row, ``0 <= b[r] <= n_bodies`` (``n_bodies``: the world).
-    n_bodies : int
-        Number of bodies ``n``.
-
-    Returns
-    -------
-    TreeStructure or None
-        The structure, or ``None`` when the graph has a cycle (a closed loop of
-        groups between bodies): the caller must use a general sparse solver.
-
-    Raises
-    ------
-    ValueError
-        If ``a`` and ``b`` differ in shape or hold out-of-range bodies.
-
-    """
-    a = np.asarray(a, dtype=np.int64).ravel()
-    b = np.asarray(b, dtype=np.int64).ravel()
-    n = int(n_bodies)
-    if a.shape != b.shape:
-        raise ValueError(f'a and b must have the same length, got {a.size} and {b.size}')
-    if a.size and (a.min() < 0 or a.max() >= n or b.min() < 0 or b.max() > n):
-        raise ValueError('body indices out of range: need 0 <= a < n_bodies, 0 <= b <= n_bodies')
-    m = a.size
-    world_rows = [[] for _ in range(n)]   # rows to the world (or acting on one body)
-    group_of_pair = {}
-    pair_rows = []
-    pair_bodies = []
-    for r in range(m):
-        ar, br = int(a[r]), int(b[r])
-        if br == n or br == ar:
-            world_rows[ar].append(r)
-            continue
-        key = (min(ar, br), max(ar, br))
-        g = group_of_pair.get(key)
-        if g is None:
-            g = group_of_pair[key] = len(pair_rows)
-            pair_rows.append([])
-            pair_bodies.append(key)
-        pair_rows[g].append(r)
-    # A cycle of the bipartite body/group graph is a cycle of the graph of bodies with one edge
-    # per pair group (the pairs are distinct): detect it with union-find.
-    root_of = list(range(n))
-
-    def find(i):
-        while root_of[i] != i:
-            root_of[i] = root_of[root_of[i]]
-            i = root_of[i]
-        return i
-
-    adjacent = [[] for _ in range(n)]   # (pair group, other body) per body
-    for g, (i, j) in enumerate(pair_bodies):
-        ri, rj = find(i), find(j)
-        if ri == rj:
-            return None
-        root_of[ri] = rj
-        adjacent[i].append((g, j))
-        adjacent[j].append((g, i))
-    # Breadth-first from a root body per tree; reversed, the visit order has children first.
-    up_group = np.full(n, -1, dtype=np.int64)   # pair group to the parent body
-    up_body = np.full(n, -1, dtype=np.int64)
-    visited = np.zeros(n, dtype=bool)
-    bfs = []
-    for root in range(n):
-        if visited[root] or not (world_rows[root] or adjacent[root]):
-            continue
-        visited[root] = True
-        head = len(bfs)
-        bfs.append(root)
-        while head < len(bfs):
-            body = bfs[head]
-            head += 1
-            for g, other in adjacent[body]:
-                if not visited[other]:
-                    visited[other] = True
-                    up_group[other] = g
-                    up_body[other] = body
-                    bfs.append(other)
-    # Per body, leaves first: its world group, then the group to its parent body.
-    ptr, rows, child, parent, side = [0], [], [], [], np.zeros(m, dtype=np.int64)
-    group_body_parent = np.full(n, -1, dtype=np.int64)
-    for body in reversed(bfs):
-        if world_rows[body]:
-            for r in world_rows[body]:
-                side[r] = 2 if a[r] == b[r] else 0
-            rows.extend(world_rows[body])
-            ptr.append(len(rows))
-            child.append(-1)
-            parent.append(body)
-        if up_group[body] >= 0:
-            own = pair_rows[up_group[body]]
-            for r in own:
-                side[r] = 0 if a[r] == up_body[body] else 1
-            rows.extend(own)
-            ptr.append(len(rows))
-            group_body_parent[body] = len(child)
-            child.append(body)
-            parent.append(int(up_body[body]))
-    group_ptr = np.array(ptr, dtype=np.int64)
-    group_rows = np.array(rows, dtype=np.int64)
-    row_group = np.empty(m, dtype=np.int64)
-    row_group[group_rows] = np.repeat(np.arange(len(child), dtype=np.int64), np.diff(group_ptr))
-    block = int(np.diff(group_ptr).max()) if len(child) else 1
-    return TreeStructure(group_ptr, group_rows, np.array(child, dtype=np.int64),
-                         np.array(parent, dtype=np.int64), side, row_group, group_body_parent,
-                         block, n)
-
-
-def factor_arrays(structure: TreeStructure) -> tuple:
+def factor_arrays(structure: tuple) -> tuple:
     """
     Allocate the factor and work arrays of a structure (once; reused every step).
 
     Parameters
     ----------
     structure : TreeStructure
-        From :func:`tree_structure`.
+        From :func:`..graph.tree_structure`.
 
     Returns
     -------
@@ -365,7 +188,7 @@ def tree_factor(group_ptr, group_rows, group_child, group_parent, row_side, Ga, 
     Parameters
     ----------
     group_ptr, group_rows, group_child, group_parent, row_side : ndarray of int64
-        ``TreeStructure.arrays`` (see :class:`TreeStructure`).
+        ``TreeStructure.arrays`` (see :class:`..graph.TreeStructure`).
     Ga, Gb : ndarray of float64, shape (m, 6)
         Blocks of ``G`` on bodies ``a[r]`` and ``b[r]``.
     Ha, Hb : ndarray of float64, shape (m, 6)
