@@ -122,6 +122,16 @@ def test_the_embedded_pair_is_third_order_and_differs_from_rk4_by_k4_minus_k5():
     assert np.allclose(np.append(rk.B, 0.0) - b, [0, 0, 0, 1 / 6, -1 / 6])
 
 
+def test_the_tableau_has_the_shape_the_kernels_use():
+    # The kernels (kernels/free_step.py) read RKMK4's tableau from kernels/methods.py and
+    # use its shape: a stage takes the slopes of the stage before only, the weights are
+    # paired (b0 = b3, b1 = b2), the embedded pair differs in the last two slopes only.
+    rk = RKMK4
+    assert np.array_equal(rk.A, np.diag(np.diag(rk.A, -1), -1))
+    assert rk.B[0] == rk.B[3] and rk.B[1] == rk.B[2]
+    assert np.array_equal(rk.B_HAT[:3], rk.B[:3])
+
+
 # Steps long enough that the local errors are far above rounding.
 @pytest.mark.parametrize('build', [lambda dt: free_body('rkmk4', 4 * dt),
                                    lambda dt: pendulum('rkmk4', dt),

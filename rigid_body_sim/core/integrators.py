@@ -335,24 +335,22 @@ class Integrator:
 
 class RKMK4(Integrator):
     """
-    Fourth-order Runge–Kutta–Munthe-Kaas (classical RK4 tableau, below).
+    Fourth-order Runge–Kutta–Munthe-Kaas (classical RK4 tableau ``A``, ``B``, ``C``).
 
     Its embedded pair: the third-order weights ``B_HAT`` over the four stages and
-    the slopes at the new state (first same as last), for the accuracy knob.
+    the slopes at the new state (first same as last), for the accuracy knob. The
+    tableau is the kernels' (:mod:`.kernels.methods`), the one copy.
     """
 
     name = 'rkmk4'
     KERNEL = methods.Method.RKMK4
     order = 4
     EMBEDDED_ORDER = 3
-    B_HAT = np.array([1.0, 2.0, 2.0, 0.0, 1.0]) / 6.0
+    B_HAT = np.array(methods.RK4_B_HAT_NUMERATORS) / methods.RK4_B_DENOMINATOR
     conserves = frozenset({Invariant.ORIENTATION_ON_SO3, Invariant.LINEAR_MOMENTUM})
-    A = np.array([[0.0, 0.0, 0.0, 0.0],
-                  [0.5, 0.0, 0.0, 0.0],
-                  [0.0, 0.5, 0.0, 0.0],
-                  [0.0, 0.0, 1.0, 0.0]])
-    B = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
-    C = np.array([0.0, 0.5, 0.5, 1.0])
+    A = np.array(methods.RK4_A)
+    B = np.array(methods.RK4_B_NUMERATORS) / methods.RK4_B_DENOMINATOR
+    C = np.array(methods.RK4_C)
 
 
 class Splitting(Integrator):

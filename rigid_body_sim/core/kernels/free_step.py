@@ -51,7 +51,8 @@ from .layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MOMENTS, B_W
                      O_ORIGIN_VEL_BODY, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD, O_QUAT_BODY_WORLD,
                      O_WIDTH, S_OM, S_POS, S_QUAT, S_VEL, S_WIDTH, W_BODY, W_FORCE, W_IN_BODY,
                      W_POINT, W_TORQUE, W_WIDTH)
-from .methods import Method, YOSHIDA_W1
+from .methods import (Method, RK4_A, RK4_B_DENOMINATOR, RK4_B_HAT_NUMERATORS, RK4_B_NUMERATORS,
+                      YOSHIDA_W1)
 from .so3 import (_matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply,
                   quat_matrix)
 from .views import Pinned, pinned, pinned_int, raw, raw_slice
@@ -149,9 +150,10 @@ def rkmk4_stage(s: int, h: float, pos: np.ndarray, quat: np.ndarray, vel: np.nda
     Set ``p, q, v, w`` to the state of RKMK4 stage ``s`` (0..3), ``u`` to its rotation.
 
     ``kp, kv, kw, kr`` (4, n, 3) hold the earlier stages' slopes of position,
-    velocity, Ω and the rotation vector (classical tableau: a = 1/2, 1/2, 1).
+    velocity, Ω and the rotation vector (:data:`.methods.RK4_A`: a stage takes the
+    slopes of the stage before it only).
     """
-    a = h * (0.0, 0.5, 0.5, 1.0)[s]
+    a = h * RK4_A[s][s - 1] if s else 0.0
     n = pos.shape[0]
     for i in range(n):
         for c in range(3):
@@ -186,8 +188,9 @@ def rkmk4_slopes(s: int, v: np.ndarray, w: np.ndarray, u: np.ndarray, kp: np.nda
 def rkmk4_finish(h: float, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
                  om: np.ndarray, kp: np.ndarray, kv: np.ndarray, kw: np.ndarray,
                  kr: np.ndarray, u: np.ndarray, counts: np.ndarray) -> None:
-    """Combine the four stages (weights 1/6, 1/3, 1/3, 1/6) into the new state, in place."""
-    b0, b1 = h / 6.0, h / 3.0
+    """Combine the four stages (weights :data:`.methods.RK4_B_NUMERATORS`) into the new state."""
+    b0 = h * RK4_B_NUMERATORS[0] / RK4_B_DENOMINATOR   # = b3
+    b1 = h * RK4_B_NUMERATORS[1] / RK4_B_DENOMINATOR   # = b2
     n = pos.shape[0]
     for i in range(n):
         for c in range(3):
@@ -207,7 +210,8 @@ def rkmk4_embedded_error(vel: np.ndarray, om: np.ndarray, u: np.ndarray, kp: np.
 
     The pair (Hairer, Nørsett & Wanner, Solving ODEs I, II.4): the stages of the
     classical tableau and a fifth, the slopes at the new state (first same as
-    last), with weights ``b̂ = (1/6, 1/3, 1/3, 0, 1/6)`` give a third-order
+    last), with weights ``b̂ = (1/6, 1/3, 1/3, 0, 1/6)``
+    (:data:`.methods.RK4_B_HAT_NUMERATORS`) give a third-order
     solution; the difference from the fourth-order one is ``h/6 (k4 − k5)``.
     Its largest component over every body's position (m), velocity (m/s), Ω
     (rad/s) and rotation vector (rad), divided by ``h``, is returned: the local
@@ -223,7 +227,7 @@ def rkmk4_embedded_error(vel: np.ndarray, om: np.ndarray, u: np.ndarray, kp: np.
         for c in range(3):
             e = max(e, abs(kp[3, i, c] - kp[4, i, c]), abs(kv[3, i, c] - kv[4, i, c]),
                     abs(kw[3, i, c] - kw[4, i, c]), abs(kr[3, i, c] - kr[4, i, c]))
-    return e / 6.0
+    return e * (RK4_B_NUMERATORS[3] - RK4_B_HAT_NUMERATORS[3]) / RK4_B_DENOMINATOR
 
 
 @njit(cache=True)
