@@ -23,14 +23,10 @@ import numpy as np
 
 from . import rotation as so3
 from .bodies import BodySet
-from .effects import AppliedWrenches, Damping, Effect, Gravity, Kinematics, WrenchAccumulator
+from .effects import Effect, EFFECTS, KernelModel, Kinematics, WrenchAccumulator
 from .errors import SpecError
-from .kernels.free_step import HAS_DAMPING, HAS_POSITION_FORCES
-from .kernels.layout import Count, N_COUNTS
-
-#: The effects the compiled kernels evaluate (see :mod:`.kernels.free_step`).
-KERNEL_EFFECTS = (Gravity, Damping, AppliedWrenches)
-
+from .kernels.free_step import HAS_POSITION_FORCES
+from .kernels.layout import Count, N_COUNTS, W_BODY
 
 #: Slot of the steps in a work tally; the slots before it are the compiled kernels'
 #: count slots (:mod:`.kernels.free_step`, :mod:`.kernels.constrained_step`).
@@ -182,6 +178,7 @@ class Dynamics:
         """
         Return the effects as :mod:`.kernels.free_step` takes them: (body, gforce, wrench, flags).
 
+        Each effect adds its own encoding (:meth:`.effects.Effect.add_to_kernel_model`).
         Rebuilt only when the model changed (``version``); ``time_mid`` picks the
         active wrenches of an AppliedWrenches table that no Simulation switched
         (:meth:`.effects.AppliedWrenches.begin_step`).
@@ -189,33 +186,18 @@ class Dynamics:
         cached = self._kernel_model
         if cached is not None and cached[0] == self.version and cached[1] in (None, time_mid):
             return cached[2]
-        bodies = self.bodies
-        n = len(bodies)
-        body = np.zeros((n, 8))
-        body[:, 0], body[:, 1], body[:, 2:5] = bodies.mass, bodies.inv_mass, bodies.moments
-        body[bodies.anisotropic, 7] = 1.0
-        gforce = np.zeros((n, 3))
-        wrench = [np.zeros((0, 11))]
-        flags = 0
-        time_dependent = False
+        model = KernelModel(self.bodies)
+        rows = []   # per effect, the range of its rows in the wrench array
         for effect in self.effects:
-            if isinstance(effect, Gravity):
-                gforce += effect._force
-                flags |= HAS_POSITION_FORCES
-            elif isinstance(effect, Damping):
-                np.add.at(body[:, 5], effect.index, effect.linear)
-                np.add.at(body[:, 6], effect.index, effect.angular)
-                flags |= HAS_DAMPING
-            elif isinstance(effect, AppliedWrenches) and len(effect):
-                rows = effect.kernel_rows(time_mid)
-                time_dependent |= effect._active is None
-                if len(rows):
-                    wrench.append(rows)
-                    flags |= HAS_POSITION_FORCES
-        model = (body, gforce, np.concatenate(wrench), flags)
-        # Only a table no Simulation switches depends on the time (then not cached).
-        self._kernel_model = (self.version, time_mid if time_dependent else None, model)
-        return model
+            start = model.n_wrench_rows
+            effect.add_to_kernel_model(model, time_mid)
+            rows.append((start, model.n_wrench_rows))
+        arrays = model.arrays()
+        # A model that depends on the time (a wrench table no Simulation switches) is not
+        # reused at another time.
+        self._kernel_model = (self.version, time_mid if model.time_dependent else None, arrays,
+                              rows)
+        return arrays
 
     def kernel_submodel(self, time_mid: float, bodies: np.ndarray) -> tuple:
         """
@@ -234,20 +216,14 @@ class Dynamics:
             return hit[1]
         local = np.full(len(self.bodies), -1)
         local[bodies] = np.arange(len(bodies))
-        keep = local[wrench[:, 0].astype(int)] >= 0
+        keep = local[wrench[:, W_BODY].astype(int)] >= 0
         sub_wrench = wrench[keep]
-        sub_wrench[:, 0] = local[sub_wrench[:, 0].astype(int)]
+        sub_wrench[:, W_BODY] = local[sub_wrench[:, W_BODY].astype(int)]
         sub_flags = flags
         if not np.any(gforce[bodies]) and not len(sub_wrench):
             sub_flags &= ~HAS_POSITION_FORCES
-        acting = []
-        for effect in self.effects:
-            if isinstance(effect, Damping):
-                acting.append(int(np.count_nonzero(local[effect.index] >= 0)))
-            elif isinstance(effect, Gravity):
-                acting.append(len(bodies))
-            else:
-                acting.append(int(np.count_nonzero(keep)) if len(effect) else 0)
+        acting = [effect.acting_in(local, keep[start:stop])
+                  for effect, (start, stop) in zip(self.effects, self._kernel_model[3])]
         model = (np.ascontiguousarray(body[bodies]), np.ascontiguousarray(gforce[bodies]),
                  np.ascontiguousarray(sub_wrench), sub_flags, acting)
         cache[id(bodies)] = (bodies, model)
@@ -259,23 +235,11 @@ class Dynamics:
         Add compiled-kernel work to each effect's counters, as if evaluated one by one.
 
         ``acting``: per effect, the bodies (wrench entries) it acts on in the
-        step's subset (see :meth:`kernel_submodel`); default all.
+        step's subset (see :meth:`kernel_submodel`); default all. Each effect
+        says what it counts (:meth:`.effects.Effect.count_kernel_work`).
         """
         for i, effect in enumerate(self.effects):
-            if isinstance(effect, Damping):
-                calls = rhs + flows
-                bodies = len(effect.index)
-            elif isinstance(effect, Gravity):
-                calls, bodies = rhs + kicks, len(self.bodies)
-            else:
-                bodies = effect.active_count()
-                calls = rhs + kicks
-            if acting is not None:
-                bodies = acting[i]
-            if not bodies and not isinstance(effect, (Damping, Gravity)):
-                calls = 0
-            effect.evaluations += calls
-            effect.body_evaluations += calls * bodies
+            effect.count_kernel_work(rhs, kicks, flows, None if acting is None else acting[i])
 
     def defer_effect_work(self) -> Optional[list]:
         """
@@ -366,8 +330,8 @@ class Dynamics:
 
 
 def check_kernel_effect(effect: Effect, field_name: str) -> None:
-    """Raise SpecError unless ``effect`` is one the compiled step evaluates."""
-    if not isinstance(effect, KERNEL_EFFECTS):
+    """Raise SpecError unless ``effect`` is one the compiled step evaluates (has an encoding)."""
+    if not (isinstance(effect, Effect)
+            and type(effect).add_to_kernel_model is not Effect.add_to_kernel_model):
         raise SpecError(field_name, f'{type(effect).__name__} is not an effect the compiled '
-                                    f'step evaluates; known: '
-                                    f'{[cls.name for cls in KERNEL_EFFECTS]}')
+                                    f'step evaluates; known: {list(EFFECTS)}')

@@ -9,6 +9,13 @@ number of bodies those calls touched), so tests and benchmarks can show it.
 An effect adds to a :class:`WrenchAccumulator`: forces in the world frame
 (acting at the centre of mass), torques about the centre of mass either in the
 world frame or in the principal frame, whichever is cheaper for the effect.
+
+The steps evaluate effects in compiled code (:mod:`.kernels.free_step`), from
+model arrays rebuilt when the scene changes. Each effect owns its part of them,
+as Drake's force elements own their contribution: it adds its encoding to a
+:class:`KernelModel` (:meth:`Effect.add_to_kernel_model`) and says what work the
+kernels did with it (:meth:`Effect.count_kernel_work`, :meth:`Effect.acting_in`).
+A new effect is one subclass here and its arithmetic in the kernels.
 """
 
 from __future__ import annotations
@@ -22,6 +29,9 @@ import numpy as np
 from . import rotation as so3
 from .bodies import BodySet
 from .errors import SpecError
+from .kernels.free_step import HAS_DAMPING, HAS_POSITION_FORCES
+from .kernels.layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MASS, B_MOMENTS,
+                             B_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_POINT, W_TORQUE, W_WIDTH)
 from .validate import finite_array, finite_scalar, nonnegative_scalar
 
 
@@ -87,8 +97,69 @@ class WrenchAccumulator:
                                                  self._torque_world)
 
 
+class KernelModel:
+    """
+    The compiled steps' model arrays while the effects add to them.
+
+    The layout is that of :mod:`.kernels.free_step` ("Model arrays"), its
+    columns named in :mod:`.kernels.layout` (``BODY``, ``WRENCH``). Built by
+    :meth:`.dynamics.Dynamics.kernel_model` when the scene changes: the bodies'
+    columns here, then each effect's :meth:`Effect.add_to_kernel_model`.
+
+    Parameters
+    ----------
+    bodies : BodySet
+
+    Attributes
+    ----------
+    body : ndarray, shape (n, B_WIDTH)
+        ``mass, 1/mass, J1, J2, J3, c_lin, c_ang, anisotropic`` per body.
+    gforce : ndarray, shape (n, 3)
+        N, world: constant forces at the centres of mass (gravity).
+    wrench_rows : list of ndarray, shape (k, W_WIDTH)
+        Rows of the applied wrenches active in the step, in effect order
+        (:meth:`add_wrench_rows`).
+    n_wrench_rows : int
+        Rows in ``wrench_rows`` so far.
+    flags : int
+        Bits ``HAS_POSITION_FORCES`` and ``HAS_DAMPING`` of the kernels.
+    time_dependent : bool
+        Whether the arrays depend on the step's midpoint (then rebuilt every step).
+
+    """
+
+    def __init__(self, bodies: BodySet) -> None:
+        n = len(bodies)
+        self.body = np.zeros((n, B_WIDTH))
+        self.body[:, B_MASS], self.body[:, B_INV_MASS] = bodies.mass, bodies.inv_mass
+        self.body[:, B_MOMENTS:B_MOMENTS + 3] = bodies.moments
+        self.body[bodies.anisotropic, B_ANISOTROPIC] = 1.0
+        self.gforce = np.zeros((n, 3))
+        self.wrench_rows: list = []
+        self.n_wrench_rows = 0
+        self.flags = 0
+        self.time_dependent = False
+
+    def add_wrench_rows(self, rows: np.ndarray) -> None:
+        """Append rows (k, W_WIDTH) to the wrench array."""
+        self.wrench_rows.append(rows)
+        self.n_wrench_rows += len(rows)
+
+    def arrays(self) -> tuple:
+        """Return ``(body, gforce, wrench, flags)`` as the kernels take them."""
+        wrench = np.concatenate([np.zeros((0, W_WIDTH))] + self.wrench_rows)
+        return self.body, self.gforce, wrench, self.flags
+
+
 class Effect:
-    """Base class: a force generator bound to a :class:`BodySet`."""
+    """
+    Base class: a force generator bound to a :class:`BodySet`.
+
+    A subclass evaluates its wrench in numpy (:meth:`accumulate`, for the
+    references and the tests) and in the compiled steps (its encoding,
+    :meth:`add_to_kernel_model`, and its work, :meth:`count_kernel_work` and
+    :meth:`acting_in`).
+    """
 
     #: Name used in scene files and the registry.
     name: ClassVar[str] = ''
@@ -106,6 +177,47 @@ class Effect:
     def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
         """Add this effect's wrench at ``kin`` to ``acc``."""
         raise NotImplementedError
+
+    def add_to_kernel_model(self, model: KernelModel, time_mid: float) -> None:
+        """
+        Add this effect's encoding to the compiled steps' model arrays.
+
+        ``time_mid``: the midpoint of the step the model is for. An effect that
+        does not implement it is not one the compiled steps evaluate.
+        """
+        raise NotImplementedError
+
+    def count_kernel_work(self, rhs: int, kicks: int, flows: int,
+                          acting: Optional[int] = None) -> None:
+        """
+        Add the compiled steps' work with this effect to its counters.
+
+        Counted as if the effect had been evaluated one call at a time: the
+        kernels took ``rhs`` full right-hand sides, ``kicks`` kicks (the
+        position-dependent wrenches only) and ``flows`` exact damping flows.
+        ``acting``: the bodies (wrench entries) it acted on when the steps took
+        a subset of the bodies (:meth:`acting_in`); default: all it acts on.
+        """
+        raise NotImplementedError
+
+    def acting_in(self, local: np.ndarray, rows_kept: np.ndarray) -> int:
+        """
+        Return how many of the bodies (wrench entries) it acts on are in a subset.
+
+        Parameters
+        ----------
+        local : ndarray of int, shape (n,)
+            Each body's index in the subset, ``-1`` if not in it.
+        rows_kept : ndarray of bool, shape (k,)
+            Per row this effect added to the model's wrench array, whether its
+            body is in the subset.
+
+        """
+        raise NotImplementedError
+
+    def _count(self, calls: int, bodies: int) -> None:
+        self.evaluations += calls
+        self.body_evaluations += calls * bodies
 
     def begin_step(self, time_mid: float) -> bool:
         """
@@ -152,6 +264,20 @@ class Gravity(Effect):
         self.evaluations += 1
         self.body_evaluations += len(self._force)
         acc.force_world += self._force
+
+    def add_to_kernel_model(self, model: KernelModel, time_mid: float) -> None:
+        """Add ``m g`` to ``gforce``: the kicks then have a force to add."""
+        model.gforce += self._force
+        model.flags |= HAS_POSITION_FORCES
+
+    def count_kernel_work(self, rhs: int, kicks: int, flows: int,
+                          acting: Optional[int] = None) -> None:
+        """Count every right-hand side and kick, on every body."""
+        self._count(rhs + kicks, len(self._force) if acting is None else acting)
+
+    def acting_in(self, local: np.ndarray, rows_kept: np.ndarray) -> int:
+        """Return the bodies in the subset: gravity acts on every one."""
+        return int(np.count_nonzero(local >= 0))
 
     def potential_energy(self, pos_com_world: np.ndarray) -> np.ndarray:
         """``-m g · x_com`` for each body (zero at the world origin)."""
@@ -204,6 +330,21 @@ class Damping(Effect):
             acc.force_world[idx] -= self.linear * kin.vel_com_world[idx]
         if self.angular:
             acc.torque_principal[idx] -= self.angular * kin.ang_vel_principal[idx]
+
+    def add_to_kernel_model(self, model: KernelModel, time_mid: float) -> None:
+        """Add the coefficients to the damped bodies' ``c_lin`` and ``c_ang`` columns."""
+        np.add.at(model.body[:, B_C_LIN], self.index, self.linear)
+        np.add.at(model.body[:, B_C_ANG], self.index, self.angular)
+        model.flags |= HAS_DAMPING
+
+    def count_kernel_work(self, rhs: int, kicks: int, flows: int,
+                          acting: Optional[int] = None) -> None:
+        """Count every right-hand side and exact flow (a kick has no damping), per damped body."""
+        self._count(rhs + flows, len(self.index) if acting is None else acting)
+
+    def acting_in(self, local: np.ndarray, rows_kept: np.ndarray) -> int:
+        """Return the damped bodies in the subset."""
+        return int(np.count_nonzero(local[self.index] >= 0))
 
     def exact_flow(self, vel_com_world: np.ndarray, ang_mom_principal: np.ndarray,
                    dt: float) -> None:
@@ -378,7 +519,7 @@ class AppliedWrenches(Effect):
 
         Returns
         -------
-        ndarray, shape (k, 11)
+        ndarray, shape (k, W_WIDTH)
             ``body, in_body, force (3), torque (3), point (3)`` (see
             :mod:`.kernels.free_step`); ``time_mid`` decides which entries are active
             when no :meth:`begin_step` did.
@@ -388,18 +529,39 @@ class AppliedWrenches(Effect):
         active = self._active
         if active is None:
             active = (tab['start'] <= time_mid) & (time_mid < tab['end'])
-        rows = np.empty((int(np.count_nonzero(active)), 11))
-        rows[:, 0] = tab['body'][active]
-        rows[:, 1] = tab['in_body'][active]
-        rows[:, 2:5] = tab['force'][active]
-        rows[:, 5:8] = tab['torque'][active]
-        rows[:, 8:11] = tab['point'][active]
+        rows = np.empty((int(np.count_nonzero(active)), W_WIDTH))
+        rows[:, W_BODY] = tab['body'][active]
+        rows[:, W_IN_BODY] = tab['in_body'][active]
+        rows[:, W_FORCE:W_FORCE + 3] = tab['force'][active]
+        rows[:, W_TORQUE:W_TORQUE + 3] = tab['torque'][active]
+        rows[:, W_POINT:W_POINT + 3] = tab['point'][active]
         self._kernel_active = len(rows)
         return rows
 
     def active_count(self) -> int:
         """Entries active in the step the compiled kernels last took."""
         return getattr(self, '_kernel_active', 0)
+
+    def add_to_kernel_model(self, model: KernelModel, time_mid: float) -> None:
+        """Add the entries active in the step as wrench rows (:meth:`kernel_rows`)."""
+        if not len(self):
+            return
+        rows = self.kernel_rows(time_mid)
+        # Without begin_step (no Simulation switches it) the rows depend on the time.
+        model.time_dependent |= self._active is None
+        if len(rows):
+            model.add_wrench_rows(rows)
+            model.flags |= HAS_POSITION_FORCES
+
+    def count_kernel_work(self, rhs: int, kicks: int, flows: int,
+                          acting: Optional[int] = None) -> None:
+        """Count every right-hand side and kick, per active entry; nothing without one."""
+        entries = self.active_count() if acting is None else acting
+        self._count(rhs + kicks if entries else 0, entries)
+
+    def acting_in(self, local: np.ndarray, rows_kept: np.ndarray) -> int:
+        """Return the active entries on bodies of the subset."""
+        return int(np.count_nonzero(rows_kept))
 
     def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
         """Add the wrenches active in this step (or at ``kin.time``, outside a simulation)."""
