@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from rigid_body_sim.core import Gravity, RigidBody, Simulation, SpecError
+from rigid_body_sim.core import AppliedWrenches, Gravity, RigidBody, Simulation, SpecError
 
 
 def _sim(integrator='lie_poisson2', dt=1e-3):
@@ -67,3 +67,16 @@ def test_changing_dt_keeps_time_continuous(integrator):
     with pytest.raises(SpecError, match='dt: must be positive'):
         sim.set_step(dt=-1.0, integrator='lie_poisson2')
     assert sim.dt == 2.5e-3 and sim.integrator_name == 'rkmk4'
+
+
+def test_a_wrench_table_puts_back_a_snapshot():
+    sim = _sim()
+    table = AppliedWrenches([{'body': 'b', 'force': [1.0, 0.0, 0.0]}])
+    table.bind(sim.bodies)
+    saved = table.snapshot()
+    table.add('b', torque=[0.0, 0.0, 2.0])
+    table.clear()
+    assert len(table) == 0
+    table.restore(saved)
+    assert len(table) == 1
+    np.testing.assert_array_equal(table.kernel_rows(0.0)[0, 2:8], [1.0, 0, 0, 0, 0, 0])

@@ -487,6 +487,16 @@ class AppliedWrenches(Effect):
         self._arrays = None
         self._active = None
 
+    def snapshot(self) -> list:
+        """Return the entries as they are now, for :meth:`restore`."""
+        return list(self._rows)
+
+    def restore(self, rows: list) -> None:
+        """Put back the entries of a :meth:`snapshot`; the next step switches them afresh."""
+        self._rows = list(rows)
+        self._arrays = None
+        self._active = None
+
     def begin_step(self, time_mid: float) -> bool:
         """Fix the entries active during the step whose midpoint is ``time_mid``."""
         tab = self._table()

@@ -257,9 +257,7 @@ class Simulation:
         self._time_base = 0.0    # s: when dt was last changed
         for effect, rows in zip(self.dynamics.effects, self._initial_wrenches):
             if rows is not None:
-                effect._rows = list(rows)
-                effect._arrays = None
-                effect._active = None
+                effect.restore(rows)
         # Effects added at run time (a lazily created wrench table) are dropped.
         self.dynamics.effects = self.dynamics.effects[:len(self._initial_wrenches)]
         self._wrenches = next((e for e in self.dynamics.effects
@@ -292,7 +290,7 @@ class Simulation:
 
     @staticmethod
     def _wrench_rows(effect: Effect) -> Optional[list]:
-        return list(effect._rows) if isinstance(effect, AppliedWrenches) else None
+        return effect.snapshot() if isinstance(effect, AppliedWrenches) else None
 
     # -- inputs ---------------------------------------------------------------------------
 
