@@ -122,6 +122,17 @@ def test_the_embedded_pair_is_third_order_and_differs_from_rk4_by_k4_minus_k5():
     assert np.allclose(np.append(rk.B, 0.0) - b, [0, 0, 0, 1 / 6, -1 / 6])
 
 
+def test_retuning_keeps_the_sub_step_count_and_a_refused_value_changes_nothing():
+    control = ErrorControl(1e-6, budget=64, estimator='doubling')
+    control.k, control.steps, control.misses = 8, 5, 2
+    control.retune(1e-8)
+    assert (control.tolerance, control.budget, control.estimator) == (1e-8, 64, 'doubling')
+    assert (control.k, control.steps, control.misses) == (8, 5, 2)
+    with pytest.raises(SpecError, match='power of two'):
+        control.retune(1e-9, budget=3)
+    assert (control.tolerance, control.budget, control.k) == (1e-8, 64, 8)
+
+
 def test_the_tableau_has_the_shape_the_kernels_use():
     # The kernels (kernels/free_step.py) read RKMK4's tableau from kernels/methods.py and
     # use its shape: a stage takes the slopes of the stage before only, the weights are

@@ -120,6 +120,17 @@ def _positive(value: Any, field_name: str) -> float:
     return x
 
 
+def _settings(tolerance: Any, budget: Any, estimator: Optional[str]) -> tuple:
+    """Return the validated settings of :class:`ErrorControl`: (tolerance, budget, estimator)."""
+    tolerance = _positive(tolerance, 'tolerance')
+    if isinstance(budget, bool) or not isinstance(budget, (int, np.integer)) \
+            or budget < 2 or budget & (budget - 1):
+        raise SpecError('tolerance_budget', f'must be a power of two >= 2, got {budget!r}')
+    if estimator not in (None, 'embedded', 'doubling'):
+        raise SpecError('estimator', f"must be 'embedded' or 'doubling', got {estimator!r}")
+    return tolerance, int(budget), estimator
+
+
 class ErrorControl:
     """
     The knob's sub-step control for one simulation (see the module docstring).
@@ -144,15 +155,19 @@ class ErrorControl:
 
     def __init__(self, tolerance: Any, budget: Any = DEFAULT_BUDGET,
                  estimator: Optional[str] = None) -> None:
-        self.tolerance = _positive(tolerance, 'tolerance')
-        if isinstance(budget, bool) or not isinstance(budget, (int, np.integer)) \
-                or budget < 2 or budget & (budget - 1):
-            raise SpecError('tolerance_budget', f'must be a power of two >= 2, got {budget!r}')
-        if estimator not in (None, 'embedded', 'doubling'):
-            raise SpecError('estimator', f"must be 'embedded' or 'doubling', got {estimator!r}")
-        self.budget = int(budget)
-        self.estimator = estimator
+        self.tolerance, self.budget, self.estimator = _settings(tolerance, budget, estimator)
         self.reset()
+
+    def retune(self, tolerance: Any, budget: Any = None, estimator: Optional[str] = None) -> None:
+        """
+        Change the settings between steps, keeping the sub-step count and the tallies.
+
+        ``budget``, ``estimator``: None keeps the present one. All three are
+        validated before any changes.
+        """
+        self.tolerance, self.budget, self.estimator = _settings(
+            tolerance, self.budget if budget is None else budget,
+            self.estimator if estimator is None else estimator)
 
     def reset(self) -> None:
         """Forget the sub-step count and the tallies (a reset simulation)."""

@@ -223,18 +223,11 @@ class Simulation:
         """
         if tolerance is None:
             self._control = None
-            return
-        old = self._control
-        budget = budget if budget is not None else (
-            old.budget if old is not None else DEFAULT_BUDGET)
-        estimator = estimator if estimator is not None else (
-            old.estimator if old is not None else None)
-        control = ErrorControl(tolerance, budget, estimator)
-        if self._control is not None:   # keep the sub-step count and the tallies
-            for key in ('k', 'estimate', 'last_k', 'misses', 'steps', 'worst', '_try_embedded',
-                        '_wait', '_backoff'):
-                setattr(control, key, getattr(self._control, key))
-        self._control = control
+        elif self._control is None:
+            self._control = ErrorControl(tolerance, DEFAULT_BUDGET if budget is None else budget,
+                                         estimator)
+        else:   # keeps the sub-step count and the tallies
+            self._control.retune(tolerance, budget, estimator)
 
     def accuracy(self) -> AccuracyReport:
         """Return what the accuracy knob did (tolerance None when it is off)."""
