@@ -112,3 +112,18 @@ def test_effect_work_deferred_over_a_run_equals_work_counted_every_step(name):
     # The wrenches did work in some steps only: a wrong settlement would count them in all.
     assert 0 < once['wrenches_body_evaluations'] < 2 * once['gravity_evaluations']
     assert once['wrenches_evaluations'] < once['gravity_evaluations']
+
+
+def test_counters_reset_and_restore_in_place():
+    sim = scene('lie_poisson2', True, (1.0, 2.0, 3.0))
+    sim.step(3)
+    counters = sim.dynamics.counters
+    saved = counters.as_dict()
+    assert saved['steps'] == 3
+    counters.reset()
+    assert set(counters.as_dict().values()) == {0}
+    assert sim.dynamics.tally[list(counters.SLOTS.values())].tolist() == [0] * len(saved)
+    counters.restore(saved)
+    assert counters.as_dict() == saved and counters is sim.dynamics.counters
+    with pytest.raises(TypeError, match="no counter 'bogus'"):
+        counters.restore({'bogus': 1})

@@ -17,7 +17,7 @@ side here (:meth:`Dynamics.accelerations`) serves the references
 
 from __future__ import annotations
 
-from typing import ClassVar, Optional, Sequence
+from typing import ClassVar, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -42,8 +42,8 @@ class TalliedCounters:
     Subclasses name their slots in ``SLOTS``; each name is an int attribute
     (read and assigned as usual). Counter objects built on the same tally share
     it: a step's kernels then count all their work in one array, with no
-    per-counter bookkeeping. ``__init__`` again zeros (or sets) this object's
-    slots in place.
+    per-counter bookkeeping. :meth:`reset` zeros this object's slots in place,
+    :meth:`restore` sets them (say, to an :meth:`as_dict` taken earlier).
     """
 
     SLOTS: ClassVar[dict] = {}
@@ -57,15 +57,20 @@ class TalliedCounters:
                 lambda self, value, slot=slot: self.tally.__setitem__(slot, value)))
 
     def __init__(self, *, tally: Optional[np.ndarray] = None, **values: int) -> None:
-        if tally is not None:
-            self.tally = tally
-        elif 'tally' not in self.__dict__:
-            self.tally = np.zeros(N_TALLY, dtype=np.int64)
-        unknown = sorted(set(values) - set(self.SLOTS))
+        self.tally = tally if tally is not None else np.zeros(N_TALLY, dtype=np.int64)
+        self.restore(values)
+
+    def restore(self, saved: Mapping[str, int]) -> None:
+        """Set each counter to its value in ``saved`` (0 if missing), in place."""
+        unknown = sorted(set(saved) - set(self.SLOTS))
         if unknown:
             raise TypeError(f'{type(self).__name__} has no counter {unknown[0]!r}')
         for name, slot in self.SLOTS.items():
-            self.tally[slot] = values.get(name, 0)
+            self.tally[slot] = saved.get(name, 0)
+
+    def reset(self) -> None:
+        """Zero the counters in place (the tally's other slots keep their values)."""
+        self.restore({})
 
     def as_dict(self) -> dict:
         """Counters as a plain dict."""

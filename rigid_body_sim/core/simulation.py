@@ -257,10 +257,10 @@ class Simulation:
                                if isinstance(e, AppliedWrenches)), None)
         for effect in self.dynamics.effects:
             effect.reset_counters()
-        self.dynamics.counters.__init__()
+        self.dynamics.counters.reset()
         solver = self.dynamics.solver
         solver.constraints = ConstraintSet(self.bodies)
-        solver.counters.__init__()
+        solver.counters.reset()
         for i, spec in enumerate(self._initial_constraints):
             try:
                 solver.constraints.add(spec, self.state)
