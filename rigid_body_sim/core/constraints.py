@@ -335,21 +335,21 @@ class Geometry:
                        np.ascontiguousarray(omega, dtype=float), cs.row_kind, cs.row_comp,
                        cs.row_a, cs.row_b, cs.row_par, self.g_builtin[0], self.g_builtin[1],
                        bool(need_gamma), phi_dot[:mb], gamma[:mb])
-        if not cs._gen:
+        if not cs.generic:
             return phi_dot, gamma
         n = self.n
         x, R = self.frames
         v = np.vstack([vel, np.zeros((1, 3))])
         w = np.vstack([np.einsum('nij,nj->ni', R[:n], omega), np.zeros((1, 3))])
         start = mb
-        for res, g in zip(cs._gen, self.g_generic):
+        for res, g in zip(cs.generic, self.g_generic):
             stop = start + res.n_rows
             rate = g[:, :6] @ np.concatenate([vel[res.a], omega[res.a]])
             if res.b < n:
                 rate += g[:, 6:] @ np.concatenate([vel[res.b], omega[res.b]])
             phi_dot[start:stop] = rate
             if need_gamma:
-                gamma[start:stop] = cs._generic_rows(res, x, R, v, w, True)[2]
+                gamma[start:stop] = cs.generic_rows(res, x, R, v, w, True)[2]
             start = stop
         return phi_dot, gamma
 
@@ -378,7 +378,7 @@ class Evaluation:
 
 
 @dataclass
-class _Resolved:
+class ResolvedConstraint:
     """A constraint bound to body indices and principal-frame vectors."""
 
     spec: Constraint
@@ -415,7 +415,7 @@ class ConstraintSet:
 
     def __init__(self, bodies: BodySet) -> None:
         self.bodies = bodies
-        self._resolved: dict[str, _Resolved] = {}
+        self._resolved: dict[str, ResolvedConstraint] = {}
         self.n_rows = 0
         self._build()
 
@@ -428,6 +428,16 @@ class ConstraintSet:
     def __contains__(self, name: str) -> bool:
         """Tell whether a constraint called ``name`` exists."""
         return name in self._resolved
+
+    @property
+    def resolved(self) -> tuple:
+        """Return the constraints bound to bodies (:class:`ResolvedConstraint`), as added."""
+        return tuple(self._resolved.values())
+
+    @property
+    def generic(self) -> tuple:
+        """Return the resolved generic constraints in row order (after the built-in rows)."""
+        return self._gen
 
     @property
     def names(self) -> list[str]:
@@ -458,7 +468,7 @@ class ConstraintSet:
         res = self._get(name)
         return (res.a, res.anchor[0]), (res.b, res.anchor[1])
 
-    def _get(self, name: str) -> _Resolved:
+    def _get(self, name: str) -> ResolvedConstraint:
         try:
             return self._resolved[name]
         except (KeyError, TypeError):
@@ -474,7 +484,7 @@ class ConstraintSet:
         res = self._resolve(spec, state)
         if spec.type is JointType.GENERIC:
             # Evaluate once: validates the function and fixes its number of rows.
-            res.n_rows = len(self._generic_rows(res, *self._frames(state))[0])
+            res.n_rows = len(self.generic_rows(res, *self._frames(state))[0])
         self._resolved[spec.name] = res
         self._build()
 
@@ -491,7 +501,7 @@ class ConstraintSet:
         R = np.concatenate([so3.quat_to_matrix(state.quat_principal_world), np.eye(3)[None]])
         return x, R
 
-    def _resolve(self, spec: Constraint, state: State) -> _Resolved:
+    def _resolve(self, spec: Constraint, state: State) -> ResolvedConstraint:
         bodies = self.bodies
         n = len(bodies)
         a = bodies.lookup(spec.body_a, 'body_a')
@@ -521,7 +531,7 @@ class ConstraintSet:
                         f'{far:.3g} m, outside the range of +-{MAX_JOINT_DISTANCE:g} m in '
                         f'which joints are supported (farther out, the rounding of a '
                         f'coordinate nears the 1e-8 m to which a joint must hold)')
-        res = _Resolved(spec, a, b, anchor=(r_a, r_b))
+        res = ResolvedConstraint(spec, a, b, anchor=(r_a, r_b))
         jt = spec.type
         if jt in (JointType.HINGE, JointType.SLIDER, JointType.FIXED):
             axis = spec.axis_world if spec.axis_world is not None else np.array([0.0, 0.0, 1.0])
@@ -564,7 +574,7 @@ class ConstraintSet:
         # Flat row arrays for the kernels of .kernels.rows (and a compiled step).
         self.row_kind, self.row_comp, self.row_a, self.row_b, self.row_par = pack_rows(table)
         self.n_builtin_rows = len(table)
-        self._gen = gens
+        self._gen = tuple(gens)
         # Row numbering: point block, dot block, line block, distance block, generic.
         rows: dict[str, list] = {r.spec.name: [] for r in res}
         start = 0
@@ -667,7 +677,7 @@ class ConstraintSet:
             x, R = geo.frames
             parts, start = [flat], mb
             for res in self._gen:
-                phi_g, g_g, _ = self._generic_rows(res, x, R)
+                phi_g, g_g, _ = self.generic_rows(res, x, R)
                 phi[start:start + res.n_rows] = phi_g
                 parts += [g_g[:, :6].ravel(), g_g[:, 6:].ravel()]
                 geo.g_generic.append(g_g)
@@ -704,14 +714,29 @@ class ConstraintSet:
 
     # -- generic constraints ---------------------------------------------------------------
 
-    def _generic_rows(self, res: _Resolved, x: np.ndarray, R: np.ndarray,
-                      v: Optional[np.ndarray] = None, w: Optional[np.ndarray] = None,
-                      need_gamma: bool = False, need_jacobian: bool = True) -> tuple:
+    def generic_rows(self, res: ResolvedConstraint, x: np.ndarray, R: np.ndarray,
+                     v: Optional[np.ndarray] = None, w: Optional[np.ndarray] = None,
+                     need_gamma: bool = False, need_jacobian: bool = True) -> tuple:
         """
         Φ (k,), G (k, 12) in principal coordinates and γ (k,) of a generic constraint.
 
-        ``need_jacobian`` False skips the finite-difference G (returned as None)
-        when only γ is wanted and the user gave no Jacobian function.
+        Parameters
+        ----------
+        res : ResolvedConstraint
+            One of :attr:`generic`.
+        x : ndarray, shape (n + 1, 3)
+            Centre-of-mass positions (m, world), the world's (zeros) last.
+        R : ndarray, shape (n + 1, 3, 3)
+            Principal-frame rotations, the world's (identity) last.
+        v, w : ndarray, shape (n + 1, 3), optional
+            Velocities (m/s) and angular velocities (rad/s), both world frame,
+            the world's last; needed for γ.
+        need_gamma : bool
+            Compute γ (else returned as None).
+        need_jacobian : bool
+            False skips the finite-difference G (returned as None) when only γ
+            is wanted and the user gave no Jacobian function.
+
         """
         spec = res.spec
         n = len(self.bodies)

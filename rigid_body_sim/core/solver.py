@@ -140,7 +140,7 @@ class _GenericRows:
         x, R = self._frames(pos, quat)
         r0 = self.offset
         for res in self.resolved:
-            values, g, _ = self.constraints._generic_rows(res, x, R)
+            values, g, _ = self.constraints.generic_rows(res, x, R)
             k = len(values)
             phi[r0:r0 + k] = values
             Ga[r0:r0 + k] = g[:, :6]
@@ -157,8 +157,8 @@ class _GenericRows:
         w[self.bodies] = np.einsum('nij,nj->ni', R[self.bodies], om)
         r0 = self.offset
         for res in self.resolved:
-            values = self.constraints._generic_rows(res, x, R, v, w, True,
-                                                    need_jacobian=False)[2]
+            values = self.constraints.generic_rows(res, x, R, v, w, True,
+                                                   need_jacobian=False)[2]
             gamma[r0:r0 + len(values)] = values
             r0 += len(values)
 
@@ -295,7 +295,7 @@ class ConstraintSolver:
         touched[cs.touched] = True
         components = []
         joints_of: dict = {}   # component label -> (a, b) per constraint
-        for r in cs._resolved.values():
+        for r in cs.resolved:
             joints_of.setdefault(label[r.a], []).append((r.a, r.b))
         for lab in np.unique(label[touched]):
             bodies = np.flatnonzero(label == lab)
@@ -332,7 +332,7 @@ class ConstraintSolver:
             body[:, j:j + 3] = self.bodies.moments[bodies]
             # Built-in rows first (compiled), then generic ones (Python, object mode).
             builtin = rows_global[rows_global < mb]
-            generic = [res for res in cs._gen if label[res.a] == lab]
+            generic = [res for res in cs.generic if label[res.a] == lab]
             key = -1
             if generic:
                 key = next(_KEYS)
