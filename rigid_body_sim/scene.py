@@ -97,13 +97,13 @@ def load_scene(path: Union[str, Path]) -> Scene:
     except OSError as exc:
         raise SceneError(f'{path}: cannot read: {exc.strerror}') from None
     try:
-        data = yaml.load(text, Loader=_Loader)
+        data = yaml.load(text, Loader=YamlLoader)
     except yaml.YAMLError as exc:
         raise SceneError(f'{path}: not valid YAML: {exc}') from None
     return scene_from_dict(data, str(path))
 
 
-class _Loader(yaml.SafeLoader):
+class YamlLoader(yaml.SafeLoader):
     """
     PyYAML's safe loader with YAML 1.2 floats.
 
@@ -113,9 +113,9 @@ class _Loader(yaml.SafeLoader):
     """
 
 
-_Loader.yaml_implicit_resolvers = {k: list(v) for k, v in
-                                   yaml.SafeLoader.yaml_implicit_resolvers.items()}
-_Loader.add_implicit_resolver(
+YamlLoader.yaml_implicit_resolvers = {k: list(v) for k, v in
+                                      yaml.SafeLoader.yaml_implicit_resolvers.items()}
+YamlLoader.add_implicit_resolver(
     'tag:yaml.org,2002:float',
     re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
     list('-+0123456789'))

@@ -66,7 +66,7 @@ from .session import Session
 from .settings import Settings
 from ..core import DivergenceError, INTEGRATORS, SpecError
 from ..core.validate import finite_array, finite_scalar, positive_scalar
-from ..scene import _Loader, load_scene, SceneError
+from ..scene import load_scene, SceneError, YamlLoader
 
 SCHEDULE_KEYS = ('duration', 'events')
 EVENT_KINDS = ('wrench', 'add_constraint', 'remove_constraint', 'reset')
@@ -114,7 +114,7 @@ def load_schedule(path: Path, body_names: Sequence[str], constraint_names: Seque
         raise ScheduleError(f'{path}: cannot read: {exc.strerror}') from None
     try:
         import yaml
-        data = yaml.load(text, Loader=_Loader)
+        data = yaml.load(text, Loader=YamlLoader)
     except Exception as exc:  # noqa: B902 - any YAML error: report it, run nothing
         raise ScheduleError(f'{path}: not valid YAML: {exc}') from None
     try:
