@@ -76,7 +76,7 @@ def free_body(dts, tolerances, reps, duration=10.0) -> list:
         data.qvel[3:6] = peer.FREE_OMEGA0
 
     body = ('    <body name="b">\n      <freejoint/>\n'
-            f'      <inertial pos="0 0 0" mass="1" diaginertia="{peer._nums(moments)}"/>'
+            f'      <inertial pos="0 0 0" mass="1" diaginertia="{peer.nums(moments)}"/>'
             '\n    </body>\n')
     refs: dict = {}
 
@@ -87,7 +87,7 @@ def free_body(dts, tolerances, reps, duration=10.0) -> list:
                                               [t_end], rtol=1e-13, atol=1e-13)[0][-1]
         w_ref = refs[t_end]
         if v.engine == 'ours':
-            R = peer._rot(rec['quat'][-1:])
+            R = peer.rot(rec['quat'][-1:])
             w = np.einsum('nji,nj->ni', R, rec['omega'][-1:])[0]
         else:
             w = rec['qvel'][-1, 3:6]
@@ -95,21 +95,21 @@ def free_body(dts, tolerances, reps, duration=10.0) -> list:
 
     runs = []
     for dt in dts:
-        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer.run_ours(
             lambda name=name, dt=dt: build(name, dt), 'b')) for name in OURS]
-        vs += [peer.Variant('MuJoCo', f'{mj} dt {dt:g}', peer._mujoco(
-            peer._mjcf('free_body', dt, mj, 0.0, body), init)) for mj in ('RK4', 'Euler')]
+        vs += [peer.Variant('MuJoCo', f'{mj} dt {dt:g}', peer.run_mujoco(
+            peer.mjcf('free_body', dt, mj, 0.0, body), init)) for mj in ('RK4', 'Euler')]
         runs.append((dt, None, vs))
     dt0 = dts[0]
     for tol in tolerances:
-        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
+        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer.run_ours(
             _knob(build, name, dt0, tol), 'b')) for name in ('rkmk4', 'lie_poisson4')]
         runs.append((dt0, tol, vs))
     return _sweep('free body', runs, duration, reps, lambda v, rec, dt, t: error(v, rec, t))
 
 
 def pendulum(theta_deg: float, dts, tolerances, reps) -> list:
-    geo = peer._pendulum_geometry(np.radians(theta_deg))
+    geo = peer.pendulum_geometry(np.radians(theta_deg))
     duration = 2.5 * geo['period']
     scene = f'pendulum {theta_deg:g}°'
 
@@ -121,29 +121,29 @@ def pendulum(theta_deg: float, dts, tolerances, reps) -> list:
 
     runs = []
     for dt in dts:
-        stiff = peer._mj_stiffest(dt)
+        stiff = peer.mj_stiffest(dt)
         vs = [peer.Variant('ours', f'{name} dt {dt:g}',
-                           peer._ours(lambda name=name, dt=dt: build(name, dt), 'rod'))
+                           peer.run_ours(lambda name=name, dt=dt: build(name, dt), 'rod'))
               for name in OURS]
         vs += [peer.Variant('MuJoCo', f'RK4, connect, default dt {dt:g}',
-                            peer._mujoco(peer._pendulum_connect_xml(geo, dt, 'RK4'))),
+                            peer.run_mujoco(peer.pendulum_connect_xml(geo, dt, 'RK4'))),
                peer.Variant('MuJoCo', f'RK4, connect, stiffest dt {dt:g}',
-                            peer._mujoco(peer._pendulum_connect_xml(geo, dt, 'RK4', *stiff))),
+                            peer.run_mujoco(peer.pendulum_connect_xml(geo, dt, 'RK4', *stiff))),
                peer.Variant('MuJoCo', f'implicitfast, connect, default dt {dt:g}',
-                            peer._mujoco(peer._pendulum_connect_xml(geo, dt, 'implicitfast'))),
+                            peer.run_mujoco(peer.pendulum_connect_xml(geo, dt, 'implicitfast'))),
                peer.Variant('MuJoCo', f'RK4, ball joint dt {dt:g}',
-                            peer._mujoco(peer._pendulum_ball_xml(geo, dt, 'RK4')))]
+                            peer.run_mujoco(peer.pendulum_ball_xml(geo, dt, 'RK4')))]
         runs.append((dt, None, vs))
     # The knob at 100 Hz, a common node rate. (The period comes from linearly
     # interpolated zero crossings of states dt apart: at dt = 3e-2 that floors the
     # measured error near 1e-6, at 1e-2 near 1e-8, for both simulators.)
     dt0 = 1e-2
     for tol in tolerances:
-        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
+        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer.run_ours(
             _knob(build, name, dt0, tol), 'rod')) for name in ('rkmk4', 'lie_poisson4')]
         runs.append((dt0, tol, vs))
     return _sweep(scene, runs, duration, reps,
-                  lambda v, rec, dt, t: peer._pendulum_analysis(geo, dt, v, rec)['err'])
+                  lambda v, rec, dt, t: peer.pendulum_analysis(geo, dt, v, rec)['err'])
 
 
 # The heavy top: a symmetric top on a ball joint at its tip, tilted 20°, spinning.
@@ -173,21 +173,21 @@ def heavy_top(dts, tolerances, reps, duration=1.0) -> list:
             refs[t_end] = dop853_trajectory(build('rkmk4', dts[0]), [t_end], rtol=1e-13,
                                             atol=1e-13)[0].pos_com_world[0]
         return refs[t_end]
-    inertia = peer._nums(TOP_MOMENTS)
-    ball = (f'    <body name="top" pos="0 0 0" quat="{peer._nums(quat_wxyz)}">\n'
+    inertia = peer.nums(TOP_MOMENTS)
+    ball = (f'    <body name="top" pos="0 0 0" quat="{peer.nums(quat_wxyz)}">\n'
             '      <joint type="ball" pos="0 0 0"/>\n'
             f'      <inertial pos="0 0 {TOP_LENGTH!r}" mass="{TOP_MASS!r}" '
             f'diaginertia="{inertia}"/>\n    </body>\n')
-    free = (f'    <body name="top" pos="{peer._nums(TOP_LENGTH * axis)}" '
-            f'quat="{peer._nums(quat_wxyz)}">\n      <freejoint/>\n'
+    free = (f'    <body name="top" pos="{peer.nums(TOP_LENGTH * axis)}" '
+            f'quat="{peer.nums(quat_wxyz)}">\n      <freejoint/>\n'
             f'      <inertial pos="0 0 0" mass="{TOP_MASS!r}" diaginertia="{inertia}"/>\n'
             '    </body>\n')
 
     def connect(dt, stiff):
         params = ''
         if stiff:
-            (tc, dr), imp = peer._mj_stiffest(dt)
-            params = f' solref="{tc!r} {dr!r}" solimp="{peer._nums(imp)}"'
+            (tc, dr), imp = peer.mj_stiffest(dt)
+            params = f' solref="{tc!r} {dr!r}" solimp="{peer.nums(imp)}"'
         return f'    <connect body1="top" anchor="0 0 {-TOP_LENGTH!r}"{params}/>\n'
 
     def init_ball(model, data):
@@ -200,25 +200,25 @@ def heavy_top(dts, tolerances, reps, duration=1.0) -> list:
         if v.engine == 'ours':
             com = rec['pos'][-1]
         else:
-            com = peer._mj_replay(rec['model'], rec['qpos'][-1:], rec['qvel'][-1:],
-                                  1)['xipos'][0]
+            com = peer.mj_replay(rec['model'], rec['qpos'][-1:], rec['qvel'][-1:],
+                                 1)['xipos'][0]
         return float(np.linalg.norm(com - reference(t_end)) / TOP_LENGTH)
 
     runs = []
     for dt in dts:
-        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer.run_ours(
             lambda name=name, dt=dt: build(name, dt), 'top')) for name in OURS]
-        vs += [peer.Variant('MuJoCo', f'RK4, ball joint dt {dt:g}', peer._mujoco(
-                   peer._mjcf('top', dt, 'RK4', peer.G, ball), init_ball)),
-               peer.Variant('MuJoCo', f'RK4, connect, default dt {dt:g}', peer._mujoco(
-                   peer._mjcf('top', dt, 'RK4', peer.G, free, connect(dt, False)),
+        vs += [peer.Variant('MuJoCo', f'RK4, ball joint dt {dt:g}', peer.run_mujoco(
+                   peer.mjcf('top', dt, 'RK4', peer.G, ball), init_ball)),
+               peer.Variant('MuJoCo', f'RK4, connect, default dt {dt:g}', peer.run_mujoco(
+                   peer.mjcf('top', dt, 'RK4', peer.G, free, connect(dt, False)),
                    init_free)),
-               peer.Variant('MuJoCo', f'RK4, connect, stiffest dt {dt:g}', peer._mujoco(
-                   peer._mjcf('top', dt, 'RK4', peer.G, free, connect(dt, True)),
+               peer.Variant('MuJoCo', f'RK4, connect, stiffest dt {dt:g}', peer.run_mujoco(
+                   peer.mjcf('top', dt, 'RK4', peer.G, free, connect(dt, True)),
                    init_free))]
         runs.append((dt, None, vs))
     for tol in tolerances:
-        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
+        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer.run_ours(
             _knob(build, name, dts[0], tol), 'top')) for name in ('rkmk4', 'lie_poisson4')]
         runs.append((dts[0], tol, vs))
     return _sweep(scene, runs, duration, reps, lambda v, rec, dt, t: error(v, rec, t))
@@ -251,13 +251,13 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
     base = four_bar('rkmk4', dts[0])
 
     def crank_angle_of_quat(q_xyzw):
-        x_axis = peer._rot(q_xyzw[None])[0][:, 0]
+        x_axis = peer.rot(q_xyzw[None])[0][:, 0]
         return float(np.arctan2(x_axis[2], x_axis[0]))
 
     ends = {}
     for name in ('crank', 'coupler', 'rocker'):   # the initial poses (body frames)
         pos, quat = base.pose(name)
-        ends[name] = (pos, peer._rot(quat[None])[0])
+        ends[name] = (pos, peer.rot(quat[None])[0])
     refs: dict = {}
 
     def ref_angle(t_end):
@@ -274,7 +274,7 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
         m, L = masses[name], lengths[name]
         side = m * (3 * ROD_RADIUS ** 2 + L ** 2) / 12.0
         return (f'<inertial pos="{0.5 * L!r} 0 0" mass="{m!r}" '
-                f'diaginertia="{peer._nums([0.5 * m * ROD_RADIUS ** 2, side, side])}"/>')
+                f'diaginertia="{peer.nums([0.5 * m * ROD_RADIUS ** 2, side, side])}"/>')
 
     def start(name):
         pos, R = ends[name]
@@ -285,22 +285,22 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
     d, Rd = start('rocker')
     y = np.array([0.0, 1.0, 0.0])
     coupler_rel = Ra.T @ (b - a)
-    body = (f'    <body name="crank" pos="{peer._nums(a)}" quat="{peer._nums(_wxyz(Ra))}">\n'
-            f'      <joint type="hinge" pos="0 0 0" axis="{peer._nums(Ra.T @ y)}"/>\n'
+    body = (f'    <body name="crank" pos="{peer.nums(a)}" quat="{peer.nums(_wxyz(Ra))}">\n'
+            f'      <joint type="hinge" pos="0 0 0" axis="{peer.nums(Ra.T @ y)}"/>\n'
             f'      {inertial("crank")}\n'
-            f'      <body name="coupler" pos="{peer._nums(coupler_rel)}" '
-            f'quat="{peer._nums(_wxyz(Ra.T @ Rb))}">\n'
-            f'        <joint type="hinge" pos="0 0 0" axis="{peer._nums(Rb.T @ y)}"/>\n'
+            f'      <body name="coupler" pos="{peer.nums(coupler_rel)}" '
+            f'quat="{peer.nums(_wxyz(Ra.T @ Rb))}">\n'
+            f'        <joint type="hinge" pos="0 0 0" axis="{peer.nums(Rb.T @ y)}"/>\n'
             f'        {inertial("coupler")}\n      </body>\n    </body>\n'
-            f'    <body name="rocker" pos="{peer._nums(d)}" quat="{peer._nums(_wxyz(Rd))}">\n'
-            f'      <joint type="hinge" pos="0 0 0" axis="{peer._nums(Rd.T @ y)}"/>\n'
+            f'    <body name="rocker" pos="{peer.nums(d)}" quat="{peer.nums(_wxyz(Rd))}">\n'
+            f'      <joint type="hinge" pos="0 0 0" axis="{peer.nums(Rd.T @ y)}"/>\n'
             f'      {inertial("rocker")}\n    </body>\n')
 
     def connect(dt, stiff):
         params = ''
         if stiff:
-            (tc, dr), imp = peer._mj_stiffest(dt)
-            params = f' solref="{tc!r} {dr!r}" solimp="{peer._nums(imp)}"'
+            (tc, dr), imp = peer.mj_stiffest(dt)
+            params = f' solref="{tc!r} {dr!r}" solimp="{peer.nums(imp)}"'
         return (f'    <connect body1="coupler" body2="rocker" '
                 f'anchor="{lengths["coupler"]!r} 0 0"{params}/>\n')
 
@@ -308,22 +308,22 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
         if v.engine == 'ours':
             angle = crank_angle_of_quat(rec['quat'][-1])
         else:
-            replay = peer._mj_replay(rec['model'], rec['qpos'][-1:], rec['qvel'][-1:], 1)
+            replay = peer.mj_replay(rec['model'], rec['qpos'][-1:], rec['qvel'][-1:], 1)
             x_axis = replay['xmat'][0][:, 0]
             angle = float(np.arctan2(x_axis[2], x_axis[0]))
         return abs(angle - ref_angle(t_end))
 
     runs = []
     for dt in dts:
-        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer.run_ours(
             lambda name=name, dt=dt: four_bar(name, dt), 'crank')) for name in OURS]
-        vs += [peer.Variant('MuJoCo', f'{mj}, connect, {which} dt {dt:g}', peer._mujoco(
-            peer._mjcf('four_bar', dt, mj, peer.G, body, connect(dt, which == 'stiffest'))))
+        vs += [peer.Variant('MuJoCo', f'{mj}, connect, {which} dt {dt:g}', peer.run_mujoco(
+            peer.mjcf('four_bar', dt, mj, peer.G, body, connect(dt, which == 'stiffest'))))
             for mj, which in (('RK4', 'default'), ('RK4', 'stiffest'),
                               ('implicitfast', 'default'))]
         runs.append((dt, None, vs))
     for tol in tolerances:
-        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer._ours(
+        vs = [peer.Variant('ours', f'{name} knob {tol:g}', peer.run_ours(
             _knob(four_bar, name, dts[0], tol), 'crank')) for name in ('rkmk4', 'lie_poisson4')]
         runs.append((dts[0], tol, vs))
     return _sweep(scene, runs, duration, reps, lambda v, rec, dt, t: error(v, rec, t))
@@ -332,25 +332,25 @@ def four_bar_scene(dts, tolerances, reps, duration=1.0) -> list:
 def chain(n_links: int, duration: float, dts, reps) -> list:
     scene = f'chain {n_links}'
     scale = peer.CHAIN_MASS * peer.G * peer.CHAIN_LENGTH * n_links ** 2 / 2.0
-    inertia = peer._chain_inertia()
+    inertia = peer.chain_inertia()
     rows = []
     for dt in dts:
         n = int(round(duration / dt))
-        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer._ours(
-            lambda name=name, dt=dt: peer._chain_sim(n_links, name, dt)))
+        vs = [peer.Variant('ours', f'{name} dt {dt:g}', peer.run_ours(
+            lambda name=name, dt=dt: peer.chain_sim(n_links, name, dt)))
             for name in ('lie_poisson2', 'lie_poisson4', 'rkmk4')]
         vs += [peer.Variant('MuJoCo', f'{mj} dt {dt:g}',
-                            peer._mujoco(peer._chain_xml(n_links, dt, mj)))
+                            peer.run_mujoco(peer.chain_xml(n_links, dt, mj)))
                for mj in ('RK4', 'implicitfast')]
         print(f'\n== {scene}, {duration:g} s, dt {dt:g} ==', flush=True)
         per_step, records = peer.measure(vs, n, reps)
         for v, us, rec in zip(vs, per_step, records):
             if v.engine == 'ours':
-                energy = peer._energy(peer.CHAIN_MASS, inertia, rec['pos'], rec['quat'],
-                                      rec['vel'], rec['omega'])
+                energy = peer.total_energy(peer.CHAIN_MASS, inertia, rec['pos'], rec['quat'],
+                                           rec['vel'], rec['omega'])
             else:
-                energy = peer._mj_replay(rec['model'], rec['qpos'], rec['qvel'],
-                                         n_links)['energy']
+                energy = peer.mj_replay(rec['model'], rec['qpos'], rec['qvel'],
+                                        n_links)['energy']
             rel = np.abs(energy - energy[0]) / scale
             err = float(np.max(rel)) if np.all(np.isfinite(rel)) and np.max(rel) < 1.0 \
                 else float('inf')

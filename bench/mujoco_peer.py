@@ -84,11 +84,12 @@ CHAIN_LINKS, CHAIN_LENGTH, CHAIN_MASS, CHAIN_DT = 50, 0.1, 1.0, 1e-3
 MJ_DEFAULT = ((0.02, 1.0), (0.9, 0.95, 0.001, 0.5, 2.0))
 
 
-def _mj_stiffest(dt: float) -> tuple:
+def mj_stiffest(dt: float) -> tuple:
+    """Return the stiffest ``(solref, solimp)`` MuJoCo accepts at step ``dt`` (see above)."""
     return (2.0 * dt, 1.0), (0.9999, 0.9999, 0.001, 0.5, 2.0)
 
 
-def _nums(values) -> str:
+def nums(values) -> str:
     """Space-separated exact decimals for MJCF attributes."""
     return ' '.join(repr(float(v)) for v in values)
 
@@ -110,7 +111,7 @@ class Variant:
     note: str = ''
 
 
-def _ours(build: Callable[[], Simulation], body: Optional[str] = None) -> Callable:
+def run_ours(build: Callable[[], Simulation], body: Optional[str] = None) -> Callable:
     """Run a fresh Simulation n steps, reading pose and twist (world) after each."""
     def run(n: int) -> tuple:
         sim = build()
@@ -135,7 +136,7 @@ def _ours(build: Callable[[], Simulation], body: Optional[str] = None) -> Callab
     return run
 
 
-def _mujoco(xml: str, init: Optional[Callable] = None, kinematics: bool = False) -> Callable:
+def run_mujoco(xml: str, init: Optional[Callable] = None, kinematics: bool = False) -> Callable:
     """
     Run fresh MjData n steps, copying qpos and qvel after each.
 
@@ -231,14 +232,14 @@ def measure(variants: list, n: int, reps: int) -> tuple:
 # -- physics helpers -----------------------------------------------------------------------
 
 
-def _rot(quat: np.ndarray, scalar_first: bool = False) -> np.ndarray:
+def rot(quat: np.ndarray, scalar_first: bool = False) -> np.ndarray:
     """Rotation matrices of quaternions of any leading shape (scipy, not the core's)."""
     flat = quat.reshape(-1, 4)
     mats = Rotation.from_quat(flat, scalar_first=scalar_first).as_matrix()
     return mats.reshape(quat.shape[:-1] + (3, 3))
 
 
-def _energy(mass, inertia, pos, quat, vel, omega) -> np.ndarray:
+def total_energy(mass, inertia, pos, quat, vel, omega) -> np.ndarray:
     """
     Total energy per row of bodies whose frame origin is their centre of mass.
 
@@ -246,14 +247,14 @@ def _energy(mass, inertia, pos, quat, vel, omega) -> np.ndarray:
     body axes; ``pos``, ``vel``, ``omega`` (world) and ``quat`` (xyzw) of shape
     (n, [nb,] 3 or 4). Potential energy ``m g z``.
     """
-    w_body = np.einsum('...ji,...j->...i', _rot(quat), omega)
+    w_body = np.einsum('...ji,...j->...i', rot(quat), omega)
     e = (0.5 * mass * np.sum(vel * vel, axis=-1) + 0.5 * np.sum(inertia * w_body * w_body,
                                                                 axis=-1)
          + mass * G * pos[..., 2])
     return e.sum(axis=-1) if e.ndim > 1 else e
 
 
-def _mj_replay(model, qpos: np.ndarray, qvel: np.ndarray, body: int) -> dict:
+def mj_replay(model, qpos: np.ndarray, qvel: np.ndarray, body: int) -> dict:
     """
     Replay recorded states in MuJoCo: kinematics and energy (outside the timed loop).
 
@@ -289,8 +290,9 @@ def _crossing_period(x: np.ndarray, dt: float) -> float:
     return 2.0 * (t[-1] - t[0]) / (len(t) - 1)
 
 
-def _mjcf(name: str, dt: float, integrator: str, gravity: float, body: str,
-          equality: str = '') -> str:
+def mjcf(name: str, dt: float, integrator: str, gravity: float, body: str,
+         equality: str = '') -> str:
+    """Return an MJCF model: options, contacts off, ``body`` and ``equality`` XML inside."""
     return (f'<mujoco model="{name}">\n'
             f'  <option timestep="{dt!r}" integrator="{integrator}" '
             f'gravity="0 0 {-gravity!r}">\n'
@@ -318,11 +320,11 @@ def free_body(duration: float, reps: int, integrators: list) -> dict:
         data.qvel[3:6] = FREE_OMEGA0   # a free joint's angular velocity is in body axes
 
     body = ('    <body name="b">\n      <freejoint/>\n'
-            f'      <inertial pos="0 0 0" mass="1" diaginertia="{_nums(moments)}"/>'
+            f'      <inertial pos="0 0 0" mass="1" diaginertia="{nums(moments)}"/>'
             '\n    </body>\n')
-    variants = [Variant('ours', name, _ours(build(name), 'b')) for name in integrators]
+    variants = [Variant('ours', name, run_ours(build(name), 'b')) for name in integrators]
     variants += [Variant('MuJoCo', mj,
-                         _mujoco(_mjcf('free_body', FREE_DT, mj, 0.0, body), init))
+                         run_mujoco(mjcf('free_body', FREE_DT, mj, 0.0, body), init))
                  for mj in ('RK4', 'Euler', 'implicitfast')]
     print(f'\n== free body: moments {FREE_MOMENTS}, Ω0 {FREE_OMEGA0}, {t_end:g} s, '
           f'dt {FREE_DT:g} ({n} steps, {reps} repetitions) ==', flush=True)
@@ -331,17 +333,17 @@ def free_body(duration: float, reps: int, integrators: list) -> dict:
                                        rtol=1e-13, atol=1e-13)
     w_ref12, _ = free_body_reference(moments, FREE_OMEGA0, [0.0, 0.0, 0.0, 1.0], [t_end])
     ref_err = float(np.linalg.norm(w_ref12[-1] - w_ref[-1]) / np.linalg.norm(w_ref[-1]))
-    R_ref = _rot(q_ref[-1])
+    R_ref = rot(q_ref[-1])
     e0 = 0.5 * np.dot(moments, np.square(FREE_OMEGA0))
     l0 = np.linalg.norm(moments * np.array(FREE_OMEGA0))
     rows = []
     base = per_step[[v.label for v in variants].index('RK4')]
     for v, us, rec in zip(variants, per_step, records):
         if v.engine == 'ours':
-            R = _rot(rec['quat'])
+            R = rot(rec['quat'])
             w_body = np.einsum('nji,nj->ni', R, rec['omega'])
         else:
-            R = _rot(rec['qpos'][:, 3:7], scalar_first=True)
+            R = rot(rec['qpos'][:, 3:7], scalar_first=True)
             w_body = rec['qvel'][:, 3:6]
         err_w = float(np.linalg.norm(w_body[-1] - w_ref[-1]) / np.linalg.norm(w_ref[-1]))
         err_r = float(Rotation.from_matrix(R_ref.T @ R[-1]).magnitude())
@@ -356,7 +358,8 @@ def free_body(duration: float, reps: int, integrators: list) -> dict:
 # -- scene 2: ball-joint pendulum -------------------------------------------------------------
 
 
-def _pendulum_geometry(theta0: float) -> dict:
+def pendulum_geometry(theta0: float) -> dict:
+    """Return the rod pendulum at ``theta0`` (rad): inertia, pivot offset, direction, period."""
     side = PEND_MASS * (3.0 * ROD_RADIUS ** 2 + PEND_LENGTH ** 2) / 12.0
     inertia = np.array([0.5 * PEND_MASS * ROD_RADIUS ** 2, side, side])
     d = 0.5 * PEND_LENGTH
@@ -369,33 +372,35 @@ def _pendulum_geometry(theta0: float) -> dict:
             'period': 4.0 * np.sqrt(length_eq / G) * ellipk(np.sin(theta0 / 2.0) ** 2)}
 
 
-def _pendulum_connect_xml(geo: dict, dt: float, integrator: str, solref=None, solimp=None,
-                          refsafe: bool = True) -> str:
+def pendulum_connect_xml(geo: dict, dt: float, integrator: str, solref=None, solimp=None,
+                         refsafe: bool = True) -> str:
+    """MJCF of the pendulum as a free body held by a connect constraint (soft)."""
     centre = geo['d'] * geo['direction']
-    body = (f'    <body name="rod" pos="{_nums(centre)}" '
-            f'quat="{_nums(geo["quat_wxyz"])}">\n      <freejoint/>\n'
+    body = (f'    <body name="rod" pos="{nums(centre)}" '
+            f'quat="{nums(geo["quat_wxyz"])}">\n      <freejoint/>\n'
             f'      <inertial pos="0 0 0" mass="{PEND_MASS!r}" '
-            f'diaginertia="{_nums(geo["inertia"])}"/>\n    </body>\n')
+            f'diaginertia="{nums(geo["inertia"])}"/>\n    </body>\n')
     params = ''
     if solref is not None:
-        params += f' solref="{_nums(solref)}"'
+        params += f' solref="{nums(solref)}"'
     if solimp is not None:
-        params += f' solimp="{_nums(solimp)}"'
+        params += f' solimp="{nums(solimp)}"'
     equality = f'    <connect body1="rod" anchor="{-geo["d"]!r} 0 0"{params}/>\n'
-    xml = _mjcf('pendulum', dt, integrator, G, body, equality)
+    xml = mjcf('pendulum', dt, integrator, G, body, equality)
     if not refsafe:
         xml = xml.replace('<flag contact="disable"/>',
                           '<flag contact="disable" refsafe="disable"/>')
     return xml
 
 
-def _pendulum_ball_xml(geo: dict, dt: float, integrator: str) -> str:
+def pendulum_ball_xml(geo: dict, dt: float, integrator: str) -> str:
+    """MJCF of the pendulum on a ball joint (joint coordinates: no constraint)."""
     body = (f'    <body name="rod" pos="0 0 0" '
-            f'quat="{_nums(geo["quat_wxyz"])}">\n'
+            f'quat="{nums(geo["quat_wxyz"])}">\n'
             '      <joint type="ball" pos="0 0 0"/>\n'
             f'      <inertial pos="{geo["d"]!r} 0 0" mass="{PEND_MASS!r}" '
-            f'diaginertia="{_nums(geo["inertia"])}"/>\n    </body>\n')
-    return _mjcf('pendulum_ball', dt, integrator, G, body)
+            f'diaginertia="{nums(geo["inertia"])}"/>\n    </body>\n')
+    return mjcf('pendulum_ball', dt, integrator, G, body)
 
 
 def _pendulum_errors(geo: dict, dt: float, com_x: np.ndarray, anchor: np.ndarray,
@@ -409,7 +414,7 @@ def _pendulum_errors(geo: dict, dt: float, com_x: np.ndarray, anchor: np.ndarray
 def pendulum(duration: float, reps: int, integrators: list,
              theta0: float = np.radians(90.0), dt: float = PEND_DT) -> dict:
     """Cost per step, period and anchor errors of the ball-joint pendulum."""
-    geo = _pendulum_geometry(theta0)
+    geo = pendulum_geometry(theta0)
     n = int(round(duration / dt))
 
     def build(name):
@@ -420,20 +425,21 @@ def pendulum(duration: float, reps: int, integrators: list,
                                           anchor_world=[0.0, 0.0, 0.0])])
         return make
 
-    stiff = _mj_stiffest(dt)
-    variants = [Variant('ours', name, _ours(build(name), 'rod')) for name in integrators]
+    stiff = mj_stiffest(dt)
+    variants = [Variant('ours', name, run_ours(build(name), 'rod')) for name in integrators]
     variants += [
-        Variant('MuJoCo', 'RK4, connect, default', _mujoco(_pendulum_connect_xml(geo, dt, 'RK4')),
+        Variant('MuJoCo', 'RK4, connect, default',
+                run_mujoco(pendulum_connect_xml(geo, dt, 'RK4')),
                 f'solref {_fmt(MJ_DEFAULT[0])}, solimp {_fmt(MJ_DEFAULT[1])}'),
         Variant('MuJoCo', 'RK4, connect, stiffest',
-                _mujoco(_pendulum_connect_xml(geo, dt, 'RK4', *stiff)),
+                run_mujoco(pendulum_connect_xml(geo, dt, 'RK4', *stiff)),
                 f'solref {_fmt(stiff[0])}, solimp {_fmt(stiff[1])}'),
         Variant('MuJoCo', 'Euler, connect, default',
-                _mujoco(_pendulum_connect_xml(geo, dt, 'Euler')), 'default solref, solimp'),
+                run_mujoco(pendulum_connect_xml(geo, dt, 'Euler')), 'default solref, solimp'),
         Variant('MuJoCo', 'implicitfast, connect, default',
-                _mujoco(_pendulum_connect_xml(geo, dt, 'implicitfast')),
+                run_mujoco(pendulum_connect_xml(geo, dt, 'implicitfast')),
                 'default solref, solimp'),
-        Variant('MuJoCo', 'RK4, ball joint', _mujoco(_pendulum_ball_xml(geo, dt, 'RK4')),
+        Variant('MuJoCo', 'RK4, ball joint', run_mujoco(pendulum_ball_xml(geo, dt, 'RK4')),
                 'joint coordinates: no constraint, exact at the anchor'),
     ]
     print(f'\n== pendulum: rod {PEND_LENGTH:g} m, {PEND_MASS:g} kg, ball joint, released at '
@@ -444,20 +450,21 @@ def pendulum(duration: float, reps: int, integrators: list,
     rows = []
     for v, us, rec in zip(variants, per_step, records):
         rows.append({'engine': v.engine, 'label': v.label, 'us': us * 1e6, 'ratio': us / base,
-                     'note': v.note, **_pendulum_analysis(geo, dt, v, rec)})
+                     'note': v.note, **pendulum_analysis(geo, dt, v, rec)})
     return {'rows': rows, 'duration': n * dt, 'steps': n, 'period': geo['period'],
             'theta0': theta0, 'read_us': read_cost(build(integrators[0]), 'rod')}
 
 
-def _pendulum_analysis(geo: dict, dt: float, v: Variant, rec: dict) -> dict:
+def pendulum_analysis(geo: dict, dt: float, v: Variant, rec: dict) -> dict:
+    """Period error, anchor drift and energy error of a pendulum run (ours or MuJoCo)."""
     if v.engine == 'ours':
-        R = _rot(rec['quat'])
+        R = rot(rec['quat'])
         anchor = rec['pos'] - geo['d'] * R[:, :, 0]
-        energy = _energy(PEND_MASS, geo['inertia'], rec['pos'], rec['quat'], rec['vel'],
-                         rec['omega'])
+        energy = total_energy(PEND_MASS, geo['inertia'], rec['pos'], rec['quat'], rec['vel'],
+                              rec['omega'])
         _check_energy(v, energy, rec, PEND_MASS * G * geo['d'])
         return _pendulum_errors(geo, dt, rec['pos'][:, 0], anchor, energy)
-    replay = _mj_replay(rec['model'], rec['qpos'], rec['qvel'], 1)
+    replay = mj_replay(rec['model'], rec['qpos'], rec['qvel'], 1)
     if 'ball' in v.label:
         anchor = replay['xpos']                       # the joint is at the body origin
     else:
@@ -476,9 +483,9 @@ def _check_energy(v: Variant, energy: np.ndarray, rec: dict, scale: float) -> No
 def solref_sweep(duration: float, reps: int, theta0: float = np.radians(90.0),
                  dt: float = PEND_DT) -> list:
     """Run MuJoCo RK4 on the pendulum across soft-constraint settings (solref, solimp)."""
-    geo = _pendulum_geometry(theta0)
+    geo = pendulum_geometry(theta0)
     n = int(round(duration / dt))
-    stiff_imp = _mj_stiffest(dt)[1]
+    stiff_imp = mj_stiffest(dt)[1]
     settings = [
         ('default', None, None, True),
         ('solref (0.01, 1)', (0.01, 1.0), None, True),
@@ -493,7 +500,7 @@ def solref_sweep(duration: float, reps: int, theta0: float = np.radians(90.0),
     for k in (1e4, 1e5, 1e6, 1e7):
         settings.append((f'solref (-{k:.0e}, -2 sqrt(k)), solimp 0.9999',
                          (-k, -2.0 * np.sqrt(k)), stiff_imp, True))
-    variants = [Variant('MuJoCo', label, _mujoco(_pendulum_connect_xml(
+    variants = [Variant('MuJoCo', label, run_mujoco(pendulum_connect_xml(
         geo, dt, 'RK4', solref, solimp, refsafe)),
         f'solref {_fmt(solref or MJ_DEFAULT[0])}, solimp {_fmt(solimp or MJ_DEFAULT[1])}'
         + ('' if refsafe else ', refsafe disabled'))
@@ -503,7 +510,7 @@ def solref_sweep(duration: float, reps: int, theta0: float = np.radians(90.0),
     per_step, records = measure(variants, n, reps)
     rows = []
     for v, us, rec in zip(variants, per_step, records):
-        errs = _pendulum_analysis(geo, dt, v, rec)
+        errs = pendulum_analysis(geo, dt, v, rec)
         note = v.note
         if rec['warnings']:
             note = (f'diverged: MuJoCo unstable at t = {rec["unstable_at"]:g} s'
@@ -515,13 +522,15 @@ def solref_sweep(duration: float, reps: int, theta0: float = np.radians(90.0),
 # -- scene 3: planar hinge chain ---------------------------------------------------------------
 
 
-def _chain_inertia() -> np.ndarray:
+def chain_inertia() -> np.ndarray:
+    """Principal moments (3,) of a chain link (kg m²)."""
     side = CHAIN_MASS * (3.0 * ROD_RADIUS ** 2 + CHAIN_LENGTH ** 2) / 12.0
     return np.array([0.5 * CHAIN_MASS * ROD_RADIUS ** 2, side, side])
 
 
-def _chain_xml(n_links: int, dt: float, integrator: str) -> str:
-    inertia = _nums(_chain_inertia())
+def chain_xml(n_links: int, dt: float, integrator: str) -> str:
+    """MJCF of the planar chain of ``n_links`` hinged rods (joint coordinates)."""
+    inertia = nums(chain_inertia())
     body, indent = '', '    '
     for i in range(n_links):
         pos = '0 0 0' if i == 0 else f'{CHAIN_LENGTH!r} 0 0'
@@ -533,10 +542,11 @@ def _chain_xml(n_links: int, dt: float, integrator: str) -> str:
     for i in reversed(range(n_links)):
         indent = indent[:-2]
         body += f'{indent}</body>\n'
-    return _mjcf('chain', dt, integrator, G, body)
+    return mjcf('chain', dt, integrator, G, body)
 
 
-def _chain_sim(n_links: int, integrator: str, dt: float) -> Simulation:
+def chain_sim(n_links: int, integrator: str, dt: float) -> Simulation:
+    """Our planar chain of ``n_links`` hinged rods, the first hinged to the world."""
     bodies, joints = [], []
     for i in range(n_links):
         start = np.array([i * CHAIN_LENGTH, 0.0, 0.0])
@@ -552,12 +562,12 @@ def chain(duration: float, reps: int, integrators: list, n_links: int = CHAIN_LI
     """Cost per step and worst energy error of the planar hinge chain, same span for both."""
     n = int(round(duration / dt))
     scale = CHAIN_MASS * G * CHAIN_LENGTH * n_links ** 2 / 2.0
-    variants = [Variant('ours', name, _ours(lambda name=name: _chain_sim(n_links, name, dt)))
+    variants = [Variant('ours', name, run_ours(lambda name=name: chain_sim(n_links, name, dt)))
                 for name in integrators]
-    variants += [Variant('MuJoCo', mj, _mujoco(_chain_xml(n_links, dt, mj)))
+    variants += [Variant('MuJoCo', mj, run_mujoco(chain_xml(n_links, dt, mj)))
                  for mj in ('RK4', 'Euler', 'implicitfast')]
     variants.append(Variant('MuJoCo', 'RK4, + mj_kinematics, xpos/xquat',
-                            _mujoco(_chain_xml(n_links, dt, 'RK4'), kinematics=True),
+                            run_mujoco(chain_xml(n_links, dt, 'RK4'), kinematics=True),
                             'reads body poses of the new state too'))
     print(f'\n== chain: {n_links} links of {CHAIN_LENGTH:g} m, {CHAIN_MASS:g} kg, hinges, '
           f'released horizontal, {n * dt:g} s, dt {dt:g} ({n} steps, {reps} repetitions) ==',
@@ -565,21 +575,21 @@ def chain(duration: float, reps: int, integrators: list, n_links: int = CHAIN_LI
     per_step, records = measure(variants, n, reps)
     base = per_step[[v.label for v in variants].index('RK4')]
     rows, curves = [], {}
-    inertia = _chain_inertia()
+    inertia = chain_inertia()
     t = dt * np.arange(n + 1)
     tips = {}
     for v, us, rec in zip(variants, per_step, records):
         note = v.note
         if v.engine == 'ours':
-            energy = _energy(CHAIN_MASS, inertia, rec['pos'], rec['quat'], rec['vel'],
-                             rec['omega'])
+            energy = total_energy(CHAIN_MASS, inertia, rec['pos'], rec['quat'], rec['vel'],
+                                  rec['omega'])
             _check_energy(v, energy, rec, scale)
             work = rec['work']
             if work.get('substeps') or work.get('retries'):
                 note = f'{work["substeps"]} sub-steps, {work["retries"]} retries'
-            tip = rec['pos'][:, -1] + 0.5 * CHAIN_LENGTH * _rot(rec['quat'][:, -1])[:, :, 0]
+            tip = rec['pos'][:, -1] + 0.5 * CHAIN_LENGTH * rot(rec['quat'][:, -1])[:, :, 0]
         else:
-            replay = _mj_replay(rec['model'], rec['qpos'], rec['qvel'], n_links)
+            replay = mj_replay(rec['model'], rec['qpos'], rec['qvel'], n_links)
             energy = replay['energy']
             tip = replay['xpos'] + CHAIN_LENGTH * replay['xmat'][:, :, 0]
         tips[v.label] = tip
@@ -604,7 +614,7 @@ def chain(duration: float, reps: int, integrators: list, n_links: int = CHAIN_LI
     tip_diff = float(np.linalg.norm(tips[first_ours][k] - tips['RK4'][k]))
     return {'rows': rows, 'curves': curves, 'duration': n * dt, 'steps': n, 'scale': scale,
             'tip_check': (k * dt, first_ours, tip_diff),
-            'read_us': read_cost(lambda: _chain_sim(n_links, integrators[0], dt))}
+            'read_us': read_cost(lambda: chain_sim(n_links, integrators[0], dt))}
 
 
 # -- output ------------------------------------------------------------------------------------
@@ -814,7 +824,7 @@ def main(argv=None) -> int:
     versions = (f'python {platform.python_version()}, numpy {np.__version__}, scipy '
                 f'{scipy.__version__}, mujoco {mujoco.__version__}, rigid_body_sim {_commit()}')
     print(f'{when}; {_machine()}\n{versions}')
-    geo = _pendulum_geometry(np.radians(90.0))
+    geo = pendulum_geometry(np.radians(90.0))
     if args.quick:
         free_s, pend_s, chain_s = 5.0, 1.5, 0.2
         pend_integrators = ['lie_poisson2', 'lie_poisson4']
