@@ -114,6 +114,19 @@ def test_effect_work_deferred_over_a_run_equals_work_counted_every_step(name):
     assert once['wrenches_evaluations'] < once['gravity_evaluations']
 
 
+@pytest.mark.parametrize('name', sorted(INTEGRATORS))
+def test_a_cleared_wrench_table_counts_no_more_work(name):
+    bodies = [RigidBody('a', 1.0, (1.0, 2.0, 3.0), angular_velocity_body=(0.1, 1.0, 0.2))]
+    sim = Simulation(bodies, [Gravity()], name, 1e-3)
+    sim.apply_wrench('a', (1.0, 0.0, 0.0))
+    sim.step(10)
+    acting = sim.work()['wrenches_evaluations']
+    sim.clear_wrenches()
+    sim.step(10)
+    assert acting > 0
+    assert sim.work()['wrenches_evaluations'] == acting
+
+
 def test_counters_reset_and_restore_in_place():
     sim = scene('lie_poisson2', True, (1.0, 2.0, 3.0))
     sim.step(3)

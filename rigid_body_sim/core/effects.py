@@ -555,6 +555,7 @@ class AppliedWrenches(Effect):
     def add_to_kernel_model(self, model: KernelModel, time_mid: float) -> None:
         """Add the entries active in the step as wrench rows (:meth:`kernel_rows`)."""
         if not len(self):
+            self._kernel_active = 0   # an emptied table acts on nothing, and counts no work
             return
         rows = self.kernel_rows(time_mid)
         # Without begin_step (no Simulation switches it) the rows depend on the time.
