@@ -408,7 +408,7 @@ class ConstraintSet:
     n_builtin_rows : int
         The point, dot, line and distance rows (in this order).
     row_kind, row_comp, row_a, row_b : ndarray, shape (n_builtin_rows,), int64
-    row_par : ndarray, shape (n_builtin_rows, kernels.rows.PAR_WIDTH)
+    row_par : ndarray, shape (n_builtin_rows, kernels.layout.PAR_WIDTH)
         The built-in rows as :mod:`.kernels.rows` takes them (layout there).
 
     """

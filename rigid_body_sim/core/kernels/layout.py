@@ -238,6 +238,9 @@ FRAME = Columns('frame', [('quat_body_principal', 4), ('com_body', 3)])
 OUTPUT = Columns('output', [('origin_world', 3), ('quat_body_world', 4),
                             ('origin_vel_world', 3), ('ang_vel_world', 3),
                             ('origin_vel_body', 3), ('ang_vel_body', 3)])
+#: ``row_par`` (m, PAR_WIDTH) of the constraint rows (:mod:`.rows`): the lever arms on
+#: bodies a and b (principal frames), the axes s and e, and a scalar (a length, a cosine).
+ROW_PARAMETERS = Columns('row par', [('ra', 3), ('rb', 3), ('s', 3), ('e', 3), ('scalar', 1)])
 #: ``par`` of the constrained kernels: the solver's and the integrator's settings.
 PAR = Columns('par', [('tau', 1), ('omega', 1), ('pos_tol', 1), ('max_it', 1),
                       ('rank_rtol', 1), ('reg', 1), ('closing', 1), ('max_rot', 1),
@@ -302,24 +305,27 @@ COMPONENT_TABLE = Table('component table',
                          'n_floats', 'n_ints', 'n_layout', 'n_lam', 'n_counts'))
 
 # The generated indices, as module integers (compile-time constants to numba).
-_CONSTANTS = {
-    **BODY.constants('B_'), **WRENCH.constants('W_'), **PAR.constants('P_'),
-    **FRAME.constants('FR_'), **OUTPUT.constants('O_'), **STATE.constants('S_'),
-    **{'V_' + n.upper(): k for k, n in enumerate(VM_ROWS)},
-    **{'FS_' + n.upper(): k for k, n in enumerate(FACTOR_STATE_ENTRIES)},
-    **COMPONENT.constants(), **DENSE.constants('D_'), **TREE.constants('T_'),
-    **{'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},
-    **FREE_TABLE.constants('FT_'), **COMPONENT_TABLE.constants('CT_'),
+_GROUPS = (
+    BODY.constants('B_'), WRENCH.constants('W_'), PAR.constants('P_'),
+    ROW_PARAMETERS.constants('PAR_'), FRAME.constants('FR_'), OUTPUT.constants('O_'),
+    STATE.constants('S_'), {'V_' + n.upper(): k for k, n in enumerate(VM_ROWS)},
+    {'FS_' + n.upper(): k for k, n in enumerate(FACTOR_STATE_ENTRIES)},
+    COMPONENT.constants(), DENSE.constants('D_'), TREE.constants('T_'),
+    {'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},
+    FREE_TABLE.constants('FT_'), COMPONENT_TABLE.constants('CT_'),
     # Where each storage starts in COMPONENT, and how many slots one takes.
-    'DENSE0': COMPONENT.index['general_dense_f'], 'DENSE_SLOTS': len(DENSE),
-    'TREE0': COMPONENT.index['general_tree_group_ptr'], 'TREE_SLOTS': len(TREE),
+    {'DENSE0': COMPONENT.index['general_dense_f'], 'DENSE_SLOTS': len(DENSE),
+     'TREE0': COMPONENT.index['general_tree_group_ptr'], 'TREE_SLOTS': len(TREE)},
     # Which storage (GENERAL or SYMMETRIC).
-    **{st.upper(): k for k, st in enumerate(STORAGES)},
-}
-_clash = set(_CONSTANTS) & set(globals())
-if _clash:
-    raise ValueError(f'generated names clash with the module: {sorted(_clash)}')
+    {st.upper(): k for k, st in enumerate(STORAGES)},
+)
+_CONSTANTS = {}
+for _group in _GROUPS:
+    _clash = (set(_group) & set(_CONSTANTS)) | (set(_group) & set(globals()))
+    if _clash:
+        raise ValueError(f'generated names clash: {sorted(_clash)}')
+    _CONSTANTS.update(_group)
 globals().update(_CONSTANTS)
 __all__ = ['BODY', 'COMPONENT', 'COMPONENT_TABLE', 'CONTEXT', 'Columns', 'Count', 'DENSE',
-           'Field', 'FRAME', 'FREE_TABLE', 'Layout', 'N_COUNTS', 'OUTPUT', 'PAR', 'Solve',
-           'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]
+           'Field', 'FRAME', 'FREE_TABLE', 'Layout', 'N_COUNTS', 'OUTPUT', 'PAR', 'ROW_PARAMETERS',
+           'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]

@@ -49,11 +49,10 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
+from .layout import PAR_E, PAR_RA, PAR_RB, PAR_S, PAR_SCALAR, PAR_WIDTH
 from .so3 import quat_matrix
 
 KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE = 0, 1, 2, 3
-PAR_RA, PAR_RB, PAR_S, PAR_E, PAR_SCALAR = 0, 3, 6, 9, 12
-PAR_WIDTH = 13
 
 # Guards the division by a distance row's current length (as the numpy version did).
 _TINY = 1e-300
