@@ -43,7 +43,6 @@ from pathlib import Path
 import platform
 import re
 import statistics
-import subprocess
 import sys
 import time
 from typing import Callable, Optional
@@ -61,9 +60,11 @@ try:
 except ImportError:   # main() says what to install
     mujoco = None
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import report  # noqa: E402, I100
+
 OUT = Path(__file__).resolve().parent / 'out'
 MJ_WARNINGS: list = []   # MuJoCo's warnings of the current run (instead of its prints)
-ROOT = Path(__file__).resolve().parents[1]
 G = 9.81
 
 # Free body (issue 8): principal moments in ascending order, so that the body frame is
@@ -779,26 +780,8 @@ def _plot(free: Optional[dict], pend: Optional[dict], chn: Optional[dict]) -> Op
 
 
 def _machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                cpu = line.split(':', 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f'{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}'
-
-
-def _commit() -> str:
-    try:
-        head = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, check=True,
-                              capture_output=True, text=True).stdout.strip()
-        dirty = subprocess.run(['git', 'status', '--porcelain', '--', 'rigid_body_sim/core'],
-                               cwd=ROOT, capture_output=True, text=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return 'unknown'
-    return head + (' (rigid_body_sim/core modified)' if dirty else '')
+    return (f'{report.cpu_model()}, {os.cpu_count()} cores, {platform.system()} '
+            f'{platform.release()}')
 
 
 def main(argv=None) -> int:
@@ -822,7 +805,8 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     when = datetime.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')
     versions = (f'python {platform.python_version()}, numpy {np.__version__}, scipy '
-                f'{scipy.__version__}, mujoco {mujoco.__version__}, rigid_body_sim {_commit()}')
+                f'{scipy.__version__}, mujoco {mujoco.__version__}, '
+                f'rigid_body_sim {report.commit()}')
     print(f'{when}; {_machine()}\n{versions}')
     geo = pendulum_geometry(np.radians(90.0))
     if args.quick:
