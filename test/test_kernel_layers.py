@@ -84,8 +84,8 @@ def test_pack_takes_arrays_by_name_and_returns_named_views():
     packed, views = ck.pack(rows, ws, dense, trees)
     assert packed[0] == -1
     views['phi'][1, 2] = 7.0
-    from rigid_body_sim.core.kernels.layout import PHI
-    start = packed[3][PHI, 0]
+    from rigid_body_sim.core.kernels.layout import L_OFFSET, PHI
+    start = packed[3][PHI, L_OFFSET]
     assert packed[1][start + 1 * 3 + 2] == 7.0   # phi (3, m) row-major in the float buffer
 
 

@@ -49,13 +49,13 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      CT_PAR, CT_SOLVE, CT_WRENCH, CX_FLOATS, CX_INTS, CX_KEY, CX_LAYOUT, CX_SOLVE,
                      D_F, D_PIV, D_S, D_U, D_VT, DENSE0, DENSE_SLOTS, FACTOR_STATE, FORCE,
                      FR_WIDTH, FRAMES, FREE_ACC, FS_MODE, FS_VALID, G2, GENERAL, GT_LAMBDA, JAC,
-                     JR, KIND, MINV, O_WIDTH, OMEGA_WORLD, P_CLOSING, P_MAX_IT, P_MAX_ROT,
-                     P_MAX_SUB, P_OMEGA, P_POS_TOL, P_RANK_RTOL, P_REG, P_TAU, PHI, QUATS, ROTOR,
-                     ROW_A, ROW_B, ROW_PAR, Solve, STAGES, STORAGES, SYMMETRIC, T_B, T_CLOSURE,
-                     T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT, T_GROUP_PTR, T_GROUP_ROWS, T_P,
-                     T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W, T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE,
-                     TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT, V_RHS, V_SOLUTION, VECTORS, VM,
-                     W_WIDTH, WATCH)
+                     JR, KIND, L_OFFSET, L_SHAPE, L_WIDTH, MINV, O_WIDTH, OMEGA_WORLD, P_CLOSING,
+                     P_MAX_IT, P_MAX_ROT, P_MAX_SUB, P_OMEGA, P_POS_TOL, P_RANK_RTOL, P_REG, P_TAU,
+                     PHI, QUATS, ROTOR, ROW_A, ROW_B, ROW_PAR, Solve, STAGES, STORAGES, SYMMETRIC,
+                     T_B, T_CLOSURE, T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT, T_GROUP_PTR,
+                     T_GROUP_ROWS, T_P, T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W, T_WORK, T_X, T_XC,
+                     T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT, V_RHS, V_SOLUTION,
+                     VECTORS, VM, W_WIDTH, WATCH)
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
 from .methods import Method, YOSHIDA_W1
@@ -1137,17 +1137,17 @@ def pack(rows: dict, ws: dict, dense: tuple, trees: tuple) -> tuple:
     for st, storage in zip(STORAGES, trees):
         named.update({f'{st}_tree_{k}': v for k, v in storage.items()})
     arrays = COMPONENT.check(named)
-    layout = np.zeros((len(arrays), 6), dtype=np.int64)
+    layout = np.zeros((len(arrays), L_WIDTH), dtype=np.int64)
     sizes = {'f': 0, 'i': 0}
     for k, (x, field) in enumerate(zip(arrays, COMPONENT.fields)):
-        layout[k, 0] = sizes[field.kind]
-        layout[k, 1:1 + x.ndim] = x.shape
+        layout[k, L_OFFSET] = sizes[field.kind]
+        layout[k, L_SHAPE:L_SHAPE + x.ndim] = x.shape
         sizes[field.kind] += x.size
     floats, ints = np.zeros(sizes['f']), np.zeros(sizes['i'], dtype=np.int64)
     views = {}
     for k, (x, field) in enumerate(zip(arrays, COMPONENT.fields)):
         buf = floats if field.kind == 'f' else ints
-        v = buf[layout[k, 0]:layout[k, 0] + x.size].reshape(x.shape)
+        v = buf[layout[k, L_OFFSET]:layout[k, L_OFFSET] + x.size].reshape(x.shape)
         v[...] = x
         views[field.name] = v
     return (rows['key'], floats, ints, layout), views
@@ -1155,22 +1155,23 @@ def pack(rows: dict, ws: dict, dense: tuple, trees: tuple) -> tuple:
 
 @njit(cache=True)
 def _v1(buf, L, k):
-    return raw_slice(buf, L[k, 0], (L[k, 1],))
+    return raw_slice(buf, L[k, L_OFFSET], (L[k, L_SHAPE],))
 
 
 @njit(cache=True)
 def _v2(buf, L, k):
-    return raw_slice(buf, L[k, 0], (L[k, 1], L[k, 2]))
+    return raw_slice(buf, L[k, L_OFFSET], (L[k, L_SHAPE], L[k, L_SHAPE + 1]))
 
 
 @njit(cache=True)
 def _v3(buf, L, k):
-    return raw_slice(buf, L[k, 0], (L[k, 1], L[k, 2], L[k, 3]))
+    return raw_slice(buf, L[k, L_OFFSET], (L[k, L_SHAPE], L[k, L_SHAPE + 1], L[k, L_SHAPE + 2]))
 
 
 @njit(cache=True)
 def _v4(buf, L, k):
-    return raw_slice(buf, L[k, 0], (L[k, 1], L[k, 2], L[k, 3], L[k, 4]))
+    return raw_slice(buf, L[k, L_OFFSET],
+                     (L[k, L_SHAPE], L[k, L_SHAPE + 1], L[k, L_SHAPE + 2], L[k, L_SHAPE + 3]))
 
 
 @njit(cache=True)
@@ -1363,7 +1364,7 @@ def pinned_packed_step(y0, y, dt, c_valid, with_outputs, err, table):
         pinned(t, CT_GFORCE, (n, 3)), pinned(t, CT_WRENCH, (t[CT_N_WRENCH], W_WIDTH)),
         t[CT_FLAGS], pinned(t, CT_PAR, (t[CT_N_PAR],)), t[CT_SOLVE], t[CT_GENERIC],
         pinned(t, CT_FLOATS, (t[CT_N_FLOATS],)), pinned_int(t, CT_INTS, (t[CT_N_INTS],)),
-        pinned_int(t, CT_LAYOUT, (t[CT_N_LAYOUT], 6)), pos, quat, vel, om,
+        pinned_int(t, CT_LAYOUT, (t[CT_N_LAYOUT], L_WIDTH)), pos, quat, vel, om,
         pinned(t, CT_LAM, (t[CT_N_LAM],)), c_valid, pinned_int(t, CT_COUNTS, (t[CT_N_COUNTS],)),
         err, pinned(t, CT_FRAMES, (n, FR_WIDTH)),
         pinned(t, CT_OUT, (n if with_outputs else 0, O_WIDTH)))

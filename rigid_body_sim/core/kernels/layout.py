@@ -286,6 +286,9 @@ COMPONENT = Layout('component', ROWS + WORKSPACE + SCRATCH + tuple(
     (f'{st}_dense_{f.name}', f.kind, f.ndim) for st in STORAGES for f in DENSE.fields)
     + tuple((f'{st}_tree_{f.name}', f.kind, f.ndim) for st in STORAGES for f in TREE.fields))
 
+#: A packed buffer's layout table (n_arrays, L_WIDTH), one row per array of
+#: :data:`COMPONENT`: its first entry in its buffer, then its shape (up to 4 dimensions).
+LAYOUT_TABLE = Columns('layout table', [('offset', 1), ('shape', 4)])
 #: The context a constrained step passes to its helpers: the component's packed buffers and
 #: their layout table (see constrained_step.pack), the key of its generic rows (-1 if none)
 #: and its :class:`Solve`.
@@ -312,6 +315,7 @@ _GROUPS = (
     {'FS_' + n.upper(): k for k, n in enumerate(FACTOR_STATE_ENTRIES)},
     COMPONENT.constants(), DENSE.constants('D_'), TREE.constants('T_'),
     {'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},
+    LAYOUT_TABLE.constants('L_'),
     FREE_TABLE.constants('FT_'), COMPONENT_TABLE.constants('CT_'),
     # Where each storage starts in COMPONENT, and how many slots one takes.
     {'DENSE0': COMPONENT.index['general_dense_f'], 'DENSE_SLOTS': len(DENSE),
@@ -327,5 +331,5 @@ for _group in _GROUPS:
     _CONSTANTS.update(_group)
 globals().update(_CONSTANTS)
 __all__ = ['BODY', 'COMPONENT', 'COMPONENT_TABLE', 'CONTEXT', 'Columns', 'Count', 'DENSE',
-           'Field', 'FRAME', 'FREE_TABLE', 'Layout', 'N_COUNTS', 'OUTPUT', 'PAR', 'ROW_PARAMETERS',
-           'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]
+           'Field', 'FRAME', 'FREE_TABLE', 'Layout', 'LAYOUT_TABLE', 'N_COUNTS', 'OUTPUT', 'PAR',
+           'ROW_PARAMETERS', 'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]
