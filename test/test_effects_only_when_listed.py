@@ -80,6 +80,8 @@ def test_reading_outputs_does_no_counted_work():
         watched.constraint_violation()
     assert watched.work() == quiet.work()
     assert watched.dynamics.solver.counters == quiet.dynamics.solver.counters
+    # Nor may reading change the motion (the reads share the step's workspaces).
+    assert (watched.state.y == quiet.state.y).all()
     # Counters are restored in place: references a caller holds stay live.
     assert held[0] is watched.dynamics.counters and held[1] is watched.dynamics.solver.counters
 

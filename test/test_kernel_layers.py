@@ -57,8 +57,9 @@ def test_the_kernel_cache_hashes_every_module_of_the_package():
 
 def test_slot_indices_are_generated_from_the_one_declaration():
     from rigid_body_sim.core.kernels import layout
-    for k, f in enumerate(layout.COMPONENT.fields):
-        assert getattr(layout, f.name.upper()) == k
+    assert layout.COMPONENT.fields[layout.PHI].name == 'phi'
+    assert layout.COMPONENT.fields[layout.TREE0 + layout.TREE_SLOTS + layout.T_XC].name == (
+        'symmetric_tree_xc')
     assert layout.TREE0 + layout.TREE_SLOTS * 2 == len(layout.COMPONENT)
     assert layout.COMPONENT.fields[layout.DENSE0 + layout.DENSE_SLOTS + layout.D_VT].name == (
         'symmetric_dense_vt')
@@ -115,3 +116,11 @@ def test_a_layout_refuses_a_name_declared_twice_and_a_table_an_unknown_slot():
                               n_ws=0)
     with pytest.raises(ValueError, match=r"unknown columns \['dt'\]"):
         layout.PAR.row(dt=1.0)
+    with pytest.raises(ValueError, match=r"column 'a' declared twice"):
+        layout.Columns('x', [('a', 1), ('a', 3)])
+    arrays = {n: np.zeros(1) for n in layout.FREE_TABLE.arrays}
+    values = dict.fromkeys(layout.FREE_TABLE.values, 0)
+    with pytest.raises(ValueError, match=r'free-step table\.counts: expected int64'):
+        layout.FREE_TABLE.pin(**arrays, **values)
+    arrays['counts'] = np.zeros(1, dtype=np.int64)
+    assert len(layout.FREE_TABLE.pin(**arrays, **values).table) == len(arrays) + len(values)

@@ -469,13 +469,15 @@ class AppliedWrenches(Effect):
         self._arrays = None
         self._active = None
 
-    def remove_expired(self, time: float) -> None:
-        """Drop entries that ended at or before ``time``."""
+    def remove_expired(self, time: float) -> bool:
+        """Drop entries that ended at or before ``time``; return whether any was dropped."""
         keep = [row for row in self._rows if row[6] > time]
-        if len(keep) != len(self._rows):
-            self._rows = keep
-            self._arrays = None
-            self._active = None
+        if len(keep) == len(self._rows):
+            return False
+        self._rows = keep
+        self._arrays = None
+        self._active = None
+        return True
 
     def clear(self, body: Optional[str] = None) -> None:
         """Remove all entries, or those of one body."""

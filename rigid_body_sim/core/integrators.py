@@ -194,7 +194,7 @@ class Integrator:
         """``par`` of the constrained kernels, rebuilt when what it depends on changed."""
         solver = self.dynamics.solver
         # solver.omega is a function of time_constant and dt.
-        key = (solver.time_constant, solver.dt, self.max_rotation, self.max_substeps)
+        key = (solver.settings_key(), self.max_rotation, self.max_substeps)
         if self._parameters is None or self._parameters[0] != key:
             self._parameters = (key, solver.kernel_parameters(
                 self.max_rotation, self.max_substeps, getattr(self, 'CLOSING', 0.0)))
@@ -218,6 +218,7 @@ class Integrator:
             table = self._component_table(model, par, setup)
         y0 = state.y
         valid = setup.geometry_of[0] is y0
+        setup.geometry_of[0] = None   # until the kernel returns: it may raise half-way
         # A new buffer (a copy: the cheapest fresh array), overwritten by the kernel.
         y = y0.copy()
         before = dyn.defer_effect_work() if dyn.effects else None
@@ -305,6 +306,7 @@ class Integrator:
             if counting:
                 dyn.count_effect_work_since(before, acting)
         valid = setup.geometry_of[0] is state.y
+        setup.geometry_of[0] = None   # until every kernel returns: one may raise half-way
         lam = dyn.last_multipliers
         if len(lam) != solver.constraints.n_rows or lam is components[0].multipliers:
             lam = dyn.last_multipliers = np.zeros(solver.constraints.n_rows)

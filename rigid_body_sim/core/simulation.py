@@ -186,7 +186,9 @@ class Simulation:
             self.state = new
             self._steps = steps + 1
             if self._wrenches is not None and len(self._wrenches):
-                self._wrenches.remove_expired(new.time)
+                if self._wrenches.remove_expired(new.time):
+                    # What reads the model between steps (reactions) must not see them.
+                    self.dynamics.changed()
 
     def _moving_fastest(self) -> list:
         """Name the body turning fastest (where a divergence most likely began)."""

@@ -360,10 +360,14 @@ class ConstraintSolver:
 
     # -- the compiled solve outside a step ----------------------------------------------
 
+    def settings_key(self) -> tuple:
+        """Everything the solver puts into the kernels' ``par`` (a changed one rebuilds it)."""
+        return (self.time_constant, self.dt, self.position_tolerance, self.max_iterations,
+                self.rank_rtol, self.regularization)
+
     def _settings(self) -> np.ndarray:
         """``par`` of the compiled kernels for the solver's own uses (no sub-steps)."""
-        key = (self.time_constant, self.dt, self.position_tolerance, self.max_iterations,
-               self.rank_rtol, self.regularization)
+        key = self.settings_key()
         if self._par is None or self._par[0] != key:
             self._par = (key, self.kernel_parameters(None, 1, 0.0))
         return self._par[1]
@@ -383,6 +387,7 @@ class ConstraintSolver:
         """
         setup = self.kernel_setup()
         current = setup.geometry_of[0] is state.y
+        setup.geometry_of[0] = None   # until every component is done: one may raise
         par = self._settings()
         lam = np.zeros(self.constraints.n_rows)
         tally = np.zeros_like(self.counters.tally)   # reading is not stepping
@@ -437,6 +442,7 @@ class ConstraintSolver:
 
         """
         setup = self.kernel_setup()
+        setup.geometry_of[0] = None   # the workspaces will hold the last iterates
         par = self._settings()
         tally = np.zeros_like(self.counters.tally)   # a question, not work
         worst = 0.0
@@ -445,7 +451,6 @@ class ConstraintSolver:
             worst = max(worst, component_reach(
                 np.ascontiguousarray(pos[b]), np.ascontiguousarray(quat[b]), float(tolerance),
                 int(max_iterations), par, int(comp.solve), *comp.packed, tally))
-        setup.geometry_of[0] = None   # the workspaces hold the last iterates
         return worst
 
     # -- consistency -----------------------------------------------------------------------
@@ -550,6 +555,8 @@ class ConstraintSolver:
         work is counted.
         """
         setup = self.kernel_setup()
+        # Of the positions, but never of the new state's buffer.
+        setup.geometry_of[0] = None
         par = self._settings()
         s = state
         vel, om = s.vel_com_world.copy(), s.ang_vel_principal.copy()
@@ -561,7 +568,6 @@ class ConstraintSolver:
                 np.ascontiguousarray(s.quat_principal_world[b]), v, w, comp.inertia, par,
                 int(comp.solve), *comp.packed, False, self.counters.tally)
             vel[b], om[b] = v, w
-        setup.geometry_of[0] = None   # of the positions, but not of the new state's buffer
         return vel, om
 
     # -- reaction wrenches -----------------------------------------------------------------

@@ -103,18 +103,25 @@ class Table:
     name : str
         What the table is for (error messages).
     arrays : sequence of str
-        The arrays whose addresses come first, in order.
+        The arrays whose addresses come first, in order (float64 unless listed in
+        ``int_arrays``).
     values : sequence of str
         The integers after them, in order.
+    int_arrays : sequence of str
+        The arrays that are int64 (the kernel reads them with ``pinned_int``).
 
     """
 
-    def __init__(self, name: str, arrays: Sequence[str], values: Sequence[str]) -> None:
+    def __init__(self, name: str, arrays: Sequence[str], values: Sequence[str],
+                 int_arrays: Sequence[str] = ()) -> None:
         self.name = name
         self.arrays, self.values = tuple(arrays), tuple(values)
+        self.int_arrays = frozenset(int_arrays)
         names = self.arrays + self.values
-        if len(set(names)) != len(names):
-            raise ValueError(f'{name}: a slot is declared twice')
+        if len(set(names)) != len(names) or 'key' in names:
+            raise ValueError(f'{name}: a slot is declared twice (or named key)')
+        if not self.int_arrays <= set(self.arrays):
+            raise ValueError(f'{name}: int_arrays must be among the arrays')
 
     def constants(self, prefix: str) -> dict:
         """``{PREFIX + NAME: slot}`` for every array and value."""
@@ -127,6 +134,11 @@ class Table:
         if given != want:
             raise ValueError(f'{self.name}: unknown slots {sorted(given - want)}, '
                              f'missing {sorted(want - given)}')
+        for n in self.arrays:
+            want = np.int64 if n in self.int_arrays else np.float64
+            if np.asarray(named[n]).dtype != want:
+                raise ValueError(f'{self.name}.{n}: expected {np.dtype(want)}, '
+                                 f'got {np.asarray(named[n]).dtype}')
         return Pinned([named[n] for n in self.arrays], [int(named[n]) for n in self.values],
                       key=key)
 
@@ -142,6 +154,8 @@ class Columns:
         self.name = name
         self.start, self.widths, k = {}, {}, 0
         for column, width in columns:
+            if column in self.start:
+                raise ValueError(f'{name}: column {column!r} declared twice')
             self.start[column], self.widths[column] = k, int(width)
             k += int(width)
         self.width = k
@@ -158,7 +172,7 @@ class Columns:
                              f'missing {sorted(want - given)}')
         out = np.empty(self.width)
         for name, k in self.start.items():
-            out[k] = values[name]
+            out[k:k + self.widths[name]] = values[name]   # a scalar fills a range of 1
         return out
 
     def constants(self, prefix: str) -> dict:
@@ -299,13 +313,14 @@ CONTEXT = ('floats', 'ints', 'layout', 'key', 'solve')
 #: free_step.free_table / pinned_free_step.
 FREE_TABLE = Table('free-step table',
                    ('body', 'gforce', 'wrench', 'kick', 'counts', 'ws', 'frames', 'out'),
-                   ('n_wrench', 'flags', 'method', 'n_counts', 'n_ws'))
+                   ('n_wrench', 'flags', 'method', 'n_counts', 'n_ws'), int_arrays=('counts',))
 #: constrained_step.component_table / pinned_packed_step.
 COMPONENT_TABLE = Table('component table',
                         ('body', 'gforce', 'wrench', 'par', 'floats', 'ints', 'layout', 'lam',
                          'counts', 'frames', 'out'),
                         ('n_wrench', 'flags', 'method', 'solve', 'generic', 'n_par',
-                         'n_floats', 'n_ints', 'n_layout', 'n_lam', 'n_counts'))
+                         'n_floats', 'n_ints', 'n_layout', 'n_lam', 'n_counts'),
+                        int_arrays=('ints', 'layout', 'counts'))
 
 # The generated indices, as module integers (compile-time constants to numba).
 _GROUPS = (
