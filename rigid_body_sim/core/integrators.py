@@ -399,8 +399,7 @@ class LiePoisson4(Splitting):
     KERNEL = methods.Method.LIE_POISSON4
     order = 4
     conserves = SymplecticEuler.conserves
-    W1 = methods.YOSHIDA_W1
-    COMPOSITION = (W1, 1.0 - 2.0 * W1, W1)
+    COMPOSITION = methods.TRIPLE_JUMP
 
 
 INTEGRATORS: dict[str, type] = {

@@ -58,7 +58,7 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      VECTORS, VM, W_WIDTH, WATCH)
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
-from .methods import Method, YOSHIDA_W1
+from .methods import Method, ONE_STEP, TRIPLE_JUMP
 from .rows import framed_geometry, framed_rates, frames
 from .so3 import normalize_quaternions, positive_product, quat_exp_multiply
 from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_solve
@@ -871,10 +871,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
     """
     n = pos.shape[0]
     symmetric = method != Method.SYMPLECTIC_EULER
-    if method == Method.LIE_POISSON4:
-        weights = (YOSHIDA_W1, 1.0 - 2.0 * YOSHIDA_W1, YOSHIDA_W1)
-    else:
-        weights = (1.0, 0.0, 0.0)
+    weights = TRIPLE_JUMP if method == Method.LIE_POISSON4 else ONE_STEP
     n_sub = 3 if method == Method.LIE_POISSON4 else 1
     damping = flags & HAS_DAMPING
     mom = _f3(cx, BODY_VECTORS)[0]

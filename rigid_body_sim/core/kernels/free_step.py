@@ -51,8 +51,8 @@ from .layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MOMENTS, B_W
                      O_ORIGIN_VEL_BODY, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD, O_QUAT_BODY_WORLD,
                      O_WIDTH, S_OM, S_POS, S_QUAT, S_VEL, S_WIDTH, W_BODY, W_FORCE, W_IN_BODY,
                      W_POINT, W_TORQUE, W_WIDTH)
-from .methods import (Method, RK4_A, RK4_B_DENOMINATOR, RK4_B_HAT_NUMERATORS, RK4_B_NUMERATORS,
-                      YOSHIDA_W1)
+from .methods import (Method, ONE_STEP, RK4_A, RK4_B_DENOMINATOR, RK4_B_HAT_NUMERATORS,
+                      RK4_B_NUMERATORS, TRIPLE_JUMP)
 from .so3 import (_matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply,
                   quat_matrix)
 from .views import Pinned, pinned, pinned_int, raw, raw_slice
@@ -348,10 +348,7 @@ def splitting_step(method: int, pos: np.ndarray, quat: np.ndarray, vel: np.ndarr
     """
     n = pos.shape[0]
     symmetric = method != Method.SYMPLECTIC_EULER
-    if method == Method.LIE_POISSON4:
-        weights = (YOSHIDA_W1, 1.0 - 2.0 * YOSHIDA_W1, YOSHIDA_W1)
-    else:
-        weights = (1.0, 0.0, 0.0)
+    weights = TRIPLE_JUMP if method == Method.LIE_POISSON4 else ONE_STEP
     n_sub = 3 if method == Method.LIE_POISSON4 else 1
     mom = raw_slice(ws, 0, (n, 3))
     for i in range(n):

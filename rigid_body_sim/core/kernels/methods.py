@@ -20,6 +20,10 @@ class Method(IntEnum):
 #: Yoshida's triple jump (Phys. Lett. A 150, 262, 1990): lie_poisson4 composes
 #: lie_poisson2 steps of ``(w1, 1 - 2 w1, w1)`` times the step.
 YOSHIDA_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+#: The sub-step weights (fractions of the step) of each splitting, padded to three for
+#: the kernels: lie_poisson4's triple jump, and one Strang step for the others.
+TRIPLE_JUMP = (YOSHIDA_W1, 1.0 - 2.0 * YOSHIDA_W1, YOSHIDA_W1)
+ONE_STEP = (1.0, 0.0, 0.0)
 
 #: rkmk4's Butcher tableau, the classical fourth-order Runge–Kutta method: stage
 #: ``s`` starts at ``t + RK4_C[s] h`` from the state plus ``h Σ_j RK4_A[s][j] k_j``.
