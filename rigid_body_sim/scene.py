@@ -31,6 +31,20 @@ A scene file::
     tolerance: 1.0e-6               # optional: local error per unit time (the accuracy
                                     # knob, see rigid_body_sim.core.accuracy)
 
+    robots:                         # URDF or xacro robots (see rigid_body_sim.core.robots)
+      - name: arm                   # default: the URDF's robot name
+        urdf: arm.urdf.xacro        # relative to this file; .urdf, .urdf.xacro or .xacro
+        xacro_args: {prefix: ''}    # xacro arguments (strings)
+        prefix: ''                  # prepended to link and joint names (several robots)
+        base_pose: {xyz: [0, 0, 0], rpy: [0, 0, 0]}   # or quat_xyzw: [x, y, z, w]
+        fixed_base: true            # weld the root link to the world (also: a 'world' link)
+        initial_positions: {joint1: 0.5}    # rad or m; others 0
+        initial_velocities: {joint1: 0.0}   # rad/s or m/s
+        keep_fixed: [ft_sensor_joint]       # fixed joints kept as welds (reaction published)
+
+A URDF or xacro file is a scene by itself: its robot, with gravity, ``dt``
+0.001 s, ``duration`` 10 s, floating unless it has a ``world`` link.
+
 Shapes for ``inertia`` (uniform density, about the centre of mass):
 ``{box: [lx, ly, lz]}``, ``{sphere: r}``, ``{cylinder: [r, length]}`` (axis z).
 """
@@ -40,7 +54,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 import re
-from typing import Any, Union
+from typing import Any, Optional, Union
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -49,10 +63,15 @@ import yaml
 from .core import Constraint, Damping, Gravity, RigidBody, Simulation, SpecError
 from .core.effects import AppliedWrenches
 from .core.integrators import INTEGRATORS
+from .core.robots import RobotSpec
 from .core.validate import finite_array, positive_scalar
+from .urdf import parse_urdf, read_robot_xml, UrdfError
 
 TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constraints',
-            'constraint_time_constant', 'tolerance')
+            'constraint_time_constant', 'tolerance', 'robots')
+ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
+              'initial_positions', 'initial_velocities', 'keep_fixed')
+ROBOT_SUFFIXES = ('.urdf', '.xacro')
 CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
                    'anchor_b_body', 'axis_world', 'length')
 BODY_KEYS = ('name', 'mass', 'inertia', 'com_body', 'position_world', 'orientation_xyzw',
@@ -79,6 +98,10 @@ class Scene:
     #: ('box', [lx, ly, lz]), ('sphere', [r]) or ('cylinder', [r, length]), m, centred
     #: on the centre of mass, in the body's axes.
     shapes: dict = field(default_factory=dict)
+    #: The robots, in the order of ``simulation.robots``: (prefix, ParsedUrdf).
+    robots: list = field(default_factory=list)
+    #: What a user should read once: elements not simulated, limits not enforced.
+    warnings: list = field(default_factory=list)
 
 
 def load_scene(path: Union[str, Path]) -> Scene:
@@ -92,6 +115,10 @@ def load_scene(path: Union[str, Path]) -> Scene:
 
     """
     path = Path(path)
+    if path.suffix in ROBOT_SUFFIXES:
+        return scene_from_dict({'dt': 0.001, 'effects': {'gravity': {}},
+                                'robots': [{'urdf': str(path.resolve())}]}, str(path),
+                               name=path.name.split('.')[0])
     try:
         text = path.read_text()
     except OSError as exc:
@@ -121,12 +148,17 @@ YamlLoader.add_implicit_resolver(
     list('-+0123456789'))
 
 
-def scene_from_dict(data: Any, source: str = '<scene>') -> Scene:
+def scene_from_dict(data: Any, source: str = '<scene>', name: Optional[str] = None) -> Scene:
     """Build a :class:`Scene` from parsed YAML; ``source`` names it in errors."""
     try:
-        return _build(data, source)
+        scene = _build(data, source)
     except SpecError as exc:
         raise SceneError(f'{source}: {exc}') from None
+    except UrdfError as exc:
+        raise SceneError(f'{source}: {exc}') from None
+    if name is not None:
+        scene.name = name
+    return scene
 
 
 def _mapping(value: Any, field: str, allowed: tuple) -> dict:
@@ -141,18 +173,20 @@ def _mapping(value: Any, field: str, allowed: tuple) -> dict:
 
 def _build(data: Any, source: str) -> Scene:
     data = _mapping(data, '', TOP_KEYS)
-    for key in ('dt', 'bodies'):
-        if key not in data:
-            raise SpecError(key, 'missing (required)')
+    if 'dt' not in data:
+        raise SpecError('dt', 'missing (required)')
+    if 'bodies' not in data and not data.get('robots'):
+        raise SpecError('bodies', 'missing (required unless the scene has robots)')
     integrator = data.get('integrator', 'lie_poisson2')
     if not isinstance(integrator, str) or integrator not in INTEGRATORS:
         raise SpecError('integrator', f'unknown integrator {integrator!r}; known: '
                                       f'{sorted(INTEGRATORS)}')
     dt = positive_scalar(data['dt'], 'dt')
     duration = positive_scalar(data.get('duration', 10.0), 'duration')
-    bodies_data = data['bodies']
-    if not isinstance(bodies_data, list) or not bodies_data:
+    bodies_data = data.get('bodies', [])
+    if not isinstance(bodies_data, list) or not (bodies_data or data.get('robots')):
         raise SpecError('bodies', f'expected a non-empty list of bodies, got {bodies_data!r}')
+    robots = _robots(data.get('robots') or [], source)
     bodies = [_body(b, f'bodies[{i}]') for i, b in enumerate(bodies_data)]
     effects = _effects(data.get('effects') or {})
     constraints = _constraints(data.get('constraints') or [])
@@ -160,7 +194,8 @@ def _build(data: Any, source: str) -> Scene:
                                     'constraint_time_constant')
     try:
         sim = Simulation(bodies, [e for _, e in effects], integrator, dt, constraints,
-                         time_constant, tolerance=data.get('tolerance'))
+                         time_constant, tolerance=data.get('tolerance'),
+                         robots=[spec for spec, _ in robots])
     except SpecError as exc:
         # Map 'effects[i]...' from the core back to the scene's effect key.
         if exc.field.startswith('effects['):
@@ -175,8 +210,69 @@ def _build(data: Any, source: str) -> Scene:
                 next(iter(inertia)) in ('box', 'sphere', 'cylinder'):
             kind, dims = next(iter(inertia.items()))
             shapes[body['name']] = (kind, [float(d) for d in np.atleast_1d(dims)])
+    warnings = []
+    for (spec, parsed), model in zip(robots, sim.robots):
+        if parsed.ignored:
+            warnings.append(f'robot {spec.name!r} ({parsed.source}): not simulated: '
+                            + '; '.join(parsed.ignored))
+        warnings += [f'robot {spec.name!r}: {note}' for note in model.notes]
     return Scene(name=str(data.get('name', Path(source).stem)), simulation=sim,
-                 duration=duration, source=source, shapes=shapes)
+                 duration=duration, source=source, shapes=shapes,
+                 robots=[(spec.prefix, parsed) for spec, parsed in robots], warnings=warnings)
+
+
+def _robots(data: Any, source: str) -> list:
+    """The scene's robots as (RobotSpec, ParsedUrdf) pairs."""
+    if not isinstance(data, list):
+        raise SpecError('robots', f'expected a list of robots, got {data!r}')
+    out = []
+    folder = Path(source).parent
+    for i, entry in enumerate(data):
+        field = f'robots[{i}]'
+        entry = _mapping(entry, field, ROBOT_KEYS)
+        if 'urdf' not in entry:
+            raise SpecError(f'{field}.urdf', 'missing (required): a .urdf or .xacro file')
+        if not isinstance(entry['urdf'], str):
+            raise SpecError(f'{field}.urdf', f'expected a file name, got {entry["urdf"]!r}')
+        path = Path(entry['urdf'])
+        path = path if path.is_absolute() else folder / path
+        try:
+            parsed = parse_urdf(read_robot_xml(path, entry.get('xacro_args')), str(path))
+        except UrdfError as exc:
+            raise SpecError(f'{field}.urdf', str(exc)) from None
+        base = _mapping(entry.get('base_pose') or {}, f'{field}.base_pose',
+                        ('xyz', 'rpy', 'quat_xyzw'))
+        if 'rpy' in base and 'quat_xyzw' in base:
+            raise SpecError(f'{field}.base_pose', 'give rpy or quat_xyzw, not both')
+        xyz = finite_array(base.get('xyz', [0.0, 0.0, 0.0]), f'{field}.base_pose.xyz', (3,))
+        if 'rpy' in base:
+            rpy = finite_array(base['rpy'], f'{field}.base_pose.rpy', (3,))
+            quat = Rotation.from_euler('xyz', rpy).as_quat()
+        else:
+            quat = finite_array(base.get('quat_xyzw', [0.0, 0.0, 0.0, 1.0]),
+                                f'{field}.base_pose.quat_xyzw', (4,))
+            if not np.linalg.norm(quat) > 0.0:
+                raise SpecError(f'{field}.base_pose.quat_xyzw', 'a zero quaternion')
+        fixed = entry.get('fixed_base', False)
+        if not isinstance(fixed, bool):
+            raise SpecError(f'{field}.fixed_base', f'expected true or false, got {fixed!r}')
+        prefix = entry.get('prefix', '')
+        if not isinstance(prefix, str):
+            raise SpecError(f'{field}.prefix', f'expected a string, got {prefix!r}')
+        keep = entry.get('keep_fixed') or []
+        if not isinstance(keep, list) or not all(isinstance(k, str) for k in keep):
+            raise SpecError(f'{field}.keep_fixed', f'expected a list of joint names, '
+                                                   f'got {keep!r}')
+        name = entry.get('name', parsed.name)
+        if not isinstance(name, str) or not name:
+            raise SpecError(f'{field}.name', f'expected a non-empty string, got {name!r}')
+        spec = RobotSpec(name=name, links=parsed.links, joints=parsed.joints, base_xyz=xyz,
+                         base_quat_xyzw=quat, fixed_base=fixed,
+                         initial_positions=entry.get('initial_positions') or {},
+                         initial_velocities=entry.get('initial_velocities') or {},
+                         keep_fixed=tuple(keep), prefix=prefix, source=str(path))
+        out.append((spec, parsed))
+    return out
 
 
 def _body(data: Any, field: str) -> RigidBody:

@@ -369,17 +369,39 @@ class BodySet:
         """State at t = 0 from the user-frame initial conditions of ``bodies``."""
         q_wb = np.array([b.orientation_xyzw for b in bodies])
         R_wb = so3.quat_to_matrix(q_wb)
-        pos_origin = np.array([b.position_world for b in bodies])
-        v_origin = np.array([b.linear_velocity_world for b in bodies])
-        w_body = np.array([b.angular_velocity_body for b in bodies])
+        w_world = np.einsum('nij,nj->ni', R_wb,
+                            np.array([b.angular_velocity_body for b in bodies]))
+        return self.state_from_origins(0.0, np.array([b.position_world for b in bodies]), q_wb,
+                                       np.array([b.linear_velocity_world for b in bodies]),
+                                       w_world)
+
+    def state_from_origins(self, time: float, pos_origin_world: np.ndarray,
+                           quat_body_world: np.ndarray, vel_origin_world: np.ndarray,
+                           ang_vel_world: np.ndarray) -> State:
+        """
+        State of the body frames' poses and twists (the inverse of :meth:`outputs`).
+
+        Parameters
+        ----------
+        time : float
+        pos_origin_world : ndarray, shape (n, 3)
+            m, each body origin.
+        quat_body_world : ndarray, shape (n, 4)
+            Body-frame orientations, xyzw.
+        vel_origin_world, ang_vel_world : ndarray, shape (n, 3)
+            m/s and rad/s, world frame: of each body origin, and angular.
+
+        """
+        q_wb = so3.quat_normalize(np.asarray(quat_body_world, dtype=float))
+        R_wb = so3.quat_to_matrix(q_wb)
         com_world_offset = np.einsum('nij,nj->ni', R_wb, self.com_body)
-        w_world = np.einsum('nij,nj->ni', R_wb, w_body)
+        w_body = np.einsum('nji,nj->ni', R_wb, ang_vel_world)
         return State(
-            0.0,
-            pos_com_world=pos_origin + com_world_offset,
+            time,
+            pos_com_world=pos_origin_world + com_world_offset,
             quat_principal_world=so3.quat_normalize(
                 so3.quat_multiply(q_wb, self.quat_body_principal)),
-            vel_com_world=v_origin + so3.cross(w_world, com_world_offset),
+            vel_com_world=vel_origin_world + so3.cross(ang_vel_world, com_world_offset),
             ang_vel_principal=np.einsum('nji,nj->ni', self.R_body_principal, w_body),
         )
 

@@ -29,6 +29,7 @@ hinge      point + dot(k_a, e1_b) + dot(k_a, e2_b)              5
 slider     dot(k_a,e1_b) + dot(k_a,e2_b) + dot(e1_a,e2_b)
            + line(e1_b) + line(e2_b)                            5
 fixed      point + the three dots of slider                     6
+planar     dot(k_a, e1_b) + dot(k_a, e2_b) + line(k_b)          3
 distance   distance                                             1
 generic    a user function Φ(x_a, R_a, x_b, R_b) (finite-difference Jacobian
            and γ unless given), evaluated one constraint at a time
@@ -70,6 +71,7 @@ class JointType(enum.Enum):
     HINGE = 'hinge'
     SLIDER = 'slider'
     FIXED = 'fixed'
+    PLANAR = 'planar'
     DISTANCE = 'distance'
     GENERIC = 'generic'
 
@@ -95,7 +97,7 @@ class Constraint:
     name : str
         Unique among the simulation's constraints.
     type : JointType or str
-        'ball', 'hinge', 'slider', 'fixed', 'distance' or 'generic'.
+        'ball', 'hinge', 'slider', 'fixed', 'planar', 'distance' or 'generic'.
     body_a : str
     body_b : str, optional
         The second body; None (or 'world') for the world.
@@ -108,8 +110,9 @@ class Constraint:
         its violation decays smoothly (see :mod:`.solver`). Default: each body's
         origin.
     axis_world : array_like, shape (3,), optional
-        Joint axis (hinge, slider), world frame at the time of adding; any
-        non-zero length. Required for hinge and slider.
+        Joint axis (hinge, slider; planar: the plane's normal), world frame at
+        the time of adding; any non-zero length. Required for hinge, slider and
+        planar.
     length : float, optional
         m, for distance: default the current distance between the anchors.
     function : callable, optional
@@ -159,7 +162,7 @@ class Constraint:
             value = getattr(self, key)
             object.__setattr__(self, key, np.zeros(3) if value is None
                                else finite_array(value, key, (3,)))
-        if jt in (JointType.HINGE, JointType.SLIDER):
+        if jt in (JointType.HINGE, JointType.SLIDER, JointType.PLANAR):
             if self.axis_world is None:
                 raise SpecError('axis_world', f'required for a {jt.value} constraint')
         if self.axis_world is not None:
@@ -533,17 +536,20 @@ class ConstraintSet:
                         f'coordinate nears the 1e-8 m to which a joint must hold)')
         res = ResolvedConstraint(spec, a, b, anchor=(r_a, r_b))
         jt = spec.type
-        if jt in (JointType.HINGE, JointType.SLIDER, JointType.FIXED):
+        if jt in (JointType.HINGE, JointType.SLIDER, JointType.FIXED, JointType.PLANAR):
             axis = spec.axis_world if spec.axis_world is not None else np.array([0.0, 0.0, 1.0])
             k, e1, e2 = perpendicular_frame(axis)
             fa = [R[a].T @ v for v in (k, e1, e2)]
             fb = [R[b].T @ v for v in (k, e1, e2)]
             # (s in a, e in b): k_a ⟂ e1_b, k_a ⟂ e2_b fix the axis; e1_a ⟂ e2_b the angle.
             res.dots = [(fa[0], fb[1], 0.0), (fa[0], fb[2], 0.0)]
-            if jt is not JointType.HINGE:
+            if jt in (JointType.SLIDER, JointType.FIXED):
                 res.dots.append((fa[1], fb[2], 0.0))
             if jt is JointType.SLIDER:
                 res.lines = [(r_a, r_b, fb[1]), (r_a, r_b, fb[2])]
+            if jt is JointType.PLANAR:
+                # The anchors stay in the plane through b's anchor normal to k_b.
+                res.lines = [(r_a, r_b, fb[0])]
         if jt in (JointType.BALL, JointType.HINGE, JointType.FIXED):
             res.point = (r_a, r_b)
         if jt is JointType.DISTANCE:

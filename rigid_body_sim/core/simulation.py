@@ -35,6 +35,7 @@ from .effects import AppliedWrenches, Effect
 from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .kernels import free_step
+from .robots import build_robot, JointSpace, JointState, RobotSpec
 from .solver import ConstraintSolver
 from .validate import positive_scalar
 
@@ -98,6 +99,12 @@ class Simulation:
         (SI units; see :mod:`.accuracy`). None: every step is one integrator step.
     tolerance_budget : int
         Most sub-steps a step may take under the knob (a power of two).
+    robots : sequence of RobotSpec
+        Robots (links and joints, as parsed from URDF by :mod:`rigid_body_sim.scene`):
+        their bodies and joints are added after ``bodies`` and ``constraints``
+        (see :mod:`.robots` for the conversion), and their one-coordinate
+        joints are read and commanded with :meth:`joint_state`,
+        :meth:`set_joint_state` and :meth:`set_joint_efforts`.
 
     """
 
@@ -105,8 +112,29 @@ class Simulation:
                  integrator: str = 'lie_poisson2', dt: float = 1e-3,
                  constraints: Sequence[Constraint] = (),
                  constraint_time_constant: float = 0.05, tolerance: Optional[float] = None,
-                 tolerance_budget: int = DEFAULT_BUDGET) -> None:
+                 tolerance_budget: int = DEFAULT_BUDGET,
+                 robots: Sequence[RobotSpec] = ()) -> None:
         self.dt = positive_scalar(dt, 'dt')
+        bodies, constraints = list(bodies), list(constraints)
+        self.robots = []
+        taken = {b.name: 'a body of the scene' for b in bodies if isinstance(b, RigidBody)}
+        for i, robot in enumerate(robots):
+            if not isinstance(robot, RobotSpec):
+                raise SpecError(f'robots[{i}]', f'expected a RobotSpec, got {robot!r}')
+            try:
+                model = build_robot(robot)
+            except SpecError as exc:
+                raise exc.within(f'robots[{i}]') from None
+            for body in model.bodies:
+                if body.name in taken:
+                    raise SpecError(f'robots[{i}]', f'body {body.name!r} of robot '
+                                                    f'{robot.name!r} has the name of '
+                                                    f'{taken[body.name]}: give the robot a '
+                                                    f"prefix (e.g. '{robot.name}/')")
+                taken[body.name] = f'a link of robot {robot.name!r}'
+            self.robots.append(model)
+            bodies += model.bodies
+            constraints += model.constraints
         self._switching: tuple = (None, 0, [])
         self._control = (None if tolerance is None
                          else ErrorControl(tolerance, tolerance_budget))
@@ -128,6 +156,8 @@ class Simulation:
                                                 tally=self.dynamics.tally)
         self.dynamics.solver.dt = self.dt
         self._initial_constraints = list(constraints)
+        self.joints = JointSpace(self.bodies.names, self.robots)
+        self._tracking = bool(np.any(self.joints.rotary))
         self.reset()
 
     # -- time stepping --------------------------------------------------------------------
@@ -185,6 +215,8 @@ class Simulation:
                 raise DivergenceError(self.time, [self.bodies.names[i] for i in bad])
             self.state = new
             self._steps = steps + 1
+            if self._tracking:
+                self.joints.track(self.bodies.outputs(new))
             if self._wrenches is not None and len(self._wrenches):
                 if self._wrenches.remove_expired(new.time):
                     # What reads the model between steps (reactions) must not see them.
@@ -274,6 +306,9 @@ class Simulation:
                                      f'constraints[{index}]', 'no simulation was built', residual)
         self.dynamics.changed()
         self._reconcile_velocities()
+        self.joints.reset()
+        if len(self.joints):
+            self.joints.track(self.bodies.outputs(self.state))
 
     def _inconsistent(self, name: str, field: str, outcome: str,
                       residual: float) -> InconsistentConstraintError:
@@ -329,6 +364,80 @@ class Simulation:
         if self._wrenches is not None:
             self._wrenches.clear(body)
             self.dynamics.changed()
+
+    # -- joint space (robots) -------------------------------------------------------------
+
+    def joint_names(self) -> list:
+        """Names of the robots' revolute, continuous and prismatic joints (URDF order)."""
+        return list(self.joints.names)
+
+    def joint_state(self, names: Optional[Sequence[str]] = None) -> JointState:
+        """
+        Positions, velocities and efforts of the joints now (all, or ``names``).
+
+        Positions are 0 in the URDF's zero configuration; angles count turns.
+        Efforts are what the joint's actuation applied over the last step.
+        """
+        return self.joints.state(self.bodies.outputs(self.state), self.time - 0.5 * self.dt,
+                                 names)
+
+    def set_joint_state(self, positions: dict, velocities: Optional[dict] = None) -> None:
+        """
+        Move the robots' bodies to joint coordinates, by forward kinematics, between steps.
+
+        Parameters
+        ----------
+        positions : dict
+            ``{joint: q}`` (rad or m); joints not named keep theirs.
+        velocities : dict, optional
+            ``{joint: q̇}`` (rad/s or m/s); joints not named keep theirs.
+
+        Every value is validated before anything changes. Floating bases keep
+        their pose and twist; the children of floating and planar joints keep
+        their pose and twist relative to their parent.
+        """
+        if not isinstance(positions, dict):
+            raise SpecError('positions', f'expected a mapping joint -> position, '
+                                         f'got {positions!r}')
+        velocities = {} if velocities is None else velocities
+        if not isinstance(velocities, dict):
+            raise SpecError('velocities', f'expected a mapping joint -> velocity, '
+                                          f'got {velocities!r}')
+        out = self.bodies.outputs(self.state)
+        pose = self.joints.poses_for(out, positions, velocities)
+        self.state = self.bodies.state_from_origins(self.time, *pose)
+        self.dynamics.changed()
+        self._reconcile_velocities()
+        self.joints.tracked = False   # the new angles are taken as they are
+        self.joints.track(self.bodies.outputs(self.state))
+        for name, value in positions.items():
+            i = self.joints.index[name]
+            if self.joints.rotary[i]:
+                # Keep the turns the caller asked for (the tracked angle is wrapped).
+                self.joints.positions[i] += 2.0 * np.pi * np.round(
+                    (float(value) - self.joints.positions[i]) / (2.0 * np.pi))
+
+    def set_joint_efforts(self, efforts: dict, duration: Optional[float] = None) -> None:
+        """
+        Command joint efforts (N m or N), held until replaced, or for ``duration`` s.
+
+        Each effort is clamped to the joint's URDF effort limit (counted in
+        ``joint_counters()['clamped_efforts']``) and acts as a pair of equal and
+        opposite wrenches on the joint's bodies from the next step on.
+        """
+        idx, clamped, wrenches = self.joints.effort_wrenches(efforts)
+        start = self.time
+        if duration is not None:
+            duration = positive_scalar(duration, 'duration')
+        for w in wrenches:
+            self.apply_wrench(duration=duration, start=start, **w)
+        values = np.array([float(v) for v in efforts.values()])
+        end = np.inf if duration is None else start + duration
+        self.joints.commanded(idx, clamped, values, start, end)
+
+    def joint_counters(self) -> dict:
+        """Counts since the last reset: clamped effort commands, velocity-limit excursions."""
+        return dict(self.joints.counters)
 
     def add_constraint(self, constraint: Constraint) -> None:
         """

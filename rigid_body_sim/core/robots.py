@@ -1,0 +1,825 @@
+"""
+Robots: a tree of links and joints (as URDF describes one) -> bodies, joints, joint space.
+
+The core never sees XML: :mod:`rigid_body_sim.scene` parses URDF and xacro into
+the plain specs here (:class:`LinkSpec`, :class:`JointSpec`, :class:`RobotSpec`),
+and :func:`build_robot` turns them into the same bodies and constraints a YAML
+scene gives, plus the map between the maximal state and joint coordinates
+(:class:`JointSpace`).
+
+Conventions (URDF's)
+--------------------
+* A joint's frame J sits in its parent link's frame P at ``origin`` (xyz, and
+  rpy: roll about x, then pitch about y, then yaw about z, fixed axes, so
+  ``R = Rz(yaw) Ry(pitch) Rx(roll)``). The child link's frame C is J moved by
+  the joint: rotated by q about ``axis`` (revolute, continuous) or translated
+  by ``q axis`` (prismatic); ``axis`` is a unit vector in J. At q = 0, C = J.
+* A link's ``inertial`` gives its mass, its centre of mass and the axes of its
+  inertia tensor in the link frame (``origin``), and the tensor in those axes;
+  in the link frame the tensor is ``R I Rᵀ``.
+
+Conversion rules
+----------------
+* Links joined by a ``fixed`` joint are lumped into one body (masses, centres
+  of mass and inertias combined exactly, by the parallel-axis theorem), whose
+  frame is the frame of the group's topmost link; a fixed joint listed in
+  ``keep_fixed`` is kept instead, as a weld (a ``fixed`` constraint) whose
+  reaction wrench is published: a force/torque sensor.
+* A link named ``world`` is the world. The root link is welded to the world
+  when the robot has a ``world`` link or ``fixed_base`` is set (then it, and
+  every link lumped with it, is part of the world: it never moves); else it
+  floats, at ``base_pose``.
+* revolute and continuous joints become hinges, prismatic joints sliders,
+  planar joints planar constraints (3 rows), floating joints nothing; a body
+  whose links have no mass, on a joint that moves, is an error naming it.
+* Joint coordinates are 0 in the URDF's zero configuration, as the URDF's
+  frames put it; revolute and continuous angles unwrap (they count turns).
+
+Joint efforts act as equal and opposite wrenches on the joint's two bodies:
+a torque ``τ k`` about the axis (revolute), a force ``τ k`` along it applied on
+the axis line (prismatic), so the pair exerts no net wrench on the robot and
+does work ``τ q̇`` exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import enum
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from . import rotation as so3
+from .bodies import RigidBody
+from .constraints import Constraint, perpendicular_frame
+from .errors import SpecError
+from .validate import finite_array, finite_scalar
+
+
+class JointKind(enum.Enum):
+    """URDF joint types."""
+
+    REVOLUTE = 'revolute'
+    CONTINUOUS = 'continuous'
+    PRISMATIC = 'prismatic'
+    FIXED = 'fixed'
+    FLOATING = 'floating'
+    PLANAR = 'planar'
+
+
+#: Joint kinds with one coordinate (the joints of ``sensor_msgs/JointState``).
+ONE_DOF = (JointKind.REVOLUTE, JointKind.CONTINUOUS, JointKind.PRISMATIC)
+ROTARY = (JointKind.REVOLUTE, JointKind.CONTINUOUS)
+
+#: The name of the link that is the world, as URDF uses it.
+WORLD_LINK = 'world'
+
+
+def rpy_matrix(rpy: Any) -> np.ndarray:
+    """Rotation matrix (3, 3) of URDF roll, pitch, yaw (rad): ``Rz(y) Ry(p) Rx(r)``."""
+    r, p, y = np.asarray(rpy, dtype=float)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix (3, 3) by ``angle`` (rad) about the unit vector ``axis`` (3,)."""
+    k = so3.hat(axis)
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+@dataclass(frozen=True)
+class LinkSpec:
+    """
+    One URDF link's inertial properties.
+
+    Parameters
+    ----------
+    name : str
+    mass : float
+        kg, >= 0 (0: no ``<inertial>``).
+    com_link : array_like, shape (3,)
+        m, centre of mass in the link frame.
+    inertia_link : array_like, shape (3, 3)
+        kg m², about the centre of mass, in the link frame's axes.
+
+    """
+
+    name: str
+    mass: float = 0.0
+    com_link: Any = (0.0, 0.0, 0.0)
+    inertia_link: Any = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise SpecError('name', f'must be a non-empty string, got {self.name!r}')
+        mass = finite_scalar(self.mass, 'mass')
+        if mass < 0.0:
+            raise SpecError('mass', f'must be >= 0, got {mass!r}')
+        object.__setattr__(self, 'mass', mass)
+        object.__setattr__(self, 'com_link', finite_array(self.com_link, 'com_link', (3,)))
+        inertia = finite_array(self.inertia_link, 'inertia_link', (3, 3))
+        object.__setattr__(self, 'inertia_link', 0.5 * (inertia + inertia.T))
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """
+    One URDF joint.
+
+    Parameters
+    ----------
+    name : str
+    kind : JointKind or str
+    parent, child : str
+        Link names.
+    origin_xyz : array_like, shape (3,)
+        m, the joint frame's origin in the parent link frame.
+    origin_rpy : array_like, shape (3,)
+        rad, its orientation (URDF roll, pitch, yaw).
+    axis : array_like, shape (3,)
+        In the joint frame; normalized here (URDF's default is 1 0 0).
+    lower, upper : float, optional
+        rad or m: position limits (kept, not enforced yet).
+    effort : float, optional
+        N m or N: the largest effort; commands beyond it are clamped (counted).
+    velocity : float, optional
+        rad/s or m/s: the largest speed; excursions are counted.
+    damping, friction : float
+        N m s/rad (N s/m), N m (N): from ``<dynamics>``.
+    mimic : tuple, optional
+        ``(joint, multiplier, offset)``: this joint follows ``multiplier q + offset``.
+
+    """
+
+    name: str
+    kind: Any
+    parent: str
+    child: str
+    origin_xyz: Any = (0.0, 0.0, 0.0)
+    origin_rpy: Any = (0.0, 0.0, 0.0)
+    axis: Any = (1.0, 0.0, 0.0)
+    lower: Optional[float] = None
+    upper: Optional[float] = None
+    effort: Optional[float] = None
+    velocity: Optional[float] = None
+    damping: float = 0.0
+    friction: float = 0.0
+    mimic: Optional[tuple] = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise SpecError('name', f'must be a non-empty string, got {self.name!r}')
+        try:
+            kind = JointKind(self.kind.value if isinstance(self.kind, JointKind) else self.kind)
+        except ValueError:
+            raise SpecError('type', f'unknown joint type {self.kind!r}; known: '
+                                    f'{[k.value for k in JointKind]}') from None
+        object.__setattr__(self, 'kind', kind)
+        for key in ('parent', 'child'):
+            if not isinstance(getattr(self, key), str) or not getattr(self, key):
+                raise SpecError(key, f'must name a link, got {getattr(self, key)!r}')
+        if self.parent == self.child:
+            raise SpecError('child', f'a joint cannot join link {self.child!r} to itself')
+        object.__setattr__(self, 'origin_xyz', finite_array(self.origin_xyz, 'origin.xyz', (3,)))
+        object.__setattr__(self, 'origin_rpy', finite_array(self.origin_rpy, 'origin.rpy', (3,)))
+        axis = finite_array(self.axis, 'axis', (3,))
+        norm = float(np.linalg.norm(axis))
+        if kind in ONE_DOF + (JointKind.PLANAR,) and not norm > 1e-12:
+            raise SpecError('axis', f'zero-length axis {axis.tolist()}')
+        object.__setattr__(self, 'axis', axis / norm if norm > 0.0 else axis)
+        for key in ('lower', 'upper', 'effort', 'velocity'):
+            value = getattr(self, key)
+            if value is not None:
+                object.__setattr__(self, key, finite_scalar(value, f'limit.{key}'))
+        for key in ('effort', 'velocity'):
+            value = getattr(self, key)
+            if value is not None and value < 0.0:
+                raise SpecError(f'limit.{key}', f'must be >= 0, got {value!r}')
+        if self.lower is not None and self.upper is not None and self.lower > self.upper:
+            raise SpecError('limit', f'lower {self.lower!r} is above upper {self.upper!r}')
+        for key in ('damping', 'friction'):
+            value = finite_scalar(getattr(self, key), f'dynamics.{key}')
+            if value < 0.0:
+                raise SpecError(f'dynamics.{key}', f'must be >= 0, got {value!r}')
+            object.__setattr__(self, key, value)
+        if self.mimic is not None:
+            joint, multiplier, offset = self.mimic
+            if not isinstance(joint, str) or not joint:
+                raise SpecError('mimic.joint', f'must name a joint, got {joint!r}')
+            object.__setattr__(self, 'mimic', (joint, finite_scalar(multiplier,
+                                                                    'mimic.multiplier'),
+                                               finite_scalar(offset, 'mimic.offset')))
+
+    @property
+    def origin(self) -> tuple[np.ndarray, np.ndarray]:
+        """The joint frame in the parent link frame: position (3,) and rotation (3, 3)."""
+        return np.asarray(self.origin_xyz), rpy_matrix(self.origin_rpy)
+
+    def motion(self, q: float) -> tuple[np.ndarray, np.ndarray]:
+        """The child frame in the joint frame at coordinate ``q``: (3,), (3, 3)."""
+        if self.kind in ROTARY:
+            return np.zeros(3), axis_angle_matrix(self.axis, q)
+        if self.kind is JointKind.PRISMATIC:
+            return q * self.axis, np.eye(3)
+        return np.zeros(3), np.eye(3)
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """
+    A robot as parsed: its links and joints, and where and how it starts.
+
+    Parameters
+    ----------
+    name : str
+    links : sequence of LinkSpec
+    joints : sequence of JointSpec
+        A tree: each link is the child of at most one joint, and one link (the
+        root) of none.
+    base_xyz : array_like, shape (3,)
+        m, the root link's origin in the world.
+    base_quat_xyzw : array_like, shape (4,)
+        The root link's orientation in the world.
+    fixed_base : bool
+        Weld the root link to the world (also implied by a link named ``world``).
+    initial_positions, initial_velocities : dict
+        ``{joint: q}`` and ``{joint: q̇}`` (rad, m; rad/s, m/s); others start at 0.
+    keep_fixed : sequence of str
+        Fixed joints kept as welds (with a published reaction) instead of lumped.
+    prefix : str
+        Prepended to every link and joint name in the simulation (several
+        robots of the same URDF in one scene).
+    source : str
+        Where the robot came from (a file), for messages.
+
+    """
+
+    name: str
+    links: Sequence[LinkSpec]
+    joints: Sequence[JointSpec]
+    base_xyz: Any = (0.0, 0.0, 0.0)
+    base_quat_xyzw: Any = (0.0, 0.0, 0.0, 1.0)
+    fixed_base: bool = False
+    initial_positions: dict = field(default_factory=dict)
+    initial_velocities: dict = field(default_factory=dict)
+    keep_fixed: Sequence[str] = ()
+    prefix: str = ''
+    source: str = ''
+
+
+@dataclass
+class Joint:
+    """
+    A robot joint in the simulation (built by :func:`build_robot`).
+
+    Attributes
+    ----------
+    name : str
+        With the robot's prefix.
+    spec : JointSpec
+    parent_body, child_body : str or None
+        Body names; None: the world.
+    joint_in_parent : tuple
+        The joint frame in the parent body's frame (the world's for None):
+        position (3,) and rotation (3, 3).
+    axis : ndarray, shape (3,)
+        In the joint frame, which is also the child body's frame at q = 0.
+
+    """
+
+    name: str
+    spec: JointSpec
+    parent_body: Optional[str]
+    child_body: Optional[str]
+    joint_in_parent: tuple
+    axis: np.ndarray
+
+
+@dataclass
+class LinkFrame:
+    """Where a link's frame sits: on body ``body`` (None: the world) at ``(p, R)``."""
+
+    body: Optional[str]
+    position: np.ndarray
+    rotation: np.ndarray
+
+
+@dataclass
+class RobotModel:
+    """
+    A robot converted: what :class:`.simulation.Simulation` simulates and reads back.
+
+    Attributes
+    ----------
+    spec : RobotSpec
+    bodies : list of RigidBody
+        One per lumped group of links that moves; named after its topmost link.
+    constraints : list of Constraint
+        The joints that constrain (hinge, slider, planar, kept welds).
+    joints : list of Joint
+        Every joint that moves or is kept, in URDF order.
+    links : dict
+        ``{link: LinkFrame}``: every link's frame on its body (for tf).
+    lumped : list of str
+        Fixed joints lumped into their parent body.
+    tree_order : list of int
+        Indices into ``joints``, parents before children.
+    notes : list of str
+        Conversion notes a user should read (unenforced limits, for example).
+
+    """
+
+    spec: RobotSpec
+    bodies: list
+    constraints: list
+    joints: list
+    links: dict
+    lumped: list
+    notes: list
+    tree_order: list = field(default_factory=list)
+
+
+class _Tree:
+    """The link tree of a :class:`RobotSpec`: parent joint of each link, root, order."""
+
+    def __init__(self, spec: RobotSpec) -> None:
+        self.links = {}
+        for i, link in enumerate(spec.links):
+            if link.name in self.links:
+                raise SpecError(f'links[{i}].name', f'duplicate link name {link.name!r}')
+            self.links[link.name] = link
+        self.joints = {}
+        self.parent_joint: dict = {}
+        self.children: dict = {name: [] for name in self.links}
+        for i, joint in enumerate(spec.joints):
+            where = f'joints[{i}] ({joint.name!r})'
+            if joint.name in self.joints:
+                raise SpecError(f'{where}.name', f'duplicate joint name {joint.name!r}')
+            for key in ('parent', 'child'):
+                link = getattr(joint, key)
+                if link not in self.links:
+                    raise SpecError(f'{where}.{key}', f'unknown link {link!r}')
+            if joint.child in self.parent_joint:
+                raise SpecError(f'{where}.child', f'link {joint.child!r} is already the '
+                                                  f'child of joint '
+                                                  f'{self.parent_joint[joint.child].name!r}: '
+                                                  f'a URDF is a tree')
+            self.joints[joint.name] = joint
+            self.parent_joint[joint.child] = joint
+            self.children[joint.parent].append(joint)
+        roots = [name for name in self.links if name not in self.parent_joint]
+        if len(roots) != 1:
+            raise SpecError('links', f'a robot needs exactly one root link (a link that is no '
+                                     f"joint's child), found {roots or 'none (a loop)'}")
+        self.root = roots[0]
+        # Depth-first order from the root; links not reached sit on a loop.
+        self.order = []
+        stack = [self.root]
+        while stack:
+            name = stack.pop()
+            self.order.append(name)
+            stack.extend(j.child for j in reversed(self.children[name]))
+        if len(self.order) != len(self.links):
+            missing = sorted(set(self.links) - set(self.order))
+            raise SpecError('joints', f'links {missing} are not connected to the root '
+                                      f'{self.root!r}')
+
+
+def _lump(group: list, frames: dict, links: dict) -> tuple:
+    """Mass, centre of mass (3,) and inertia (3, 3) of links in the group's frame."""
+    mass, first = 0.0, np.zeros(3)
+    parts = []
+    for name in group:
+        p, R = frames[name]
+        link = links[name]
+        if link.mass > 0.0:
+            c = p + R @ link.com_link
+            parts.append((link.mass, c, R @ link.inertia_link @ R.T))
+            mass += link.mass
+            first += link.mass * c
+    if mass == 0.0:
+        return 0.0, np.zeros(3), np.zeros((3, 3))
+    com = first / mass
+    inertia = np.zeros((3, 3))
+    for m, c, I_c in parts:
+        d = c - com
+        inertia += I_c + m * (d @ d * np.eye(3) - np.outer(d, d))
+    return mass, com, inertia
+
+
+def build_robot(spec: RobotSpec) -> RobotModel:
+    """
+    Convert a robot to bodies and constraints at its initial joint positions.
+
+    Raises
+    ------
+    SpecError
+        Naming the link, joint or key at fault.
+
+    """
+    tree = _Tree(spec)
+    pre = spec.prefix
+    keep = set(spec.keep_fixed)
+    for name in keep:
+        joint = tree.joints.get(name)
+        if joint is None or joint.kind is not JointKind.FIXED:
+            raise SpecError('keep_fixed', f'{name!r} is not a fixed joint of the robot; fixed '
+                                          f'joints: {[j.name for j in spec.joints if j.kind is JointKind.FIXED]}')
+    one_dof = [j.name for j in spec.joints if j.kind in ONE_DOF]
+    for key in ('initial_positions', 'initial_velocities'):
+        values = getattr(spec, key)
+        if not isinstance(values, dict):
+            raise SpecError(key, f'expected a mapping joint -> value, got {values!r}')
+        for name, value in values.items():
+            if name not in one_dof:
+                raise SpecError(f'{key}.{name}', f'not a revolute, continuous or prismatic '
+                                                 f'joint of the robot; those are {one_dof}')
+            finite_scalar(value, f'{key}.{name}')
+    q0 = {name: float(spec.initial_positions.get(name, 0.0)) for name in one_dof}
+    qd0 = {name: float(spec.initial_velocities.get(name, 0.0)) for name in one_dof}
+
+    # Forward kinematics at the initial positions: every link frame in the world.
+    base_p = finite_array(spec.base_xyz, 'base_pose.xyz', (3,))
+    base_q = so3.quat_normalize(finite_array(spec.base_quat_xyzw, 'base_pose.quat_xyzw',
+                                             (4,)))
+    world_root = tree.root == WORLD_LINK
+    welded = world_root or bool(spec.fixed_base)
+    poses = {tree.root: (np.zeros(3), np.eye(3)) if world_root
+             else (base_p, so3.quat_to_matrix(base_q))}
+    twists = {tree.root: (np.zeros(3), np.zeros(3))}
+    for name in tree.order[1:]:
+        j = tree.parent_joint[name]
+        p_par, R_par = poses[j.parent]
+        o_p, o_R = j.origin
+        m_p, m_R = j.motion(q0.get(j.name, 0.0))
+        p_joint, R_joint = p_par + R_par @ o_p, R_par @ o_R
+        poses[name] = (p_joint + R_joint @ m_p, R_joint @ m_R)
+        v_par, w_par = twists[j.parent]
+        v = v_par + so3.cross(w_par, poses[name][0] - p_par)
+        w = w_par.copy()
+        rate = qd0.get(j.name, 0.0)
+        if j.kind in ROTARY:
+            w = w + rate * (R_joint @ j.axis)
+        elif j.kind is JointKind.PRISMATIC:
+            v = v + rate * (R_joint @ j.axis)
+        twists[name] = (v, w)
+
+    # Groups: links joined by lumped fixed joints share a body, named after the top link.
+    group_of = {}
+    for name in tree.order:
+        j = tree.parent_joint.get(name)
+        lumped = j is not None and j.kind is JointKind.FIXED and j.name not in keep
+        group_of[name] = group_of[j.parent] if lumped else name
+    lumped = [j.name for j in spec.joints
+              if j.kind is JointKind.FIXED and j.name not in keep]
+    world_group = tree.root if welded else None
+    links_out, bodies, body_of_group = {}, [], {}
+    for top in dict.fromkeys(group_of.values()):
+        members = [n for n in tree.order if group_of[n] == top]
+        p_top, R_top = poses[top]
+        local = {n: (R_top.T @ (poses[n][0] - p_top), R_top.T @ poses[n][1]) for n in members}
+        if top == world_group:
+            for n in members:
+                links_out[n] = LinkFrame(None, *poses[n])
+            body_of_group[top] = None
+            continue
+        mass, com, inertia = _lump(members, local, tree.links)
+        if mass == 0.0:
+            j = tree.parent_joint.get(top)
+            how = (f'the child of joint {j.name!r} ({j.kind.value})' if j is not None
+                   else 'the root of a floating base')
+            raise SpecError(f'links.{top}.inertial',
+                            f'link {top!r} (with {members[1:] or "no"} lumped links) has no '
+                            f'mass but is {how}: it would move without inertia; give it an '
+                            f'<inertial>, or make its joint fixed')
+        v_top, w_top = twists[top]
+        try:
+            bodies.append(RigidBody(name=pre + top, mass=mass, inertia=inertia, com_body=com,
+                                    position_world=p_top,
+                                    orientation_xyzw=so3.matrix_to_quat(R_top),
+                                    linear_velocity_world=v_top,
+                                    angular_velocity_body=R_top.T @ w_top))
+        except SpecError as exc:
+            raise exc.within(f'links.{top}') from None
+        body_of_group[top] = pre + top
+        for n in members:
+            links_out[n] = LinkFrame(pre + top, *local[n])
+
+    # Joints between bodies (or a body and the world) become constraints.
+    constraints, joints, notes = [], [], []
+    kind_of = {JointKind.REVOLUTE: 'hinge', JointKind.CONTINUOUS: 'hinge',
+               JointKind.PRISMATIC: 'slider', JointKind.PLANAR: 'planar',
+               JointKind.FIXED: 'fixed'}
+    for j in spec.joints:
+        if j.name in lumped:
+            continue
+        parent_link = links_out[j.parent]
+        child_body = body_of_group[group_of[j.child]]
+        p_par, R_par = poses[j.parent]
+        o_p, o_R = j.origin
+        p_joint, R_joint = p_par + R_par @ o_p, R_par @ o_R
+        parent_body = parent_link.body
+        in_parent = (parent_link.position + parent_link.rotation @ o_p,
+                     parent_link.rotation @ o_R)
+        joints.append(Joint(pre + j.name, j, parent_body, child_body, in_parent, j.axis))
+        if j.kind is JointKind.FLOATING:
+            continue
+        if child_body is None:
+            raise SpecError(f'joints.{j.name}', f'joins two links of the world '
+                                                f'({j.parent!r}, {j.child!r})')
+        axis = R_joint @ (j.axis if j.kind is not JointKind.FIXED else np.array([0, 0, 1.0]))
+        constraints.append(Constraint(name=pre + j.name, type=kind_of[j.kind],
+                                      body_a=child_body, body_b=parent_body,
+                                      anchor_world=p_joint,
+                                      axis_world=axis if j.kind is not JointKind.FIXED
+                                      else None))
+        if j.kind in ONE_DOF and (j.lower is not None or j.upper is not None) \
+                and j.kind is not JointKind.CONTINUOUS:
+            notes.append(f'joint {pre + j.name!r}: position limits [{j.lower}, {j.upper}] are '
+                         f'read but not enforced yet')
+        if j.friction > 0.0:
+            notes.append(f'joint {pre + j.name!r}: Coulomb friction {j.friction} is read but '
+                         f'not simulated yet')
+        if j.damping > 0.0:
+            notes.append(f'joint {pre + j.name!r}: damping {j.damping} is read but not '
+                         f'simulated yet')
+        if j.mimic is not None:
+            notes.append(f'joint {pre + j.name!r}: mimic of {j.mimic[0]!r} is read but not '
+                         f'enforced yet (the joint moves freely)')
+    index = {j.spec.name: i for i, j in enumerate(joints)}
+    order = [index[tree.parent_joint[n].name] for n in tree.order[1:]
+             if tree.parent_joint[n].name in index]
+    return RobotModel(spec, bodies, constraints, joints, links_out, lumped, notes, order)
+
+
+@dataclass(frozen=True)
+class JointState:
+    """
+    Joint coordinates of the one-coordinate joints, as ``sensor_msgs/JointState`` has them.
+
+    Attributes
+    ----------
+    names : list of str
+    positions : ndarray, shape (k,)
+        rad or m.
+    velocities : ndarray, shape (k,)
+        rad/s or m/s.
+    efforts : ndarray, shape (k,)
+        N m or N: the generalized force the joint's actuation applied in the
+        last step, along its free direction (after clamping to the effort limit).
+
+    """
+
+    names: list
+    positions: np.ndarray
+    velocities: np.ndarray
+    efforts: np.ndarray
+
+
+class JointSpace:
+    """
+    The map between the maximal state and the robots' joint coordinates.
+
+    Vectorized over the k one-coordinate joints (revolute, continuous,
+    prismatic) of every robot of a simulation. The angle of a rotary joint is
+    the rotation of the child body relative to the joint frame on the parent
+    about the axis, ``atan2(e2·R e1, e1·R e1)`` in the frame ``(k, e1, e2)``,
+    unwrapped after every step (:meth:`track`) so that it counts turns; a slide
+    is the child origin's displacement along the axis in the parent's joint
+    frame.
+
+    Parameters
+    ----------
+    names : list of str
+        Body names of the simulation, in body order.
+    models : list of RobotModel
+
+    """
+
+    def __init__(self, names: list, models: list) -> None:
+        self.models = list(models)
+        self.body_index = index = {name: i for i, name in enumerate(names)}
+        n = len(names)
+        self.n_bodies = n
+        self.joints = [j for m in self.models for j in m.joints if j.spec.kind in ONE_DOF]
+        self.names = [j.name for j in self.joints]
+        self.index = {name: i for i, name in enumerate(self.names)}
+        k = len(self.joints)
+        self.parent = np.array([n if j.parent_body is None else index[j.parent_body]
+                                for j in self.joints], dtype=int)
+        self.child = np.array([index[j.child_body] for j in self.joints], dtype=int)
+        self.p_jp = np.array([j.joint_in_parent[0] for j in self.joints]).reshape(k, 3)
+        self.R_jp = np.array([j.joint_in_parent[1] for j in self.joints]).reshape(k, 3, 3)
+        frames = np.array([perpendicular_frame(j.axis) for j in self.joints]).reshape(k, 3, 3)
+        self.axis, self.e1, self.e2 = frames[:, 0], frames[:, 1], frames[:, 2]
+        self.rotary = np.array([j.spec.kind in ROTARY for j in self.joints], dtype=bool)
+        self.effort_limit = np.array([np.inf if j.spec.effort is None else j.spec.effort
+                                      for j in self.joints])
+        self.velocity_limit = np.array([np.inf if not j.spec.velocity else j.spec.velocity
+                                        for j in self.joints])
+        self.has_velocity_limits = bool(np.any(np.isfinite(self.velocity_limit)))
+        self.reset()
+
+    def __len__(self) -> int:
+        """Return the number of one-coordinate joints."""
+        return len(self.joints)
+
+    def reset(self) -> None:
+        """Forget the commands, the counted turns and the counters."""
+        k = len(self.joints)
+        self.positions = np.zeros(k)   # unwrapped at the last track()
+        self.tracked = False
+        self.efforts = np.zeros(k)     # held commands, clamped
+        self.effort_window = np.tile([0.0, np.inf], (k, 1))
+        self.counters = {'clamped_efforts': 0, 'velocity_limit_excursions': 0}
+
+    def lookup(self, name: Any, field_name: str) -> int:
+        """Index of joint ``name``; SpecError naming ``field_name`` if unknown."""
+        try:
+            return self.index[name]
+        except (KeyError, TypeError):
+            raise SpecError(field_name, f'unknown joint {name!r}; joints: {self.names}') from None
+
+    # -- reading ----------------------------------------------------------------------------
+
+    @staticmethod
+    def _with_world(out: tuple) -> tuple:
+        pos, quat, vel, omega = (np.asarray(a) for a in out[:4])
+        R = so3.quat_to_matrix(quat)
+        return (np.vstack([pos, np.zeros((1, 3))]), np.concatenate([R, np.eye(3)[None]]),
+                np.vstack([vel, np.zeros((1, 3))]), np.vstack([omega, np.zeros((1, 3))]))
+
+    def raw(self, outputs: tuple) -> tuple:
+        """
+        Wrapped angles and slides, and rates, from the bodies' outputs.
+
+        Parameters
+        ----------
+        outputs : tuple
+            :meth:`.bodies.BodySet.outputs` of all bodies.
+
+        Returns
+        -------
+        positions, velocities : ndarray, shape (k,)
+            Angles in (-π, π].
+
+        """
+        p, R, v, w = self._with_world(outputs)
+        a, b = self.child, self.parent
+        R_joint = np.einsum('kij,kjl->kil', R[b], self.R_jp)       # joint frame, world
+        p_joint = p[b] + np.einsum('kij,kj->ki', R[b], self.p_jp)
+        R_rel = np.einsum('kji,kjl->kil', R_joint, R[a])            # child in joint frame
+        Re1 = np.einsum('kij,kj->ki', R_rel, self.e1)
+        angle = np.arctan2(np.einsum('ki,ki->k', self.e2, Re1),
+                           np.einsum('ki,ki->k', self.e1, Re1))
+        slide = np.einsum('ki,kji,kj->k', self.axis, R_joint, p[a] - p_joint)
+        axis_world = np.einsum('kij,kj->ki', R_joint, self.axis)
+        spin = np.einsum('ki,ki->k', axis_world, w[a] - w[b])
+        drift = v[a] - v[b] - so3.cross(w[b], p[a] - p[b])
+        glide = np.einsum('ki,ki->k', axis_world, drift)
+        rotary = self.rotary
+        return np.where(rotary, angle, slide), np.where(rotary, spin, glide)
+
+    def track(self, outputs: tuple) -> np.ndarray:
+        """Update the unwrapped positions from the state after a step; return the rates."""
+        raw, rate = self.raw(outputs)
+        if self.tracked:
+            turns = np.round((self.positions - raw) / (2.0 * np.pi))
+            raw = np.where(self.rotary, raw + 2.0 * np.pi * turns, raw)
+        self.positions = raw
+        self.tracked = True
+        if self.has_velocity_limits:
+            self.counters['velocity_limit_excursions'] += int(
+                np.count_nonzero(np.abs(rate) > self.velocity_limit))
+        return rate
+
+    def state(self, outputs: tuple, time_mid: float, names: Optional[Sequence] = None
+              ) -> JointState:
+        """
+        Joint state now (see :class:`JointState`).
+
+        ``time_mid`` is the midpoint of the last step: an effort command counts
+        when it acted over that step.
+        """
+        raw, rate = self.raw(outputs)
+        if self.tracked:
+            turns = np.round((self.positions - raw) / (2.0 * np.pi))
+            raw = np.where(self.rotary, raw + 2.0 * np.pi * turns, raw)
+        window = self.effort_window
+        acting = (window[:, 0] <= time_mid) & (time_mid < window[:, 1])
+        efforts = np.where(acting, self.efforts, 0.0)
+        if names is None:
+            return JointState(list(self.names), raw, rate, efforts)
+        idx = np.array([self.lookup(name, f'names[{i}]') for i, name in enumerate(names)],
+                       dtype=int)
+        return JointState([self.names[i] for i in idx], raw[idx], rate[idx], efforts[idx])
+
+    # -- commands ---------------------------------------------------------------------------
+
+    def effort_wrenches(self, efforts: dict) -> tuple:
+        """
+        Validate ``{joint: effort}`` and return the clamped efforts and their wrenches.
+
+        Returns
+        -------
+        idx : ndarray of int
+            Joint indices.
+        clamped : ndarray
+            The efforts after clamping to each joint's limit.
+        wrenches : list of dict
+            Keyword arguments of :meth:`.simulation.Simulation.apply_wrench` (body
+            frame, keyed per joint and body): the pair of equal and opposite
+            wrenches each effort is.
+
+        """
+        if not isinstance(efforts, dict):
+            raise SpecError('efforts', f'expected a mapping joint -> effort, got {efforts!r}')
+        idx = np.array([self.lookup(name, f'efforts.{name}') for name in efforts], dtype=int)
+        values = np.array([finite_scalar(value, f'efforts.{name}')
+                           for name, value in efforts.items()])
+        limit = self.effort_limit[idx] if len(idx) else np.zeros(0)
+        clamped = np.clip(values, -limit, limit)
+        wrenches = []
+        for i, tau in zip(idx, clamped):
+            j = self.joints[i]
+            k_child = self.axis[i]
+            k_parent = self.R_jp[i] @ self.axis[i]
+            if self.rotary[i]:
+                pair = ((j.child_body, {'torque': tau * k_child}),
+                        (j.parent_body, {'torque': -tau * k_parent}))
+            else:
+                pair = ((j.child_body, {'force': tau * k_child, 'point_body': np.zeros(3)}),
+                        (j.parent_body, {'force': -tau * k_parent,
+                                         'point_body': self.p_jp[i]}))
+            for side, (body, load) in zip(('child', 'parent'), pair):
+                if body is not None:
+                    wrenches.append(dict(body=body, frame='body', key=f'joint {j.name} {side}',
+                                         **load))
+        return idx, clamped, wrenches
+
+    def commanded(self, idx: np.ndarray, clamped: np.ndarray, values: np.ndarray,
+                  start: float, end: float) -> None:
+        """Record efforts that were applied from ``start`` to ``end`` (s)."""
+        self.counters['clamped_efforts'] += int(np.count_nonzero(clamped != values))
+        self.efforts[idx] = clamped
+        self.effort_window[idx] = (start, end)
+
+    # -- setting (forward kinematics) -------------------------------------------------------
+
+    def poses_for(self, outputs: tuple, positions: dict, velocities: dict) -> tuple:
+        """
+        Body-origin poses and twists with the joints at new coordinates.
+
+        Bodies not driven by a one-coordinate joint (floating bases, the children
+        of floating, planar or kept fixed joints) keep their pose relative to
+        their parent; every joint not named keeps its coordinate and rate.
+
+        Returns
+        -------
+        pos, quat_xyzw, vel, omega : ndarray, shapes (n, 3), (n, 4), (n, 3), (n, 3)
+            World frame, of body origins.
+
+        """
+        q, qd = self.state(outputs, 0.0).positions.copy(), self.raw(outputs)[1]
+        for name, value in positions.items():
+            q[self.lookup(name, f'positions.{name}')] = finite_scalar(value,
+                                                                      f'positions.{name}')
+        for name, value in velocities.items():
+            qd[self.lookup(name, f'velocities.{name}')] = finite_scalar(value,
+                                                                        f'velocities.{name}')
+        p, R, v, w = (x.copy() for x in self._with_world(outputs))
+        p0, R0, v0, w0 = (x.copy() for x in self._with_world(outputs))
+        index = self.index
+        body_index = self.body_index
+        for model in self.models:
+            for ji in model.tree_order:
+                j = model.joints[ji]
+                if j.child_body is None:
+                    continue
+                a = body_index[j.child_body]
+                b = self.n_bodies if j.parent_body is None else body_index[j.parent_body]
+                p_jp, R_jp = j.joint_in_parent
+                # The joint frame on the parent, before and after.
+                Rj0, pj0 = R0[b] @ R_jp, p0[b] + R0[b] @ p_jp
+                Rj, pj = R[b] @ R_jp, p[b] + R[b] @ p_jp
+                # Relative twist of the child in the joint frame, before (kept if not set).
+                w_rel = Rj0.T @ (w0[a] - w0[b])
+                v_rel = Rj0.T @ (v0[a] - v0[b] - so3.cross(w0[b], p0[a] - p0[b]))
+                i = index.get(j.name)
+                if i is not None:
+                    m_p, m_R = j.spec.motion(q[i])
+                    axis = self.axis[i]
+                    w_rel = qd[i] * axis if self.rotary[i] else np.zeros(3)
+                    v_rel = np.zeros(3) if self.rotary[i] else qd[i] * axis
+                else:
+                    m_R = Rj0.T @ R0[a]
+                    m_p = Rj0.T @ (p0[a] - pj0)
+                R[a] = Rj @ m_R
+                p[a] = pj + Rj @ m_p
+                w[a] = w[b] + Rj @ w_rel
+                v[a] = v[b] + so3.cross(w[b], p[a] - p[b]) + Rj @ v_rel
+        n = self.n_bodies
+        return p[:n], so3.matrix_to_quat(R[:n]), v[:n], w[:n]
