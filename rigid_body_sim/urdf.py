@@ -122,21 +122,29 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
                 return f'{source}:{el.sourceline}'
         return source
 
+    ignored = []
+    for tag in NOT_SIMULATED:
+        count = sum(1 for _ in root.iter(tag))
+        if count:
+            ignored.append(f'<{tag}> x{count}')
+    # What the simulator does not read is not parsed either (a transmission written for
+    # another tool must not stop a load); the rest goes to urdf_parser_py.
+    parse_tree = etree.fromstring(etree.tostring(root))
+    for tag in ('transmission', 'gazebo', 'ros2_control'):
+        for el in list(parse_tree.iter(tag)):
+            el.getparent().remove(el)
     # Everything urdf_parser_py would only print, collected for one warning.
     complaints: list = []
     saved = xml_core.on_error
     xml_core.on_error = complaints.append
     try:
-        robot = up.URDF.from_xml_string(etree.tostring(root))
+        robot = up.URDF.from_xml_string(etree.tostring(parse_tree))
     except Exception as exc:  # noqa: B902 - urdf_parser_py raises bare Exceptions
-        raise UrdfError(f'{source}: {exc}') from None
+        flat = ' '.join(str(exc).split())
+        raise UrdfError(f'{_where(parse_tree, flat, source)}: {flat}') from None
     finally:
         xml_core.on_error = saved
-    ignored = [c for c in complaints if not c.startswith('Unknown tag "collision"')]
-    for tag in NOT_SIMULATED:
-        count = sum(1 for _ in root.iter(tag))
-        if count:
-            ignored.append(f'<{tag}> x{count}')
+    ignored += complaints
 
     links, visuals = [], []
     for link in robot.links:
@@ -194,6 +202,22 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
                             f'unknown joint {j.mimic[0]!r}')
     return ParsedUrdf(robot.name, xml if isinstance(xml, str) else xml.decode(), links,
                       joints, visuals, ignored, source)
+
+
+_PATH = re.compile(r"ParseError in (/\S+?):?\s")
+
+
+def _where(tree: Any, message: str, source: str) -> str:
+    """``source:line`` of the element a urdf_parser_py message names by its path."""
+    m = _PATH.search(message + ' ')
+    if m is not None:
+        try:
+            found = tree.getroottree().xpath(m.group(1))
+        except Exception:  # noqa: B902 - lxml's XPath errors: the path is only a hint
+            found = []
+        if found:
+            return f'{source}:{found[0].sourceline}'
+    return source
 
 
 def _origin(origin: Any) -> tuple:
