@@ -1,0 +1,824 @@
+"""
+Joint-space reference dynamics of fixed-base URDF trees: an oracle for the robot tests.
+
+The simulator integrates robots in maximal coordinates (one rigid body per link, joints as
+Lagrange-multiplier constraints). This module is an independent check of it: it parses the
+URDF itself with ``urdf_parser_py`` and computes the joint-space dynamics
+
+    M(q) qdd + h(q, qd) = tau,    h(q, qd) = C(q, qd) qd + g(q),
+
+from the textbook recursions of Featherstone, *Rigid Body Dynamics Algorithms* (2008):
+the recursive Newton-Euler algorithm (RNEA, ch. 5) for ``h`` and inverse dynamics, and the
+composite-rigid-body algorithm (CRBA, ch. 6) for ``M``. It imports only numpy, scipy and
+urdf_parser_py, nothing of the simulator.
+
+Conventions
+-----------
+- URDF, exactly as specified: a joint frame is its parent link frame moved by the joint
+  ``origin`` (translation xyz, then rotation ``R = Rz(yaw) Ry(pitch) Rx(roll)``, i.e.
+  fixed-axis roll about x, then pitch about y, then yaw about z). The child link frame is
+  the joint frame moved by the joint motion: a rotation by q about ``axis`` (revolute,
+  continuous) or a translation ``q * axis`` (prismatic); ``axis`` is given in the joint
+  frame, normalized here, and a missing ``<axis>`` means (1, 0, 0). Fixed joints have no
+  coordinate: the child rides rigidly on its parent. A link's ``<inertial>`` gives its
+  centre of mass (origin xyz) and the inertia tensor about it in the inertial frame
+  (origin rpy), so the tensor in the link frame is ``R I Rᵀ``. A link without
+  ``<inertial>`` is massless.
+- The base is fixed: the root link (often named ``world``) is the world frame. Its own
+  inertia does not enter the dynamics. Floating and planar joints are not supported.
+- Generalized coordinates: one per revolute, continuous or prismatic joint, in the order
+  of ``JointSpaceModel.joint_names``, which is the URDF file's joint order restricted to
+  those joints. Zero is the URDF zero configuration. Mimic joints keep their own
+  coordinate in the full model (which ignores ``<mimic>``); the reduced model
+  (``reduced_*`` methods) eliminates them (see ``JointSpaceModel.mimic_map``).
+- Spatial vectors (Featherstone's notation, angular part first) are expressed in world
+  coordinates about the world origin O: a twist is ``[omega; v_O]`` with v_O the
+  velocity of the body point at O, a wrench ``[n_O; f]``. In these coordinates a joint's
+  motion subspace S depends on q but no coordinate transforms are needed along the tree.
+- ``tau`` is the total generalized force on each coordinate (N m for revolute, N for
+  prismatic). ``<dynamics damping friction>`` and ``<limit>`` are read (``damping``,
+  ``friction``, ``limits``) but never applied: a test adds them to tau if it wants them.
+- SI units; gravity defaults to (0, 0, -9.81) m/s².
+"""
+
+import collections
+import os
+
+import numpy as np
+
+import scipy.linalg
+
+from urdf_parser_py.urdf import URDF
+
+#: The directory of the test robots (hand-written URDF and xacro files).
+URDF_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'urdf')
+
+#: Joint types with one coordinate; 'fixed' has none; others are rejected.
+MOVING_TYPES = ('revolute', 'continuous', 'prismatic')
+SUPPORTED_TYPES = MOVING_TYPES + ('fixed',)
+
+JointLimit = collections.namedtuple('JointLimit', 'lower upper effort velocity')
+
+
+def urdf_path(file_name: str) -> str:
+    """Return the path of a test robot in ``test/urdf``."""
+    return os.path.join(URDF_DIR, file_name)
+
+
+def rpy_matrix(rpy) -> np.ndarray:
+    """
+    Return the URDF rotation ``Rz(yaw) Ry(pitch) Rx(roll)`` of ``rpy = (roll, pitch, yaw)``.
+
+    Parameters
+    ----------
+    rpy : array_like, shape (3,)
+        Roll, pitch, yaw in rad (fixed axes x, then y, then z).
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+        The rotation matrix, mapping coordinates in the rotated frame to the parent's.
+
+    """
+    roll, pitch, yaw = (float(a) for a in rpy)
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    return rz @ ry @ rx
+
+
+def skew(v) -> np.ndarray:
+    """Return the cross-product matrix ``[v]x`` (shape (3, 3)) of a vector v (shape (3,))."""
+    x, y, z = v
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def axis_angle_matrix(axis, angle: float) -> np.ndarray:
+    """
+    Return the rotation by ``angle`` (rad) about a unit ``axis`` (shape (3,)), (3, 3).
+
+    Rodrigues' formula ``R = 1 + sin(a) K + (1 - cos(a)) K²`` with ``K = [axis]x``.
+    """
+    k = skew(axis)
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+def spatial_inertia(mass: float, com_world, inertia_com_world) -> np.ndarray:
+    """
+    Return a body's spatial inertia about the world origin (Featherstone eq. 2.63).
+
+    Parameters
+    ----------
+    mass : float
+        Mass in kg.
+    com_world : array_like, shape (3,)
+        Centre of mass in world coordinates, m.
+    inertia_com_world : array_like, shape (3, 3)
+        Rotational inertia about the centre of mass, world axes, kg m².
+
+    Returns
+    -------
+    numpy.ndarray, shape (6, 6)
+        ``[[I_c + m [c]x [c]xᵀ, m [c]x], [m [c]xᵀ, m 1]]`` (angular rows first).
+
+    """
+    cx = skew(com_world)
+    out = np.empty((6, 6))
+    out[:3, :3] = np.asarray(inertia_com_world) + mass * cx @ cx.T
+    out[:3, 3:] = mass * cx
+    out[3:, :3] = mass * cx.T
+    out[3:, 3:] = mass * np.eye(3)
+    return out
+
+
+def motion_cross(v) -> np.ndarray:
+    """Return the spatial motion cross product ``v x`` (shape (6, 6)) of a twist v (6,)."""
+    out = np.zeros((6, 6))
+    out[:3, :3] = out[3:, 3:] = skew(v[:3])
+    out[3:, :3] = skew(v[3:])
+    return out
+
+
+def force_cross(v) -> np.ndarray:
+    """Return the spatial force cross product ``v x* = -(v x)ᵀ`` (shape (6, 6))."""
+    return -motion_cross(v).T
+
+
+class _Link:
+    """One link: its parent joint and its inertial data in the link frame."""
+
+    def __init__(self, name, mass, com_link, inertia_link):
+        self.name = name
+        self.mass = mass                    # kg; 0 for a massless link
+        self.com_link = com_link            # (3,) m, link frame
+        self.inertia_link = inertia_link    # (3, 3) kg m², about the COM, link axes
+        self.parent = None                  # index of the parent link, None for the root
+        self.joint = None                   # the _Joint to the parent, None for the root
+
+
+class _Joint:
+    """One joint: its origin in the parent link frame, its axis and its coordinate."""
+
+    def __init__(self, name, kind, origin_xyz, origin_rot, axis, coordinate):
+        self.name = name
+        self.kind = kind                    # 'revolute', 'continuous', 'prismatic', 'fixed'
+        self.origin_xyz = origin_xyz        # (3,) m, in the parent link frame
+        self.origin_rot = origin_rot        # (3, 3) joint frame -> parent link frame
+        self.axis = axis                    # (3,) unit, in the joint frame
+        self.coordinate = coordinate        # index into q, None for a fixed joint
+
+
+class _Kinematics:
+    """Link frames and joint motion subspaces at one configuration (world coordinates)."""
+
+    def __init__(self, p, rot, subspace):
+        self.p = p                          # (n_links, 3) link frame origins
+        self.rot = rot                      # (n_links, 3, 3) link frame -> world
+        self.subspace = subspace            # (n_links, 6) S of each link's joint (0: fixed)
+
+
+class JointSpaceModel:
+    """
+    Joint-space dynamics of a fixed-base URDF tree (RNEA and CRBA, world coordinates).
+
+    Build it with :meth:`from_urdf`. Attributes (read only):
+
+    - ``robot_name`` (str), ``root_link`` (str): the root link, fixed at the world origin.
+    - ``link_names`` (list of str): every link, parents before children.
+    - ``joint_names`` (list of str): the coordinates' joints, in URDF order (length n).
+    - ``n`` (int): number of coordinates.
+    - ``gravity`` (numpy.ndarray, shape (3,)): m/s², world frame.
+    - ``damping``, ``friction`` (numpy.ndarray, shape (n,)): the URDF ``<dynamics>``
+      values (0 when absent); never applied.
+    - ``limits`` (dict str -> JointLimit or None): the URDF ``<limit>`` of each coordinate.
+    - ``mimic_map`` (dict str -> (str, float, float)): mimic joint -> (leader, multiplier,
+      offset) with ``q_mimic = multiplier * q_leader + offset``; chains are resolved, so
+      the leader is always an independent joint.
+    - ``independent_joint_names`` (list of str): ``joint_names`` without the mimic joints,
+      the coordinates of the reduced model (length r).
+    """
+
+    def __init__(self, robot_name, links, joints, gravity, mimic):
+        """Assemble a model from parsed links (parents first); use :meth:`from_urdf`."""
+        self.robot_name = robot_name
+        self._links = links
+        self._index = {link.name: i for i, link in enumerate(links)}
+        self.root_link = links[0].name
+        self.link_names = [link.name for link in links]
+        moving = sorted((j for j in joints if j.coordinate is not None),
+                        key=lambda j: j.coordinate)
+        self.joint_names = [j.name for j in moving]
+        self.n = len(moving)
+        self.gravity = np.array(gravity, dtype=float).reshape(3)
+        self.damping = np.zeros(self.n)
+        self.friction = np.zeros(self.n)
+        self.limits = {}
+        self.mimic_map = _resolve_mimic(mimic, self.joint_names)
+        self.independent_joint_names = [name for name in self.joint_names
+                                        if name not in self.mimic_map]
+        column = {name: k for k, name in enumerate(self.independent_joint_names)}
+        self._mimic_matrix = np.zeros((self.n, len(column)))
+        self._mimic_offset = np.zeros(self.n)
+        for i, name in enumerate(self.joint_names):
+            if name in column:
+                self._mimic_matrix[i, column[name]] = 1.0
+            else:
+                leader, multiplier, offset = self.mimic_map[name]
+                self._mimic_matrix[i, column[leader]] = multiplier
+                self._mimic_offset[i] = offset
+        self._mimic_matrix.flags.writeable = False
+        self._mimic_offset.flags.writeable = False
+
+    # ---------------------------------------------------------------- construction
+
+    @classmethod
+    def from_urdf(cls, xml_string, base_fixed: bool = True,
+                  gravity=(0.0, 0.0, -9.81)) -> 'JointSpaceModel':
+        """
+        Parse a URDF document into a joint-space model.
+
+        Parameters
+        ----------
+        xml_string : str or bytes
+            The URDF document (after xacro, if any).
+        base_fixed : bool
+            Must be True: the root link is fixed at the world origin (a floating base is
+            not supported).
+        gravity : array_like, shape (3,)
+            Gravitational acceleration in the world frame, m/s².
+
+        Returns
+        -------
+        JointSpaceModel
+
+        Raises
+        ------
+        NotImplementedError
+            If ``base_fixed`` is False.
+        ValueError
+            If a joint type other than revolute, continuous, prismatic or fixed occurs,
+            an axis is zero, the links do not form one tree, or a mimic joint names an
+            unknown or non-moving leader.
+
+        """
+        if not base_fixed:
+            raise NotImplementedError('JointSpaceModel supports a fixed base only')
+        if isinstance(xml_string, str):
+            xml_string = xml_string.encode('utf-8')   # lxml refuses str with an encoding
+        robot = URDF.from_xml_string(xml_string)
+        links = {}
+        for link in robot.links:
+            links[link.name] = _parse_link(link)
+        joints = []
+        by_child = {}
+        mimic = {}
+        for joint in robot.joints:
+            if joint.type not in SUPPORTED_TYPES:
+                raise ValueError(f'joint {joint.name!r}: type {joint.type!r} is not '
+                                 f'supported (only {", ".join(SUPPORTED_TYPES)})')
+            for end in (joint.parent, joint.child):
+                if end not in links:
+                    raise ValueError(f'joint {joint.name!r}: unknown link {end!r}')
+            if joint.child in by_child:
+                raise ValueError(f'link {joint.child!r} is the child of two joints')
+            coordinate = None
+            if joint.type in MOVING_TYPES:
+                coordinate = sum(j.coordinate is not None for j in joints)
+            parsed = _parse_joint(joint, coordinate)
+            joints.append(parsed)
+            by_child[joint.child] = (parsed, joint)
+            if joint.mimic is not None:
+                if coordinate is None:
+                    raise ValueError(f'joint {joint.name!r}: a fixed joint cannot mimic')
+                multiplier = 1.0 if joint.mimic.multiplier is None else joint.mimic.multiplier
+                offset = 0.0 if joint.mimic.offset is None else joint.mimic.offset
+                mimic[joint.name] = (joint.mimic.joint, float(multiplier), float(offset))
+        roots = [name for name in links if name not in by_child]
+        if len(roots) != 1:
+            raise ValueError(f'the links must form one tree; roots: {roots}')
+        # Parents before children (breadth first from the root), children in URDF order.
+        children = {name: [] for name in links}
+        for joint in robot.joints:
+            children[joint.parent].append(joint.child)
+        order = [roots[0]]
+        for name in order:
+            order.extend(children[name])
+        if len(order) != len(links):
+            raise ValueError('the joints contain a cycle')
+        position = {name: i for i, name in enumerate(order)}
+        ordered = [links[name] for name in order]
+        for name in order[1:]:
+            parsed, joint = by_child[name]
+            links[name].parent = position[joint.parent]
+            links[name].joint = parsed
+        model = cls(robot.name, ordered, joints, gravity, mimic)
+        for parsed, joint in by_child.values():
+            if parsed.coordinate is None:
+                continue
+            dynamics = joint.dynamics
+            if dynamics is not None:
+                model.damping[parsed.coordinate] = dynamics.damping or 0.0
+                model.friction[parsed.coordinate] = dynamics.friction or 0.0
+            limit = joint.limit
+            model.limits[joint.name] = None if limit is None else JointLimit(
+                limit.lower, limit.upper, limit.effort, limit.velocity)
+        return model
+
+    # ---------------------------------------------------------------- kinematics
+
+    def _vector(self, x, name: str, size: int = None) -> np.ndarray:
+        size = self.n if size is None else size
+        out = np.asarray(x, dtype=float)
+        if out.shape != (size,):
+            raise ValueError(f'{name} must have shape ({size},), got {out.shape}')
+        return out
+
+    def _kinematics(self, q) -> _Kinematics:
+        q = self._vector(q, 'q')
+        count = len(self._links)
+        p = np.zeros((count, 3))
+        rot = np.zeros((count, 3, 3))
+        rot[0] = np.eye(3)
+        subspace = np.zeros((count, 6))
+        for i in range(1, count):
+            link = self._links[i]
+            joint = link.joint
+            parent = link.parent
+            p_joint = p[parent] + rot[parent] @ joint.origin_xyz
+            rot_joint = rot[parent] @ joint.origin_rot
+            axis_world = rot_joint @ joint.axis
+            if joint.kind == 'prismatic':
+                p[i] = p_joint + q[joint.coordinate] * axis_world
+                rot[i] = rot_joint
+                subspace[i, 3:] = axis_world
+            elif joint.kind == 'fixed':
+                p[i] = p_joint
+                rot[i] = rot_joint
+            else:   # revolute, continuous: the child origin stays on the axis
+                p[i] = p_joint
+                rot[i] = rot_joint @ axis_angle_matrix(joint.axis, q[joint.coordinate])
+                subspace[i, :3] = axis_world
+                subspace[i, 3:] = np.cross(p_joint, axis_world)
+        return _Kinematics(p, rot, subspace)
+
+    def fk(self, q) -> dict:
+        """
+        Return the world pose of every link frame.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Joint coordinates (rad or m), in the order of ``joint_names``.
+
+        Returns
+        -------
+        dict
+            link name -> ``(p_world, R_world)``: the frame origin, shape (3,), and the
+            rotation from link to world coordinates, shape (3, 3).
+
+        """
+        kin = self._kinematics(q)
+        return {link.name: (kin.p[i], kin.rot[i]) for i, link in enumerate(self._links)}
+
+    def joint_axes_world(self, q) -> dict:
+        """
+        Return each moving joint's axis in the world frame.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Joint coordinates.
+
+        Returns
+        -------
+        dict
+            joint name -> ``(point_world, axis_world)``: the joint frame origin, shape (3,),
+            and the unit axis, shape (3,), both in world coordinates. For a prismatic joint
+            the point is where the child frame is at q = 0 for the current parent pose.
+
+        """
+        q = self._vector(q, 'q')
+        kin = self._kinematics(q)
+        out = {}
+        for i in range(1, len(self._links)):
+            link = self._links[i]
+            joint = link.joint
+            if joint.coordinate is None:
+                continue
+            parent = link.parent
+            rot_joint = kin.rot[parent] @ joint.origin_rot
+            out[joint.name] = (kin.p[parent] + kin.rot[parent] @ joint.origin_xyz,
+                               rot_joint @ joint.axis)
+        return out
+
+    def link_twists(self, q, qd) -> dict:
+        """
+        Return the velocity of every link frame, by classical velocity propagation.
+
+        ``omega_child = omega_parent + qd axis`` (revolute) and ``v_child = v_parent +
+        omega_parent x (p_child - p_parent) + qd axis`` (prismatic), independently of
+        the spatial-vector recursions used for the dynamics.
+
+        Parameters
+        ----------
+        q, qd : array_like, shape (n,)
+            Joint coordinates and velocities.
+
+        Returns
+        -------
+        dict
+            link name -> ``(v_origin_world, omega_world)``: the velocity of the link frame
+            origin, m/s, and the angular velocity, rad/s, both shape (3,), world frame.
+
+        """
+        qd = self._vector(qd, 'qd')
+        kin = self._kinematics(q)
+        count = len(self._links)
+        v = np.zeros((count, 3))
+        w = np.zeros((count, 3))
+        for i in range(1, count):
+            link = self._links[i]
+            joint = link.joint
+            parent = link.parent
+            w[i] = w[parent]
+            v[i] = v[parent] + np.cross(w[parent], kin.p[i] - kin.p[parent])
+            if joint.coordinate is None:
+                continue
+            axis_world = kin.rot[parent] @ joint.origin_rot @ joint.axis
+            if joint.kind == 'prismatic':
+                v[i] += qd[joint.coordinate] * axis_world
+            else:
+                w[i] += qd[joint.coordinate] * axis_world
+        return {link.name: (v[i], w[i]) for i, link in enumerate(self._links)}
+
+    def link_inertia_world(self, q) -> dict:
+        """
+        Return every massive link's mass, centre of mass and inertia in the world frame.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Joint coordinates.
+
+        Returns
+        -------
+        dict
+            link name -> ``(mass, com_world, inertia_world)``: kg, shape (3,) m, and the
+            inertia about the centre of mass in world axes, shape (3, 3) kg m². Massless
+            links are left out.
+
+        """
+        kin = self._kinematics(q)
+        out = {}
+        for i, link in enumerate(self._links):
+            if link.mass > 0.0:
+                rot = kin.rot[i]
+                out[link.name] = (link.mass, kin.p[i] + rot @ link.com_link,
+                                  rot @ link.inertia_link @ rot.T)
+        return out
+
+    # ---------------------------------------------------------------- dynamics
+
+    def _spatial_inertias(self, kin: _Kinematics) -> np.ndarray:
+        out = np.zeros((len(self._links), 6, 6))
+        for i, link in enumerate(self._links):
+            if i > 0 and link.mass > 0.0:
+                rot = kin.rot[i]
+                out[i] = spatial_inertia(link.mass, kin.p[i] + rot @ link.com_link,
+                                         rot @ link.inertia_link @ rot.T)
+        return out
+
+    def _rnea(self, kin, qd, qdd, gravity) -> np.ndarray:
+        """Featherstone's RNEA (table 5.1) with every quantity in world coordinates."""
+        count = len(self._links)
+        inertia = self._spatial_inertias(kin)
+        v = np.zeros((count, 6))
+        a = np.zeros((count, 6))
+        a[0, 3:] = -gravity           # the base accelerates up: gravity on every body
+        f = np.zeros((count, 6))
+        for i in range(1, count):
+            link = self._links[i]
+            parent = link.parent
+            coordinate = link.joint.coordinate
+            s = kin.subspace[i]
+            v[i] = v[parent]
+            a[i] = a[parent]
+            if coordinate is not None:
+                v[i] += s * qd[coordinate]
+                # S is fixed in body i, so in world coordinates d/dt S = v_i x S.
+                a[i] += s * qdd[coordinate] + motion_cross(v[i]) @ (s * qd[coordinate])
+            f[i] = inertia[i] @ a[i] + force_cross(v[i]) @ (inertia[i] @ v[i])
+        tau = np.zeros(self.n)
+        for i in range(count - 1, 0, -1):
+            link = self._links[i]
+            if link.joint.coordinate is not None:
+                tau[link.joint.coordinate] = kin.subspace[i] @ f[i]
+            f[link.parent] += f[i]
+        return tau
+
+    def _crba(self, kin) -> np.ndarray:
+        """Featherstone's CRBA (table 6.2) with every quantity in world coordinates."""
+        count = len(self._links)
+        composite = self._spatial_inertias(kin)
+        for i in range(count - 1, 0, -1):
+            composite[self._links[i].parent] += composite[i]
+        m = np.zeros((self.n, self.n))
+        for i in range(1, count):
+            row = self._links[i].joint.coordinate
+            if row is None:
+                continue
+            force = composite[i] @ kin.subspace[i]
+            j = i
+            while j > 0:
+                column = self._links[j].joint.coordinate
+                if column is not None:
+                    m[row, column] = m[column, row] = kin.subspace[j] @ force
+                j = self._links[j].parent
+        return m
+
+    def mass_matrix(self, q) -> np.ndarray:
+        """
+        Return the joint-space mass matrix M(q) by the CRBA.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Joint coordinates.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n, n)
+            Symmetric positive definite (when every moving subtree has mass).
+
+        """
+        return self._crba(self._kinematics(q))
+
+    def bias(self, q, qd) -> np.ndarray:
+        """
+        Return ``h(q, qd) = C(q, qd) qd + g(q)``: the RNEA with qdd = 0.
+
+        Parameters
+        ----------
+        q, qd : array_like, shape (n,)
+            Joint coordinates and velocities.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n,)
+            The generalized force that keeps qdd = 0 (Coriolis, centrifugal, gravity).
+
+        """
+        qd = self._vector(qd, 'qd')
+        return self._rnea(self._kinematics(q), qd, np.zeros(self.n), self.gravity)
+
+    def inverse_dynamics(self, q, qd, qdd) -> np.ndarray:
+        """
+        Return the generalized force ``tau = M(q) qdd + h(q, qd)`` by the RNEA.
+
+        Parameters
+        ----------
+        q, qd, qdd : array_like, shape (n,)
+            Joint coordinates, velocities and accelerations.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n,)
+            tau, N m or N per coordinate.
+
+        """
+        qd = self._vector(qd, 'qd')
+        qdd = self._vector(qdd, 'qdd')
+        return self._rnea(self._kinematics(q), qd, qdd, self.gravity)
+
+    def forward_dynamics(self, q, qd, tau) -> np.ndarray:
+        """
+        Return ``qdd = M(q)⁻¹ (tau - h(q, qd))`` (CRBA, RNEA and a Cholesky solve).
+
+        Parameters
+        ----------
+        q, qd, tau : array_like, shape (n,)
+            Joint coordinates, velocities and generalized forces.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n,)
+            The joint accelerations.
+
+        """
+        qd = self._vector(qd, 'qd')
+        tau = self._vector(tau, 'tau')
+        kin = self._kinematics(q)
+        h = self._rnea(kin, qd, np.zeros(self.n), self.gravity)
+        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(self._crba(kin)), tau - h)
+
+    def energy(self, q, qd) -> tuple:
+        """
+        Return the kinetic and potential energy from the links' velocities and poses.
+
+        Computed link by link (``½ m |v_com|² + ½ ωᵀ I_world ω`` and ``-m g·c``) from
+        :meth:`link_twists`, not from M: comparing it with ``½ qdᵀ M qd`` checks M.
+
+        Parameters
+        ----------
+        q, qd : array_like, shape (n,)
+            Joint coordinates and velocities.
+
+        Returns
+        -------
+        tuple of float
+            ``(kinetic, potential)`` in J; the potential is zero with every centre of mass
+            at the world origin.
+
+        """
+        twists = self.link_twists(q, qd)
+        frames = self.fk(q)
+        kinetic = potential = 0.0
+        for name, (mass, com, inertia) in self.link_inertia_world(q).items():
+            if name == self.root_link:
+                continue        # fixed: no kinetic energy, a constant potential
+            v_origin, w = twists[name]
+            v_com = v_origin + np.cross(w, com - frames[name][0])
+            kinetic += 0.5 * mass * (v_com @ v_com) + 0.5 * w @ inertia @ w
+            potential -= mass * (self.gravity @ com)
+        return kinetic, potential
+
+    # ---------------------------------------------------------------- mimic joints
+
+    @property
+    def mimic_matrix(self) -> np.ndarray:
+        """Return the map T, shape (n, r), with ``q = T q_r + mimic_offset`` (read only)."""
+        return self._mimic_matrix
+
+    @property
+    def mimic_offset(self) -> np.ndarray:
+        """Return the offsets b, shape (n,), with ``q = T q_r + b`` (read only)."""
+        return self._mimic_offset
+
+    def expand(self, q_r) -> np.ndarray:
+        """
+        Return the full coordinates ``q = T q_r + b`` (shape (n,)) of reduced ones (r,).
+
+        For velocities and accelerations use ``mimic_matrix @ qd_r`` (no offset).
+        """
+        return self._mimic_matrix @ self._vector(q_r, 'q_r', self._mimic_matrix.shape[1]) \
+            + self._mimic_offset
+
+    def reduced_dynamics(self, q_r, qd_r) -> tuple:
+        """
+        Return the dynamics with the mimic joints eliminated: ``M_r qdd_r + h_r = tau_r``.
+
+        ``M_r = Tᵀ M(q) T`` and ``h_r = Tᵀ h(q, T qd_r)`` at ``q = T q_r + b``; a full
+        generalized force tau acts on the reduced coordinates as ``tau_r = Tᵀ tau``.
+
+        Parameters
+        ----------
+        q_r, qd_r : array_like, shape (r,)
+            Coordinates and velocities of ``independent_joint_names``.
+
+        Returns
+        -------
+        tuple
+            ``(M_r, h_r)`` of shapes (r, r) and (r,).
+
+        """
+        t = self._mimic_matrix
+        q = self.expand(q_r)
+        qd = t @ self._vector(qd_r, 'qd_r', t.shape[1])
+        kin = self._kinematics(q)
+        h = self._rnea(kin, qd, np.zeros(self.n), self.gravity)
+        return t.T @ self._crba(kin) @ t, t.T @ h
+
+    def reduced_forward_dynamics(self, q_r, qd_r, tau_r) -> np.ndarray:
+        """
+        Return ``qdd_r = M_r⁻¹ (tau_r - h_r)`` (shape (r,)) of the reduced model.
+
+        Parameters
+        ----------
+        q_r, qd_r, tau_r : array_like, shape (r,)
+            Reduced coordinates, velocities and generalized forces (``tau_r = Tᵀ tau``).
+
+        Returns
+        -------
+        numpy.ndarray, shape (r,)
+            The accelerations of ``independent_joint_names``.
+
+        """
+        m_r, h_r = self.reduced_dynamics(q_r, qd_r)
+        tau_r = self._vector(tau_r, 'tau_r', m_r.shape[0])
+        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(m_r), tau_r - h_r)
+
+
+def _parse_link(link) -> _Link:
+    inertial = link.inertial
+    if inertial is None or not inertial.mass:
+        return _Link(link.name, 0.0, np.zeros(3), np.zeros((3, 3)))
+    xyz, rot = _pose(inertial.origin)
+    tensor = np.zeros((3, 3)) if inertial.inertia is None \
+        else np.array(inertial.inertia.to_matrix(), dtype=float)
+    return _Link(link.name, float(inertial.mass), xyz, rot @ tensor @ rot.T)
+
+
+def _parse_joint(joint, coordinate) -> _Joint:
+    xyz, rot = _pose(joint.origin)
+    axis = np.array([1.0, 0.0, 0.0] if joint.axis is None else joint.axis, dtype=float)
+    norm = np.linalg.norm(axis)
+    if joint.type in MOVING_TYPES and not norm > 0.0:
+        raise ValueError(f'joint {joint.name!r}: the axis is zero')
+    return _Joint(joint.name, joint.type, xyz, rot, axis / norm if norm > 0.0 else axis,
+                  coordinate)
+
+
+def _pose(origin) -> tuple:
+    if origin is None:
+        return np.zeros(3), np.eye(3)
+    xyz = np.zeros(3) if origin.xyz is None else np.array(origin.xyz, dtype=float)
+    return xyz, rpy_matrix([0.0, 0.0, 0.0] if origin.rpy is None else origin.rpy)
+
+
+def _resolve_mimic(mimic: dict, joint_names: list) -> dict:
+    """Map each mimic joint to (independent leader, multiplier, offset), resolving chains."""
+    out = {}
+    for name in mimic:
+        multiplier, offset = 1.0, 0.0
+        current, seen = name, []
+        while current in mimic:
+            if current in seen:
+                raise ValueError(f'mimic joints form a cycle: {seen}')
+            seen.append(current)
+            leader, m, b = mimic[current]
+            if leader not in joint_names:
+                raise ValueError(f'joint {current!r} mimics {leader!r}, which is not a '
+                                 'revolute, continuous or prismatic joint of this robot')
+            # q_current = m q_leader + b; composing with what maps current to name.
+            multiplier, offset = multiplier * m, multiplier * b + offset
+            current = leader
+        out[name] = (current, multiplier, offset)
+    return out
+
+
+# -------------------------------------------------------------------- the planar 2R arm
+
+#: Parameters of the textbook planar 2R arm: masses (kg), the first link's length l1,
+#: the distances lc1, lc2 of the centres of mass from their joints (m), the inertias
+#: i1, i2 about the joint axis through each centre of mass (kg m²) and g (m/s²).
+TwoLinkParams = collections.namedtuple('TwoLinkParams', 'm1 m2 l1 lc1 lc2 i1 i2 g')
+
+#: The parameters of ``two_link_arm.urdf`` (and of ``two_link_arm_rotated.urdf``).
+TWO_LINK_PARAMS = TwoLinkParams(m1=1.3, m2=0.8, l1=0.5, lc1=0.22, lc2=0.17,
+                                i1=0.021, i2=0.011, g=9.81)
+
+#: The constant rotation of each link frame of ``two_link_arm_rotated.urdf`` relative to
+#: the same link's frame in ``two_link_arm.urdf`` (rpy): ``R_rotated = R_plain Rpy(off)``.
+TWO_LINK_ROTATED_FRAME_RPY = {'world': (0.0, 0.0, 0.0), 'base_link': (0.4, -0.3, 0.7),
+                              'upper_arm': (-0.6, 0.25, 1.1), 'forearm': (0.9, 0.5, -0.35)}
+
+
+def two_link_closed_form(params: TwoLinkParams) -> tuple:
+    """
+    Return M(q) and h(q, qd) of the planar 2R arm, written from its Lagrangian.
+
+    Both joints turn about the horizontal y axis; at q = 0 the arm hangs straight down
+    and q1 is the first link's angle from the downward vertical, q2 the second link's
+    angle relative to the first. The centres of mass in the x-z plane are
+    ``c1 = -lc1 (sin q1, cos q1)`` and ``c2 = -l1 (sin q1, cos q1) - lc2 (sin(q1 + q2),
+    cos(q1 + q2))``, so ``T = ½ qdᵀ M qd`` and ``V = -g (m1 lc1 cos q1 + m2 (l1 cos q1 +
+    lc2 cos(q1 + q2)))`` give
+
+        M11 = i1 + i2 + m1 lc1² + m2 (l1² + lc2² + 2 l1 lc2 cos q2)
+        M12 = M21 = i2 + m2 (lc2² + l1 lc2 cos q2),    M22 = i2 + m2 lc2²
+        h1 = -m2 l1 lc2 sin q2 (2 qd1 qd2 + qd2²) + g1,    h2 = m2 l1 lc2 sin q2 qd1² + g2
+        g1 = g (m1 lc1 sin q1 + m2 (l1 sin q1 + lc2 sin(q1 + q2))),  g2 = g m2 lc2 sin(q1 + q2)
+
+    Parameters
+    ----------
+    params : TwoLinkParams
+        Masses, lengths, inertias and g (see ``TwoLinkParams``).
+
+    Returns
+    -------
+    tuple
+        ``(mass_matrix, bias)``: ``mass_matrix(q)`` returns shape (2, 2) and
+        ``bias(q, qd)`` returns h, shape (2,), for q, qd of shape (2,).
+
+    """
+    m1, m2, l1, lc1, lc2, i1, i2, g = params
+
+    def mass_matrix(q) -> np.ndarray:
+        c2 = np.cos(q[1])
+        m11 = i1 + i2 + m1 * lc1 ** 2 + m2 * (l1 ** 2 + lc2 ** 2 + 2.0 * l1 * lc2 * c2)
+        m12 = i2 + m2 * (lc2 ** 2 + l1 * lc2 * c2)
+        return np.array([[m11, m12], [m12, i2 + m2 * lc2 ** 2]])
+
+    def bias(q, qd) -> np.ndarray:
+        s2 = np.sin(q[1])
+        s1, s12 = np.sin(q[0]), np.sin(q[0] + q[1])
+        coupling = m2 * l1 * lc2 * s2
+        g1 = g * (m1 * lc1 * s1 + m2 * (l1 * s1 + lc2 * s12))
+        g2 = g * m2 * lc2 * s12
+        return np.array([-coupling * (2.0 * qd[0] * qd[1] + qd[1] ** 2) + g1,
+                         coupling * qd[0] ** 2 + g2])
+
+    return mass_matrix, bias
