@@ -822,3 +822,17 @@ def two_link_closed_form(params: TwoLinkParams) -> tuple:
                          coupling * qd[0] ** 2 + g2])
 
     return mass_matrix, bias
+
+
+def xacro_arm_params(link_length: float = 0.4) -> TwoLinkParams:
+    """
+    Return the 2R-arm parameters of ``xacro_arm.urdf.xacro`` expanded with ``link_length``.
+
+    Its links are uniform rods of 1 kg and radius 0.02 m hanging from their joints, so
+    ``lc = L / 2`` and the inertia about the joint axis through the centre of mass is
+    ``m (L² / 12 + r² / 4)``.
+    """
+    mass, radius = 1.0, 0.02
+    inertia = mass * (link_length ** 2 / 12.0 + radius ** 2 / 4.0)
+    return TwoLinkParams(m1=mass, m2=mass, l1=link_length, lc1=link_length / 2.0,
+                         lc2=link_length / 2.0, i1=inertia, i2=inertia, g=9.81)
