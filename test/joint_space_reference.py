@@ -9,7 +9,7 @@ URDF itself with ``urdf_parser_py`` and computes the joint-space dynamics
 
 from the textbook recursions of Featherstone, *Rigid Body Dynamics Algorithms* (2008):
 the recursive Newton-Euler algorithm (RNEA, ch. 5) for ``h`` and inverse dynamics, and the
-composite-rigid-body algorithm (CRBA, ch. 6) for ``M``. It imports only numpy, scipy and
+composite-rigid-body algorithm (CRBA, ch. 6) for ``M``. It imports only numpy and
 urdf_parser_py, nothing of the simulator.
 
 Conventions
@@ -46,9 +46,10 @@ import os
 
 import numpy as np
 
-import scipy.linalg
-
 from urdf_parser_py.urdf import URDF
+
+_EYE3 = np.eye(3)
+_EYE4 = np.eye(4)
 
 #: The directory of the test robots (hand-written URDF and xacro files).
 URDF_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'urdf')
@@ -90,61 +91,61 @@ def rpy_matrix(rpy) -> np.ndarray:
     return rz @ ry @ rx
 
 
-def skew(v) -> np.ndarray:
-    """Return the cross-product matrix ``[v]x`` (shape (3, 3)) of a vector v (shape (3,))."""
-    x, y, z = v
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Return the row-wise cross products of a and b, shapes (..., 3) (faster than np.cross)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def axis_angle_matrix(axis, angle: float) -> np.ndarray:
+def _matvecs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Return the products a_l b_l of matrices a (m, i, j) and vectors b (m, j), (m, i)."""
+    return (a @ b[..., None])[..., 0]
+
+
+def _skews(v: np.ndarray) -> np.ndarray:
+    """Return the cross-product matrices (shape (m, 3, 3)) of vectors v (shape (m, 3))."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
+
+
+def spatial_inertias(mass, com_world, inertia_com_world) -> np.ndarray:
     """
-    Return the rotation by ``angle`` (rad) about a unit ``axis`` (shape (3,)), (3, 3).
-
-    Rodrigues' formula ``R = 1 + sin(a) K + (1 - cos(a)) K²`` with ``K = [axis]x``.
-    """
-    k = skew(axis)
-    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
-
-
-def spatial_inertia(mass: float, com_world, inertia_com_world) -> np.ndarray:
-    """
-    Return a body's spatial inertia about the world origin (Featherstone eq. 2.63).
+    Return bodies' spatial inertias about the world origin (Featherstone eq. 2.63).
 
     Parameters
     ----------
-    mass : float
-        Mass in kg.
-    com_world : array_like, shape (3,)
-        Centre of mass in world coordinates, m.
-    inertia_com_world : array_like, shape (3, 3)
-        Rotational inertia about the centre of mass, world axes, kg m².
+    mass : array_like, shape (m,)
+        Masses in kg.
+    com_world : array_like, shape (m, 3)
+        Centres of mass in world coordinates, m.
+    inertia_com_world : array_like, shape (m, 3, 3)
+        Rotational inertias about the centres of mass, world axes, kg m².
 
     Returns
     -------
-    numpy.ndarray, shape (6, 6)
+    numpy.ndarray, shape (m, 6, 6)
         ``[[I_c + m [c]x [c]xᵀ, m [c]x], [m [c]xᵀ, m 1]]`` (angular rows first).
 
     """
-    cx = skew(com_world)
-    out = np.empty((6, 6))
-    out[:3, :3] = np.asarray(inertia_com_world) + mass * cx @ cx.T
-    out[:3, 3:] = mass * cx
-    out[3:, :3] = mass * cx.T
-    out[3:, 3:] = mass * np.eye(3)
+    mass = np.asarray(mass, dtype=float)[:, None, None]
+    cx = _skews(np.asarray(com_world, dtype=float))
+    out = np.empty((len(mass), 6, 6))
+    out[:, :3, :3] = inertia_com_world + mass * cx @ cx.transpose(0, 2, 1)
+    out[:, :3, 3:] = mass * cx
+    out[:, 3:, :3] = mass * cx.transpose(0, 2, 1)
+    out[:, 3:, 3:] = mass * _EYE3
     return out
 
 
-def motion_cross(v) -> np.ndarray:
-    """Return the spatial motion cross product ``v x`` (shape (6, 6)) of a twist v (6,)."""
-    out = np.zeros((6, 6))
-    out[:3, :3] = out[3:, 3:] = skew(v[:3])
-    out[3:, :3] = skew(v[3:])
+def _motion_cross_matrices(v: np.ndarray) -> np.ndarray:
+    """Return ``v x = [[[w]x, 0], [[v_O]x, [w]x]]`` (shape (m, 6, 6)) of twists v (m, 6)."""
+    out = np.zeros(v.shape[:-1] + (6, 6))
+    out[..., :3, :3] = out[..., 3:, 3:] = _skews(v[..., :3])
+    out[..., 3:, :3] = _skews(v[..., 3:])
     return out
-
-
-def force_cross(v) -> np.ndarray:
-    """Return the spatial force cross product ``v x* = -(v x)ᵀ`` (shape (6, 6))."""
-    return -motion_cross(v).T
 
 
 class _Link:
@@ -172,12 +173,13 @@ class _Joint:
 
 
 class _Kinematics:
-    """Link frames and joint motion subspaces at one configuration (world coordinates)."""
+    """Link frames, joint motion subspaces and spatial inertias at one configuration."""
 
-    def __init__(self, p, rot, subspace):
-        self.p = p                          # (n_links, 3) link frame origins
+    def __init__(self, p, rot, subspace, inertia):
+        self.p = p                          # (n_links, 3) link frame origins, world
         self.rot = rot                      # (n_links, 3, 3) link frame -> world
         self.subspace = subspace            # (n_links, 6) S of each link's joint (0: fixed)
+        self.inertia = inertia              # (n_links, 6, 6) about the world origin
 
 
 class JointSpaceModel:
@@ -193,7 +195,8 @@ class JointSpaceModel:
     - ``gravity`` (numpy.ndarray, shape (3,)): m/s², world frame.
     - ``damping``, ``friction`` (numpy.ndarray, shape (n,)): the URDF ``<dynamics>``
       values (0 when absent); never applied.
-    - ``limits`` (dict str -> JointLimit or None): the URDF ``<limit>`` of each coordinate.
+    - ``limits`` (dict str -> JointLimit or None): the URDF ``<limit>`` of each coordinate,
+      as urdf_parser_py reads it (a missing lower or upper reads as 0).
     - ``mimic_map`` (dict str -> (str, float, float)): mimic joint -> (leader, multiplier,
       offset) with ``q_mimic = multiplier * q_leader + offset``; chains are resolved, so
       the leader is always an independent joint.
@@ -205,7 +208,6 @@ class JointSpaceModel:
         """Assemble a model from parsed links (parents first); use :meth:`from_urdf`."""
         self.robot_name = robot_name
         self._links = links
-        self._index = {link.name: i for i, link in enumerate(links)}
         self.root_link = links[0].name
         self.link_names = [link.name for link in links]
         moving = sorted((j for j in joints if j.coordinate is not None),
@@ -231,6 +233,44 @@ class JointSpaceModel:
                 self._mimic_offset[i] = offset
         self._mimic_matrix.flags.writeable = False
         self._mimic_offset.flags.writeable = False
+        self._arrays()
+
+    def _arrays(self):
+        """Lay the tree out as arrays over the links (index 0: the root)."""
+        links = self._links
+        count = len(links)
+        self._parent_list = [0] + [link.parent for link in links[1:]]
+        self._parent = np.array(self._parent_list)
+        # support[i, j] = 1 where link j is link i or one of its ancestors (the root, which
+        # does not move, left out): a sum over the path from the root is a product with it.
+        self._support = np.zeros((count, count))
+        for i in range(1, count):
+            j = i
+            while j > 0:
+                self._support[i, j] = 1.0
+                j = links[j].parent
+        joints = [None] + [link.joint for link in links[1:]]
+        kinds = ['fixed'] + [joint.kind for joint in joints[1:]]
+        self._revolute = np.array([kind in ('revolute', 'continuous') for kind in kinds])
+        self._prismatic = np.array([kind == 'prismatic' for kind in kinds])
+        self._revolute_column = self._revolute[:, None].astype(float)
+        self._prismatic_column = self._prismatic[:, None].astype(float)
+        # Each link's coordinate, n (a padded zero) for the root and fixed joints.
+        self._coordinate = np.array([self.n if joint is None or joint.coordinate is None
+                                     else joint.coordinate for joint in joints])
+        self._moving_links = np.argsort(self._coordinate, kind='stable')[:self.n]
+        self._moving_rows = self._moving_links[:, None]
+        self._strict_support = self._support - np.diag(np.diag(self._support))
+        self._origin_xyz = np.array([np.zeros(3)] + [j.origin_xyz for j in joints[1:]])
+        self._origin_rot = np.array([np.eye(3)] + [j.origin_rot for j in joints[1:]])
+        axis = np.array([np.zeros(3)] + [j.axis if j.kind in MOVING_TYPES else np.zeros(3)
+                                         for j in joints[1:]])
+        self._axis_parent = _matvecs(self._origin_rot, axis)
+        self._k = _skews(axis * self._revolute[:, None])
+        self._k2 = self._k @ self._k
+        self._mass = np.array([0.0] + [link.mass for link in links[1:]])
+        self._com_link = np.array([link.com_link for link in links])
+        self._inertia_link = np.array([link.inertia_link for link in links])
 
     # ---------------------------------------------------------------- construction
 
@@ -336,33 +376,43 @@ class JointSpaceModel:
             raise ValueError(f'{name} must have shape ({size},), got {out.shape}')
         return out
 
+    def _per_link(self, x: np.ndarray) -> np.ndarray:
+        """Return each link's joint coordinate of x (shape (n,)): 0 for root and fixed."""
+        padded = np.zeros(self.n + 1)
+        padded[:self.n] = x
+        return padded[self._coordinate]
+
     def _kinematics(self, q) -> _Kinematics:
-        q = self._vector(q, 'q')
+        q_link = self._per_link(self._vector(q, 'q'))
+        angle = np.where(self._revolute, q_link, 0.0)[:, None, None]
+        slide = np.where(self._prismatic, q_link, 0.0)[:, None]
+        # Each link frame in its parent's: the joint origin, then the joint motion.
+        local_rot = self._origin_rot @ (_EYE3 + np.sin(angle) * self._k
+                                        + (1.0 - np.cos(angle)) * self._k2)
         count = len(self._links)
-        p = np.zeros((count, 3))
-        rot = np.zeros((count, 3, 3))
-        rot[0] = np.eye(3)
+        local = np.zeros((count, 4, 4))
+        local[:, :3, :3] = local_rot
+        local[:, :3, 3] = self._origin_xyz + slide * self._axis_parent
+        local[:, 3, 3] = 1.0
+        pose = [_EYE4]              # homogeneous link -> world transforms
+        for i, parent in enumerate(self._parent_list[1:], start=1):
+            pose.append(pose[parent] @ local[i])
+        pose = np.array(pose)
+        p = pose[:, :3, 3]
+        rot = pose[:, :3, :3]
+        parent = self._parent
+        rot_parent = rot[parent]
+        axis_world = _matvecs(rot_parent, self._axis_parent)
+        p_joint = p[parent] + _matvecs(rot_parent, self._origin_xyz)
+        # Motion subspaces: [a; p_joint x a] (revolute), [0; a] (prismatic), 0 (fixed).
         subspace = np.zeros((count, 6))
-        for i in range(1, count):
-            link = self._links[i]
-            joint = link.joint
-            parent = link.parent
-            p_joint = p[parent] + rot[parent] @ joint.origin_xyz
-            rot_joint = rot[parent] @ joint.origin_rot
-            axis_world = rot_joint @ joint.axis
-            if joint.kind == 'prismatic':
-                p[i] = p_joint + q[joint.coordinate] * axis_world
-                rot[i] = rot_joint
-                subspace[i, 3:] = axis_world
-            elif joint.kind == 'fixed':
-                p[i] = p_joint
-                rot[i] = rot_joint
-            else:   # revolute, continuous: the child origin stays on the axis
-                p[i] = p_joint
-                rot[i] = rot_joint @ axis_angle_matrix(joint.axis, q[joint.coordinate])
-                subspace[i, :3] = axis_world
-                subspace[i, 3:] = np.cross(p_joint, axis_world)
-        return _Kinematics(p, rot, subspace)
+        subspace[:, :3] = axis_world * self._revolute_column
+        subspace[:, 3:] = (_cross(p_joint, axis_world) * self._revolute_column
+                           + axis_world * self._prismatic_column)
+        com_world = p + _matvecs(rot, self._com_link)
+        inertia_world = rot @ self._inertia_link @ rot.transpose(0, 2, 1)
+        inertia = spatial_inertias(self._mass, com_world, inertia_world)
+        return _Kinematics(p, rot, subspace, inertia)
 
     def fk(self, q) -> dict:
         """
@@ -444,7 +494,7 @@ class JointSpaceModel:
             joint = link.joint
             parent = link.parent
             w[i] = w[parent]
-            v[i] = v[parent] + np.cross(w[parent], kin.p[i] - kin.p[parent])
+            v[i] = v[parent] + _cross(w[parent], kin.p[i] - kin.p[parent])
             if joint.coordinate is None:
                 continue
             axis_world = kin.rot[parent] @ joint.origin_rot @ joint.axis
@@ -482,62 +532,45 @@ class JointSpaceModel:
 
     # ---------------------------------------------------------------- dynamics
 
-    def _spatial_inertias(self, kin: _Kinematics) -> np.ndarray:
-        out = np.zeros((len(self._links), 6, 6))
-        for i, link in enumerate(self._links):
-            if i > 0 and link.mass > 0.0:
-                rot = kin.rot[i]
-                out[i] = spatial_inertia(link.mass, kin.p[i] + rot @ link.com_link,
-                                         rot @ link.inertia_link @ rot.T)
-        return out
-
     def _rnea(self, kin, qd, qdd, gravity) -> np.ndarray:
-        """Featherstone's RNEA (table 5.1) with every quantity in world coordinates."""
-        count = len(self._links)
-        inertia = self._spatial_inertias(kin)
-        v = np.zeros((count, 6))
-        a = np.zeros((count, 6))
-        a[0, 3:] = -gravity           # the base accelerates up: gravity on every body
-        f = np.zeros((count, 6))
-        for i in range(1, count):
-            link = self._links[i]
-            parent = link.parent
-            coordinate = link.joint.coordinate
-            s = kin.subspace[i]
-            v[i] = v[parent]
-            a[i] = a[parent]
-            if coordinate is not None:
-                v[i] += s * qd[coordinate]
-                # S is fixed in body i, so in world coordinates d/dt S = v_i x S.
-                a[i] += s * qdd[coordinate] + motion_cross(v[i]) @ (s * qd[coordinate])
-            f[i] = inertia[i] @ a[i] + force_cross(v[i]) @ (inertia[i] @ v[i])
-        tau = np.zeros(self.n)
-        for i in range(count - 1, 0, -1):
-            link = self._links[i]
-            if link.joint.coordinate is not None:
-                tau[link.joint.coordinate] = kin.subspace[i] @ f[i]
-            f[link.parent] += f[i]
-        return tau
+        """
+        Return tau by Featherstone's RNEA, every quantity in world coordinates.
+
+        The forward pass ``v_i = v_p + S_i qd_i``, ``a_i = a_p + S_i qdd_i + v_i x S_i
+        qd_i`` (S_i is fixed in body i, so d/dt S_i = v_i x S_i in world coordinates),
+        with ``a_0 = -g`` (gravity as an upward acceleration of the base), sums over each
+        link's path from the root; the backward pass ``f_p += f_i`` sums over each link's
+        subtree. Both are products with the support matrix.
+        """
+        support = self._support
+        s = kin.subspace
+        s_qd = s * self._per_link(qd)[:, None]
+        s_qdd = s * self._per_link(qdd)[:, None]
+        v = support @ s_qd
+        cross = _motion_cross_matrices(v)       # v x; the force cross product is -(v x)ᵀ
+        a = support @ (s_qdd + _matvecs(cross, s_qd))
+        a[:, 3:] -= gravity
+        inertia = kin.inertia
+        f = (_matvecs(inertia, a)
+             - np.einsum('lji,lj->li', cross, _matvecs(inertia, v)))
+        f_subtree = support.T @ f
+        return np.einsum('li,li->l', s, f_subtree)[self._moving_links]
 
     def _crba(self, kin) -> np.ndarray:
-        """Featherstone's CRBA (table 6.2) with every quantity in world coordinates."""
-        count = len(self._links)
-        composite = self._spatial_inertias(kin)
-        for i in range(count - 1, 0, -1):
-            composite[self._links[i].parent] += composite[i]
-        m = np.zeros((self.n, self.n))
-        for i in range(1, count):
-            row = self._links[i].joint.coordinate
-            if row is None:
-                continue
-            force = composite[i] @ kin.subspace[i]
-            j = i
-            while j > 0:
-                column = self._links[j].joint.coordinate
-                if column is not None:
-                    m[row, column] = m[column, row] = kin.subspace[j] @ force
-                j = self._links[j].parent
-        return m
+        """
+        Return M by Featherstone's CRBA, every quantity in world coordinates.
+
+        ``I^c_i`` is the sum of the spatial inertias of link i's subtree, and ``M_ij =
+        S_iᵀ I^c_i S_j`` for a joint j on the path from the root to link i (M_ji by
+        symmetry; 0 for joints on different branches).
+        """
+        support = self._support
+        s = kin.subspace
+        composite = np.einsum('ji,jkl->ikl', support, kin.inertia)
+        force = _matvecs(composite, s)
+        products = force @ s.T                  # [i, j] = S_jᵀ I^c_i S_i
+        full = products * support + (products * self._strict_support).T
+        return full[self._moving_rows, self._moving_links]
 
     def mass_matrix(self, q) -> np.ndarray:
         """
@@ -595,7 +628,7 @@ class JointSpaceModel:
 
     def forward_dynamics(self, q, qd, tau) -> np.ndarray:
         """
-        Return ``qdd = M(q)⁻¹ (tau - h(q, qd))`` (CRBA, RNEA and a Cholesky solve).
+        Return ``qdd = M(q)⁻¹ (tau - h(q, qd))`` (CRBA, RNEA and a linear solve).
 
         Parameters
         ----------
@@ -612,7 +645,7 @@ class JointSpaceModel:
         tau = self._vector(tau, 'tau')
         kin = self._kinematics(q)
         h = self._rnea(kin, qd, np.zeros(self.n), self.gravity)
-        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(self._crba(kin)), tau - h)
+        return np.linalg.solve(self._crba(kin), tau - h)
 
     def energy(self, q, qd) -> tuple:
         """
@@ -640,7 +673,7 @@ class JointSpaceModel:
             if name == self.root_link:
                 continue        # fixed: no kinetic energy, a constant potential
             v_origin, w = twists[name]
-            v_com = v_origin + np.cross(w, com - frames[name][0])
+            v_com = v_origin + _cross(w, com - frames[name][0])
             kinetic += 0.5 * mass * (v_com @ v_com) + 0.5 * w @ inertia @ w
             potential -= mass * (self.gravity @ com)
         return kinetic, potential
@@ -708,7 +741,7 @@ class JointSpaceModel:
         """
         m_r, h_r = self.reduced_dynamics(q_r, qd_r)
         tau_r = self._vector(tau_r, 'tau_r', m_r.shape[0])
-        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(m_r), tau_r - h_r)
+        return np.linalg.solve(m_r, tau_r - h_r)
 
 
 def _parse_link(link) -> _Link:
