@@ -53,6 +53,9 @@ from . import rotation as so3
 from .bodies import RigidBody
 from .constraints import Constraint, perpendicular_frame
 from .errors import SpecError
+from .kernels.joints import joint_coordinates
+from .kernels.layout import (JOINT, O_ANG_VEL_WORLD, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD,
+                             O_QUAT_BODY_WORLD)
 from .validate import finite_array, finite_scalar
 
 
@@ -620,7 +623,13 @@ class JointSpace:
                                       for j in self.joints])
         self.velocity_limit = np.array([np.inf if not j.spec.velocity else j.spec.velocity
                                         for j in self.joints])
-        self.has_velocity_limits = bool(np.any(np.isfinite(self.velocity_limit)))
+        self.table = np.array([JOINT.row(parent=self.parent[i], child=self.child[i],
+                                         rotary=float(self.rotary[i]), p_jp=self.p_jp[i],
+                                         R_jp=self.R_jp[i].ravel(), axis=self.axis[i],
+                                         e1=self.e1[i], e2=self.e2[i],
+                                         velocity_limit=self.velocity_limit[i])
+                               for i in range(k)]).reshape(k, JOINT.width)
+        self._rates = np.zeros(k)
         self.reset()
 
     def __len__(self) -> int:
@@ -646,76 +655,49 @@ class JointSpace:
     # -- reading ----------------------------------------------------------------------------
 
     @staticmethod
-    def _with_world(out: tuple) -> tuple:
-        pos, quat, vel, omega = (np.asarray(a) for a in out[:4])
-        R = so3.quat_to_matrix(quat)
+    def _with_world(out: np.ndarray) -> tuple:
+        """Origins, rotations, origin velocities, angular velocities; the world appended."""
+        pos = out[:, O_ORIGIN_WORLD:O_ORIGIN_WORLD + 3]
+        R = so3.quat_to_matrix(out[:, O_QUAT_BODY_WORLD:O_QUAT_BODY_WORLD + 4])
+        vel = out[:, O_ORIGIN_VEL_WORLD:O_ORIGIN_VEL_WORLD + 3]
+        omega = out[:, O_ANG_VEL_WORLD:O_ANG_VEL_WORLD + 3]
         return (np.vstack([pos, np.zeros((1, 3))]), np.concatenate([R, np.eye(3)[None]]),
                 np.vstack([vel, np.zeros((1, 3))]), np.vstack([omega, np.zeros((1, 3))]))
 
-    def raw(self, outputs: tuple) -> tuple:
+    def track(self, out: np.ndarray) -> None:
         """
-        Wrapped angles and slides, and rates, from the bodies' outputs.
+        Update the unwrapped coordinates from the bodies' outputs after a step.
 
         Parameters
         ----------
-        outputs : tuple
-            :meth:`.bodies.BodySet.outputs` of all bodies.
-
-        Returns
-        -------
-        positions, velocities : ndarray, shape (k,)
-            Angles in (-π, π].
+        out : ndarray, shape (n, O_WIDTH)
+            The outputs of the new state (:attr:`.bodies.BodySet.outputs_cache`).
 
         """
-        p, R, v, w = self._with_world(outputs)
-        a, b = self.child, self.parent
-        R_joint = np.einsum('kij,kjl->kil', R[b], self.R_jp)       # joint frame, world
-        p_joint = p[b] + np.einsum('kij,kj->ki', R[b], self.p_jp)
-        R_rel = np.einsum('kji,kjl->kil', R_joint, R[a])            # child in joint frame
-        Re1 = np.einsum('kij,kj->ki', R_rel, self.e1)
-        angle = np.arctan2(np.einsum('ki,ki->k', self.e2, Re1),
-                           np.einsum('ki,ki->k', self.e1, Re1))
-        slide = np.einsum('ki,kji,kj->k', self.axis, R_joint, p[a] - p_joint)
-        axis_world = np.einsum('kij,kj->ki', R_joint, self.axis)
-        spin = np.einsum('ki,ki->k', axis_world, w[a] - w[b])
-        drift = v[a] - v[b] - so3.cross(w[b], p[a] - p[b])
-        glide = np.einsum('ki,ki->k', axis_world, drift)
-        rotary = self.rotary
-        return np.where(rotary, angle, slide), np.where(rotary, spin, glide)
-
-    def track(self, outputs: tuple) -> np.ndarray:
-        """Update the unwrapped positions from the state after a step; return the rates."""
-        raw, rate = self.raw(outputs)
-        if self.tracked:
-            turns = np.round((self.positions - raw) / (2.0 * np.pi))
-            raw = np.where(self.rotary, raw + 2.0 * np.pi * turns, raw)
-        self.positions = raw
+        over = joint_coordinates(out, self.table, self.tracked, self.positions, self._rates)
         self.tracked = True
-        if self.has_velocity_limits:
-            self.counters['velocity_limit_excursions'] += int(
-                np.count_nonzero(np.abs(rate) > self.velocity_limit))
-        return rate
+        self.counters['velocity_limit_excursions'] += over
 
-    def state(self, outputs: tuple, time_mid: float, names: Optional[Sequence] = None
+    def state(self, out: np.ndarray, time_mid: float, names: Optional[Sequence] = None
               ) -> JointState:
         """
-        Joint state now (see :class:`JointState`).
+        Joint state of the outputs ``out`` (n, O_WIDTH) (see :class:`JointState`).
 
         ``time_mid`` is the midpoint of the last step: an effort command counts
         when it acted over that step.
         """
-        raw, rate = self.raw(outputs)
-        if self.tracked:
-            turns = np.round((self.positions - raw) / (2.0 * np.pi))
-            raw = np.where(self.rotary, raw + 2.0 * np.pi * turns, raw)
+        if names is not None:
+            idx = np.array([self.lookup(name, f'names[{i}]') for i, name in enumerate(names)],
+                           dtype=int)
+        positions, rates = self.positions.copy(), np.empty(len(self.joints))
+        joint_coordinates(out, self.table, self.tracked, positions, rates)
         window = self.effort_window
         acting = (window[:, 0] <= time_mid) & (time_mid < window[:, 1])
         efforts = np.where(acting, self.efforts, 0.0)
         if names is None:
-            return JointState(list(self.names), raw, rate, efforts)
-        idx = np.array([self.lookup(name, f'names[{i}]') for i, name in enumerate(names)],
-                       dtype=int)
-        return JointState([self.names[i] for i in idx], raw[idx], rate[idx], efforts[idx])
+            return JointState(list(self.names), positions, rates, efforts)
+        return JointState([self.names[i] for i in idx], positions[idx], rates[idx],
+                          efforts[idx])
 
     # -- commands ---------------------------------------------------------------------------
 
@@ -769,7 +751,7 @@ class JointSpace:
 
     # -- setting (forward kinematics) -------------------------------------------------------
 
-    def poses_for(self, outputs: tuple, positions: dict, velocities: dict) -> tuple:
+    def poses_for(self, out: np.ndarray, positions: dict, velocities: dict) -> tuple:
         """
         Body-origin poses and twists with the joints at new coordinates.
 
@@ -783,15 +765,16 @@ class JointSpace:
             World frame, of body origins.
 
         """
-        q, qd = self.state(outputs, 0.0).positions.copy(), self.raw(outputs)[1]
+        now = self.state(out, 0.0)
+        q, qd = now.positions, now.velocities
         for name, value in positions.items():
             q[self.lookup(name, f'positions.{name}')] = finite_scalar(value,
                                                                       f'positions.{name}')
         for name, value in velocities.items():
             qd[self.lookup(name, f'velocities.{name}')] = finite_scalar(value,
                                                                         f'velocities.{name}')
-        p, R, v, w = (x.copy() for x in self._with_world(outputs))
-        p0, R0, v0, w0 = (x.copy() for x in self._with_world(outputs))
+        p, R, v, w = (x.copy() for x in self._with_world(out))
+        p0, R0, v0, w0 = (x.copy() for x in self._with_world(out))
         index = self.index
         body_index = self.body_index
         for model in self.models:

@@ -157,7 +157,7 @@ class Simulation:
         self.dynamics.solver.dt = self.dt
         self._initial_constraints = list(constraints)
         self.joints = JointSpace(self.bodies.names, self.robots)
-        self._tracking = bool(np.any(self.joints.rotary))
+        self._tracking = len(self.joints) > 0
         self.reset()
 
     # -- time stepping --------------------------------------------------------------------
@@ -216,7 +216,8 @@ class Simulation:
             self.state = new
             self._steps = steps + 1
             if self._tracking:
-                self.joints.track(self.bodies.outputs(new))
+                self.bodies.outputs(new)
+                self.joints.track(self.bodies.outputs_cache.out)
             if self._wrenches is not None and len(self._wrenches):
                 if self._wrenches.remove_expired(new.time):
                     # What reads the model between steps (reactions) must not see them.
@@ -308,7 +309,7 @@ class Simulation:
         self._reconcile_velocities()
         self.joints.reset()
         if len(self.joints):
-            self.joints.track(self.bodies.outputs(self.state))
+            self.joints.track(self._outputs_now())
 
     def _inconsistent(self, name: str, field: str, outcome: str,
                       residual: float) -> InconsistentConstraintError:
@@ -378,8 +379,12 @@ class Simulation:
         Positions are 0 in the URDF's zero configuration; angles count turns.
         Efforts are what the joint's actuation applied over the last step.
         """
-        return self.joints.state(self.bodies.outputs(self.state), self.time - 0.5 * self.dt,
-                                 names)
+        return self.joints.state(self._outputs_now(), self.time - 0.5 * self.dt, names)
+
+    def _outputs_now(self) -> np.ndarray:
+        """The bodies' outputs (n, O_WIDTH) of the current state."""
+        self.bodies.outputs(self.state)
+        return self.bodies.outputs_cache.out
 
     def set_joint_state(self, positions: dict, velocities: Optional[dict] = None) -> None:
         """
@@ -403,13 +408,12 @@ class Simulation:
         if not isinstance(velocities, dict):
             raise SpecError('velocities', f'expected a mapping joint -> velocity, '
                                           f'got {velocities!r}')
-        out = self.bodies.outputs(self.state)
-        pose = self.joints.poses_for(out, positions, velocities)
+        pose = self.joints.poses_for(self._outputs_now(), positions, velocities)
         self.state = self.bodies.state_from_origins(self.time, *pose)
         self.dynamics.changed()
         self._reconcile_velocities()
         self.joints.tracked = False   # the new angles are taken as they are
-        self.joints.track(self.bodies.outputs(self.state))
+        self.joints.track(self._outputs_now())
         for name, value in positions.items():
             i = self.joints.index[name]
             if self.joints.rotary[i]:

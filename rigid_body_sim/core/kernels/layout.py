@@ -252,6 +252,12 @@ FRAME = Columns('frame', [('quat_body_principal', 4), ('com_body', 3)])
 OUTPUT = Columns('output', [('origin_world', 3), ('quat_body_world', 4),
                             ('origin_vel_world', 3), ('ang_vel_world', 3),
                             ('origin_vel_body', 3), ('ang_vel_body', 3)])
+#: ``joint`` (k, J_WIDTH) of :mod:`.joints`: a one-coordinate joint's bodies (the world
+#: is index n), whether it rotates, the joint frame in the parent body's frame (position,
+#: rotation row by row), the frame (axis, e1, e2) in the joint frame, the speed limit.
+JOINT = Columns('joint', [('parent', 1), ('child', 1), ('rotary', 1), ('p_jp', 3),
+                          ('R_jp', 9), ('axis', 3), ('e1', 3), ('e2', 3),
+                          ('velocity_limit', 1)])
 #: ``row_par`` (m, PAR_WIDTH) of the constraint rows (:mod:`.rows`): the lever arms on
 #: bodies a and b (principal frames), the axes s and e, and a scalar (a length, a cosine).
 ROW_PARAMETERS = Columns('row par', [('ra', 3), ('rb', 3), ('s', 3), ('e', 3), ('scalar', 1)])
@@ -326,7 +332,7 @@ COMPONENT_TABLE = Table('component table',
 _GROUPS = (
     BODY.constants('B_'), WRENCH.constants('W_'), PAR.constants('P_'),
     ROW_PARAMETERS.constants('PAR_'), FRAME.constants('FR_'), OUTPUT.constants('O_'),
-    STATE.constants('S_'), {'V_' + n.upper(): k for k, n in enumerate(VM_ROWS)},
+    JOINT.constants('J_'), STATE.constants('S_'), {'V_' + n.upper(): k for k, n in enumerate(VM_ROWS)},
     {'FS_' + n.upper(): k for k, n in enumerate(FACTOR_STATE_ENTRIES)},
     COMPONENT.constants(), DENSE.constants('D_'), TREE.constants('T_'),
     {'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},
@@ -346,5 +352,5 @@ for _group in _GROUPS:
     _CONSTANTS.update(_group)
 globals().update(_CONSTANTS)
 __all__ = ['BODY', 'COMPONENT', 'COMPONENT_TABLE', 'CONTEXT', 'Columns', 'Count', 'DENSE',
-           'Field', 'FRAME', 'FREE_TABLE', 'Layout', 'LAYOUT_TABLE', 'N_COUNTS', 'OUTPUT', 'PAR',
+           'Field', 'FRAME', 'FREE_TABLE', 'JOINT', 'Layout', 'LAYOUT_TABLE', 'N_COUNTS', 'OUTPUT', 'PAR',
            'ROW_PARAMETERS', 'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]
