@@ -16,7 +16,7 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML', 'rosbags', 'mcap',
-                      'matplotlib'],
+                      'matplotlib', 'urdfdom-py', 'xacro', 'lxml'],
     extras_require={'test': ['pytest', 'mcap-ros2-support']},
     zip_safe=True,
     maintainer='rigid_body_sim developers',
