@@ -117,7 +117,7 @@ build() {
     done
     want=$( (cat requirements.txt package.xml setup.py setup.cfg \
                  interfaces/package.xml interfaces/CMakeLists.txt interfaces/msg/* interfaces/srv/*
-             ls config resource interfaces/msg interfaces/srv
+             ls config launch resource interfaces/msg interfaces/srv
              for pkg in ${vendored[@]+"${vendored[@]}"}; do
                  find "vendor/$pkg" -type f | LC_ALL=C sort
                  find "vendor/$pkg" -type f -print0 | LC_ALL=C sort -z | xargs -0 cat
