@@ -41,6 +41,9 @@ A scene file::
         initial_positions: {joint1: 0.5}    # rad or m; others 0
         initial_velocities: {joint1: 0.0}   # rad/s or m/s
         keep_fixed: [ft_sensor_joint]       # fixed joints kept as welds (reaction published)
+    command_groups:                 # joints commanded together (others take efforts)
+      - {name: arm_controller, joints: [joint1, joint2], interface: position,
+         mode: servo, kp: 100.0, kd: 5.0}   # effort | position | velocity; N m/rad, N m s/rad
 
 A URDF or xacro file is a scene by itself: its robot, with gravity, ``dt``
 0.001 s, ``duration`` 10 s, floating unless it has a ``world`` link.
@@ -63,12 +66,13 @@ import yaml
 from .core import Constraint, Damping, Gravity, RigidBody, Simulation, SpecError
 from .core.effects import AppliedWrenches
 from .core.integrators import INTEGRATORS
-from .core.robots import RobotSpec
+from .core.robots import CommandGroup, RobotSpec
 from .core.validate import finite_array, positive_scalar
 from .urdf import parse_urdf, read_robot_xml, UrdfError
 
 TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constraints',
-            'constraint_time_constant', 'tolerance', 'robots')
+            'constraint_time_constant', 'tolerance', 'robots', 'command_groups')
+GROUP_KEYS = ('name', 'joints', 'interface', 'mode', 'kp', 'kd')
 ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
               'initial_positions', 'initial_velocities', 'keep_fixed')
 ROBOT_SUFFIXES = ('.urdf', '.xacro')
@@ -195,7 +199,8 @@ def _build(data: Any, source: str) -> Scene:
     try:
         sim = Simulation(bodies, [e for _, e in effects], integrator, dt, constraints,
                          time_constant, tolerance=data.get('tolerance'),
-                         robots=[spec for spec, _ in robots])
+                         robots=[spec for spec, _ in robots],
+                         command_groups=_groups(data.get('command_groups') or []))
     except SpecError as exc:
         # Map 'effects[i]...' from the core back to the scene's effect key.
         if exc.field.startswith('effects['):
@@ -221,8 +226,26 @@ def _build(data: Any, source: str) -> Scene:
                  robots=[(spec.prefix, parsed) for spec, parsed in robots], warnings=warnings)
 
 
+def _groups(data: Any) -> list:
+    """Return the scene's joint command groups."""
+    if not isinstance(data, list):
+        raise SpecError('command_groups', f'expected a list of groups, got {data!r}')
+    out = []
+    for i, entry in enumerate(data):
+        field = f'command_groups[{i}]'
+        entry = _mapping(entry, field, GROUP_KEYS)
+        for key in ('name', 'joints'):
+            if key not in entry:
+                raise SpecError(f'{field}.{key}', 'missing (required)')
+        try:
+            out.append(CommandGroup(**entry))
+        except SpecError as exc:
+            raise exc.within(field) from None
+    return out
+
+
 def _robots(data: Any, source: str) -> list:
-    """The scene's robots as (RobotSpec, ParsedUrdf) pairs."""
+    """Return the scene's robots as (RobotSpec, ParsedUrdf) pairs."""
     if not isinstance(data, list):
         raise SpecError('robots', f'expected a list of robots, got {data!r}')
     out = []

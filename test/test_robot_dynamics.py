@@ -7,10 +7,10 @@ joint space from the same files with its own parser (RNEA and CRBA), and the two
 arm also has a closed form written from its Lagrangian.
 """
 
-import numpy as np
-import pytest
 from joint_space_reference import (JointSpaceModel, two_link_closed_form, TWO_LINK_PARAMS,
                                    urdf_path, xacro_arm_params)
+import numpy as np
+import pytest
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.scene import scene_from_dict
 from robot_helpers import joint_accelerations
@@ -81,7 +81,8 @@ def test_rotated_frames_give_the_same_motion():
 
 @pytest.mark.parametrize('seed', [1, 2, 3])
 def test_arm7_accelerations_are_the_joint_space_dynamics(seed):
-    # q̈ of the maximal-coordinate solve (the step's multipliers) = M⁻¹ (τ − h), with the
+    # q̈ of the maximal-coordinate solve (the step's multipliers) = M⁻¹ (τ − D q̇ − h) (the
+    # URDF's joint damping D), with the
     # fixed hand lumped into link7 and the fingers on prismatic joints (their mimic is
     # not enforced yet, so the reference's full model, which ignores it, applies).
     rng = np.random.default_rng(seed)
@@ -97,16 +98,20 @@ def test_arm7_accelerations_are_the_joint_space_dynamics(seed):
     sim.set_joint_efforts(dict(zip(names, tau)))
     js = sim.joint_state()
     np.testing.assert_allclose(js.positions, q, atol=1e-12)
-    expected = reference.forward_dynamics(q, qd, tau)
+    expected = reference.forward_dynamics(q, qd, tau - reference.damping * qd)
     # bound: two solves of a 9-coordinate system (condition ~1e4 from the 0.1 kg fingers)
     # in double precision: 1e-16 · 1e4 · |q̈| ≈ 1e-12 |q̈| (measured 3e-14 |q̈|); 1e-10
     # relative leaves room for another CPU's last bits.
     scale = np.max(np.abs(expected))
     np.testing.assert_allclose(joint_accelerations(sim), expected, atol=1e-10 * scale)
-    # The effort read back is the effort applied (no limit reached).
-    np.testing.assert_array_equal(sim.joint_state().efforts, 0.0)   # nothing acted yet
+    # The effort read back: the command that acted (none yet, then τ: no limit reached)
+    # and the damping torque now.
+    np.testing.assert_allclose(sim.joint_state().efforts, -reference.damping * qd,
+                               rtol=1e-12)
     sim.step()
-    np.testing.assert_array_equal(sim.joint_state().efforts, tau)
+    js = sim.joint_state()
+    np.testing.assert_allclose(js.efforts, tau - reference.damping * js.velocities,
+                               rtol=1e-12, atol=1e-12)
     assert sim.joint_counters()['clamped_efforts'] == 0
 
 

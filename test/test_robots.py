@@ -11,7 +11,7 @@ from robot_helpers import (inertial, joint, joint_accelerations, link, robot,
 from scipy.spatial.transform import Rotation
 
 # A generic inertia tensor (kg m², positive definite, triangle inequality holds).
-TENSOR = dict(ixx=0.30, iyy=0.20, izz=0.25, ixy=0.02, ixz=-0.03, iyz=0.01)
+TENSOR = {'ixx': 0.30, 'iyy': 0.20, 'izz': 0.25, 'ixy': 0.02, 'ixz': -0.03, 'iyz': 0.01}
 
 
 def tensor_matrix(t=TENSOR):
@@ -20,7 +20,7 @@ def tensor_matrix(t=TENSOR):
 
 
 def world_inertia(sim, body):
-    """The inertia tensor of ``body`` about its centre of mass, in its body frame."""
+    """Return the inertia tensor of ``body`` about its centre of mass, in its body frame."""
     i = sim.bodies.index[body]
     V = sim.bodies.R_body_principal[i]
     return V @ np.diag(sim.bodies.moments[i]) @ V.T
@@ -219,7 +219,7 @@ def test_missing_urdf_file_and_xacro_error(tmp_path):
 # -- joint coordinates -----------------------------------------------------------------------
 
 def chain(tmp_path, **entry):
-    """A fixed-base chain of a revolute, a prismatic and a continuous joint, skewed frames."""
+    """Build a fixed-base chain: a revolute, a prismatic and a continuous joint, skewed."""
     text = robot(
         'chain', link('world'),
         link('l1', inertial(1.0, (0.2, 0.05, 0), (0.1, 0.2, 0.3), **TENSOR)),
@@ -356,7 +356,7 @@ def test_effort_for_a_duration_expires(tmp_path):
     (lambda s: s.set_joint_efforts([1.0]), r'efforts: expected a mapping'),
     (lambda s: s.set_joint_efforts({'q1': 1.0}, duration=-1), r'duration'),
     (lambda s: s.set_joint_state({'q1': float('inf')}), r'positions\.q1'),
-    (lambda s: s.set_joint_state({'q1': 0.1}, {'zz': 1.0}), r"velocities\.zz: unknown joint"),
+    (lambda s: s.set_joint_state({'q1': 0.1}, {'zz': 1.0}), r'velocities\.zz: unknown joint'),
     (lambda s: s.joint_state(['q1', 'x']), r"names\[1\]: unknown joint 'x'"),
 ])
 def test_bad_joint_input_changes_nothing(tmp_path, call, match):

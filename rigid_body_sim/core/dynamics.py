@@ -26,7 +26,7 @@ from .bodies import BodySet
 from .effects import Effect, EFFECTS, KernelModel, Kinematics, WrenchAccumulator
 from .errors import SpecError
 from .kernels.free_step import HAS_POSITION_FORCES
-from .kernels.layout import Count, N_COUNTS, W_BODY
+from .kernels.layout import Count, N_COUNTS, W_BODY, W_KIND, W_PARENT, WRENCH_DRIVE
 
 #: Slot of the steps in a work tally; the slots before it are the compiled kernels'
 #: count slots (:mod:`.kernels.free_step`, :mod:`.kernels.constrained_step`).
@@ -224,6 +224,12 @@ class Dynamics:
         keep = local[wrench[:, W_BODY].astype(int)] >= 0
         sub_wrench = wrench[keep]
         sub_wrench[:, W_BODY] = local[sub_wrench[:, W_BODY].astype(int)]
+        drive = sub_wrench[:, W_KIND] == WRENCH_DRIVE
+        if np.any(drive):
+            # A drive's parent is in the subset too (a joint joins one component), or the
+            # world: index n here, len(bodies) there.
+            outer = np.append(local, len(bodies))
+            sub_wrench[drive, W_PARENT] = outer[sub_wrench[drive, W_PARENT].astype(int)]
         sub_flags = flags
         if not np.any(gforce[bodies]) and not len(sub_wrench):
             sub_flags &= ~HAS_POSITION_FORCES

@@ -541,7 +541,7 @@ class AppliedWrenches(Effect):
         active = self._active
         if active is None:
             active = (tab['start'] <= time_mid) & (time_mid < tab['end'])
-        rows = np.empty((int(np.count_nonzero(active)), W_WIDTH))
+        rows = np.zeros((int(np.count_nonzero(active)), W_WIDTH))   # kind WRENCH_APPLIED
         rows[:, W_BODY] = tab['body'][active]
         rows[:, W_IN_BODY] = tab['in_body'][active]
         rows[:, W_FORCE:W_FORCE + 3] = tab['force'][active]

@@ -52,10 +52,15 @@ import numpy as np
 from . import rotation as so3
 from .bodies import RigidBody
 from .constraints import Constraint, perpendicular_frame
+from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
 from .errors import SpecError
+from .kernels.free_step import HAS_DRIVE_DAMPING, HAS_DRIVES
 from .kernels.joints import joint_coordinates
 from .kernels.layout import (JOINT, O_ANG_VEL_WORLD, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD,
-                             O_QUAT_BODY_WORLD)
+                             O_QUAT_BODY_WORLD, W_BODY, W_CENTER, W_DAMPING, W_E1_CHILD,
+                             W_E1_PARENT, W_E2_PARENT, W_EFFORT_MAX, W_K_CHILD, W_K_PARENT,
+                             W_KD, W_KIND, W_KP, W_PARENT, W_Q_TARGET, W_R_CHILD, W_R_PARENT,
+                             W_ROTARY, W_V_TARGET, W_WIDTH, WRENCH_DRIVE)
 from .validate import finite_array, finite_scalar
 
 
@@ -218,11 +223,11 @@ class JointSpec:
 
     @property
     def origin(self) -> tuple[np.ndarray, np.ndarray]:
-        """The joint frame in the parent link frame: position (3,) and rotation (3, 3)."""
+        """Return the joint frame in the parent link frame: position (3,), rotation (3, 3)."""
         return np.asarray(self.origin_xyz), rpy_matrix(self.origin_rpy)
 
     def motion(self, q: float) -> tuple[np.ndarray, np.ndarray]:
-        """The child frame in the joint frame at coordinate ``q``: (3,), (3, 3)."""
+        """Return the child frame in the joint frame at coordinate ``q``: (3,), (3, 3)."""
         if self.kind in ROTARY:
             return np.zeros(3), axis_angle_matrix(self.axis, q)
         if self.kind is JointKind.PRISMATIC:
@@ -429,8 +434,9 @@ def build_robot(spec: RobotSpec) -> RobotModel:
     for name in keep:
         joint = tree.joints.get(name)
         if joint is None or joint.kind is not JointKind.FIXED:
+            fixed = [j.name for j in spec.joints if j.kind is JointKind.FIXED]
             raise SpecError('keep_fixed', f'{name!r} is not a fixed joint of the robot; fixed '
-                                          f'joints: {[j.name for j in spec.joints if j.kind is JointKind.FIXED]}')
+                                          f'joints: {fixed}')
     one_dof = [j.name for j in spec.joints if j.kind in ONE_DOF]
     for key in ('initial_positions', 'initial_velocities'):
         values = getattr(spec, key)
@@ -806,3 +812,303 @@ class JointSpace:
                 v[a] = v[b] + so3.cross(w[b], p[a] - p[b]) + Rj @ v_rel
         n = self.n_bodies
         return p[:n], so3.matrix_to_quat(R[:n]), v[:n], w[:n]
+
+
+class Interface(enum.Enum):
+    """What a joint's commands set (ros2_control's command interfaces)."""
+
+    EFFORT = 'effort'
+    POSITION = 'position'
+    VELOCITY = 'velocity'
+
+
+@dataclass(frozen=True)
+class CommandGroup:
+    """
+    Joints commanded together, with one interface (a forward-command controller's).
+
+    Parameters
+    ----------
+    name : str
+    joints : sequence of str
+        In the order of the group's command arrays.
+    interface : {'effort', 'position', 'velocity'}
+    mode : {'servo'}
+        ``servo``: a PD drive ``τ = clip(kp (q* − q) + kd (v* − q̇), ±effort)``
+        (MuJoCo's position and velocity actuators). (``exact``, a driving
+        constraint, is not implemented yet and is refused.)
+    kp : float
+        N m/rad or N/m, > 0 for position servos; 0 for velocity ones.
+    kd : float
+        N m s/rad or N s/m, >= 0 (> 0 for velocity servos).
+
+    """
+
+    name: str
+    joints: Sequence[str]
+    interface: Any = 'effort'
+    mode: str = 'servo'
+    kp: float = 0.0
+    kd: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise SpecError('name', f'must be a non-empty string, got {self.name!r}')
+        if isinstance(self.joints, str) or not all(isinstance(j, str) for j in self.joints) \
+                or not len(self.joints):
+            raise SpecError('joints', f'expected a non-empty list of joint names, '
+                                      f'got {self.joints!r}')
+        object.__setattr__(self, 'joints', tuple(self.joints))
+        try:
+            interface = Interface(self.interface.value if isinstance(self.interface, Interface)
+                                  else self.interface)
+        except ValueError:
+            raise SpecError('interface', f"must be 'effort', 'position' or 'velocity', "
+                                         f'got {self.interface!r}') from None
+        object.__setattr__(self, 'interface', interface)
+        if self.mode == 'exact':
+            raise SpecError('mode', "'exact' (a driving constraint whose multiplier is the "
+                                    "effort) is not implemented yet; use 'servo'")
+        if self.mode != 'servo':
+            raise SpecError('mode', f"must be 'servo', got {self.mode!r}")
+        kp, kd = finite_scalar(self.kp, 'kp'), finite_scalar(self.kd, 'kd')
+        if kp < 0.0 or kd < 0.0:
+            raise SpecError('kp' if kp < 0.0 else 'kd', 'gains must be >= 0')
+        if interface is Interface.POSITION and not kp > 0.0:
+            raise SpecError('kp', f'a position servo needs kp > 0, got {kp!r}')
+        if interface is Interface.VELOCITY and (kp != 0.0 or not kd > 0.0):
+            raise SpecError('kd' if kp == 0.0 else 'kp',
+                            f'a velocity servo needs kd > 0 and kp = 0, got kp {kp!r}, '
+                            f'kd {kd!r}')
+        if interface is Interface.EFFORT and (kp or kd):
+            raise SpecError('kp', 'an effort group has no gains')
+        object.__setattr__(self, 'kp', kp)
+        object.__setattr__(self, 'kd', kd)
+
+
+class JointDrives(Effect):
+    """
+    The joints' servos and passive damping, in the compiled steps (:mod:`.kernels.drives`).
+
+    Only joints with a servo or a nonzero ``<dynamics damping>`` have a row;
+    without any, the effect adds nothing and costs nothing. In the splittings the
+    rate terms (``kd``, ``d``) are exact flows, stable for any gain; the servo's
+    spring is a force of the positions in the symplectic kicks, stable while
+    ``kp c dt² <= 1`` (ω dt <= 1, half the symplectic limit of 2), checked when
+    built and when ``dt`` changes, with ``c`` the joint's inverse inertia
+    ``j M⁻¹ jᵀ`` over its two bodies alone, which bounds the constrained system's
+    (a joint in a chain moves more inertia, never less). ``rkmk4`` evaluates
+    everything explicitly, under ``(kp dt² + (kd + d) dt) c <= 1``.
+    """
+
+    name = 'joint_drives'
+    velocity_dependent = True
+
+    def __init__(self, space: 'JointSpace', groups: Sequence[CommandGroup] = ()) -> None:
+        super().__init__()
+        self.space = space
+        k = len(space)
+        self.interface = [Interface.EFFORT] * k
+        self.group_of: dict = {}
+        self.groups = {}
+        self.kp, self.kd = np.zeros(k), np.zeros(k)
+        for g, group in enumerate(groups):
+            where = f'command_groups[{g}]'
+            if group.name in self.groups:
+                raise SpecError(f'{where}.name', f'duplicate group name {group.name!r}')
+            self.groups[group.name] = group
+            for j, name in enumerate(group.joints):
+                i = space.lookup(name, f'{where}.joints[{j}]')
+                if name in self.group_of:
+                    raise SpecError(f'{where}.joints[{j}]', f'joint {name!r} is already in '
+                                                            f'group {self.group_of[name]!r}')
+                self.group_of[name] = group.name
+                self.interface[i] = group.interface
+                self.kp[i], self.kd[i] = group.kp, group.kd
+        self.damping = np.array([j.spec.damping for j in space.joints]).reshape(k)
+        self.servo = self.kp + self.kd > 0.0
+        self.rows_of = np.flatnonzero(self.servo | (self.damping > 0.0))
+        self.q_target, self.v_target = np.zeros(k), np.zeros(k)
+        self.center = np.zeros(k)
+        self._geometry: Optional[np.ndarray] = None
+
+    def bind(self, bodies: Any) -> None:
+        """Compute each drive row's geometry in the principal frames."""
+        super().bind(bodies)
+        js = self.space
+        V = np.concatenate([bodies.R_body_principal, np.eye(3)[None]])
+        com = np.vstack([bodies.com_body, np.zeros((1, 3))])
+        rows = np.zeros((len(self.rows_of), W_WIDTH))
+        for r, i in enumerate(self.rows_of):
+            a, b = js.child[i], js.parent[i]
+            Va, Vb = V[a], V[b]
+            axis_parent = js.R_jp[i] @ js.axis[i]
+            rows[r, W_BODY], rows[r, W_PARENT] = a, b
+            rows[r, W_KIND] = WRENCH_DRIVE
+            rows[r, W_ROTARY] = float(js.rotary[i])
+            rows[r, W_K_CHILD:W_K_CHILD + 3] = Va.T @ js.axis[i]
+            rows[r, W_K_PARENT:W_K_PARENT + 3] = Vb.T @ axis_parent
+            rows[r, W_E1_CHILD:W_E1_CHILD + 3] = Va.T @ js.e1[i]
+            rows[r, W_E1_PARENT:W_E1_PARENT + 3] = Vb.T @ (js.R_jp[i] @ js.e1[i])
+            rows[r, W_E2_PARENT:W_E2_PARENT + 3] = Vb.T @ (js.R_jp[i] @ js.e2[i])
+            rows[r, W_R_CHILD:W_R_CHILD + 3] = Va.T @ (np.zeros(3) - com[a])
+            rows[r, W_R_PARENT:W_R_PARENT + 3] = Vb.T @ (js.p_jp[i] - com[b])
+            rows[r, W_KP], rows[r, W_KD] = self.kp[i], self.kd[i]
+            rows[r, W_DAMPING] = self.damping[i]
+            rows[r, W_EFFORT_MAX] = js.effort_limit[i]
+        self._geometry = rows
+
+    def inverse_inertias(self, state: Any) -> np.ndarray:
+        """``c = j M⁻¹ jᵀ`` of each joint over its two bodies at ``state`` (k,)."""
+        js, bodies = self.space, self.bodies
+        n = len(bodies)
+        out = np.zeros(len(js))
+        R = so3.quat_to_matrix(state.quat_principal_world)
+        for i in range(len(js)):
+            a, b = js.child[i], js.parent[i]
+            ends = [a] if b >= n else [a, b]
+            if js.rotary[i]:
+                axis_w = R[a] @ (bodies.R_body_principal[a].T @ js.axis[i])
+                out[i] = sum(np.sum((R[e].T @ axis_w) ** 2 / bodies.moments[e]) for e in ends)
+                continue
+            Ra = R[a]
+            point = state.pos_com_world[a] + Ra @ (bodies.R_body_principal[a].T
+                                                   @ (-bodies.com_body[a]))
+            axis_w = Ra @ (bodies.R_body_principal[a].T @ js.axis[i])
+            for e in ends:
+                lever = np.cross(point - state.pos_com_world[e], axis_w)
+                out[i] += bodies.inv_mass[e] + np.sum((R[e].T @ lever) ** 2
+                                                      / bodies.moments[e])
+        return out
+
+    def check_stability(self, state: Any, dt: float, integrator: str) -> None:
+        """Refuse gains the explicit servo (and rkmk4's explicit damping) cannot hold at dt."""
+        c = self.inverse_inertias(state)
+        kd = self.kd + self.damping if integrator == 'rkmk4' else np.zeros(len(c))
+        measure = (self.kp * dt * dt + kd * dt) * c
+        bad = np.flatnonzero(measure > 1.0)
+        if len(bad):
+            i = int(bad[0])
+            name = self.space.names[i]
+            where = f'command_groups.{self.group_of[name]}' if name in self.group_of \
+                else f'joints.{name}.dynamics.damping'
+            raise SpecError(where, f'joint {name!r}: kp {self.kp[i]:.6g}, kd {kd[i]:.6g} at dt '
+                                   f'{dt:g} s ({integrator}) with the joint inverse inertia '
+                                   f'{c[i]:.6g} give (kp dt² + kd dt) c = {measure[i]:.3g} > 1 '
+                                   f'(kd counts for rkmk4 only): the explicit drive would be '
+                                   f'unstable; lower the gains or dt')
+
+    # -- commands ---------------------------------------------------------------------------
+
+    def set_targets(self, idx: np.ndarray, values: np.ndarray) -> None:
+        """Set the targets of joints ``idx`` (positions or velocities, per interface)."""
+        for i, value in zip(idx, values):
+            if self.interface[i] is Interface.POSITION:
+                self.q_target[i] = value
+            else:
+                self.v_target[i] = value
+
+    def hold(self, positions: np.ndarray) -> None:
+        """Position servos hold ``positions`` (k,); velocity servos stop; re-center angles."""
+        self.q_target[:] = np.where(self.interface_is(Interface.POSITION), positions, 0.0)
+        self.v_target[:] = 0.0
+        self.center[:] = positions
+
+    def interface_is(self, interface: Interface) -> np.ndarray:
+        """Mask (k,) of the joints with this interface."""
+        return np.array([x is interface for x in self.interface], dtype=bool)
+
+    def recenter(self, positions: np.ndarray) -> bool:
+        """Move the angle windows of position servos that drifted past π/2; True if any."""
+        idx = self.rows_of
+        far = np.abs(positions[idx] - self.center[idx]) > 0.5 * np.pi
+        if not np.any(far):
+            return False
+        self.center[idx[far]] = positions[idx[far]]
+        return True
+
+    def efforts(self, positions: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        """Each joint's drive effort (k,) at coordinates and rates: servo (clamped) + damping."""
+        limit = self.space.effort_limit
+        servo = np.where(self.servo, np.clip(self.kp * (self.q_target - positions)
+                                             + self.kd * (self.v_target - rates),
+                                             -limit, limit), 0.0)
+        return servo - self.damping * rates
+
+    # -- the effect -------------------------------------------------------------------------
+
+    def add_to_kernel_model(self, model: KernelModel, time_mid: float) -> None:
+        """Add one wrench row per driven joint (:data:`.kernels.layout.WRENCH`)."""
+        if not len(self.rows_of):
+            return
+        rows = self._geometry.copy()
+        idx = self.rows_of
+        rows[:, W_CENTER] = self.center[idx]
+        rows[:, W_Q_TARGET] = self.q_target[idx]
+        rows[:, W_V_TARGET] = self.v_target[idx]
+        model.add_wrench_rows(rows)
+        if np.any(self.servo):
+            model.flags |= HAS_DRIVES
+        if np.any(self.damping > 0.0) or np.any(self.kd > 0.0):
+            model.flags |= HAS_DRIVE_DAMPING   # rate terms: exact flows
+
+    def count_kernel_work(self, rhs: int, kicks: int, flows: int,
+                          acting: Optional[int] = None) -> None:
+        """Count every right-hand side, kick and flow, per driven joint."""
+        joints = len(self.rows_of) if acting is None else acting
+        self._count(rhs + kicks + flows if joints else 0, joints)
+
+    def acting_in(self, local: np.ndarray, rows_kept: np.ndarray) -> int:
+        """Return the driven joints in the subset."""
+        return int(np.count_nonzero(rows_kept))
+
+    def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
+        """Add the drives' wrenches at ``kin`` (numpy, one joint at a time: references)."""
+        js, bodies = self.space, self.bodies
+        n = len(bodies)
+        if not len(self.rows_of):
+            return
+        self.evaluations += 1
+        self.body_evaluations += len(self.rows_of)
+        x = np.vstack([kin.pos_com_world, np.zeros((1, 3))])
+        R = np.concatenate([kin.R_principal_world, np.eye(3)[None]])
+        v = np.vstack([kin.vel_com_world, np.zeros((1, 3))])
+        w = np.vstack([np.einsum('nij,nj->ni', kin.R_principal_world, kin.ang_vel_principal),
+                       np.zeros((1, 3))])
+        rows = self._geometry
+        for r, i in enumerate(self.rows_of):
+            row = rows[r]
+            a, b = int(row[W_BODY]), int(row[W_PARENT])
+            k_w = R[b] @ row[W_K_PARENT:W_K_PARENT + 3]
+            rho_a = R[a] @ row[W_R_CHILD:W_R_CHILD + 3]
+            point = x[a] + rho_a
+            if js.rotary[i]:
+                e1c = R[a] @ row[W_E1_CHILD:W_E1_CHILD + 3]
+                q = np.arctan2((R[b] @ row[W_E2_PARENT:W_E2_PARENT + 3]) @ e1c,
+                               (R[b] @ row[W_E1_PARENT:W_E1_PARENT + 3]) @ e1c)
+                q += 2.0 * np.pi * np.round((self.center[i] - q) / (2.0 * np.pi))
+                rate = k_w @ (w[a] - w[b])
+            else:
+                q = k_w @ (point - x[b] - R[b] @ row[W_R_PARENT:W_R_PARENT + 3])
+                rate = k_w @ (v[a] + np.cross(w[a], rho_a) - v[b] - np.cross(w[b], point - x[b]))
+            tau = self.efforts_one(i, q, rate)
+            if js.rotary[i]:
+                acc.torque_principal[a] += tau * row[W_K_CHILD:W_K_CHILD + 3]
+                if b < n:
+                    acc.torque_principal[b] -= tau * row[W_K_PARENT:W_K_PARENT + 3]
+                continue
+            f = tau * k_w
+            acc.force_world[a] += f
+            acc.torque_world[a] += np.cross(rho_a, f)
+            if b < n:
+                acc.force_world[b] -= f
+                acc.torque_world[b] -= np.cross(point - x[b], f)
+
+    def efforts_one(self, i: int, q: float, rate: float) -> float:
+        """Return the drive effort of joint i at one coordinate and rate (:meth:`efforts`)."""
+        tau = 0.0
+        if self.servo[i]:
+            limit = self.space.effort_limit[i]
+            tau = min(max(self.kp[i] * (self.q_target[i] - q)
+                          + self.kd[i] * (self.v_target[i] - rate), -limit), limit)
+        return tau - self.damping[i] * rate

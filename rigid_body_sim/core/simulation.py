@@ -35,9 +35,10 @@ from .effects import AppliedWrenches, Effect
 from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .kernels import free_step
-from .robots import build_robot, JointSpace, JointState, RobotSpec
+from .robots import (build_robot, CommandGroup, Interface, JointDrives, JointSpace, JointState,
+                     RobotSpec)
 from .solver import ConstraintSolver
-from .validate import positive_scalar
+from .validate import finite_scalar, positive_scalar
 
 
 def _finite(s: State) -> bool:
@@ -104,7 +105,10 @@ class Simulation:
         their bodies and joints are added after ``bodies`` and ``constraints``
         (see :mod:`.robots` for the conversion), and their one-coordinate
         joints are read and commanded with :meth:`joint_state`,
-        :meth:`set_joint_state` and :meth:`set_joint_efforts`.
+        :meth:`set_joint_state`, :meth:`set_joint_efforts` and :meth:`command_joints`.
+    command_groups : sequence of CommandGroup
+        The robots' joints commanded by position or velocity (servos); the
+        others take efforts.
 
     """
 
@@ -113,7 +117,8 @@ class Simulation:
                  constraints: Sequence[Constraint] = (),
                  constraint_time_constant: float = 0.05, tolerance: Optional[float] = None,
                  tolerance_budget: int = DEFAULT_BUDGET,
-                 robots: Sequence[RobotSpec] = ()) -> None:
+                 robots: Sequence[RobotSpec] = (),
+                 command_groups: Sequence[CommandGroup] = ()) -> None:
         self.dt = positive_scalar(dt, 'dt')
         bodies, constraints = list(bodies), list(constraints)
         self.robots = []
@@ -148,6 +153,14 @@ class Simulation:
                 effect.bind(self.bodies)
             except SpecError as exc:
                 raise exc.within(f'effects[{i}]') from None
+        self.joints = JointSpace(self.bodies.names, self.robots)
+        self.drives: Optional[JointDrives] = None
+        if len(self.joints) or command_groups:
+            drives = JointDrives(self.joints, command_groups)
+            drives.bind(self.bodies)
+            self.drives = drives
+            if len(drives.rows_of):
+                effects.append(drives)   # only where a joint is damped or servoed
         self.dynamics = Dynamics(self.bodies, effects)
         self.integrator = integrator_class(integrator)(self.dynamics)
         self._initial_wrenches = [self._wrench_rows(e) for e in effects]
@@ -156,7 +169,6 @@ class Simulation:
                                                 tally=self.dynamics.tally)
         self.dynamics.solver.dt = self.dt
         self._initial_constraints = list(constraints)
-        self.joints = JointSpace(self.bodies.names, self.robots)
         self._tracking = len(self.joints) > 0
         self.reset()
 
@@ -218,6 +230,8 @@ class Simulation:
             if self._tracking:
                 self.bodies.outputs(new)
                 self.joints.track(self.bodies.outputs_cache.out)
+                if self.drives is not None and self.drives.recenter(self.joints.positions):
+                    dyn.changed()
             if self._wrenches is not None and len(self._wrenches):
                 if self._wrenches.remove_expired(new.time):
                     # What reads the model between steps (reactions) must not see them.
@@ -237,6 +251,9 @@ class Simulation:
         """
         new_dt = self.dt if dt is None else positive_scalar(dt, 'dt')
         cls = integrator_class(integrator) if integrator is not None else None
+        if self.drives is not None:
+            self.drives.check_stability(self.state, new_dt,
+                                        cls.name if cls is not None else self.integrator.name)
         if new_dt != self.dt:
             self._time_base = self.time
             self._steps = 0
@@ -310,6 +327,9 @@ class Simulation:
         self.joints.reset()
         if len(self.joints):
             self.joints.track(self._outputs_now())
+        if self.drives is not None:
+            self.drives.hold(self.joints.positions)
+            self.drives.check_stability(self.state, self.dt, self.integrator.name)
 
     def _inconsistent(self, name: str, field: str, outcome: str,
                       residual: float) -> InconsistentConstraintError:
@@ -377,12 +397,22 @@ class Simulation:
         Positions, velocities and efforts of the joints now (all, or ``names``).
 
         Positions are 0 in the URDF's zero configuration; angles count turns.
-        Efforts are what the joint's actuation applied over the last step.
+        Efforts: the effort command that acted over the last step, plus the joint's
+        servo and damping at the current state (what a joint torque sensor reads).
         """
-        return self.joints.state(self._outputs_now(), self.time - 0.5 * self.dt, names)
+        js = self.joints.state(self._outputs_now(), self.time - 0.5 * self.dt)
+        efforts = js.efforts
+        if self.drives is not None and len(self.drives.rows_of):
+            efforts = efforts + self.drives.efforts(js.positions, js.velocities)
+        js = JointState(js.names, js.positions, js.velocities, efforts)
+        if names is None:
+            return js
+        idx = [self.joints.lookup(name, f'names[{i}]') for i, name in enumerate(names)]
+        return JointState([js.names[i] for i in idx], js.positions[idx], js.velocities[idx],
+                          js.efforts[idx])
 
     def _outputs_now(self) -> np.ndarray:
-        """The bodies' outputs (n, O_WIDTH) of the current state."""
+        """Return the bodies' outputs (n, O_WIDTH) of the current state."""
         self.bodies.outputs(self.state)
         return self.bodies.outputs_cache.out
 
@@ -397,9 +427,12 @@ class Simulation:
         velocities : dict, optional
             ``{joint: q̇}`` (rad/s or m/s); joints not named keep theirs.
 
+        Notes
+        -----
         Every value is validated before anything changes. Floating bases keep
         their pose and twist; the children of floating and planar joints keep
         their pose and twist relative to their parent.
+
         """
         if not isinstance(positions, dict):
             raise SpecError('positions', f'expected a mapping joint -> position, '
@@ -420,6 +453,9 @@ class Simulation:
                 # Keep the turns the caller asked for (the tracked angle is wrapped).
                 self.joints.positions[i] += 2.0 * np.pi * np.round(
                     (float(value) - self.joints.positions[i]) / (2.0 * np.pi))
+        if self.drives is not None:
+            self.drives.center[:] = self.joints.positions
+            self.dynamics.changed()
 
     def set_joint_efforts(self, efforts: dict, duration: Optional[float] = None) -> None:
         """
@@ -439,8 +475,38 @@ class Simulation:
         end = np.inf if duration is None else start + duration
         self.joints.commanded(idx, clamped, values, start, end)
 
+    def joint_interfaces(self) -> dict:
+        """``{joint: 'effort' | 'position' | 'velocity'}``: what each joint's commands set."""
+        if self.drives is None:
+            return {}
+        return {name: self.drives.interface[i].value for i, name in enumerate(self.joints.names)}
+
+    def command_joints(self, values: dict) -> None:
+        """
+        Command joints through their interfaces: ``{joint: effort | position | velocity}``.
+
+        Effort joints as :meth:`set_joint_efforts`; position and velocity servos
+        get a new target, held until replaced. Validated before anything changes.
+        """
+        if not isinstance(values, dict):
+            raise SpecError('values', f'expected a mapping joint -> command, got {values!r}')
+        efforts, targets = {}, {}
+        for name, value in values.items():
+            i = self.joints.lookup(name, f'values.{name}')
+            value = finite_scalar(value, f'values.{name}')
+            if self.drives.interface[i] is Interface.EFFORT:
+                efforts[name] = value
+            else:
+                targets[i] = value
+        if efforts:
+            self.set_joint_efforts(efforts)
+        if targets:
+            self.drives.set_targets(np.array(list(targets), dtype=int),
+                                    np.array(list(targets.values())))
+            self.dynamics.changed()
+
     def joint_counters(self) -> dict:
-        """Counts since the last reset: clamped effort commands, velocity-limit excursions."""
+        """Return the counts since the last reset: clamped efforts, velocity-limit excursions."""
         return dict(self.joints.counters)
 
     def add_constraint(self, constraint: Constraint) -> None:

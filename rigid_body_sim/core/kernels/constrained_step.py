@@ -39,7 +39,9 @@ import math
 from numba import njit, objmode
 import numpy as np
 
+from . import drives
 from .free_step import (all_finite, damping_flow, drift, finish_accelerations, HAS_DAMPING,
+                        HAS_DRIVE_DAMPING, HAS_DRIVES,
                         outputs, position_wrench, rkmk4_embedded_error, rkmk4_finish,
                         rkmk4_slopes, rkmk4_stage, state_parts)
 from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS, COMP, COMPONENT,
@@ -506,19 +508,23 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
 
 
 @njit(cache=True, inline='always')
-def _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, torque, counts):
+def _free_accelerations(pos, quat, vel, om, body, gforce, wrench, flags, a6, force, torque,
+                        counts):
     """
     Free accelerations (every effect and the gyroscopic term) into ``a6`` (n, 6).
 
-    The force (world) and torque (principal) of gravity and the wrenches alone
-    go to ``force`` and ``torque`` (n, 3; the kick applies them). The callers
-    pass the workspace's ``ws[4]``, ``ws[5]``, ``ws[6]``.
+    The force (world) and torque (principal) of gravity, the wrenches and the
+    joint servos alone go to ``force`` and ``torque`` (n, 3; the kick applies
+    them); the passive joint damping only to ``a6`` (a flow applies it). The
+    callers pass the workspace's ``ws[4]``, ``ws[5]``, ``ws[6]``.
     """
     position_wrench(quat, body, gforce, wrench, force, torque)
     for i in range(quat.shape[0]):
         for c in range(3):
             a6[i, c] = force[i, c]
             a6[i, 3 + c] = torque[i, c]
+    if flags & (HAS_DRIVES | HAS_DRIVE_DAMPING):
+        drives.drive_wrenches(pos, quat, vel, om, wrench, force, torque, a6[:, :3], a6[:, 3:])
     finish_accelerations(vel, om, body, flags, a6[:, :3], a6[:, 3:], counts)
 
 
@@ -542,8 +548,8 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, cx, par, lam, c
         for c in range(3):
             om[i, c] = mom[i, c] / body[i, B_MOMENTS + c]
     force, torque, g6 = _f2(cx, FORCE), _f2(cx, TORQUE), _f2(cx, GT_LAMBDA)
-    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, _f2(cx, FREE_ACC), force,
-                        torque, counts)
+    _free_accelerations(pos, quat, vel, om, body, gforce, wrench, flags, _f2(cx, FREE_ACC),
+                        force, torque, counts)
     if not c_valid:
         _geometry(pos, quat, cx, CURRENT, counts)
     _multipliers(pos, quat, vel, om, cx, par, lam, counts)
@@ -555,9 +561,10 @@ def _kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, cx, par, lam, c
 
 
 @njit(cache=True, inline='always')
-def _free_kick(quat, vel, mom, tau, body, gforce, wrench, force, torque, counts):
+def _free_kick(pos, quat, vel, mom, tau, body, gforce, wrench, flags, cx, force, torque,
+               counts):
     """
-    ``v += tau f/m`` and ``L += tau τ`` of gravity and the wrenches alone, in place.
+    ``v += tau f/m`` and ``L += tau τ`` of gravity, the wrenches and servos alone, in place.
 
     RATTLE's last kick when the velocity projection follows it directly: the
     projection removes any impulse along ``M⁻¹ Gᵀ`` (it solves for the end
@@ -567,6 +574,14 @@ def _free_kick(quat, vel, mom, tau, body, gforce, wrench, force, torque, counts)
     """
     counts[Count.KICK] += 1
     position_wrench(quat, body, gforce, wrench, force, torque)
+    if flags & HAS_DRIVES:
+        # The servos' springs (.drives.split); ``a6`` is scratch here.
+        om, a6 = _f3(cx, BODY_VECTORS)[1], _f2(cx, FREE_ACC)
+        for i in range(vel.shape[0]):
+            for c in range(3):
+                om[i, c] = mom[i, c] / body[i, B_MOMENTS + c]
+        drives.drive_wrenches(pos, quat, vel, om, wrench, force, torque, a6[:, :3],
+                              a6[:, 3:])
     for i in range(vel.shape[0]):
         for c in range(3):
             vel[i, c] += tau * body[i, B_INV_MASS] * force[i, c]
@@ -874,6 +889,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
     weights = TRIPLE_JUMP if method == Method.LIE_POISSON4 else ONE_STEP
     n_sub = 3 if method == Method.LIE_POISSON4 else 1
     damping = flags & HAS_DAMPING
+    joint_damping = flags & HAS_DRIVE_DAMPING
     mom = _f3(cx, BODY_VECTORS)[0]
     phi, G = _f2(cx, PHI), _f4(cx, JAC)
     for i in range(n):
@@ -891,19 +907,25 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
         first = 0.5 * h if symmetric else h
         if damping:
             damping_flow(vel, mom, body, first, counts)
+        if joint_damping:
+            drives.damping_flow(pos, quat, vel, mom, body, wrench, first, False)
         _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, cx, par, lam, c_valid,
               counts)
         if not _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts):
             return False, False
-        if symmetric and damping:
+        if symmetric and (damping or joint_damping):
             # The damping flow between kick and projection is not along M⁻¹ Gᵀ: the
-            # kick's constraint force is part of the method here.
+            # kick's constraint force is part of the method here. The flows in the
+            # reverse order of the first half: the step stays symmetric.
             _kick(pos, quat, vel, mom, 0.5 * h, body, gforce, wrench, flags, cx, par, lam,
                   True, counts)
-            damping_flow(vel, mom, body, 0.5 * h, counts)
+            if joint_damping:
+                drives.damping_flow(pos, quat, vel, mom, body, wrench, 0.5 * h, True)
+            if damping:
+                damping_flow(vel, mom, body, 0.5 * h, counts)
         elif symmetric:
-            _free_kick(quat, vel, mom, 0.5 * h, body, gforce, wrench, _f2(cx, FORCE),
-                       _f2(cx, TORQUE), counts)
+            _free_kick(pos, quat, vel, mom, 0.5 * h, body, gforce, wrench, flags, cx,
+                       _f2(cx, FORCE), _f2(cx, TORQUE), counts)
         _project_velocities(pos, quat, vel, mom, body, cx, par, counts)
     for i in range(n):
         for c in range(3):
@@ -934,7 +956,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
         if s:
             c_valid = False
         counts[Count.RHS] += 1
-        _free_accelerations(q, v, w, body, gforce, wrench, flags, a6, force, torque, counts)
+        _free_accelerations(p, q, v, w, body, gforce, wrench, flags, a6, force, torque, counts)
         if not c_valid:
             _geometry(p, q, cx, CURRENT, counts)
         _multipliers(p, q, v, w, cx, par, lam, counts)
@@ -950,7 +972,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
         # The fifth stage (its factorization is the projection's): λ to scratch, so
         # the reported multipliers are those of the step without the estimate.
         counts[Count.RHS] += 1
-        _free_accelerations(quat, vel, om, body, gforce, wrench, flags, a6, force, torque,
+        _free_accelerations(pos, quat, vel, om, body, gforce, wrench, flags, a6, force, torque,
                             counts)
         _multipliers(pos, quat, vel, om, cx, par, _f2(cx, VECTORS)[1], counts)
         for i in range(n):
@@ -1223,7 +1245,7 @@ def component_multipliers(pos, quat, vel, om, body, gforce, wrench, flags, par, 
     ``CURRENT``) and ``Gᵀλ`` (``GT_LAMBDA``) of this state.
     """
     cx = (raw(floats), raw(ints), raw(layout), key, solve)   # CONTEXT's order
-    _free_accelerations(quat, vel, om, body, gforce, wrench, flags, _f2(cx, FREE_ACC),
+    _free_accelerations(pos, quat, vel, om, body, gforce, wrench, flags, _f2(cx, FREE_ACC),
                         _f2(cx, FORCE), _f2(cx, TORQUE), counts)
     if not c_valid:
         _geometry(pos, quat, cx, CURRENT, counts)

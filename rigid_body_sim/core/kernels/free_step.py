@@ -17,14 +17,17 @@ changes, never per step)
     ``anisotropic`` 1.0 if the gyroscopic term is non-zero).
 ``gforce`` : (n, 3)
     N, world: the gravity force ``m g`` of each body (zeros without gravity).
-``wrench`` : (k, 11)
+``wrench`` : (k, W_WIDTH)
     The applied wrenches active in this step, one row each: ``body index,
     in_body (1.0 if force and torque are in the principal frame), force (3),
     torque (3), point of application (3, principal frame, from the centre of
-    mass)``.
+    mass)``, kind ``WRENCH_APPLIED``; rows of kind ``WRENCH_DRIVE`` are joint
+    drives, which only the constrained steps evaluate (:mod:`.drives`).
 ``flags`` : int
     Bit ``HAS_POSITION_FORCES``: a kick has something to add (gravity or an
-    active wrench); bit ``HAS_DAMPING``: damping acts.
+    active wrench); bit ``HAS_DAMPING``: damping acts; ``HAS_DRIVES``: joint drives
+    act (wrench rows of kind ``WRENCH_DRIVE``, constrained components only, see
+    :mod:`.drives`), ``HAS_DRIVE_DAMPING``: some of them damp.
 
 Work counts (``counts``: the simulation's int64 tally, :class:`.layout.Count`)
 ---------------------------------------------------------------------------
@@ -50,14 +53,14 @@ from .layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MOMENTS, B_W
                      FT_N_WS, FT_OUT, FT_WRENCH, FT_WS, O_ANG_VEL_BODY, O_ANG_VEL_WORLD,
                      O_ORIGIN_VEL_BODY, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD, O_QUAT_BODY_WORLD,
                      O_WIDTH, S_OM, S_POS, S_QUAT, S_VEL, S_WIDTH, W_BODY, W_FORCE, W_IN_BODY,
-                     W_POINT, W_TORQUE, W_WIDTH)
+                     W_KIND, W_POINT, W_TORQUE, W_WIDTH, WRENCH_APPLIED)
 from .methods import (Method, ONE_STEP, RK4_A, RK4_B_DENOMINATOR, RK4_B_HAT_NUMERATORS,
                       RK4_B_NUMERATORS, TRIPLE_JUMP)
 from .so3 import (_matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply,
                   quat_matrix)
 from .views import Pinned, pinned, pinned_int, raw, raw_slice
 
-HAS_POSITION_FORCES, HAS_DAMPING = 1, 2
+HAS_POSITION_FORCES, HAS_DAMPING, HAS_DRIVES, HAS_DRIVE_DAMPING = 1, 2, 4, 8
 # Bits of free_step's result.
 KICK_VALID, FINITE = 1, 2
 
@@ -76,6 +79,8 @@ def position_wrench(quat: np.ndarray, body: np.ndarray, gforce: np.ndarray,
         return
     R = np.empty((3, 3))
     for e in range(wrench.shape[0]):
+        if wrench[e, W_KIND] != WRENCH_APPLIED:
+            continue   # a joint drive (.drives)
         i = int(wrench[e, W_BODY])
         quat_matrix(quat[i], R)
         f0, f1, f2 = wrench[e, W_FORCE], wrench[e, W_FORCE + 1], wrench[e, W_FORCE + 2]

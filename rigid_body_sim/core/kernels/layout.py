@@ -241,10 +241,25 @@ class Solve(IntEnum):
 #: and 1.0 if the gyroscopic term is non-zero.
 BODY = Columns('body', [('mass', 1), ('inv_mass', 1), ('moments', 3), ('c_lin', 1),
                         ('c_ang', 1), ('anisotropic', 1)])
-#: ``wrench`` (k, W_WIDTH): body index, 1.0 if force and torque are in the principal
-#: frame, force (3), torque (3), point of application (3, principal, from the centre).
+#: ``wrench`` (k, W_WIDTH), one row per force element acting in the step. ``kind``
+#: WRENCH_APPLIED: body index, 1.0 if force and torque are in the principal frame,
+#: force (3), torque (3), point of application (3, principal, from the centre).
+#: ``kind`` WRENCH_DRIVE: a joint's drive between ``body`` (the child) and ``parent`` (the
+#: world when >= n), :mod:`.drives`: whether it rotates; the axis in the child's and
+#: the parent's principal frames; the joint frame's e1 in the child and e1, e2 in the
+#: parent (angles); the joint point's lever arms on the child and, at q = 0, on the
+#: parent (principal frames, from the centres; world coordinates for the world); the
+#: angle the unwrapped angle is taken near (``center``), the servo's gains and targets,
+#: the passive damping and the largest actuator effort.
 WRENCH = Columns('wrench', [('body', 1), ('in_body', 1), ('force', 3), ('torque', 3),
-                            ('point', 3)])
+                            ('point', 3), ('kind', 1), ('parent', 1), ('rotary', 1),
+                            ('k_child', 3), ('k_parent', 3), ('e1_child', 3),
+                            ('e1_parent', 3), ('e2_parent', 3), ('r_child', 3),
+                            ('r_parent', 3), ('center', 1), ('kp', 1), ('kd', 1),
+                            ('damping', 1), ('q_target', 1), ('v_target', 1),
+                            ('effort_max', 1)])
+#: Kinds of wrench rows.
+WRENCH_APPLIED, WRENCH_DRIVE = 0, 1
 #: ``frames`` (n, FR_WIDTH): the principal frame in the user's body frame (xyzw), then
 #: the centre of mass in the body frame (m).
 FRAME = Columns('frame', [('quat_body_principal', 4), ('com_body', 3)])
@@ -332,7 +347,8 @@ COMPONENT_TABLE = Table('component table',
 _GROUPS = (
     BODY.constants('B_'), WRENCH.constants('W_'), PAR.constants('P_'),
     ROW_PARAMETERS.constants('PAR_'), FRAME.constants('FR_'), OUTPUT.constants('O_'),
-    JOINT.constants('J_'), STATE.constants('S_'), {'V_' + n.upper(): k for k, n in enumerate(VM_ROWS)},
+    JOINT.constants('J_'), STATE.constants('S_'),
+    {'V_' + n.upper(): k for k, n in enumerate(VM_ROWS)},
     {'FS_' + n.upper(): k for k, n in enumerate(FACTOR_STATE_ENTRIES)},
     COMPONENT.constants(), DENSE.constants('D_'), TREE.constants('T_'),
     {'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},
@@ -352,5 +368,7 @@ for _group in _GROUPS:
     _CONSTANTS.update(_group)
 globals().update(_CONSTANTS)
 __all__ = ['BODY', 'COMPONENT', 'COMPONENT_TABLE', 'CONTEXT', 'Columns', 'Count', 'DENSE',
-           'Field', 'FRAME', 'FREE_TABLE', 'JOINT', 'Layout', 'LAYOUT_TABLE', 'N_COUNTS', 'OUTPUT', 'PAR',
-           'ROW_PARAMETERS', 'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH', *_CONSTANTS]
+           'Field', 'FRAME', 'FREE_TABLE', 'JOINT', 'Layout', 'LAYOUT_TABLE', 'N_COUNTS',
+           'OUTPUT', 'PAR',
+           'ROW_PARAMETERS', 'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH',
+           'WRENCH_APPLIED', 'WRENCH_DRIVE', *_CONSTANTS]
