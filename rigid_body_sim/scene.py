@@ -223,7 +223,7 @@ def _build(data: Any, source: str) -> Scene:
 
 
 def _robots(data: Any, source: str) -> list:
-    """The scene's robots as (RobotSpec, ParsedUrdf) pairs."""
+    """Return the scene's robots as (RobotSpec, ParsedUrdf) pairs."""
     if not isinstance(data, list):
         raise SpecError('robots', f'expected a list of robots, got {data!r}')
     out = []

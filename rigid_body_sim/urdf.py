@@ -64,7 +64,7 @@ class ParsedUrdf:
 
 def read_robot_xml(path: Any, xacro_args: Optional[dict] = None) -> str:
     """
-    The URDF text of a ``.urdf`` file, or of a ``.xacro`` file expanded with ``xacro_args``.
+    Return the URDF text of a ``.urdf`` file, or of a ``.xacro`` one expanded with ``xacro_args``.
 
     Raises
     ------
@@ -168,9 +168,9 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
         where = f'{line_of("joint", joint.name)}: joint {joint.name!r}'
         xyz, rpy = _origin(joint.origin)
         limit, dynamics, mimic = joint.limit, joint.dynamics, joint.mimic
-        kwargs = dict(name=joint.name, kind=joint.type, parent=joint.parent,
-                      child=joint.child, origin_xyz=xyz, origin_rpy=rpy,
-                      axis=(1.0, 0.0, 0.0) if joint.axis is None else joint.axis)
+        kwargs = {'name': joint.name, 'kind': joint.type, 'parent': joint.parent,
+                  'child': joint.child, 'origin_xyz': xyz, 'origin_rpy': rpy,
+                  'axis': (1.0, 0.0, 0.0) if joint.axis is None else joint.axis}
         if joint.type in ('revolute', 'prismatic') and limit is None:
             raise UrdfError(f'{where}: a {joint.type} joint needs a <limit> (URDF requires '
                             f'effort and velocity)')
@@ -230,7 +230,7 @@ _PACKAGE = re.compile(r'^package://([^/]+)/(.*)$')
 
 def resolve_uri(uri: str, source: str = '') -> str:
     """
-    The file a ``package://`` or ``file://`` URI names, or '' when it cannot be found.
+    Return the file a ``package://`` or ``file://`` URI names, or '' when none is found.
 
     ``package://pkg/rest`` resolves through ``ament_index`` when ``pkg`` is
     installed, else to ``rest`` under the nearest folder above ``source``
@@ -259,4 +259,3 @@ def resolve_uri(uri: str, source: str = '') -> str:
                 candidate = folder / rest
                 return str(candidate) if candidate.is_file() else ''
     return ''
-

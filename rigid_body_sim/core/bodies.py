@@ -384,6 +384,7 @@ class BodySet:
         Parameters
         ----------
         time : float
+            s, the state's time.
         pos_origin_world : ndarray, shape (n, 3)
             m, each body origin.
         quat_body_world : ndarray, shape (n, 4)

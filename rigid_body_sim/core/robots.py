@@ -215,11 +215,11 @@ class JointSpec:
 
     @property
     def origin(self) -> tuple[np.ndarray, np.ndarray]:
-        """The joint frame in the parent link frame: position (3,) and rotation (3, 3)."""
+        """Return the joint frame in the parent link frame: position (3,), rotation (3, 3)."""
         return np.asarray(self.origin_xyz), rpy_matrix(self.origin_rpy)
 
     def motion(self, q: float) -> tuple[np.ndarray, np.ndarray]:
-        """The child frame in the joint frame at coordinate ``q``: (3,), (3, 3)."""
+        """Return the child frame in the joint frame at coordinate ``q``: (3,), (3, 3)."""
         if self.kind in ROTARY:
             return np.zeros(3), axis_angle_matrix(self.axis, q)
         if self.kind is JointKind.PRISMATIC:
@@ -426,8 +426,9 @@ def build_robot(spec: RobotSpec) -> RobotModel:
     for name in keep:
         joint = tree.joints.get(name)
         if joint is None or joint.kind is not JointKind.FIXED:
+            fixed = [j.name for j in spec.joints if j.kind is JointKind.FIXED]
             raise SpecError('keep_fixed', f'{name!r} is not a fixed joint of the robot; fixed '
-                                          f'joints: {[j.name for j in spec.joints if j.kind is JointKind.FIXED]}')
+                                          f'joints: {fixed}')
     one_dof = [j.name for j in spec.joints if j.kind in ONE_DOF]
     for key in ('initial_positions', 'initial_velocities'):
         values = getattr(spec, key)
@@ -654,7 +655,7 @@ class JointSpace:
 
     def raw(self, outputs: tuple) -> tuple:
         """
-        Wrapped angles and slides, and rates, from the bodies' outputs.
+        Return the wrapped angles and slides, and rates, from the bodies' outputs.
 
         Parameters
         ----------

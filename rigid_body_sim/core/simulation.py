@@ -392,9 +392,12 @@ class Simulation:
         velocities : dict, optional
             ``{joint: q̇}`` (rad/s or m/s); joints not named keep theirs.
 
+        Notes
+        -----
         Every value is validated before anything changes. Floating bases keep
         their pose and twist; the children of floating and planar joints keep
         their pose and twist relative to their parent.
+
         """
         if not isinstance(positions, dict):
             raise SpecError('positions', f'expected a mapping joint -> position, '
@@ -436,7 +439,7 @@ class Simulation:
         self.joints.commanded(idx, clamped, values, start, end)
 
     def joint_counters(self) -> dict:
-        """Counts since the last reset: clamped effort commands, velocity-limit excursions."""
+        """Return counts since the last reset: clamped efforts, velocity-limit excursions."""
         return dict(self.joints.counters)
 
     def add_constraint(self, constraint: Constraint) -> None:
