@@ -134,6 +134,7 @@ def joint_state(header: Header, names: Sequence[str], positions: np.ndarray,
     header : Header
         Stamp (simulation time); ``frame_id`` empty, as joint_state_broadcaster's.
     names : sequence of str
+        The joints, in the order of the arrays.
     positions, velocities, efforts : ndarray, shape (k,)
         rad or m; rad/s or m/s; N m or N.
 

@@ -168,7 +168,7 @@ PARAMETERS = (
     Parameter('joint_state_rate', 0.0, _rate_or_zero(1e6),
               'Hz of simulated time: joint_states (robots); 0: as publish_rate'),
     Parameter('tf_rate', 0.0, _rate_or_zero(1e6),
-              'Hz of simulated time: /tf of the robots\' moving links; 0: as publish_rate'),
+              "Hz of simulated time: /tf of the robots' moving links; 0: as publish_rate"),
     Parameter('tf', 'links', _tf_mode,
               "links: the robots' link frames on /tf and /tf_static; off: none (e.g. when "
               'robot_state_publisher publishes them from joint_states)', read_only=True),
