@@ -4,8 +4,9 @@
 #   1. a project-local virtual environment .venv with ROS 2 Jazzy from PyPI wheels,
 #      numpy, scipy, the test and lint tools (exact versions: requirements.txt);
 #   2. the CMake path fix-up the ROS wheels need for colcon builds (../shared/ros-wheels.md);
-#   3. `colcon build --symlink-install` into install/ of this ament_python package and of
-#      the ament_cmake interface package rigid_body_sim_interfaces in interfaces/.
+#   3. `colcon build --symlink-install` into install/ of this ament_python package, of
+#      the ament_cmake interface package rigid_body_sim_interfaces in interfaces/, and of
+#      the standard interface packages in vendor/ that the environment lacks (tf2_msgs).
 #
 # Usage:
 #   ./dev.sh run [SCENE.yaml] [--ros-args ...]   start the node (default scene:
@@ -72,26 +73,65 @@ fix_cmake_paths() {
     touch "$VENV/.cmake-paths-fixed"
 }
 
+vendored_to_build() {
+    # vendor/<pkg>/ stands in for a standard interface package the wheels lack (tf2_msgs).
+    # Print the ones to build: those whose name is not in the ament index of the environment
+    # colcon builds against and the node runs in (the venv; build and activate set
+    # AMENT_PREFIX_PATH to it alone), so that a real package, once installed there, wins.
+    # Our own install/ is never consulted: it would find the stand-in itself.
+    local dir pkg
+    for dir in vendor/*/; do
+        [ -f "$dir/package.xml" ] || continue
+        pkg=$(basename "$dir")
+        if ! grep -q "<name>$pkg</name>" "$dir/package.xml"; then
+            say "vendor/$pkg/package.xml: the package must be named after its folder, $pkg"
+            exit 1
+        fi
+        [ -e "$VENV/share/ament_index/resource_index/packages/$pkg" ] || echo "$pkg"
+    done
+}
+
 build() {
     # Rebuild when a package's metadata or its list of installed files changes, a message
     # or service definition changes, or the wheels the interface code is generated and
     # compiled against (requirements.txt); with --symlink-install, edits to Python sources
     # and config files need no rebuild. install/ holds symlinks into build/: rebuild when
-    # either is missing.
-    local want have pkg complete=1
+    # either is missing. A vendored package is part of the build while the environment
+    # lacks it (vendored_to_build): its files and the list of them are inputs too, and one
+    # no longer needed is removed from build/ and install/ (install/setup.sh sources every
+    # package it finds in install/, so a stale one would shadow the real one).
+    local want have pkg dir list complete=1 vendored=() paths=(. interfaces)
+    list=$(vendored_to_build)
+    read -r -a vendored <<< "${list//$'\n'/ }"
+    for dir in vendor/*/; do
+        [ -f "$dir/package.xml" ] || continue
+        pkg=$(basename "$dir")
+        case " ${vendored[*]-} " in *" $pkg "*) continue ;; esac
+        if [ -e "$ROOT/install/$pkg" ] || [ -e "$ROOT/build/$pkg" ]; then
+            say "the environment has $pkg: removing the vendored one from build/ and install/"
+            rm -rf "${ROOT:?}/install/$pkg" "${ROOT:?}/build/$pkg"
+        fi
+    done
+    for pkg in ${vendored[@]+"${vendored[@]}"}; do
+        paths+=("vendor/$pkg")
+    done
     want=$( (cat requirements.txt package.xml setup.py setup.cfg \
                  interfaces/package.xml interfaces/CMakeLists.txt interfaces/msg/* interfaces/srv/*
-             ls config resource interfaces/msg interfaces/srv) | sha256sum | cut -d' ' -f1)
+             ls config launch resource interfaces/msg interfaces/srv
+             for pkg in ${vendored[@]+"${vendored[@]}"}; do
+                 find "vendor/$pkg" -type f | LC_ALL=C sort
+                 find "vendor/$pkg" -type f -print0 | LC_ALL=C sort -z | xargs -0 cat
+             done) | sha256sum | cut -d' ' -f1)
     have=$(cat "$ROOT/install/.build.sha256" 2>/dev/null || true)
-    for pkg in rigid_body_sim rigid_body_sim_interfaces; do
+    for pkg in rigid_body_sim rigid_body_sim_interfaces ${vendored[@]+"${vendored[@]}"}; do
         [ -d "$ROOT/build/$pkg" ] && [ -d "$ROOT/install/$pkg" ] || complete=0
     done
     if [ "$want" != "$have" ] || [ ! -f "$ROOT/install/setup.sh" ] || [ "$complete" = 0 ]; then
-        say "colcon build"
+        say "colcon build${vendored[0]+ (vendored: ${vendored[*]})}"
         (
             export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
             "$VENV/bin/colcon" --log-base "$ROOT/log" build --symlink-install \
-                --base-paths . interfaces \
+                --base-paths "${paths[@]}" \
                 --build-base "$ROOT/build" --install-base "$ROOT/install" \
                 --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" >&2
         )

@@ -1,9 +1,9 @@
-"""ament_flake8 over the package, its tests and benchmarks (the ROS lint test)."""
+"""ament_flake8 over the package, its tests, benchmarks and launch file (the ROS lint test)."""
 
 from ament_flake8.main import main_with_errors
 import pytest
 
-PATHS = ['rigid_body_sim', 'test', 'bench', 'setup.py']
+PATHS = ['rigid_body_sim', 'test', 'bench', 'launch', 'setup.py']
 
 
 @pytest.mark.flake8

@@ -28,3 +28,10 @@ def test_share_has_package_xml_and_scenes():
     scenes = sorted(p.name for p in (share / 'config').glob('*.yaml'))
     repo_scenes = sorted(p.name for p in (Path(__file__).parents[1] / 'config').glob('*.yaml'))
     assert scenes == repo_scenes
+
+
+def test_share_has_the_launch_files():
+    share = Path(packages.get_package_share_directory('rigid_body_sim'))
+    installed = sorted(p.name for p in (share / 'launch').glob('*.py'))
+    repo = sorted(p.name for p in (Path(__file__).parents[1] / 'launch').glob('*.py'))
+    assert installed == repo == ['sim.launch.py']

@@ -1,4 +1,4 @@
-"""ament_pep257 over the package, its tests and benchmarks (the ROS lint test)."""
+"""ament_pep257 over the package, its tests, benchmarks and launch file (the ROS lint test)."""
 
 from ament_pep257.main import main
 import pytest
@@ -7,5 +7,5 @@ import pytest
 @pytest.mark.linter
 @pytest.mark.pep257
 def test_pep257():
-    rc = main(argv=['rigid_body_sim', 'test', 'bench', 'setup.py'])
+    rc = main(argv=['rigid_body_sim', 'test', 'bench', 'launch', 'setup.py'])
     assert rc == 0, 'Found code style errors / warnings'
