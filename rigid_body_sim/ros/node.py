@@ -51,12 +51,14 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
 from std_srvs.srv import SetBool, Trigger
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
 from .inputs import Rejected, Rejection, shown
 from .outputs import body_topic, constraint_topic, JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC, \
-    MARKERS_TOPIC, METRICS_TOPIC, ROBOT_DESCRIPTION_TOPIC, STATES_TOPIC
+    MARKERS_TOPIC, METRICS_TOPIC, ROBOT_DESCRIPTION_TOPIC, STATES_TOPIC, TF_STATIC_TOPIC, \
+    TF_TOPIC
 from .pacing import Pacer, WindowStats
 from .session import Due, Session
 from .settings import BY_NAME, PARAMETERS, Settings
@@ -87,9 +89,13 @@ AUDIENCE_REFRESH = 0.25
 #: with 100 bodies).
 QUIET_PUB = PublisherEventCallbacks(use_default_callbacks=False)
 QUIET_SUB = SubscriptionEventCallbacks(use_default_callbacks=False)
-#: robot_description as robot_state_publisher offers it: the latest one to late joiners.
+#: robot_description (as robot_state_publisher offers it: the latest one to late joiners)
+#: and /tf_static (as tf2_ros's StaticTransformBroadcaster offers it).
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+#: /tf as tf2_ros's TransformBroadcaster offers it.
+TF_QOS = QoSProfile(depth=100, durability=DurabilityPolicy.VOLATILE,
+                    reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 
 
 class SimNode(Node):
@@ -206,7 +212,8 @@ class SimNode(Node):
 
     def _make_robot_interfaces(self) -> None:
         """joint_states, ~/joint_commands (with joints), robot_description, tf (robots)."""
-        self._joint_pub = None
+        self._joint_pub = self._tf_pub = self._tf_static_pub = None
+        self._tf_stamp_ns: Optional[int] = None   # of the last /tf message
         if self.sim.joint_names():
             self._joint_pub = self.create_publisher(JointState, JOINT_STATES_TOPIC, 10)
             self._joint_sub = self.create_subscription(
@@ -216,6 +223,10 @@ class SimNode(Node):
             self._description_pub = self.create_publisher(String, ROBOT_DESCRIPTION_TOPIC,
                                                           LATCHED)
             self._description_pub.publish(String(data=robots[0][1].xml))
+            if self.settings.tf == 'links':
+                self._tf_pub = self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
+                self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED)
+                self._publish_tf_static()
 
     def _guarded(self, name: str, handler, srv_type):
         """
@@ -463,6 +474,9 @@ class SimNode(Node):
         s = self.settings
         s.update({p.name: p.value for p in params})
         self.session.configure()
+        if 'world_frame' in {p.name for p in params} and self._tf_static_pub is not None:
+            self._publish_tf_static()   # (the latched one names the old world frame)
+            self._tf_stamp_ns = None
         if {p.name for p in params} & {'physics_rate', 'real_time_factor'}:
             self._pacer.dt = self.sim.dt
             self._pacer.real_time_factor = s.real_time_factor
@@ -491,6 +505,8 @@ class SimNode(Node):
             self._publish_state()
         if due.joints:
             self._publish_joint_states()
+        if due.tf:
+            self._publish_tf()
         return due
 
     def _publish_clock(self) -> None:
@@ -502,11 +518,35 @@ class SimNode(Node):
             self._publish_state()
         if joints:
             self._publish_joint_states()
+        if tf:
+            self._publish_tf()
 
     def _publish_joint_states(self) -> None:
         """Publish joint_states (where subscribed): the joints now, stamped simulation time."""
         if self._joint_pub is not None and self._joint_pub.get_subscription_count():
             self._joint_pub.publish(self.session.outputs.joint_states(self.session.stamp()))
+
+    def _publish_tf(self) -> None:
+        """
+        Publish /tf: the world frame -> each robot body's frame, unless this stamp was.
+
+        A second message with the stamp of the last (the state republished while
+        paused, a ``~/step`` of 0 steps) would make every tf listener warn of
+        repeated data (TF_REPEATED_DATA); the state at one stamp is one state.
+        """
+        if self._tf_pub is None:
+            return
+        stamp_ns = self.session.now_ns()
+        if stamp_ns == self._tf_stamp_ns or not self._tf_pub.get_subscription_count():
+            return
+        self._tf_stamp_ns = stamp_ns
+        self._tf_pub.publish(TFMessage(
+            transforms=self.session.outputs.transforms(self.session.stamp())))
+
+    def _publish_tf_static(self) -> None:
+        """Publish /tf_static once (transient local: late listeners get it too)."""
+        self._tf_static_pub.publish(TFMessage(
+            transforms=self.session.outputs.static_transforms(self.session.stamp())))
 
     def _publish_state(self) -> None:
         """
