@@ -111,6 +111,8 @@ TF_MODES = ('links', 'off')
 
 
 def _tf_mode(name: str, value: Any) -> str:
+    if value is False:   # (YAML 1.1, as ROS parameters and -p name:=value read it: off)
+        return 'off'
     value = _string(name, value)
     if value not in TF_MODES:
         raise SpecError(name, f'expected one of {list(TF_MODES)}, got {value!r}')
