@@ -77,9 +77,10 @@ def test_tf_message_type_hash_is_jazzys():
     assert hashes['tf2_msgs/msg/TFMessage'] == JAZZY_TF_MESSAGE_HASH
     # ... is the one the middleware advertises for a publisher (what other nodes match on).
     import rclpy
+    from ros_harness import random_domain
     TFMessage = _tf_message()
     context = rclpy.context.Context()
-    rclpy.init(context=context, domain_id=0)
+    rclpy.init(context=context, domain_id=random_domain())
     try:
         node = rclpy.create_node('tf_hash_probe', context=context, enable_rosout=False,
                                  start_parameter_services=False)
