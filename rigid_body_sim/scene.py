@@ -104,7 +104,8 @@ class Scene:
     shapes: dict = field(default_factory=dict)
     #: The robots, in the order of ``simulation.robots``: (prefix, ParsedUrdf).
     robots: list = field(default_factory=list)
-    #: What a user should read once: elements not simulated, limits not enforced.
+    #: What a user should read once, one line per robot: elements not simulated,
+    #: limits not enforced.
     warnings: list = field(default_factory=list)
 
 
@@ -215,12 +216,12 @@ def _build(data: Any, source: str) -> Scene:
                 next(iter(inertia)) in ('box', 'sphere', 'cylinder'):
             kind, dims = next(iter(inertia.items()))
             shapes[body['name']] = (kind, [float(d) for d in np.atleast_1d(dims)])
-    warnings = []
+    warnings = []   # one line per robot
     for (spec, parsed), model in zip(robots, sim.robots):
-        if parsed.ignored:
-            warnings.append(f'robot {spec.name!r} ({parsed.source}): not simulated: '
-                            + '; '.join(parsed.ignored))
-        warnings += [f'robot {spec.name!r}: {note}' for note in model.notes]
+        parts = (['not simulated: ' + ', '.join(parsed.ignored)] if parsed.ignored else []) \
+            + list(model.notes)
+        if parts:
+            warnings.append(f'robot {spec.name!r} ({parsed.source}): ' + '; '.join(parts))
     return Scene(name=str(data.get('name', Path(source).stem)), simulation=sim,
                  duration=duration, source=source, shapes=shapes,
                  robots=[(spec.prefix, parsed) for spec, parsed in robots], warnings=warnings)

@@ -13,10 +13,12 @@ from array import array
 from typing import Sequence
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import (Point, Pose, PoseStamped, Quaternion, Twist, TwistStamped,
-                               Vector3, Wrench, WrenchStamped)
+from geometry_msgs.msg import (Point, Pose, PoseStamped, Quaternion, Transform,
+                               TransformStamped, Twist, TwistStamped, Vector3, Wrench,
+                               WrenchStamped)
 import numpy as np
 from rigid_body_sim_interfaces.msg import BodyStates
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 NANOSECONDS = 1_000_000_000
@@ -120,3 +122,54 @@ def body_states_arrays(msg: BodyStates) -> dict:
     lin = np.asarray(msg.linear_velocity, dtype=float).reshape(-1, 3)
     ang = np.asarray(msg.angular_velocity, dtype=float).reshape(-1, 3)
     return {name: (pos[i], quat[i], lin[i], ang[i]) for i, name in enumerate(msg.names)}
+
+
+def joint_state(header: Header, names: Sequence[str], positions: np.ndarray,
+                velocities: np.ndarray, efforts: np.ndarray) -> JointState:
+    """
+    Return a ``sensor_msgs/JointState`` of the joints' arrays.
+
+    Parameters
+    ----------
+    header : Header
+        Stamp (simulation time); ``frame_id`` empty, as joint_state_broadcaster's.
+    names : sequence of str
+        The joints, in the order of the arrays.
+    positions, velocities, efforts : ndarray, shape (k,)
+        rad or m; rad/s or m/s; N m or N.
+
+    """
+    msg = JointState(header=header, name=list(names))
+    msg.position = _doubles(positions)
+    msg.velocity = _doubles(velocities)
+    msg.effort = _doubles(efforts)
+    return msg
+
+
+def joint_state_arrays(msg: JointState) -> tuple:
+    """Return ``(names, positions, velocities, efforts)`` of a JointState: a list, (k,) x 3."""
+    return (list(msg.name), np.asarray(msg.position, dtype=float),
+            np.asarray(msg.velocity, dtype=float), np.asarray(msg.effort, dtype=float))
+
+
+def transform_stamped(header: Header, child_frame_id: str, translation: np.ndarray,
+                      quat_xyzw: np.ndarray) -> TransformStamped:
+    """
+    Return a TransformStamped: the child frame's origin (3,) and orientation (4,, x y z w).
+
+    Both in the parent frame ``header.frame_id`` (tf's convention: the transform
+    takes child-frame coordinates to parent-frame coordinates).
+    """
+    p = np.asarray(translation, dtype=float).tolist()
+    q = np.asarray(quat_xyzw, dtype=float).tolist()
+    return TransformStamped(header=header, child_frame_id=child_frame_id,
+                            transform=Transform(translation=Vector3(x=p[0], y=p[1], z=p[2]),
+                                                rotation=Quaternion(x=q[0], y=q[1], z=q[2],
+                                                                    w=q[3])))
+
+
+def transform_arrays(msg: TransformStamped) -> tuple:
+    """Return ``(parent, child, translation (3,), quat_xyzw (4,))`` of a TransformStamped."""
+    t, r = msg.transform.translation, msg.transform.rotation
+    return (msg.header.frame_id, msg.child_frame_id, np.array([t.x, t.y, t.z]),
+            np.array([r.x, r.y, r.z, r.w]))

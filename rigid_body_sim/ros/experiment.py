@@ -315,10 +315,10 @@ class Runner:
         last_report = t0
         for k in range(n_steps):
             self._apply_due_events()
-            clock_due, state_due = session.advance()
-            if clock_due:
+            due = session.advance()
+            if due.clock:
                 self._write_clock()
-            if state_due:
+            if due.state:
                 self._write_state()
             now = time.perf_counter()
             if progress and now - last_report > 2.0:

@@ -31,6 +31,13 @@ class Rejection(enum.Enum):
     BAD_STEP = 'bad_step'                      # ~/step with too many steps
     DIVERGED = 'diverged'                      # a request the diverged state cannot serve
     INTERNAL_ERROR = 'internal_error'          # a request that raised unexpectedly (a bug)
+    # ~/joint_commands (sensor_msgs/JointState):
+    UNKNOWN_JOINT = 'unknown_joint'            # a name that is no joint of the robots
+    NON_FINITE_EFFORT = 'non_finite_effort'    # NaN or inf in effort
+    JOINT_COMMAND_LENGTHS = 'joint_command_lengths'   # len(effort) != len(name)
+    NOT_EFFORT = 'not_effort'                  # position or velocity values: not yet
+    BAD_JOINT_COMMAND = 'bad_joint_command'    # no names, or a joint named twice
+    EFFORT_TOO_LARGE = 'effort_too_large'      # beyond max_torque (rotary) / max_force
 
 
 class Rejected(ValueError):
@@ -113,6 +120,66 @@ def check_wrench(force: np.ndarray, torque: np.ndarray, frame_id: str, body: str
     raise Rejected(Rejection.UNKNOWN_FRAME,
                    f'header.frame_id: {frame_id!r} is neither the world frame '
                    f'{world_frame!r} nor the body {body!r}')
+
+
+def check_joint_command(names: Sequence[str], positions: np.ndarray, velocities: np.ndarray,
+                        efforts: np.ndarray, limits: dict) -> dict:
+    """
+    Check a ``sensor_msgs/JointState`` command's arrays; return ``{joint: effort}``.
+
+    Parameters
+    ----------
+    names : sequence of str
+        ``name``: the joints commanded.
+    positions, velocities, efforts : ndarray, shape (k,) or (0,)
+        ``position``, ``velocity``, ``effort``; only efforts exist so far, so
+        ``position`` and ``velocity`` must be empty.
+    limits : dict
+        ``{joint: largest |effort| accepted}`` of every joint that takes
+        commands (N m or N: the parameters max_torque, max_force).
+
+    Raises
+    ------
+    Rejected
+        Naming the field and the problem; nothing is commanded.
+
+    """
+    names = list(names)
+    if not names:
+        raise Rejected(Rejection.BAD_JOINT_COMMAND,
+                       'name: empty: name the joints to command, with their effort')
+    for field, values in (('position', positions), ('velocity', velocities)):
+        if len(values):
+            raise Rejected(Rejection.NOT_EFFORT,
+                           f'{field}: {len(values)} values given, but only effort commands '
+                           f'exist so far (no joint has a position or velocity interface '
+                           f'yet): send name and effort, with position and velocity empty')
+    if len(efforts) != len(names):
+        raise Rejected(Rejection.JOINT_COMMAND_LENGTHS,
+                       f'effort: {len(efforts)} values for {len(names)} names: give one '
+                       f'effort per name')
+    seen = set()
+    for i, name in enumerate(names):
+        if name in seen:
+            raise Rejected(Rejection.BAD_JOINT_COMMAND,
+                           f'name[{i}]: joint {shown(name)} is named twice')
+        seen.add(name)
+        if name not in limits:
+            known = list(limits)
+            raise Rejected(Rejection.UNKNOWN_JOINT,
+                           f'name[{i}]: unknown joint {shown(name)}; joints: '
+                           + (f'{known}' if len(known) <= 20 else
+                              f'{known[:20]} and {len(known) - 20} more'))
+    for i, (name, value) in enumerate(zip(names, efforts.tolist())):
+        if not math.isfinite(value):
+            raise Rejected(Rejection.NON_FINITE_EFFORT,
+                           f'effort[{i}] ({name}): must be finite, got {value!r}')
+        if abs(value) > limits[name]:
+            raise Rejected(Rejection.EFFORT_TOO_LARGE,
+                           f'effort[{i}] ({name}): magnitude {abs(value):.3g} exceeds '
+                           f'{limits[name]:.3g} (the parameter max_torque for a revolute '
+                           f'or continuous joint, max_force for a prismatic one)')
+    return dict(zip(names, efforts.tolist()))
 
 
 def _optional_vector(value: Sequence[float], field: str) -> Any:

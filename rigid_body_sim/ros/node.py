@@ -17,6 +17,10 @@ Topics (private, ``~`` = ``/<namespace>/rigid_body_sim``):
   ``~/body_states`` (rigid_body_sim_interfaces/BodyStates), ``~/metrics``
   (rigid_body_sim_interfaces/Metrics), ``~/markers`` (visualization_msgs/MarkerArray),
   ``~/constraints/<C>/wrench`` (WrenchStamped), ``/clock``, ``/diagnostics``.
+- robots (scenes with URDF robots), namespace-relative as ros2_control and
+  robot_state_publisher name them: in ``~/joint_commands`` (sensor_msgs/JointState,
+  efforts); out ``joint_states`` (sensor_msgs/JointState), ``robot_description``
+  (std_msgs/String, transient local), ``/tf`` and ``/tf_static`` (tf2_msgs/TFMessage).
 
 See the README for the frames, points and conventions of every message.
 """
@@ -37,22 +41,26 @@ import rclpy
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import qos_profile_services_default, QoSProfile
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, qos_profile_services_default, \
+    QoSProfile, ReliabilityPolicy
 from rclpy.service_introspection import ServiceIntrospectionState
 from rclpy.signals import SignalHandlerOptions
 from rigid_body_sim_interfaces.msg import BodyStates, Metrics
 from rigid_body_sim_interfaces.srv import AddConstraint, RemoveConstraint, Step
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Header
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header, String
 from std_srvs.srv import SetBool, Trigger
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
 from .inputs import Rejected, Rejection, shown
-from .outputs import body_topic, constraint_topic, MARKERS_TOPIC, METRICS_TOPIC, \
-    STATES_TOPIC
+from .outputs import body_topic, constraint_topic, JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC, \
+    MARKERS_TOPIC, METRICS_TOPIC, ROBOT_DESCRIPTION_TOPIC, STATES_TOPIC, TF_STATIC_TOPIC, \
+    TF_TOPIC
 from .pacing import Pacer, WindowStats
-from .session import Session
+from .session import Due, Session
 from .settings import BY_NAME, PARAMETERS, Settings
 from .stopping import Stop, StopRequested
 from ..cli import default_scene_path
@@ -81,6 +89,13 @@ AUDIENCE_REFRESH = 0.25
 #: with 100 bodies).
 QUIET_PUB = PublisherEventCallbacks(use_default_callbacks=False)
 QUIET_SUB = SubscriptionEventCallbacks(use_default_callbacks=False)
+#: robot_description (as robot_state_publisher offers it: the latest one to late joiners)
+#: and /tf_static (as tf2_ros's StaticTransformBroadcaster offers it).
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+#: /tf as tf2_ros's TransformBroadcaster offers it.
+TF_QOS = QoSProfile(depth=100, durability=DurabilityPolicy.VOLATILE,
+                    reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 
 
 class SimNode(Node):
@@ -139,6 +154,25 @@ class SimNode(Node):
                else f"; the scene's dt {scene_dt:g} s is overridden") + '), publish '
             f'{s.publish_rate:g} Hz, real-time factor {s.real_time_factor:g}'
             + (', paused' if self._paused else ''))
+        self._log_robots(scene)
+
+    def _log_robots(self, scene) -> None:
+        """Log the robots, what of them is not simulated, and which robot_description is."""
+        models = self.sim.robots
+        if not models:
+            return
+        listed = ', '.join(f'{m.spec.name!r} ({len(m.bodies)} moving bodies, '
+                           f'{len(m.joints)} joints, {len(m.lumped)} lumped)' for m in models)
+        self.get_logger().info(
+            f'robots: {listed}; {len(self.sim.joint_names())} joints on {JOINT_STATES_TOPIC}, '
+            + ('tf of every link' if self.settings.tf == 'links' else 'no tf (tf: off)'))
+        for line in scene.warnings:   # (one line per robot)
+            self.get_logger().warning(line)
+        if len(models) > 1:
+            self.get_logger().warning(
+                f'{len(models)} robots: {ROBOT_DESCRIPTION_TOPIC} carries the first, '
+                f'{models[0].spec.name!r}, only (one URDF per topic); not published there: '
+                f'{[m.spec.name for m in models[1:]]}')
 
     # -- interfaces -----------------------------------------------------------------------
 
@@ -163,6 +197,7 @@ class SimNode(Node):
         self._sync_constraint_publishers()
         self._clock_pub = self.create_publisher(Clock, '/clock', 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._make_robot_interfaces()
         for srv_type, name, handler in (
                 (Trigger, 'reset', self._on_reset), (SetBool, 'pause', self._on_pause),
                 (Step, 'step', self._on_step),
@@ -174,6 +209,24 @@ class SimNode(Node):
             # recorded run holds its resets and constraint changes, as the runner's bags do.
             service.configure_introspection(self.get_clock(), qos_profile_services_default,
                                             ServiceIntrospectionState.CONTENTS)
+
+    def _make_robot_interfaces(self) -> None:
+        """joint_states, ~/joint_commands (with joints), robot_description, tf (robots)."""
+        self._joint_pub = self._tf_pub = self._tf_static_pub = None
+        self._tf_stamp_ns: Optional[int] = None   # of the last /tf message
+        if self.sim.joint_names():
+            self._joint_pub = self.create_publisher(JointState, JOINT_STATES_TOPIC, 10)
+            self._joint_sub = self.create_subscription(
+                JointState, JOINT_COMMANDS_TOPIC, self._on_joint_command, QoSProfile(depth=10))
+        robots = self.session.scene.robots
+        if robots:
+            self._description_pub = self.create_publisher(String, ROBOT_DESCRIPTION_TOPIC,
+                                                          LATCHED)
+            self._description_pub.publish(String(data=robots[0][1].xml))
+            if self.settings.tf == 'links':
+                self._tf_pub = self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
+                self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED)
+                self._publish_tf_static()
 
     def _guarded(self, name: str, handler, srv_type):
         """
@@ -260,6 +313,13 @@ class SimNode(Node):
         except Rejected as exc:
             self._rejected(exc.cause, body_topic(body, 'wrench'), str(exc))
 
+    def _on_joint_command(self, msg: JointState) -> None:
+        names, positions, velocities, efforts = conv.joint_state_arrays(msg)
+        try:
+            self.session.queue_joint_command(names, positions, velocities, efforts)
+        except Rejected as exc:
+            self._rejected(exc.cause, JOINT_COMMANDS_TOPIC, str(exc))
+
     # -- services -------------------------------------------------------------------------
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response):
@@ -269,11 +329,12 @@ class SimNode(Node):
         self._pacer.restart(now)
         self._new_window(now)
         self._publish_clock()
-        self._publish_state()
+        self._publish_now()
         response.success = True
         response.message = (f'reset to the initial state of the scene, stamped t = '
                             f'{self.session.seconds():.9g} s; applied wrenches cleared, '
                             f'constraints as in the scene'
+                            + (', joint commands cleared' if self._joint_pub else '')
                             + (' (still paused)' if self._paused else ''))
         self.get_logger().info(response.message)
         return response
@@ -312,7 +373,7 @@ class SimNode(Node):
             response.success = False
             response.message = self._reject(problem[0], '~/step', problem[1])
             return response
-        published = False   # (0 steps: the current state is published)
+        due = None   # (0 steps: the current state is published)
         done, failure = 0, None
         for _ in range(request.steps):
             if not self._running:   # (SIGTERM or SIGINT ends a long request)
@@ -320,8 +381,9 @@ class SimNode(Node):
                           f'shutting down'
                 break
             try:
-                published = self._advance()
+                due = self._advance()
             except Exception as exc:  # noqa: B902 - reply, pause, say why
+                due = None
                 session.diverged = f'internal error in a step: {exc!r}'
                 self._paused = True
                 self.get_logger().error(f'paused: {session.diverged}\n'
@@ -331,8 +393,9 @@ class SimNode(Node):
                           f'{session.diverged}; call ~/reset'
                 break
             done += 1
-        if not published:
-            self._publish_state()
+        # The state after the last step: what that step did not publish.
+        self._publish_now(state=not (due and due.state), joints=not (due and due.joints),
+                          tf=not (due and due.tf))
         response.time = session.stamp()
         response.step_count = session.step_count
         response.success = failure is None
@@ -411,6 +474,9 @@ class SimNode(Node):
         s = self.settings
         s.update({p.name: p.value for p in params})
         self.session.configure()
+        if 'world_frame' in {p.name for p in params} and self._tf_static_pub is not None:
+            self._publish_tf_static()   # (the latched one names the old world frame)
+            self._tf_stamp_ns = None
         if {p.name for p in params} & {'physics_rate', 'real_time_factor'}:
             self._pacer.dt = self.sim.dt
             self._pacer.real_time_factor = s.real_time_factor
@@ -420,27 +486,67 @@ class SimNode(Node):
 
     # -- stepping and output --------------------------------------------------------------
 
-    def _advance(self) -> bool:
-        """Take one step and publish what is due; tell whether the state was published."""
+    def _advance(self) -> Optional[Due]:
+        """Take one step and publish what is due; return what was (None: it diverged)."""
         t0 = time.perf_counter()
         try:
-            clock_due, state_due = self.session.advance()
+            due = self.session.advance()
         except DivergenceError as exc:
             self._paused = True
             self.get_logger().error(f'paused: {exc}; ~/reset recovers')
             self._publish_diagnostics(time.perf_counter())
-            return False
+            return None
         # (steps of ~/step while paused have no real-time budget)
         self._window.record_step(time.perf_counter() - t0,
                                  0.0 if self._paused else self._pacer.period)
-        if clock_due:
+        if due.clock:
             self._publish_clock()
-        if state_due:
+        if due.state:
             self._publish_state()
-        return state_due
+        if due.joints:
+            self._publish_joint_states()
+        if due.tf:
+            self._publish_tf()
+        return due
 
     def _publish_clock(self) -> None:
         self._clock_pub.publish(Clock(clock=self.session.stamp()))
+
+    def _publish_now(self, state: bool = True, joints: bool = True, tf: bool = True) -> None:
+        """Publish the current state (where subscribed): bodies, joints, tf."""
+        if state:
+            self._publish_state()
+        if joints:
+            self._publish_joint_states()
+        if tf:
+            self._publish_tf()
+
+    def _publish_joint_states(self) -> None:
+        """Publish joint_states (where subscribed): the joints now, stamped simulation time."""
+        if self._joint_pub is not None and self._joint_pub.get_subscription_count():
+            self._joint_pub.publish(self.session.outputs.joint_states(self.session.stamp()))
+
+    def _publish_tf(self) -> None:
+        """
+        Publish /tf: the world frame -> each robot body's frame, unless this stamp was.
+
+        A second message with the stamp of the last (the state republished while
+        paused, a ``~/step`` of 0 steps) would make every tf listener warn of
+        repeated data (TF_REPEATED_DATA); the state at one stamp is one state.
+        """
+        if self._tf_pub is None:
+            return
+        stamp_ns = self.session.now_ns()
+        if stamp_ns == self._tf_stamp_ns or not self._tf_pub.get_subscription_count():
+            return
+        self._tf_stamp_ns = stamp_ns
+        self._tf_pub.publish(TFMessage(
+            transforms=self.session.outputs.transforms(self.session.stamp())))
+
+    def _publish_tf_static(self) -> None:
+        """Publish /tf_static once (transient local: late listeners get it too)."""
+        self._tf_static_pub.publish(TFMessage(
+            transforms=self.session.outputs.static_transforms(self.session.stamp())))
 
     def _publish_state(self) -> None:
         """
@@ -549,6 +655,12 @@ class SimNode(Node):
             'tolerance_misses_total': str(accuracy.misses),
             'wrench_messages_superseded': str(session.superseded),
         }
+        if self._joint_pub is not None:
+            counters = sim.joint_counters()
+            values['joint_efforts_clamped'] = str(counters['clamped_efforts'])
+            values['joint_velocity_limit_excursions'] = str(
+                counters['velocity_limit_excursions'])
+            values['joint_efforts_superseded'] = str(session.efforts_superseded)
         rejected = session.totals.rejected
         for cause in Rejection:
             values[f'rejected_{cause.value}'] = str(rejected.get(cause.value, 0))
@@ -587,7 +699,7 @@ class SimNode(Node):
         self._pacer.restart(now)
         self._new_window(now)
         self._publish_clock()
-        self._publish_state()
+        self._publish_now()
         next_report = next_republish = now + REPORT_PERIOD
         last_spin = now
         while self._running and rclpy.ok(context=self.context):
@@ -601,7 +713,7 @@ class SimNode(Node):
                 if now >= next_republish:
                     # Late subscribers see a paused simulation too (same stamp again).
                     self._publish_clock()
-                    self._publish_state()
+                    self._publish_now()
                     next_republish = now + REPORT_PERIOD
                 self._spin(IDLE_WAIT)
                 last_spin = time.perf_counter()

@@ -11,6 +11,12 @@ and orientation in the world frame; twists the origin's velocity and the
 angular velocity, world axes; a constraint's wrench on a body is in that
 body's axes about its frame origin (``frame_id`` the body), on the world in
 world axes about the world origin.
+
+Robots (URDF): a body is a group of links lumped by fixed joints, and its
+frame is the frame of the group's topmost link, named as the body (the link
+name with the robot's prefix). So tf has the world frame -> each body (moving,
+:meth:`Outputs.transforms`), each body -> its other links, and the world frame
+-> the links fixed to the world (both constant, :meth:`Outputs.static_transforms`).
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from . import conversions as conv
 from ..core import rotation as so3
 from ..core import Simulation
+from ..core.robots import rpy_matrix
 
 #: m: diameter of the sphere that marks a joint.
 JOINT_MARKER_SIZE = 0.04
@@ -46,6 +53,12 @@ def constraint_topic(name: str) -> str:
 STATES_TOPIC = '~/body_states'
 METRICS_TOPIC = '~/metrics'
 MARKERS_TOPIC = '~/markers'
+#: Robots: namespace-relative, as joint_state_broadcaster and robot_state_publisher name them.
+JOINT_STATES_TOPIC = 'joint_states'
+ROBOT_DESCRIPTION_TOPIC = 'robot_description'
+JOINT_COMMANDS_TOPIC = '~/joint_commands'
+TF_TOPIC = '/tf'
+TF_STATIC_TOPIC = '/tf_static'
 
 
 class Outputs:
@@ -59,13 +72,36 @@ class Outputs:
         ``{body: (shape, dims)}`` of the scene (:attr:`rigid_body_sim.scene.Scene.shapes`);
         other bodies are drawn as the box of equal inertia.
     world_frame : str
+    robots : sequence of (str, ParsedUrdf)
+        :attr:`rigid_body_sim.scene.Scene.robots`, in the order of ``sim.robots``:
+        each robot's prefix and URDF (for the links' visuals).
 
     """
 
-    def __init__(self, sim: Simulation, shapes: dict, world_frame: str) -> None:
+    def __init__(self, sim: Simulation, shapes: dict, world_frame: str,
+                 robots: Sequence = ()) -> None:
         self.sim = sim
         self.shapes = dict(shapes)
         self.world_frame = world_frame
+        index = {name: i for i, name in enumerate(sim.bodies.names)}
+        #: Indices of the robots' bodies (each the frame of its topmost link), body order.
+        self.robot_bodies = sorted(index[b.name] for m in sim.robots for b in m.bodies)
+        # Each link's frame (frame id with the prefix) on its body (None: the world).
+        self._links = [(model.spec.prefix + link, frame)
+                       for model in sim.robots for link, frame in model.links.items()]
+        # Each visual: (body index or None, its pose in that body's frame, Visual, frame id).
+        self._visuals = []
+        for (prefix, parsed), model in zip(robots, sim.robots):
+            for v in parsed.visuals:
+                frame = model.links[v.link]
+                R_v = rpy_matrix(v.rpy)
+                self._visuals.append((
+                    None if frame.body is None else index[frame.body],
+                    frame.position + frame.rotation @ np.asarray(v.xyz, dtype=float),
+                    frame.rotation @ R_v, v, prefix + v.link))
+        drawn = {i for i, *_ in self._visuals if i is not None}
+        #: Bodies drawn as their shape or box: all but the robots' bodies with visuals.
+        self._plain = [i for i in range(len(sim.bodies.names)) if i not in drawn]
 
     def snapshot(self, stamp, bodies: Optional[Sequence[int]] = None,
                  states: bool = True, reactions: Optional[Sequence[str]] = None,
@@ -144,6 +180,46 @@ class Outputs:
                     Header(stamp=stamp, frame_id=self.world_frame), on_world_f, on_world_t)))
         return out
 
+    # -- robots -----------------------------------------------------------------------------
+
+    def joint_states(self, stamp):
+        """Return the ``sensor_msgs/JointState`` of every joint now (``sim.joint_state()``)."""
+        js = self.sim.joint_state()
+        return conv.joint_state(Header(stamp=stamp), js.names, js.positions, js.velocities,
+                                js.efforts)
+
+    def transforms(self, stamp) -> list:
+        """
+        Return the world frame -> each robot body's frame, as TransformStamped (for /tf).
+
+        The child frame is the body's name (its topmost link with the robot's
+        prefix); translation and rotation are the body's pose, as
+        ``~/bodies/<B>/pose`` has it.
+        """
+        pos, quat = self.sim.pose()
+        world = Header(stamp=stamp, frame_id=self.world_frame)
+        names = self.sim.bodies.names
+        return [conv.transform_stamped(world, names[i], pos[i], quat[i])
+                for i in self.robot_bodies]
+
+    def static_transforms(self, stamp) -> list:
+        """
+        Return the links' constant transforms, as TransformStamped (for /tf_static).
+
+        Each link lumped into a body relative to that body's frame, and each link
+        fixed to the world relative to the world frame (a URDF link that is the
+        world frame itself is left out).
+        """
+        out = []
+        for frame_id, frame in self._links:
+            parent = self.world_frame if frame.body is None else frame.body
+            if frame_id == parent:
+                continue   # (the body's own frame, or the world link as the world frame)
+            out.append(conv.transform_stamped(Header(stamp=stamp, frame_id=parent), frame_id,
+                                              frame.position,
+                                              so3.matrix_to_quat(frame.rotation)))
+        return out
+
     def metrics(self, header: Header, step_count: int, energy0: float) -> Metrics:
         """Return the scene's energies, largest violation and momenta now."""
         d = self.sim.diagnostics()
@@ -161,17 +237,24 @@ class Outputs:
         """
         Return the bodies as their shapes and the joints as small spheres.
 
-        A body whose scene gives a shape (box, sphere, cylinder) is drawn as that
-        shape about its centre of mass in its own axes; any other as the uniform
-        box of equal mass and principal moments, in its principal axes. Each
-        array starts with a DELETEALL, so removed constraints disappear.
+        A robot's links are drawn as their URDF visuals (box, cylinder, sphere,
+        mesh: a MESH_RESOURCE with the URI as written, ``file://`` for a plain
+        path), posed by their bodies, in namespace ``visuals``. A body whose
+        scene gives a shape (box, sphere, cylinder) is drawn as that shape about
+        its centre of mass in its own axes; any other (also a robot body whose
+        links have no visual) as the uniform box of equal mass and principal
+        moments, in its principal axes. Each array starts with a DELETEALL, so
+        removed constraints disappear.
         """
         sim = self.sim
         bodies = sim.bodies
         state = sim.state
-        _, quat_body = sim.pose()
+        pos_body, quat_body = sim.pose()
         out = [Marker(header=header, action=Marker.DELETEALL)]
-        for i, name in enumerate(bodies.names):
+        if self._visuals:
+            out += self._visual_markers(header, pos_body, so3.quat_to_matrix(quat_body))
+        for i in self._plain:
+            name = bodies.names[i]
             kind, dims = self.shapes.get(name, (None, None))
             if kind == 'box':
                 shape, scale, q = Marker.CUBE, dims, quat_body[i]
@@ -194,6 +277,44 @@ class Outputs:
                 scale=conv.vector3([JOINT_MARKER_SIZE] * 3),
                 color=ColorRGBA(r=0.84, g=0.15, b=0.16, a=1.0), text=name))
         return MarkerArray(markers=out)
+
+    def _visual_markers(self, header: Header, pos_body: np.ndarray,
+                        R_body: np.ndarray) -> list:
+        """Return the URDF visuals, posed by their bodies (pos (n, 3), R (n, 3, 3), world)."""
+        out = []
+        for k, (i, p_v, R_v, v, frame_id) in enumerate(self._visuals):
+            if i is None:
+                p, R = p_v, R_v
+            else:
+                p, R = pos_body[i] + R_body[i] @ p_v, R_body[i] @ R_v
+            marker = Marker(header=header, ns='visuals', id=k, action=Marker.ADD,
+                            pose=conv.pose(p, so3.matrix_to_quat(R)), text=frame_id)
+            if v.shape == 'box':
+                marker.type, scale = Marker.CUBE, v.size
+            elif v.shape == 'cylinder':
+                marker.type, scale = Marker.CYLINDER, (2 * v.size[0], 2 * v.size[0], v.size[1])
+            elif v.shape == 'sphere':
+                marker.type, scale = Marker.SPHERE, (2 * v.size[0],) * 3
+            else:
+                marker.type, scale = Marker.MESH_RESOURCE, v.size
+                marker.mesh_resource = mesh_resource(v.uri, v.path)
+            marker.scale = conv.vector3(scale)
+            if v.rgba is not None:
+                marker.color = ColorRGBA(**dict(zip('rgba', (float(c) for c in v.rgba))))
+            elif v.shape == 'mesh':
+                marker.mesh_use_embedded_materials = True   # (colour 0 0 0 0: the mesh's own)
+            else:
+                body = -1 if i is None else i
+                marker.color = ColorRGBA(**dict(zip('rgba', PALETTE[body % len(PALETTE)])))
+            out.append(marker)
+        return out
+
+
+def mesh_resource(uri: str, path: str) -> str:
+    """Return a URDF mesh's ``mesh_resource``: its URI as written, ``file://`` a plain path."""
+    if '://' in uri:
+        return uri   # (package:// and file:// as RViz resolves them)
+    return 'file://' + (path or uri)
 
 
 def equal_inertia_box(mass: float, moments: np.ndarray) -> list:

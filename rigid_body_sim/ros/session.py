@@ -4,8 +4,9 @@ One simulation as the node serves it, without the transport: shared by the node 
 It holds what the node adds to a :class:`~rigid_body_sim.core.Simulation`: the
 published clock (monotonic across resets unless ``reset_time``), the step count
 since the last reset, the energy at the last reset, the queue of wrench
-messages (the latest per body, applied before the next step), the checks of
-inputs with their rejection counts, and which outputs a step makes due. The
+messages (the latest per body) and of joint effort commands (the latest per
+joint), both applied before the next step, the checks of inputs with their
+rejection counts, and which outputs a step makes due. The
 node (:mod:`.node`) drives it from DDS and the wall clock; the experiment runner
 (:mod:`.experiment`) from a schedule, in lockstep. So both apply inputs and
 publish outputs the same way.
@@ -13,17 +14,26 @@ publish outputs the same way.
 
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any, NamedTuple, Optional
 
 import numpy as np
 
 from . import conversions as conv
-from .inputs import check_name_token, check_wrench, constraint_from_request, Rejected, \
-    Rejection, shown
+from .inputs import check_joint_command, check_name_token, check_wrench, \
+    constraint_from_request, Rejected, Rejection, shown
 from .outputs import body_topic, constraint_topic, Outputs
 from .pacing import output_due, Totals
 from ..core import DivergenceError, InconsistentConstraintError, SpecError
 from ..scene import Scene
+
+
+class Due(NamedTuple):
+    """Which outputs a step made due."""
+
+    clock: bool
+    state: bool     # poses, twists, body states, reactions, metrics, markers
+    joints: bool    # joint_states
+    tf: bool        # /tf
 
 
 class Session:
@@ -65,10 +75,14 @@ class Session:
         self.scene_integrator = self.sim.integrator_name
         self.scene_tolerance = self.sim.accuracy().tolerance
         self.configure()
-        self.outputs = Outputs(self.sim, scene.shapes, settings.world_frame)
+        self.outputs = Outputs(self.sim, scene.shapes, settings.world_frame, scene.robots)
         self.totals = Totals()
         self.pending: dict = {}   # body -> (force, torque, frame): the latest message
         self.superseded = 0       # wrench messages replaced before a step used them
+        self.pending_efforts: dict = {}   # joint -> effort: the latest command
+        self.efforts_superseded = 0       # joint efforts replaced before a step used them
+        rotary = dict(zip(self.sim.joints.names, self.sim.joints.rotary.tolist()))
+        self._rotary = rotary   # joint -> revolute or continuous (else prismatic)
         self.offset_ns = 0        # published time = this + the simulation's own time
         self.step_count = 0       # steps since the last reset
         self.diverged: Optional[str] = None
@@ -124,13 +138,43 @@ class Session:
             self.superseded += 1   # two messages between steps: the later one wins
         self.pending[body] = (force, torque, frame)
 
+    def queue_joint_command(self, names: list, positions: np.ndarray,
+                            velocities: np.ndarray, efforts: np.ndarray) -> dict:
+        """
+        Check a ``~/joint_commands`` message's arrays; queue its efforts for the next step.
+
+        Returns the ``{joint: effort}`` queued; joints not named keep their commands.
+
+        Raises
+        ------
+        Rejected
+            No names, position or velocity values, mismatched lengths, a joint
+            named twice, an unknown joint, NaN or inf, beyond max_torque or
+            max_force (counted); nothing is queued.
+
+        """
+        s = self.settings
+        limits = {name: s.max_torque if rotary else s.max_force
+                  for name, rotary in self._rotary.items()}
+        try:
+            efforts = check_joint_command(names, positions, velocities, efforts, limits)
+        except Rejected as exc:
+            self.totals.reject(exc.cause.value)
+            raise
+        self.efforts_superseded += sum(1 for name in efforts if name in self.pending_efforts)
+        self.pending_efforts.update(efforts)
+        return efforts
+
     def apply_pending(self) -> None:
-        """Apply the queued wrenches: each acts at its body frame's origin, held."""
+        """Apply the queued wrenches (each at its body frame's origin, held) and efforts."""
         timeout = self.settings.wrench_timeout or None
         for body, (force, torque, frame) in self.pending.items():
             self.sim.apply_wrench(body, force, torque, frame=frame, point_body=(0.0, 0.0, 0.0),
                                   duration=timeout, key=f'topic:{body}')
         self.pending.clear()
+        if self.pending_efforts:
+            efforts, self.pending_efforts = self.pending_efforts, {}
+            self.sim.set_joint_efforts(efforts)   # (held until the next command per joint)
 
     def reset(self) -> None:
         """Back to the scene's initial state; time runs on unless ``reset_time``."""
@@ -138,8 +182,9 @@ class Session:
             self.offset_ns = 0
         else:   # the initial state is stamped one step after the last state
             self.offset_ns = self.now_ns() + int(round(self.sim.dt * conv.NANOSECONDS))
-        self.sim.reset()   # keeps dt and the integrator
+        self.sim.reset()   # keeps dt and the integrator; clears joint commands, counters
         self.pending.clear()
+        self.pending_efforts.clear()
         self.diverged = None
         self.step_count = 0
         self.energy0 = self.sim.diagnostics().total_energy
@@ -215,9 +260,9 @@ class Session:
 
     # -- stepping -------------------------------------------------------------------------
 
-    def advance(self) -> tuple[bool, bool]:
+    def advance(self) -> Due:
         """
-        Apply queued inputs and take one step; return (clock due, state due).
+        Apply queued inputs and take one step; return which outputs are due.
 
         Raises
         ------
@@ -236,8 +281,10 @@ class Session:
         self.step_count += 1
         t_after = self.sim.time
         s = self.settings
-        return (output_due(t_before, t_after, s.clock_rate),
-                output_due(t_before, t_after, s.publish_rate))
+        return Due(output_due(t_before, t_after, s.clock_rate),
+                   output_due(t_before, t_after, s.publish_rate),
+                   output_due(t_before, t_after, s.joint_state_rate_hz),
+                   output_due(t_before, t_after, s.tf_rate_hz))
 
     def snapshot(self, **which) -> list:
         """Return ``[(private topic, message)]`` of one publish (see Outputs.snapshot)."""

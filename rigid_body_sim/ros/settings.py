@@ -48,6 +48,20 @@ def _rate(limit: float) -> Callable:
     return check
 
 
+def _rate_or_zero(limit: float) -> Callable:
+    rate = _rate(limit)
+
+    def check(name: str, value: Any) -> float:
+        if _number(name, value) == 0.0:
+            return 0.0
+        try:
+            return rate(name, value)
+        except SpecError:
+            raise SpecError(name, f'must be 0 (as publish_rate) or in [{SLOWEST_RATE:g}, '
+                                  f'{limit:g}] Hz, got {value!r}') from None
+    return check
+
+
 def _non_negative(name: str, value: Any) -> float:
     x = _number(name, value)
     if x < 0.0:
@@ -89,6 +103,19 @@ def _frame(name: str, value: Any) -> str:
                                                      f'characters)'
         raise SpecError(name, f'must be a frame name of 1 to {MAX_FRAME_LENGTH} printable '
                               f"ASCII characters without spaces or a leading '/', got {shown}")
+    return value
+
+
+#: Values of the parameter ``tf``: what the node publishes on /tf and /tf_static.
+TF_MODES = ('links', 'off')
+
+
+def _tf_mode(name: str, value: Any) -> str:
+    if value is False:   # (YAML 1.1, as ROS parameters and -p name:=value read it: off)
+        return 'off'
+    value = _string(name, value)
+    if value not in TF_MODES:
+        raise SpecError(name, f'expected one of {list(TF_MODES)}, got {value!r}')
     return value
 
 
@@ -140,6 +167,13 @@ PARAMETERS = (
     Parameter('per_body_topics', True, _boolean,
               'pose, twist and wrench topics per body (off: ~/body_states only, for large '
               'scenes)', read_only=True),
+    Parameter('joint_state_rate', 0.0, _rate_or_zero(1e6),
+              'Hz of simulated time: joint_states (robots); 0: as publish_rate'),
+    Parameter('tf_rate', 0.0, _rate_or_zero(1e6),
+              "Hz of simulated time: /tf of the robots' moving links; 0: as publish_rate"),
+    Parameter('tf', 'links', _tf_mode,
+              "links: the robots' link frames on /tf and /tf_static; off: none (e.g. when "
+              'robot_state_publisher publishes them from joint_states)', read_only=True),
 )
 
 BY_NAME = {p.name: p for p in PARAMETERS}
@@ -163,6 +197,19 @@ class Settings:
     max_torque: float = 1e8
     reset_time: bool = False
     per_body_topics: bool = True
+    joint_state_rate: float = 0.0
+    tf_rate: float = 0.0
+    tf: str = 'links'
+
+    @property
+    def joint_state_rate_hz(self) -> float:
+        """Hz: the rate of joint_states (``joint_state_rate``, or publish_rate for 0)."""
+        return self.joint_state_rate or self.publish_rate
+
+    @property
+    def tf_rate_hz(self) -> float:
+        """Hz: the rate of /tf (``tf_rate``, or publish_rate for 0)."""
+        return self.tf_rate or self.publish_rate
 
     @classmethod
     def from_values(cls, values: dict) -> 'Settings':
