@@ -18,8 +18,8 @@
 #   ./dev.sh plot BAG [-o out.png]        plot a bag
 #   ./dev.sh test [pytest args]           run the whole test suite
 #   ./dev.sh bench [--quick]              run the benchmarks (installs bench/requirements.txt:
-#                                         MuJoCo; tables and plots in bench/out/, all the
-#                                         tables in docs/performance.md)
+#                                         MuJoCo, the Panda URDF, Pinocchio; tables and plots
+#                                         in bench/out/, all the tables in docs/performance.md)
 #   ./dev.sh python [ARGS]                python in the environment (with bench/requirements.txt),
 #                                         e.g. one benchmark: ./dev.sh python bench/node.py
 #   ./dev.sh setup                        set up only
@@ -140,13 +140,14 @@ build() {
 }
 
 bench_requirements() {
-    # Benchmark-only dependencies (MuJoCo, for bench/mujoco_peer.py): installed by
+    # Benchmark-only dependencies (MuJoCo for bench/mujoco_peer.py; example-robot-data and
+    # Pinocchio too for bench/robot_panda.py, about 600 MB with MuJoCo): installed by
     # ./dev.sh bench only, never by setup, run or test; again when either file changes.
     local want have
     want=$(hash_of requirements.txt bench/requirements.txt)
     have=$(cat "$VENV/.bench-requirements.sha256" 2>/dev/null || true)
     if [ "$want" != "$have" ]; then
-        say "installing bench/requirements.txt into .venv (MuJoCo, for bench/mujoco_peer.py)"
+        say "installing bench/requirements.txt into .venv (MuJoCo, example-robot-data, pin)"
         "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r bench/requirements.txt
         echo "$want" > "$VENV/.bench-requirements.sha256"
     fi

@@ -12,7 +12,8 @@ Then ``bench/constraints.py`` (chains, trees, rings, joints), ``bench/knob_estim
 (the accuracy knob's estimators), ``bench/tree_solve.py`` (the tree solve against SuperLU),
 ``bench/shake_convergence.py`` (SHAKE's iterations) and ``bench/reactions.py`` (reading
 the reactions after a step; ``--skip-constraints`` skips these five),
-``bench/mujoco_peer.py`` and ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
+``bench/mujoco_peer.py``, ``bench/robot_panda.py`` (the Franka Panda's URDF) and
+``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` (the ROS node through DDS: rates, costs, latency; ``--skip-node``).
 A benchmark that fails is reported and the others run on.
 
@@ -275,6 +276,9 @@ def sections(quick: bool, node_args: list) -> list:
         ('skip_mujoco', 'mujoco_peer', ['--quick'] if quick else [], report.Section(
             'Side by side with MuJoCo', f'./dev.sh python bench/mujoco_peer.py{q}',
             [T('mujoco_peer.md')])),
+        ('skip_mujoco', 'robot_panda', ['--quick'] if quick else [], report.Section(
+            'The Franka Panda, beside MuJoCo', f'./dev.sh python bench/robot_panda.py{q}',
+            [T('robot_panda.md')])),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],
@@ -297,8 +301,8 @@ def main(argv=None) -> int:
     p.add_argument('--skip-node', action='store_true',
                    help='no ROS node benchmark (bench/node.py runs it)')
     p.add_argument('--skip-mujoco', action='store_true',
-                   help='no side-by-side with MuJoCo (bench/mujoco_peer.py and '
-                        'bench/accuracy_study.py run it)')
+                   help='no side-by-side with MuJoCo (bench/mujoco_peer.py, '
+                        'bench/robot_panda.py and bench/accuracy_study.py run it)')
     p.add_argument('--max-wait', type=float, metavar='S',
                    help='passed to bench/node.py (how long it waits for a quiet machine)')
     args = p.parse_args(argv)
