@@ -233,9 +233,13 @@ def test_an_effort_command_moves_its_joint_as_the_core_predicts(ros):
     expected_one = core({'j1': 100.0}).joint_state()
     _assert_joints_equal(one, expected_one)
     _assert_joints_equal(two, core({'j1': 100.0}, {'j2': -2.0}).joint_state())
-    # The effort reported is the clamped command, acting.
-    np.testing.assert_array_equal(one.effort, [10.0, 0.0])
-    np.testing.assert_array_equal(two.effort, [10.0, -2.0])
+    # The effort reported is the clamped command, acting, plus j2's URDF damping
+    # (0.1 N m s/rad) at the current rate. bound: one product's rounding, 1e-15.
+    damping = np.array([0.0, 0.1])
+    np.testing.assert_allclose(np.array(one.effort) + damping * one.velocity, [10.0, 0.0],
+                               atol=1e-12)
+    np.testing.assert_allclose(np.array(two.effort) + damping * two.velocity, [10.0, -2.0],
+                               atol=1e-12)
     # Each moved its joint its way: against the same run without it.
     free = core(None)
     assert one.position[0] > free.joint_state().positions[0]
@@ -302,7 +306,10 @@ def test_reset_clears_joint_commands_and_publishes_the_initial_state(ros):
     t = _step(ros, node, 100)
     ros.client.wait_for(lambda: any(_values(d)['joint_efforts_clamped'] == '1' for d in diags),
                         'the clamped effort counted', node=node)
-    assert _at(ros, node, states, t, 'joint states').effort.tolist() == [10.0, 1.0]
+    msg = _at(ros, node, states, t, 'joint states')
+    # The clamped command plus j2's damping (0.1 N m s/rad) now; bound: rounding, 1e-15.
+    np.testing.assert_allclose(np.array(msg.effort) + [0.0, 0.1 * msg.velocity[1]],
+                               [10.0, 1.0], atol=1e-12)
     reply = ros.client.call(Trigger, f'{NODE}/reset', Trigger.Request(), node=node)
     assert reply.success and 'joint commands cleared' in reply.message
     # The reset state is stamped one step after the last, and is the initial one.
@@ -319,7 +326,9 @@ def test_reset_clears_joint_commands_and_publishes_the_initial_state(ros):
     initial.step(100)
     msg = _at(ros, node, states, t, 'joint states')
     _assert_joints_equal(msg, initial.joint_state())
-    assert msg.effort.tolist() == [0.0, 0.0]
+    # No command acts: only j2's damping (0.1 N m s/rad). bound: rounding, 1e-15.
+    np.testing.assert_allclose(np.array(msg.effort) + [0.0, 0.1 * msg.velocity[1]], 0.0,
+                               atol=1e-12)
     ros.client.wait_for(lambda: float(_values(diags[-1])['sim_time_s']) > t - 1e-6,
                         'diagnostics after the reset', node=node)
     assert _values(diags[-1])['joint_efforts_clamped'] == '0'
