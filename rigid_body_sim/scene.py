@@ -227,21 +227,29 @@ def _build(data: Any, source: str) -> Scene:
                  robots=[(spec.prefix, parsed) for spec, parsed in robots], warnings=warnings)
 
 
-def _groups(data: Any) -> list:
-    """Return the scene's joint command groups."""
+def _entries(data: Any, key: str, allowed: tuple, required: tuple) -> list:
+    """Return ``(field, entry)`` of a list of mappings, each key checked; SpecError naming it."""
     if not isinstance(data, list):
-        raise SpecError('command_groups', f'expected a list of groups, got {data!r}')
+        raise SpecError(key, f'expected a list, got {data!r}')
     out = []
     for i, entry in enumerate(data):
-        field = f'command_groups[{i}]'
-        entry = _mapping(entry, field, GROUP_KEYS)
-        for key in ('name', 'joints'):
-            if key not in entry:
-                raise SpecError(f'{field}.{key}', 'missing (required)')
+        field = f'{key}[{i}]'
+        entry = _mapping(entry, field, allowed)
+        for name in required:
+            if name not in entry:
+                raise SpecError(f'{field}.{name}', 'missing (required)')
+        out.append((field, entry))
+    return out
+
+
+def _groups(data: Any) -> list:
+    """Return the scene's joint command groups."""
+    out = []
+    for where, entry in _entries(data, 'command_groups', GROUP_KEYS, ('name', 'joints')):
         try:
             out.append(CommandGroup(**entry))
         except SpecError as exc:
-            raise exc.within(field) from None
+            raise exc.within(where) from None
     return out
 
 
@@ -352,22 +360,15 @@ def _inertia(value: Any, mass: float) -> Any:
 
 def _constraints(data: Any) -> list:
     """Constraints listed in the scene (generic ones need Python: not in files)."""
-    if not isinstance(data, list):
-        raise SpecError('constraints', f'expected a list of constraints, got {data!r}')
     out = []
-    for i, c in enumerate(data):
-        field = f'constraints[{i}]'
-        c = _mapping(c, field, CONSTRAINT_KEYS)
-        for key in ('name', 'type', 'body_a'):
-            if key not in c:
-                raise SpecError(f'{field}.{key}', 'missing (required)')
+    for where, c in _entries(data, 'constraints', CONSTRAINT_KEYS, ('name', 'type', 'body_a')):
         if c['type'] == 'generic':
-            raise SpecError(f'{field}.type', 'generic constraints need a Python function: add '
+            raise SpecError(f'{where}.type', 'generic constraints need a Python function: add '
                                              'them with Simulation.add_constraint')
         try:
             out.append(Constraint(**c))
         except SpecError as exc:
-            raise exc.within(field) from None
+            raise exc.within(where) from None
     return out
 
 
