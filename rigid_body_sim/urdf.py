@@ -144,7 +144,14 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
         raise UrdfError(f'{_where(parse_tree, flat, source)}: {flat}') from None
     finally:
         xml_core.on_error = saved
-    ignored += complaints
+    # urdf_parser_py names an unknown attribute once per element: count them instead.
+    unknown = {}
+    for c in complaints:
+        m = re.match(r'Unknown (attribute|tag) "([^"]+)" in (.*)$', c)
+        key = c if m is None else f'unknown {m.group(1)} "{m.group(2)}" in '\
+            f'<{m.group(3).rsplit("/", 1)[-1].split("[")[0]}>'
+        unknown[key] = unknown.get(key, 0) + 1
+    ignored += [k if n == 1 else f'{k} x{n}' for k, n in unknown.items()]
 
     links, visuals = [], []
     for link in robot.links:

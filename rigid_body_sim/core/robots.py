@@ -552,9 +552,6 @@ def build_robot(spec: RobotSpec) -> RobotModel:
         if j.friction > 0.0:
             notes.append(f'joint {pre + j.name!r}: Coulomb friction {j.friction} is read but '
                          f'not simulated yet')
-        if j.damping > 0.0:
-            notes.append(f'joint {pre + j.name!r}: damping {j.damping} is read but not '
-                         f'simulated yet')
         if j.mimic is not None:
             notes.append(f'joint {pre + j.name!r}: mimic of {j.mimic[0]!r} is read but not '
                          f'enforced yet (the joint moves freely)')
