@@ -11,8 +11,9 @@ from rigid_body_sim.core import Constraint, RigidBody
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core.bodies import BodySet
 from rigid_body_sim.core.constraints import ConstraintSet
-from rigid_body_sim.core.kernels.rows import (KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT,
-                                              pack_rows, rows_geometry, rows_rates)
+from rigid_body_sim.core.kernels.layout import PAR_E, PAR_E2, PAR_RA, PAR_RB, PAR_S, PAR_SCALAR
+from rigid_body_sim.core.kernels.rows import (KIND_ANGLE, KIND_DISTANCE, KIND_DOT, KIND_LINE,
+                                              KIND_POINT, pack_rows, rows_geometry, rows_rates)
 
 JOINTS = ('ball', 'hinge', 'slider', 'fixed', 'distance')
 N_BODIES = 4
@@ -71,10 +72,10 @@ def random_rows(seed, m=40):
     rng = np.random.default_rng(seed)
     table = []
     for k in range(m):
-        kind = (KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE)[k % 4]
+        kind = (KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE, KIND_ANGLE)[k % 5]
         a = int(rng.integers(N_BODIES))
         b = N_BODIES if k % 3 == 0 else int((a + 1 + rng.integers(N_BODIES - 1)) % N_BODIES)
-        vec = [rng.normal(size=3) for _ in range(4)]
+        vec = [rng.normal(size=3) for _ in range(5)]
         table.append((kind, int(rng.integers(3)), a, b, *vec, float(rng.normal())))
     return pack_rows(table)
 
@@ -137,15 +138,21 @@ def reference_phi(rows, pos, quat):
     phi = np.zeros(len(kind))
     for k in range(len(kind)):
         i, j = a[k], b[k]
-        d = x[i] + R[i] @ par[k, 0:3] - x[j] - R[j] @ par[k, 3:6]
+        ra, rb, s, e, e2 = (par[k, c:c + 3] for c in (PAR_RA, PAR_RB, PAR_S, PAR_E, PAR_E2))
+        c = par[k, PAR_SCALAR]
+        d = x[i] + R[i] @ ra - x[j] - R[j] @ rb
         if kind[k] == KIND_POINT:
             phi[k] = d[comp[k]]
         elif kind[k] == KIND_DOT:
-            phi[k] = (R[j] @ par[k, 9:12]) @ (R[i] @ par[k, 6:9]) - par[k, 12]
+            phi[k] = (R[j] @ e) @ (R[i] @ s) - c
         elif kind[k] == KIND_LINE:
-            phi[k] = (R[j] @ par[k, 9:12]) @ d
+            phi[k] = (R[j] @ e) @ d - c
+        elif kind[k] == KIND_ANGLE:
+            u = R[i] @ s
+            theta = np.arctan2((R[j] @ e2) @ u, (R[j] @ e) @ u)
+            phi[k] = (theta - c + np.pi) % (2.0 * np.pi) - np.pi   # in [−π, π)
         else:
-            phi[k] = np.linalg.norm(d) - par[k, 12]
+            phi[k] = np.linalg.norm(d) - c
     return phi
 
 

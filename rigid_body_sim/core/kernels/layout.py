@@ -274,8 +274,10 @@ JOINT = Columns('joint', [('parent', 1), ('child', 1), ('rotary', 1), ('p_jp', 3
                           ('R_jp', 9), ('axis', 3), ('e1', 3), ('e2', 3),
                           ('velocity_limit', 1)])
 #: ``row_par`` (m, PAR_WIDTH) of the constraint rows (:mod:`.rows`): the lever arms on
-#: bodies a and b (principal frames), the axes s and e, and a scalar (a length, a cosine).
-ROW_PARAMETERS = Columns('row par', [('ra', 3), ('rb', 3), ('s', 3), ('e', 3), ('scalar', 1)])
+#: bodies a and b (principal frames), the axes s and e, a second axis e2 of body b (angle
+#: rows), and a scalar (a length, a cosine, a joint drive's target).
+ROW_PARAMETERS = Columns('row par', [('ra', 3), ('rb', 3), ('s', 3), ('e', 3), ('e2', 3),
+                                     ('scalar', 1)])
 #: ``par`` of the constrained kernels: the solver's and the integrator's settings.
 PAR = Columns('par', [('tau', 1), ('omega', 1), ('pos_tol', 1), ('max_it', 1),
                       ('rank_rtol', 1), ('reg', 1), ('closing', 1), ('max_rot', 1),

@@ -1,5 +1,5 @@
 """
-Compiled kernels for the built-in constraint rows (point, dot, line, distance).
+Compiled kernels for the built-in constraint rows (point, dot, line, distance, angle).
 
 The built-in rows of a :class:`~.constraints.ConstraintSet` are described by
 flat arrays, one entry per row, built once when the constraint set changes;
@@ -10,8 +10,8 @@ unchanged as plain Python under ``NUMBA_DISABLE_JIT=1``.
 Row description (m built-in rows)
 ---------------------------------
 ``kind`` : int64 (m,)
-    ``KIND_POINT`` (0), ``KIND_DOT`` (1), ``KIND_LINE`` (2) or
-    ``KIND_DISTANCE`` (3).
+    ``KIND_POINT`` (0), ``KIND_DOT`` (1), ``KIND_LINE`` (2),
+    ``KIND_DISTANCE`` (3) or ``KIND_ANGLE`` (4).
 ``comp`` : int64 (m,)
     The component (0, 1, 2: x, y, z, world frame) of a point row; 0 otherwise.
 ``a``, ``b`` : int64 (m,)
@@ -24,18 +24,23 @@ Row description (m built-in rows)
     ============  =========  =====================================================
     0:3           ``r_a``    point, line, distance: anchor lever arm in body a
     3:6           ``r_b``    point, line, distance: anchor lever arm in body b
-    6:9           ``s``      dot: unit vector in body a
-    9:12          ``e``      dot, line: unit vector in body b
-    12            scalar     dot: target ``c``; distance: length ``L``
+    6:9           ``s``      dot, angle: unit vector in body a
+    9:12          ``e``      dot, line, angle: unit vector in body b
+    12:15         ``e2``     angle: a second unit vector in body b, ``⟂ e``
+    15            scalar     dot: target ``c``; line: offset ``c``; distance: length
+                             ``L``; angle: target ``c`` (rad)
     ============  =========  =====================================================
 
 Rows, with anchors ``P = x + R r``, ``d = P_a − P_b``, ``u = R_a s``,
-``ε = R_b e``:
+``ε = R_b e``, ``ε₂ = R_b e2``:
 
 * point: ``Φ = d[comp]``;
 * dot: ``Φ = ε · u − c``;
-* line: ``Φ = ε · d``;
-* distance: ``Φ = |d| − L``.
+* line: ``Φ = ε · d − c`` (a slider's joint coordinate when it drives one);
+* distance: ``Φ = |d| − L``;
+* angle: ``Φ = wrap(θ − c)``, ``θ = atan2(ε₂ · u, ε · u)`` the rotation of ``u``
+  about ``ε × ε₂`` (a hinge's joint angle), the difference taken in ``(−π, π]``:
+  a driven hinge goes the shorter way to its target.
 
 The Jacobian rows are with respect to ``(δx_com_world, δΘ_principal)`` of each
 body (``δR = R hat(δΘ)``): ``Ga`` (m, 6) on body a, ``Gb`` (m, 6) on body b
@@ -49,10 +54,10 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
-from .layout import PAR_E, PAR_RA, PAR_RB, PAR_S, PAR_SCALAR, PAR_WIDTH
+from .layout import PAR_E, PAR_E2, PAR_RA, PAR_RB, PAR_S, PAR_SCALAR, PAR_WIDTH
 from .so3 import quat_matrix
 
-KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE = 0, 1, 2, 3
+KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE, KIND_ANGLE = 0, 1, 2, 3, 4
 
 # Guards the division by a distance row's current length (as the numpy version did).
 _TINY = 1e-300
@@ -65,8 +70,8 @@ def pack_rows(rows: list) -> tuple:
     Parameters
     ----------
     rows : list of tuple
-        ``(kind, comp, a, b, r_a, r_b, s, e, scalar)`` per row; vectors (3,) or
-        None for zero.
+        ``(kind, comp, a, b, r_a, r_b, s, e, e2, scalar)`` per row; vectors (3,)
+        or None for zero.
 
     Returns
     -------
@@ -80,9 +85,9 @@ def pack_rows(rows: list) -> tuple:
     a = np.zeros(m, dtype=np.int64)
     b = np.zeros(m, dtype=np.int64)
     par = np.zeros((m, PAR_WIDTH))
-    for k, (kd, c, ia, ib, r_a, r_b, s, e, scalar) in enumerate(rows):
+    for k, (kd, c, ia, ib, r_a, r_b, s, e, e2, scalar) in enumerate(rows):
         kind[k], comp[k], a[k], b[k] = kd, c, ia, ib
-        for col, vec in ((PAR_RA, r_a), (PAR_RB, r_b), (PAR_S, s), (PAR_E, e)):
+        for col, vec in ((PAR_RA, r_a), (PAR_RB, r_b), (PAR_S, s), (PAR_E, e), (PAR_E2, e2)):
             if vec is not None:
                 par[k, col:col + 3] = vec
         par[k, PAR_SCALAR] = scalar
@@ -189,6 +194,44 @@ def _put(out: np.ndarray, k: int, lin: tuple, ang: tuple) -> None:
 
 
 @njit(cache=True)
+def _angle_gradient(u: tuple, eps: tuple, eps2: tuple, x: float, y: float) -> tuple:
+    """
+    ``∂θ/∂ω_a`` (world), ``θ = atan2(y, x)``, ``x = ε · u``, ``y = ε₂ · u``.
+
+    With ``δu = δω_a × u``: ``δx = δω_a · (u × ε)``, ``δy = δω_a · (u × ε₂)``, so
+    ``g = u × (x ε₂ − y ε) / (x² + y²)``; ``∂θ/∂ω_b = −g`` (ε, ε₂ turn with b). For a
+    hinge holding its axis, ``g`` is the axis ``ε × ε₂``.
+    """
+    r2 = max(x * x + y * y, _TINY)
+    w = _sub(_scale(x, eps2), _scale(y, eps))
+    return _over(_cross(u, w), r2)
+
+
+@njit(cache=True)
+def _angle_gamma(u: tuple, eps: tuple, eps2: tuple, w_a: tuple, w_b: tuple) -> float:
+    """
+    ``γ = ġ · (ω_a − ω_b)`` of an angle row, ``g`` of :func:`_angle_gradient`.
+
+    Along ``u̇ = ω_a × u``, ``ε̇ = ω_b × ε`` (``Ṙ Ω = 0``, so this is all of ``Ġ ν``):
+    ``g = u × w / r²`` with ``w = x ε₂ − y ε``, ``r² = x² + y²``, and
+    ``ġ = (u̇ × w + u × ẇ) / r² − g ṙ² / r²``.
+    """
+    x, y = _dot(eps, u), _dot(eps2, u)
+    r2 = max(x * x + y * y, _TINY)
+    u_dot = _cross(w_a, u)
+    e_dot, e2_dot = _cross(w_b, eps), _cross(w_b, eps2)
+    x_dot = _dot(e_dot, u) + _dot(eps, u_dot)
+    y_dot = _dot(e2_dot, u) + _dot(eps2, u_dot)
+    w = _sub(_scale(x, eps2), _scale(y, eps))
+    w_dot = _sub(_add(_scale(x_dot, eps2), _scale(x, e2_dot)),
+                 _add(_scale(y_dot, eps), _scale(y, e_dot)))
+    g = _over(_cross(u, w), r2)
+    r2_dot = 2.0 * (x * x_dot + y * y_dot)
+    g_dot = _sub(_over(_add(_cross(u_dot, w), _cross(u, w_dot)), r2), _scale(r2_dot / r2, g))
+    return _dot(g_dot, _sub(w_a, w_b))
+
+
+@njit(cache=True)
 def rows_geometry(pos: np.ndarray, quat: np.ndarray, kind: np.ndarray, comp: np.ndarray,
                   a: np.ndarray, b: np.ndarray, par: np.ndarray, phi_out: np.ndarray,
                   Ga_out: np.ndarray, Gb_out: np.ndarray) -> None:
@@ -236,6 +279,19 @@ def framed_geometry(pos: np.ndarray, R: np.ndarray, kind: np.ndarray, comp: np.n
             _put(Ga_out, k, zero, _rot_t(R, i, ue))
             _put(Gb_out, k, zero, _scale(-1.0, _rot_t(R, j, ue)))
             continue
+        if kd == KIND_ANGLE:
+            u = _rot(R, i, par, k, PAR_S)
+            eps = _rot(R, j, par, k, PAR_E)
+            eps2 = _rot(R, j, par, k, PAR_E2)
+            x, y = _dot(eps, u), _dot(eps2, u)
+            c = par[k, PAR_SCALAR]
+            cc, sc = np.cos(c), np.sin(c)
+            # θ − c in (−π, π]: (x, y) turned back by c.
+            phi_out[k] = np.arctan2(y * cc - x * sc, x * cc + y * sc)
+            g = _angle_gradient(u, eps, eps2, x, y)
+            _put(Ga_out, k, zero, _rot_t(R, i, g))
+            _put(Gb_out, k, zero, _scale(-1.0, _rot_t(R, j, g)))
+            continue
         r_a = (par[k, PAR_RA], par[k, PAR_RA + 1], par[k, PAR_RA + 2])
         r_b = (par[k, PAR_RB], par[k, PAR_RB + 1], par[k, PAR_RB + 2])
         d = _sub(_add(_body_vec(pos, i), _rot(R, i, par, k, PAR_RA)),
@@ -251,7 +307,7 @@ def framed_geometry(pos: np.ndarray, R: np.ndarray, kind: np.ndarray, comp: np.n
             continue
         if kd == KIND_LINE:
             nrm = _rot(R, j, par, k, PAR_E)
-            phi_out[k] = _dot(nrm, d)
+            phi_out[k] = _dot(nrm, d) - par[k, PAR_SCALAR]
         else:
             length = np.sqrt(_dot(d, d))
             nrm = _over(d, max(length, _TINY))
@@ -341,6 +397,10 @@ def framed_rates(pos: np.ndarray, vel: np.ndarray, omega: np.ndarray, R: np.ndar
             wbe, wau = _cross(w_b, eps), _cross(w_a, u)
             gamma_out[k] = (_dot(u, _cross(w_b, wbe)) + 2.0 * _dot(wbe, wau)
                             + _dot(eps, _cross(w_a, wau)))
+            continue
+        if kd == KIND_ANGLE:
+            gamma_out[k] = _angle_gamma(_rot(R, i, par, k, PAR_S), _rot(R, j, par, k, PAR_E),
+                                        _rot(R, j, par, k, PAR_E2), w_a, w_b)
             continue
         lever_a = _rot(R, i, par, k, PAR_RA)
         lever_b = _rot(R, j, par, k, PAR_RB)
