@@ -18,8 +18,10 @@ constraints):
 
 * ``point``: ``P_a − P_b`` (3 rows), anchor points ``P = x_g + R r``;
 * ``dot``: ``(R_b e) · (R_a s)`` for unit vectors ``s`` in a and ``e`` in b;
-* ``line``: ``(R_b e) · (P_a − P_b)``;
-* ``distance``: ``|P_a − P_b| − L``.
+* ``line``: ``(R_b e) · (P_a − P_b)`` (minus an offset: a slider's coordinate);
+* ``distance``: ``|P_a − P_b| − L``;
+* ``angle``: the rotation of ``R_a s`` about the axis ``R_b (e × e2)``, from
+  ``R_b e``, minus a target (a hinge's coordinate).
 
 =========  ==================================================  ====
 type       rows                                                 DOF
@@ -31,6 +33,9 @@ slider     dot(k_a,e1_b) + dot(k_a,e2_b) + dot(e1_a,e2_b)
 fixed      point + the three dots of slider                     6
 planar     dot(k_a, e1_b) + dot(k_a, e2_b) + line(k_b)          3
 distance   distance                                             1
+drive      angle (rotary joint) or line (prismatic joint), with     1
+           the joint coordinate's target; made by command groups
+           of ``mode: exact`` (:mod:`.robots`), not by users
 generic    a user function Φ(x_a, R_a, x_b, R_b) (finite-difference Jacobian
            and γ unless given), evaluated one constraint at a time
 =========  ==================================================  ====
@@ -52,9 +57,10 @@ import scipy.sparse as sp
 from . import rotation as so3
 from .bodies import BodySet, State
 from .errors import SpecError
-from .kernels.rows import (KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT, pack_rows,
-                           rows_geometry, rows_rates)
-from .validate import finite_array, positive_scalar
+from .kernels.layout import PAR_SCALAR
+from .kernels.rows import (KIND_ANGLE, KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT,
+                           pack_rows, rows_geometry, rows_rates)
+from .validate import finite_array, finite_scalar, positive_scalar
 
 
 #: m: how far from the world origin a joint's points may lie. Beyond it a coordinate's
@@ -74,17 +80,72 @@ class JointType(enum.Enum):
     PLANAR = 'planar'
     DISTANCE = 'distance'
     GENERIC = 'generic'
+    #: A joint coordinate held at a target (:class:`DriveGeometry`): made by the
+    #: command groups of ``mode: exact``, not named by users.
+    DRIVE = 'drive'
 
     @classmethod
     def parse(cls, value: Any, field_name: str = 'type') -> 'JointType':
-        """Return the joint type of a JointType or of its name."""
+        """Return the joint type of a JointType or of its name (not 'drive': internal)."""
         if isinstance(value, JointType):
             return value
+        known = [t.value for t in cls if t is not cls.DRIVE]
+        if value == cls.DRIVE.value:
+            raise SpecError(field_name, f"'drive' constraints are made by command groups of "
+                                        f"mode 'exact' (robots); known types: {known}")
         try:
             return cls(value)
         except ValueError:
             raise SpecError(field_name, f'unknown constraint type {value!r}; known: '
-                                        f'{[t.value for t in cls]}') from None
+                                        f'{known}') from None
+
+
+@dataclass(frozen=True)
+class DriveGeometry:
+    """
+    Where a joint coordinate lives on its two bodies: what a ``drive`` constraint holds.
+
+    Vectors and points are in each body's own frame (body b the world: world
+    frame), as :mod:`.robots` knows them from the URDF. The coordinate is zero in
+    the URDF's zero configuration.
+
+    Parameters
+    ----------
+    rotary : bool
+        True: the angle ``atan2((R_b e2_b)·(R_a e1_a), (R_b e1_b)·(R_a e1_a))``
+        (revolute, continuous); False: the slide ``(R_b k_b)·(P_a − P_b)``
+        (prismatic), ``P_a = x_a + R_a p_a``, ``P_b = x_b + R_b p_b``.
+    e1_a : array_like, shape (3,)
+        Rotary: the joint frame's first perpendicular axis in body a.
+    e1_b, e2_b : array_like, shape (3,)
+        Rotary: the joint frame's perpendicular axes (at zero angle) in body b.
+    k_b : array_like, shape (3,)
+        Prismatic: the axis in body b.
+    p_a, p_b : array_like, shape (3,)
+        m, prismatic: the points whose separation along ``k_b`` is the slide.
+    target : float
+        rad or m: the coordinate held.
+
+    """
+
+    rotary: bool
+    e1_a: Any = (0.0, 0.0, 0.0)
+    e1_b: Any = (0.0, 0.0, 0.0)
+    e2_b: Any = (0.0, 0.0, 0.0)
+    k_b: Any = (0.0, 0.0, 0.0)
+    p_a: Any = (0.0, 0.0, 0.0)
+    p_b: Any = (0.0, 0.0, 0.0)
+    target: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, 'rotary', bool(self.rotary))
+        for key in ('e1_a', 'e1_b', 'e2_b', 'k_b', 'p_a', 'p_b'):
+            object.__setattr__(self, key, finite_array(getattr(self, key), key, (3,)))
+        object.__setattr__(self, 'target', finite_scalar(self.target, 'target'))
+        units = ('e1_a', 'e1_b', 'e2_b') if self.rotary else ('k_b',)
+        for key in units:
+            if abs(float(np.linalg.norm(getattr(self, key))) - 1.0) > 1e-9:
+                raise SpecError(key, f'must be a unit vector, got {getattr(self, key).tolist()}')
 
 
 @dataclass(frozen=True)
@@ -115,6 +176,8 @@ class Constraint:
         planar.
     length : float, optional
         m, for distance: default the current distance between the anchors.
+    drive : DriveGeometry, optional
+        For drive (and only for it): the joint coordinate held and its target.
     function : callable, optional
         For generic: ``phi(x_a, R_a, x_b, R_b) -> ndarray (k,)`` with centre of
         mass positions ``x`` (3,) and body-frame rotation matrices ``R`` (3, 3)
@@ -137,6 +200,7 @@ class Constraint:
     length: Any = None
     function: Optional[Callable] = None
     jacobian: Optional[Callable] = None
+    drive: Optional[DriveGeometry] = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -185,6 +249,9 @@ class Constraint:
                 raise SpecError('jacobian', f'must be callable, got {self.jacobian!r}')
         elif self.function is not None or self.jacobian is not None:
             raise SpecError('function', f'only for generic constraints, not {jt.value}')
+        if (jt is JointType.DRIVE) != isinstance(self.drive, DriveGeometry):
+            raise SpecError('drive', 'a drive constraint needs its DriveGeometry, and only it'
+                                     f' has one (type {jt.value}, drive {self.drive!r})')
 
 
 def perpendicular_frame(k: np.ndarray) -> np.ndarray:
@@ -389,7 +456,8 @@ class ResolvedConstraint:
     b: int
     point: Optional[tuple] = None          # (r_a, r_b)
     dots: list = field(default_factory=list)   # [(s_a, e_b, target)]
-    lines: list = field(default_factory=list)  # [(r_a, r_b, e_b)]
+    lines: list = field(default_factory=list)  # [(r_a, r_b, e_b, offset)]
+    angles: list = field(default_factory=list)  # [(s_a, e_b, e2_b, target)]
     distance: Optional[tuple] = None       # (r_a, r_b, L)
     n_rows: int = 0                        # generic: length of Φ
     anchor: tuple = ()                     # (r_a, r_b): anchor lever arms, principal frames
@@ -409,7 +477,7 @@ class ConstraintSet:
     n_rows : int
         m, the rows of Φ: the built-in rows first, then the generic ones.
     n_builtin_rows : int
-        The point, dot, line and distance rows (in this order).
+        The point, dot, line, distance and angle rows (in this order).
     row_kind, row_comp, row_a, row_b : ndarray, shape (n_builtin_rows,), int64
     row_par : ndarray, shape (n_builtin_rows, kernels.layout.PAR_WIDTH)
         The built-in rows as :mod:`.kernels.rows` takes them (layout there).
@@ -491,6 +559,39 @@ class ConstraintSet:
         self._resolved[spec.name] = res
         self._build()
 
+    def set_drive_targets(self, names: list, targets: np.ndarray) -> np.ndarray:
+        """
+        Move the targets of ``drive`` constraints (between steps); returns their rows.
+
+        Parameters
+        ----------
+        names : list of str
+            Drive constraints.
+        targets : ndarray, shape (k,)
+            rad or m, finite (the caller validates them).
+
+        Returns
+        -------
+        ndarray of int, shape (k,)
+            Each drive's row in Φ, G and λ (a built-in row: its ``row_par`` scalar is
+            the target). Only that scalar changes: ``G`` does not depend on it.
+
+        """
+        rows = np.empty(len(names), dtype=int)
+        for i, (name, target) in enumerate(zip(names, targets)):
+            res = self._get(name)
+            if res.spec.type is not JointType.DRIVE:
+                raise SpecError('name', f'constraint {name!r} is a {res.spec.type.value}, '
+                                        f'not a drive')
+            target = float(target)
+            if res.angles:
+                res.angles[0] = res.angles[0][:3] + (target,)
+            else:
+                res.lines[0] = res.lines[0][:3] + (target,)
+            rows[i] = res.rows[0]
+            self.row_par[rows[i], PAR_SCALAR] = target
+        return rows
+
     def remove(self, name: str) -> Constraint:
         """Remove constraint ``name``; returns its spec."""
         res = self._get(name)
@@ -546,10 +647,18 @@ class ConstraintSet:
             if jt in (JointType.SLIDER, JointType.FIXED):
                 res.dots.append((fa[1], fb[2], 0.0))
             if jt is JointType.SLIDER:
-                res.lines = [(r_a, r_b, fb[1]), (r_a, r_b, fb[2])]
+                res.lines = [(r_a, r_b, fb[1], 0.0), (r_a, r_b, fb[2], 0.0)]
             if jt is JointType.PLANAR:
                 # The anchors stay in the plane through b's anchor normal to k_b.
-                res.lines = [(r_a, r_b, fb[0])]
+                res.lines = [(r_a, r_b, fb[0], 0.0)]
+        if jt is JointType.DRIVE:
+            dg = spec.drive
+            if dg.rotary:
+                res.angles = [(V[a].T @ dg.e1_a, V[b].T @ dg.e1_b, V[b].T @ dg.e2_b,
+                               dg.target)]
+            else:
+                res.lines = [(body_point(a, dg.p_a), body_point(b, dg.p_b), V[b].T @ dg.k_b,
+                              dg.target)]
         if jt in (JointType.BALL, JointType.HINGE, JointType.FIXED):
             res.point = (r_a, r_b)
         if jt is JointType.DISTANCE:
@@ -568,20 +677,25 @@ class ConstraintSet:
         dots = [(r, d) for r in res for d in r.dots]
         lines = [(r, ln) for r in res for ln in r.lines]
         dists = [r for r in res if r.distance is not None]
+        angles = [(r, g) for r in res for g in r.angles]
         gens = [r for r in res if r.spec.type is JointType.GENERIC]
 
-        # Built-in rows, one entry each: point block (x, y, z per point), dots, lines, distances.
-        table = [(KIND_POINT, c, r.a, r.b, r.point[0], r.point[1], None, None, 0.0)
+        # Built-in rows, one entry each: point block (x, y, z per point), dots, lines,
+        # distances, angles.
+        table = [(KIND_POINT, c, r.a, r.b, r.point[0], r.point[1], None, None, None, 0.0)
                  for r in pts for c in range(3)]
-        table += [(KIND_DOT, 0, r.a, r.b, None, None, d[0], d[1], d[2]) for r, d in dots]
-        table += [(KIND_LINE, 0, r.a, r.b, ln[0], ln[1], None, ln[2], 0.0) for r, ln in lines]
-        table += [(KIND_DISTANCE, 0, r.a, r.b, r.distance[0], r.distance[1], None, None,
+        table += [(KIND_DOT, 0, r.a, r.b, None, None, d[0], d[1], None, d[2]) for r, d in dots]
+        table += [(KIND_LINE, 0, r.a, r.b, ln[0], ln[1], None, ln[2], None, ln[3])
+                  for r, ln in lines]
+        table += [(KIND_DISTANCE, 0, r.a, r.b, r.distance[0], r.distance[1], None, None, None,
                    r.distance[2]) for r in dists]
+        table += [(KIND_ANGLE, 0, r.a, r.b, None, None, g[0], g[1], g[2], g[3])
+                  for r, g in angles]
         # Flat row arrays for the kernels of .kernels.rows (and a compiled step).
         self.row_kind, self.row_comp, self.row_a, self.row_b, self.row_par = pack_rows(table)
         self.n_builtin_rows = len(table)
         self._gen = tuple(gens)
-        # Row numbering: point block, dot block, line block, distance block, generic.
+        # Row numbering: point, dot, line, distance and angle blocks, generic.
         rows: dict[str, list] = {r.spec.name: [] for r in res}
         start = 0
         for r in pts:
@@ -594,6 +708,9 @@ class ConstraintSet:
             rows[r.spec.name].append(start)
             start += 1
         for r in dists:
+            rows[r.spec.name].append(start)
+            start += 1
+        for r, _ in angles:
             rows[r.spec.name].append(start)
             start += 1
         self._gen_start = start

@@ -74,7 +74,7 @@ from .graph import closes_loop, component_labels, loop_structure, tree_structure
 from .kernels.constrained_step import (component_multipliers, component_project_velocities,
                                        component_reach, CURRENT, dense_storage, GENERIC, pack,
                                        tree_storage, workspace)
-from .kernels.layout import BODY, PAR, Solve
+from .kernels.layout import BODY, PAR, PAR_SCALAR, Solve
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -348,6 +348,29 @@ class ConstraintSolver:
         setup = KernelSetup(np.flatnonzero(~touched), tuple(components), [None])
         self._kernel_cache = (cs, cs.version, setup)
         return setup
+
+    def set_drive_targets(self, names: list, targets: np.ndarray) -> None:
+        """
+        Move the targets of ``drive`` constraints, in the set and in the kernels' copies.
+
+        Only the rows' ``row_par`` scalars change (not the rows' structure), so the
+        kernel setup is kept; its workspaces no longer hold the geometry of the
+        current state (Φ changed).
+        """
+        rows = self.constraints.set_drive_targets(names, targets)
+        c = self._kernel_cache
+        if c is None or c[0] is not self.constraints or c[1] != self.constraints.version \
+                or c[2] is None:
+            return   # the next setup copies the new targets
+        setup = c[2]
+        setup.geometry_of[0] = None
+        for comp in setup.components:
+            local = np.searchsorted(comp.rows, rows)
+            found = comp.rows[np.minimum(local, len(comp.rows) - 1)] == rows
+            mine = (local < len(comp.rows)) & found
+            if np.any(mine):
+                comp.views['row_par'][local[mine], PAR_SCALAR] = \
+                    self.constraints.row_par[rows[mine], PAR_SCALAR]
 
     def kernel_parameters(self, max_rotation: Optional[float], max_substeps: int,
                           closing: float) -> np.ndarray:
