@@ -44,6 +44,9 @@ A scene file::
     command_groups:                 # joints commanded together (others take efforts)
       - {name: arm_controller, joints: [joint1, joint2], interface: position,
          mode: servo, kp: 100.0, kd: 5.0}   # effort | position | velocity; N m/rad, N m s/rad
+      - {name: wrist, joints: [joint3], interface: position, mode: exact}
+                                    # exact: a driving constraint q = q* (no gains); its
+                                    # multiplier is the joint's effort
 
 A URDF or xacro file is a scene by itself: its robot, with gravity, ``dt``
 0.001 s, ``duration`` 10 s, floating unless it has a ``world`` link.

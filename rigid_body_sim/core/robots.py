@@ -51,7 +51,7 @@ import numpy as np
 
 from . import rotation as so3
 from .bodies import RigidBody
-from .constraints import Constraint, perpendicular_frame
+from .constraints import Constraint, DriveGeometry, JointType, perpendicular_frame
 from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
 from .errors import SpecError
 from .kernels.free_step import HAS_DRIVE_DAMPING, HAS_DRIVES
@@ -830,10 +830,16 @@ class CommandGroup:
     joints : sequence of str
         In the order of the group's command arrays.
     interface : {'effort', 'position', 'velocity'}
-    mode : {'servo'}
+    mode : {'servo', 'exact'}
         ``servo``: a PD drive ``τ = clip(kp (q* − q) + kd (v* − q̇), ±effort)``
-        (MuJoCo's position and velocity actuators). (``exact``, a driving
-        constraint, is not implemented yet and is refused.)
+        (MuJoCo's position and velocity actuators). ``exact`` (position groups):
+        the driving constraint ``q − q* = 0``, one more row of the multiplier
+        solve, so the joint follows its target exactly (a jump is closed along
+        ``exp(−t / constraint_time_constant)``, as any violated constraint) and
+        its effort is the row's multiplier: the torque the motion takes, not
+        limited by the URDF effort (that needs bounded rows). A hinge goes the
+        shorter way (within π) to its target. Exact velocity drives are not
+        implemented yet and are refused.
     kp : float
         N m/rad or N/m, > 0 for position servos; 0 for velocity ones.
     kd : float
@@ -863,14 +869,23 @@ class CommandGroup:
             raise SpecError('interface', f"must be 'effort', 'position' or 'velocity', "
                                          f'got {self.interface!r}') from None
         object.__setattr__(self, 'interface', interface)
-        if self.mode == 'exact':
-            raise SpecError('mode', "'exact' (a driving constraint whose multiplier is the "
-                                    "effort) is not implemented yet; use 'servo'")
-        if self.mode != 'servo':
-            raise SpecError('mode', f"must be 'servo', got {self.mode!r}")
+        if self.mode not in ('servo', 'exact'):
+            raise SpecError('mode', f"must be 'servo' or 'exact', got {self.mode!r}")
         kp, kd = finite_scalar(self.kp, 'kp'), finite_scalar(self.kd, 'kd')
         if kp < 0.0 or kd < 0.0:
             raise SpecError('kp' if kp < 0.0 else 'kd', 'gains must be >= 0')
+        if self.mode == 'exact':
+            if interface is not Interface.POSITION:
+                why = ("exact velocity drives are not implemented yet; use 'servo'"
+                       if interface is Interface.VELOCITY else 'an effort has nothing to hold')
+                raise SpecError('mode', f"'exact' drives exist for the position interface "
+                                        f'only (a {interface.value} group: {why})')
+            if kp or kd:
+                raise SpecError('kp' if kp else 'kd', f'an exact drive has no gains (it is a '
+                                                      f'constraint), got kp {kp!r}, kd {kd!r}')
+            object.__setattr__(self, 'kp', 0.0)
+            object.__setattr__(self, 'kd', 0.0)
+            return
         if interface is Interface.POSITION and not kp > 0.0:
             raise SpecError('kp', f'a position servo needs kp > 0, got {kp!r}')
         if interface is Interface.VELOCITY and (kp != 0.0 or not kd > 0.0):
@@ -881,6 +896,11 @@ class CommandGroup:
             raise SpecError('kp', 'an effort group has no gains')
         object.__setattr__(self, 'kp', kp)
         object.__setattr__(self, 'kd', kd)
+
+
+def drive_name(joint: str) -> str:
+    """Name of the driving constraint of an ``exact`` joint (its reaction's topic too)."""
+    return f'{joint}_drive'
 
 
 class JointDrives(Effect):
@@ -909,6 +929,8 @@ class JointDrives(Effect):
         self.group_of: dict = {}
         self.groups = {}
         self.kp, self.kd = np.zeros(k), np.zeros(k)
+        #: Joints held by a driving constraint (``mode: exact``), not by a servo.
+        self.exact = np.zeros(k, dtype=bool)
         for g, group in enumerate(groups):
             where = f'command_groups[{g}]'
             if group.name in self.groups:
@@ -922,6 +944,7 @@ class JointDrives(Effect):
                 self.group_of[name] = group.name
                 self.interface[i] = group.interface
                 self.kp[i], self.kd[i] = group.kp, group.kd
+                self.exact[i] = group.mode == 'exact'
         self.damping = np.array([j.spec.damping for j in space.joints]).reshape(k)
         self.servo = self.kp + self.kd > 0.0
         self.rows_of = np.flatnonzero(self.servo | (self.damping > 0.0))
@@ -954,6 +977,25 @@ class JointDrives(Effect):
             rows[r, W_DAMPING] = self.damping[i]
             rows[r, W_EFFORT_MAX] = js.effort_limit[i]
         self._geometry = rows
+
+    def drive_constraints(self, positions: np.ndarray) -> list:
+        """
+        Return the driving constraints of the ``exact`` joints, holding ``positions`` (k,).
+
+        One ``drive`` :class:`.constraints.Constraint` per joint, named
+        :func:`drive_name`, between the joint's child (body a) and parent (b).
+        """
+        js = self.space
+        out = []
+        for i in np.flatnonzero(self.exact):
+            j, R = js.joints[i], js.R_jp[i]
+            geometry = DriveGeometry(rotary=bool(js.rotary[i]), e1_a=js.e1[i],
+                                     e1_b=R @ js.e1[i], e2_b=R @ js.e2[i], k_b=R @ js.axis[i],
+                                     p_a=np.zeros(3), p_b=js.p_jp[i],
+                                     target=float(positions[i]))
+            out.append(Constraint(drive_name(j.name), JointType.DRIVE, j.child_body,
+                                  j.parent_body, drive=geometry))
+        return out
 
     def inverse_inertias(self, state: Any) -> np.ndarray:
         """``c = j M⁻¹ jᵀ`` of each joint over its two bodies at ``state`` (k,)."""

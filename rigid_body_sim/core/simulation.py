@@ -35,8 +35,8 @@ from .effects import AppliedWrenches, Effect
 from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .kernels import free_step
-from .robots import (build_robot, CommandGroup, Interface, JointDrives, JointSpace, JointState,
-                     RobotSpec)
+from .robots import (build_robot, CommandGroup, drive_name, Interface, JointDrives, JointSpace,
+                     JointState, RobotSpec)
 from .solver import ConstraintSolver
 from .validate import finite_scalar, positive_scalar
 
@@ -169,6 +169,16 @@ class Simulation:
                                                 tally=self.dynamics.tally)
         self.dynamics.solver.dt = self.dt
         self._initial_constraints = list(constraints)
+        names = {c.name for c in constraints if isinstance(c, Constraint)}
+        #: Joints held by driving constraints (command groups of mode 'exact').
+        self._exact = (np.zeros(0, dtype=int) if self.drives is None
+                       else np.flatnonzero(self.drives.exact))
+        self._drive_names = [drive_name(self.joints.names[i]) for i in self._exact]
+        for i, name in zip(self._exact, self._drive_names):
+            if name in names:
+                raise SpecError(f'command_groups.{self.drives.group_of[self.joints.names[i]]}',
+                                f'the exact drive of joint {self.joints.names[i]!r} is the '
+                                f'constraint {name!r}, but a constraint of that name exists')
         self._tracking = len(self.joints) > 0
         self.reset()
 
@@ -330,6 +340,12 @@ class Simulation:
         if self.drives is not None:
             self.drives.hold(self.joints.positions)
             self.drives.check_stability(self.state, self.dt, self.integrator.name)
+        if len(self._exact):
+            # Exact drives hold the initial positions; driven joints start at rest.
+            for spec in self.drives.drive_constraints(self.joints.positions):
+                solver.constraints.add(spec, self.state)
+            self.dynamics.changed()
+            self._reconcile_velocities()
 
     def _inconsistent(self, name: str, field: str, outcome: str,
                       residual: float) -> InconsistentConstraintError:
@@ -404,6 +420,14 @@ class Simulation:
         efforts = js.efforts
         if self.drives is not None and len(self.drives.rows_of):
             efforts = efforts + self.drives.efforts(js.positions, js.velocities)
+        if len(self._exact):
+            # An exact drive's effort is its row's multiplier: Φ = q − q*, so the
+            # generalized force its reaction −Gᵀλ applies along q is −λ.
+            solver = self.dynamics.solver
+            lam = solver.multipliers(self.dynamics, self.state)
+            rows = [solver.constraints.rows_of(name)[0] for name in self._drive_names]
+            efforts = efforts.copy()
+            efforts[self._exact] -= lam[rows]
         js = JointState(js.names, js.positions, js.velocities, efforts)
         if names is None:
             return js
@@ -444,7 +468,6 @@ class Simulation:
         pose = self.joints.poses_for(self._outputs_now(), positions, velocities)
         self.state = self.bodies.state_from_origins(self.time, *pose)
         self.dynamics.changed()
-        self._reconcile_velocities()
         self.joints.tracked = False   # the new angles are taken as they are
         self.joints.track(self._outputs_now())
         for name, value in positions.items():
@@ -455,7 +478,12 @@ class Simulation:
                     (float(value) - self.joints.positions[i]) / (2.0 * np.pi))
         if self.drives is not None:
             self.drives.center[:] = self.joints.positions
+            if len(self._exact):   # exact drives hold the joints where they were set
+                self.dynamics.solver.set_drive_targets(self._drive_names,
+                                                       self.joints.positions[self._exact])
             self.dynamics.changed()
+        # (after the drives' targets: the projection onto Φ̇ = −ωΦ must see them hold)
+        self._reconcile_velocities()
 
     def set_joint_efforts(self, efforts: dict, duration: Optional[float] = None) -> None:
         """
@@ -486,7 +514,8 @@ class Simulation:
         Command joints through their interfaces: ``{joint: effort | position | velocity}``.
 
         Effort joints as :meth:`set_joint_efforts`; position and velocity servos
-        get a new target, held until replaced. Validated before anything changes.
+        and exact drives get a new target, held until replaced. Validated before
+        anything changes.
         """
         if not isinstance(values, dict):
             raise SpecError('values', f'expected a mapping joint -> command, got {values!r}')
@@ -501,8 +530,13 @@ class Simulation:
         if efforts:
             self.set_joint_efforts(efforts)
         if targets:
-            self.drives.set_targets(np.array(list(targets), dtype=int),
-                                    np.array(list(targets.values())))
+            idx = np.array(list(targets), dtype=int)
+            values = np.array(list(targets.values()))
+            self.drives.set_targets(idx, values)
+            exact = self.drives.exact[idx]
+            if np.any(exact):
+                self.dynamics.solver.set_drive_targets(
+                    [drive_name(self.joints.names[i]) for i in idx[exact]], values[exact])
             self.dynamics.changed()
 
     def joint_counters(self) -> dict:
@@ -547,6 +581,10 @@ class Simulation:
 
     def remove_constraint(self, name: str) -> Constraint:
         """Remove the constraint called ``name``; returns its description."""
+        if name in self._drive_names:
+            joint = self.joints.names[self._exact[self._drive_names.index(name)]]
+            raise SpecError('name', f'{name!r} is the exact drive of joint {joint!r} (a '
+                                    f'command group of mode exact): it cannot be removed')
         spec = self.dynamics.solver.constraints.remove(name)
         self.dynamics.changed()
         return spec
