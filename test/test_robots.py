@@ -125,6 +125,49 @@ def test_world_link_or_fixed_base_welds_the_root(tmp_path):
     assert fixed.dynamics.solver.constraints.spec('j').body_b is None
 
 
+def test_a_world_link_robot_stands_at_base_pose(tmp_path):
+    # The same arm (with a `world` link) at the origin and moved and turned about the
+    # vertical: every pose is the base transform of the other's, and under gravity (along
+    # the turning axis) the joints move the same.
+    from joint_space_reference import urdf_path
+    from rigid_body_sim.scene import scene_from_dict
+    xyz, yaw = np.array([1.0, -2.0, 0.5]), 0.7
+
+    def arm(**entry):
+        data = {'dt': 1e-3, 'effects': {'gravity': {'g_world': [0.0, 0.0, -9.81]}},
+                'robots': [dict(urdf=urdf_path('two_link_arm.urdf'),
+                                initial_positions={'shoulder': 0.4, 'elbow': -0.3}, **entry)]}
+        return scene_from_dict(data, str(tmp_path / 's.yaml')).simulation
+    plain = arm()
+    moved = arm(base_pose={'xyz': xyz.tolist(), 'rpy': [0.0, 0.0, yaw]})
+    Rz = rpy_matrix([0.0, 0.0, yaw])
+    p0, q0 = plain.pose()
+    p1, q1 = moved.pose()
+    # bound: one rotation and translation of O(1) m coordinates: a few ulps, 1e-14.
+    np.testing.assert_allclose(p1, p0 @ Rz.T + xyz, atol=1e-14)
+    np.testing.assert_allclose(so3.quat_to_matrix(q1), Rz @ so3.quat_to_matrix(q0), atol=1e-14)
+    plain.run(0.3)
+    moved.run(0.3)
+    # bound: the two runs differ by the rounding of their coordinates (1e-16 of a few m)
+    # carried through 300 steps of a mildly chaotic 2R arm: well below 1e-10.
+    np.testing.assert_allclose(moved.joint_state().positions, plain.joint_state().positions,
+                               atol=1e-10)
+    assert abs(plain.joint_state().positions[0] - 0.4) > 0.01   # it did swing
+
+
+def test_a_zero_effort_limit_is_no_limit_and_noted(tmp_path):
+    text = robot('r', link('world'), link('a', inertial(1.0)),
+                 joint('j', 'revolute', 'world', 'a', axis=(0, 0, 1),
+                       extra='<limit effort="0" velocity="0" lower="-1" upper="1"/>'))
+    scene = robot_scene(tmp_path, text)
+    assert any('effort="0"> is read as no effort limit' in w for w in scene.warnings)
+    sim = scene.simulation
+    sim.set_joint_efforts({'j': 5.0})
+    sim.step()
+    assert sim.joint_state().efforts[0] == 5.0
+    assert sim.joint_counters()['clamped_efforts'] == 0
+
+
 def test_massless_link_on_a_moving_joint_is_named(tmp_path):
     text = robot('r', link('world'), link('ghost'),
                  joint('j', 'continuous', 'world', 'ghost', axis=(0, 0, 1)))

@@ -28,7 +28,7 @@ Conversion rules
 * A link named ``world`` is the world. The root link is welded to the world
   when the robot has a ``world`` link or ``fixed_base`` is set (then it, and
   every link lumped with it, is part of the world: it never moves); else it
-  floats, at ``base_pose``.
+  floats. Either way the root (a ``world`` link too) starts at ``base_pose``.
 * revolute and continuous joints become hinges, prismatic joints sliders,
   planar joints planar constraints (3 rows), floating joints nothing; a body
   whose links have no mass, on a joint that moves, is an error naming it.
@@ -153,8 +153,10 @@ class JointSpec:
         rad or m: position limits (kept, not enforced yet).
     effort : float, optional
         N m or N: the largest effort; commands beyond it are clamped (counted).
+        0 (a common placeholder) means no limit, as for ``velocity``, and is
+        noted at load.
     velocity : float, optional
-        rad/s or m/s: the largest speed; excursions are counted.
+        rad/s or m/s: the largest speed; excursions are counted (0: no limit).
     damping, friction : float
         N m s/rad (N s/m), N m (N): from ``<dynamics>``.
     mimic : tuple, optional
@@ -248,7 +250,8 @@ class RobotSpec:
         A tree: each link is the child of at most one joint, and one link (the
         root) of none.
     base_xyz : array_like, shape (3,)
-        m, the root link's origin in the world.
+        m, the root link's origin in the world (a link named ``world`` included:
+        the robot's world frame is placed there).
     base_quat_xyzw : array_like, shape (4,)
         The root link's orientation in the world.
     fixed_base : bool
@@ -456,8 +459,8 @@ def build_robot(spec: RobotSpec) -> RobotModel:
                                              (4,)))
     world_root = tree.root == WORLD_LINK
     welded = world_root or bool(spec.fixed_base)
-    poses = {tree.root: (np.zeros(3), np.eye(3)) if world_root
-             else (base_p, so3.quat_to_matrix(base_q))}
+    # (a robot's own world link sits at base_pose too: robots side by side in one scene)
+    poses = {tree.root: (base_p, so3.quat_to_matrix(base_q))}
     twists = {tree.root: (np.zeros(3), np.zeros(3))}
     for name in tree.order[1:]:
         j = tree.parent_joint[name]
@@ -549,6 +552,9 @@ def build_robot(spec: RobotSpec) -> RobotModel:
                 and j.kind is not JointKind.CONTINUOUS:
             notes.append(f'joint {pre + j.name!r}: position limits [{j.lower}, {j.upper}] are '
                          f'read but not enforced yet')
+        if j.kind in ONE_DOF and j.effort == 0.0:
+            notes.append(f'joint {pre + j.name!r}: <limit effort="0"> is read as no effort '
+                         f'limit (commands are not clamped)')
         if j.friction > 0.0:
             notes.append(f'joint {pre + j.name!r}: Coulomb friction {j.friction} is read but '
                          f'not simulated yet')
@@ -622,7 +628,7 @@ class JointSpace:
         frames = np.array([perpendicular_frame(j.axis) for j in self.joints]).reshape(k, 3, 3)
         self.axis, self.e1, self.e2 = frames[:, 0], frames[:, 1], frames[:, 2]
         self.rotary = np.array([j.spec.kind in ROTARY for j in self.joints], dtype=bool)
-        self.effort_limit = np.array([np.inf if j.spec.effort is None else j.spec.effort
+        self.effort_limit = np.array([np.inf if not j.spec.effort else j.spec.effort
                                       for j in self.joints])
         self.velocity_limit = np.array([np.inf if not j.spec.velocity else j.spec.velocity
                                         for j in self.joints])
