@@ -153,6 +153,15 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
         unknown[key] = unknown.get(key, 0) + 1
     ignored += [k if n == 1 else f'{k} x{n}' for k, n in unknown.items()]
 
+    # Colours by material name: the top-level <material>s and those defined inline in a
+    # visual, for visuals that name a material without a colour (as xacro output does).
+    colours = {}
+    for material in list(robot.materials) + [v.material for link in robot.links
+                                             for v in link.visuals
+                                             if getattr(v, 'material', None) is not None]:
+        if material.name and getattr(material, 'color', None) is not None \
+                and material.name not in colours:
+            colours[material.name] = tuple(float(c) for c in material.color.rgba)
     links, visuals = [], []
     for link in robot.links:
         where = f'{line_of("link", link.name)}: link {link.name!r}'
@@ -175,7 +184,7 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
             except SpecError as exc:
                 raise UrdfError(f'{where}: inertial.{exc}') from None
         for visual in link.visuals:
-            v = _visual(link.name, visual, source)
+            v = _visual(link.name, visual, source, colours)
             if v is not None:
                 visuals.append(v)
     joints = []
@@ -211,6 +220,44 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
                       joints, visuals, ignored, source)
 
 
+def prefixed_xml(xml: str, prefix: str) -> str:
+    """
+    Return the URDF with ``prefix`` before every link and joint name, as the simulation has them.
+
+    Renames ``<link name>``, ``<joint name>``, its ``<parent link>``, ``<child link>`` and
+    ``<mimic joint>``, ``<transmission>``'s ``<joint name>`` and ``<gazebo reference>``;
+    a link named ``world`` is the world and keeps its name. So ``robot_description``
+    names what ``joint_states`` and ``/tf`` name (RViz's RobotModel, robot_state_publisher).
+    """
+    if not prefix:
+        return xml
+    from lxml import etree
+    root = etree.fromstring(xml.encode())
+    links = {el.get('name') for el in root.iter('link')}
+    joints = {el.get('name') for el in root.iter('joint') if el.getparent() is root}
+
+    def link(name: Optional[str]) -> Optional[str]:
+        return name if name is None or name == 'world' else prefix + name
+
+    for el in root.iter('link'):
+        el.set('name', link(el.get('name')))
+    for el in root.iter('joint'):
+        if el.get('name') is not None:
+            el.set('name', prefix + el.get('name'))
+        for tag in ('parent', 'child'):
+            for end in el.findall(tag):
+                end.set('link', link(end.get('link')))
+        for mimic in el.findall('mimic'):
+            mimic.set('joint', prefix + mimic.get('joint', ''))
+    for el in root.iter('gazebo'):
+        ref = el.get('reference')
+        if ref in links:
+            el.set('reference', link(ref))
+        elif ref in joints:
+            el.set('reference', prefix + ref)
+    return etree.tostring(root, encoding='unicode')
+
+
 _PATH = re.compile(r'ParseError in (/\S+?):?\s')
 
 
@@ -235,7 +282,7 @@ def _origin(origin: Any) -> tuple:
     return xyz, rpy
 
 
-def _visual(link: str, visual: Any, source: str) -> Optional[Visual]:
+def _visual(link: str, visual: Any, source: str, colours: dict) -> Optional[Visual]:
     from urdf_parser_py import urdf as up
     xyz, rpy = _origin(visual.origin)
     g = visual.geometry
@@ -243,6 +290,8 @@ def _visual(link: str, visual: Any, source: str) -> Optional[Visual]:
     material = getattr(visual, 'material', None)
     if material is not None and getattr(material, 'color', None) is not None:
         rgba = tuple(float(c) for c in material.color.rgba)
+    elif material is not None:
+        rgba = colours.get(material.name)   # a material named only: its definition
     if isinstance(g, up.Box):
         return Visual(link, 'box', tuple(g.size), xyz, rpy, rgba=rgba)
     if isinstance(g, up.Cylinder):

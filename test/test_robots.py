@@ -413,3 +413,36 @@ def test_bad_joint_input_changes_nothing(tmp_path, call, match):
     np.testing.assert_array_equal(sim.state.y, before)
     sim.step()
     np.testing.assert_array_equal(sim.joint_state().efforts, efforts)
+
+
+def test_the_description_is_prefixed_as_the_simulation_names_things(tmp_path):
+    from rigid_body_sim.urdf import parse_urdf, prefixed_xml
+    text = robot('r', link('world'), link('a', inertial(1.0)), link('b', inertial(0.5)),
+                 joint('j1', 'continuous', 'world', 'a', axis=(0, 0, 1)),
+                 joint('j2', 'revolute', 'a', 'b', axis=(0, 1, 0),
+                       extra='<limit effort="1" velocity="1" lower="-1" upper="1"/>'
+                             '<mimic joint="j1" multiplier="2"/>'),
+                 '<gazebo reference="b"><mu1>0.5</mu1></gazebo>')
+    parsed = parse_urdf(prefixed_xml(text, 'left_'), 'r.urdf')
+    assert [lk.name for lk in parsed.links] == ['world', 'left_a', 'left_b']
+    assert [(j.name, j.parent, j.child) for j in parsed.joints] == [
+        ('left_j1', 'world', 'left_a'), ('left_j2', 'left_a', 'left_b')]
+    assert parsed.joints[1].mimic[0] == 'left_j1'
+    assert 'reference="left_b"' in parsed.xml
+    sim = robot_scene(tmp_path, text, prefix='left_').simulation
+    assert sim.joint_names() == ['left_j1', 'left_j2']
+    assert prefixed_xml(text, '') == text
+
+
+def test_a_material_named_only_takes_its_definitions_colour():
+    from rigid_body_sim.urdf import parse_urdf
+    shape = '<geometry><box size="1 1 1"/></geometry>'
+    text = robot('r', '<material name="blue"><color rgba="0 0 0.8 1"/></material>',
+                 link('a', f'<visual>{shape}<material name="blue"/></visual>'
+                      f'<visual>{shape}<material name="red"><color rgba="1 0 0 1"/>'
+                      f'</material></visual>'),
+                 link('b', f'<visual>{shape}<material name="red"/></visual>'
+                      f'<visual>{shape}<material name="none"/></visual>'),
+                 joint('j', 'fixed', 'a', 'b'))
+    rgba = [v.rgba for v in parse_urdf(text, 'r.urdf').visuals]
+    assert rgba == [(0.0, 0.0, 0.8, 1.0), (1.0, 0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 1.0), None]

@@ -135,7 +135,7 @@ class Simulation:
                     raise SpecError(f'robots[{i}]', f'body {body.name!r} of robot '
                                                     f'{robot.name!r} has the name of '
                                                     f'{taken[body.name]}: give the robot a '
-                                                    f"prefix (e.g. '{robot.name}/')")
+                                                    f"prefix (e.g. '{robot.name}_')")
                 taken[body.name] = f'a link of robot {robot.name!r}'
             self.robots.append(model)
             bodies += model.bodies
