@@ -373,3 +373,42 @@ def _same(live, written) -> bool:
     if isinstance(live, str) or np.ndim(live) == 0:
         return live == written
     return np.array_equal(np.asarray(live), np.asarray(written))
+
+
+def test_a_robot_run_bags_joint_states_tf_and_its_commands(tmp_path):
+    # node_arm under gravity, j1 an exact drive, j2 commanded by effort at 0.1 s.
+    urdf = Path(__file__).resolve().parent / 'urdf' / 'node_arm.urdf'
+    scene = tmp_path / 'arm.yaml'
+    scene.write_text(f'dt: 0.001\neffects: {{gravity: {{}}}}\n'
+                     f'robots: [{{urdf: {urdf}, prefix: left_}}]\n'
+                     f'command_groups: [{{name: hold, joints: [left_j1], interface: position, '
+                     f'mode: exact}}]\n')
+    schedule = tmp_path / 'schedule.yaml'
+    schedule.write_text('duration: 0.3\nevents:\n'
+                        '  - {at: 0.1, joints: {left_j2: 0.25, left_j1: 0.2}}\n')
+    out = tmp_path / 'bag'
+    assert main([str(scene), '--schedule', str(schedule), '--bag', str(out)]) == 0
+    msgs = _read(out)
+    states = msgs['/joint_states']
+    assert len(states) == len(msgs['/tf']) == 30 + 1
+    assert len(msgs['/tf_static']) == len(msgs['/robot_description']) == 1
+    assert '<joint name="left_j1"' in msgs['/robot_description'][0][1].data
+    [(t, command)] = msgs[f'{NODE}/joint_commands']
+    assert t == 100_000_000 and list(command.name) == ['left_j2', 'left_j1']
+    assert np.isnan(command.position[0]) and command.position[1] == 0.2
+    assert command.effort[0] == 0.25 and np.isnan(command.effort[1])
+    assert not len(command.velocity)
+    sim = load_scene(scene).simulation
+    first = states[0][1]
+    assert list(first.name) == sim.joint_names() == ['left_j1', 'left_j2']
+    np.testing.assert_array_equal(first.position, sim.joint_state().positions)
+    sim.step(100)
+    sim.command_joints({'left_j2': 0.25, 'left_j1': 0.2})
+    sim.step(200)
+    last = states[-1][1]
+    # The same core calls in the same order: the same numbers, bit for bit.
+    js = sim.joint_state()
+    np.testing.assert_array_equal(last.position, js.positions)
+    np.testing.assert_array_equal(last.effort, js.efforts)
+    frames = {tf.child_frame_id for _, m in msgs['/tf'] for tf in m.transforms}
+    assert frames == {'left_l1', 'left_l2'}

@@ -35,7 +35,8 @@ class Diagnostics:
     orthonormality_error : ndarray, shape (n,)
         Largest entry of ``|RᵀR - I|`` for each body's rotation matrix.
     constraint_violation : float
-        Largest ``|Φ|`` over all constraint rows (0 without constraints).
+        Largest ``|Φ|`` over all constraint rows (0 without constraints), but for
+        the exact drives' rows, whose ``Φ`` is a commanded motion still to go.
     accuracy : AccuracyReport or None
         What the accuracy knob did (see :mod:`.accuracy`); set by the Simulation.
 

@@ -13,11 +13,14 @@ in simulation time; ``/clock`` every step up to 1 kHz, the state at
 ``--publish-rate``, all topics as if subscribed), plus the schedule's inputs as
 the messages that would have carried them: wrenches on ``~/bodies/<B>/wrench``
 and the service calls as the service events ``ros2 bag record --all-services``
-records (``~/add_constraint/_service_event``, ...; request and response). Bag
-time is simulation time. ``/diagnostics`` (about the wall clock) is not
-written. The summary's largest violation is over the published states (every
-``1 / publish_rate``). The scene and schedule files go into the bag's ``metadata.yaml``
-(``custom_data``). Same inputs, same bag, bit for bit.
+records (``~/add_constraint/_service_event``, ...; request and response), and
+joint commands on ``~/joint_commands``. With robots, also ``joint_states`` and
+``/tf`` with every state, and ``robot_description`` and ``/tf_static`` once (as
+the node publishes them, ``tf: links``). Bag time is simulation time.
+``/diagnostics`` (about the wall clock) is not written. The summary's largest
+violation is over the published states (every ``1 / publish_rate``). The scene
+and schedule files go into the bag's ``metadata.yaml`` (``custom_data``). Same
+inputs, same bag, bit for bit.
 
 A schedule file::
 
@@ -33,6 +36,8 @@ A schedule file::
                          anchor_b_body: [0, 0, 1]}
       - at: 4.0
         reset: true
+      - at: 4.5                   # robots: joints through their interfaces (effort,
+        joints: {joint1: 0.3}     # or a servo's or exact drive's target), held
 
 Every error in a schedule (a key, a body or constraint name, a value, a
 constraint removed that does not exist then) is refused before anything runs,
@@ -55,21 +60,24 @@ import numpy as np
 from rigid_body_sim_interfaces.srv import AddConstraint, RemoveConstraint
 from rosgraph_msgs.msg import Clock
 from service_msgs.msg import ServiceEventInfo
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 from std_srvs.srv import Trigger
+from tf2_msgs.msg import TFMessage
 
 from . import conversions as conv
 from .bag import BagWriter
 from .inputs import check_wrench, constraint_from_request, Rejected
-from .outputs import body_topic
+from .outputs import body_topic, JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC, \
+    ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 from .session import Session
 from .settings import Settings
 from ..core import DivergenceError, INTEGRATORS, SpecError
 from ..core.validate import finite_array, finite_scalar, positive_scalar
 from ..scene import load_scene, SceneError, YamlLoader
+from ..urdf import prefixed_xml
 
 SCHEDULE_KEYS = ('duration', 'events')
-EVENT_KINDS = ('wrench', 'add_constraint', 'remove_constraint', 'reset')
+EVENT_KINDS = ('wrench', 'add_constraint', 'remove_constraint', 'reset', 'joints')
 WRENCH_KEYS = ('body', 'force', 'torque', 'frame', 'duration')
 ADD_KEYS = tuple(AddConstraint.Request.get_fields_and_field_types())
 
@@ -98,9 +106,12 @@ class Event:
 
 
 def load_schedule(path: Path, body_names: Sequence[str], constraint_names: Sequence[str],
-                  settings: Settings) -> tuple[list, Optional[float]]:
+                  settings: Settings, joint_names: Sequence[str] = ()
+                  ) -> tuple[list, Optional[float]]:
     """
     Read and check a schedule file; return its events in time order and its duration.
+
+    ``joint_names``: the robots' joints, which ``joints`` events may command.
 
     Raises
     ------
@@ -118,13 +129,13 @@ def load_schedule(path: Path, body_names: Sequence[str], constraint_names: Seque
     except Exception as exc:  # noqa: B902 - any YAML error: report it, run nothing
         raise ScheduleError(f'{path}: not valid YAML: {exc}') from None
     try:
-        return _events(data, body_names, constraint_names, settings)
+        return _events(data, body_names, constraint_names, settings, joint_names)
     except SpecError as exc:
         raise ScheduleError(f'{path}: {exc}') from None
 
 
 def _events(data: Any, bodies: Sequence[str], constraints: Sequence[str],
-            settings: Settings) -> tuple[list, Optional[float]]:
+            settings: Settings, joints: Sequence[str] = ()) -> tuple[list, Optional[float]]:
     if not isinstance(data, dict):
         raise SpecError('', f'expected a mapping with key events, got {data!r}')
     unknown = [k for k in data if k not in SCHEDULE_KEYS]
@@ -163,6 +174,8 @@ def _events(data: Any, bodies: Sequence[str], constraints: Sequence[str],
             if not isinstance(value, str) or not value:
                 raise SpecError(field, f'expected a constraint name, got {value!r}')
             events.append(Event(at, kind, value))
+        elif kind == 'joints':
+            events.append(Event(at, kind, _joint_values(value, field, joints)))
         elif value is not True:
             raise SpecError(field, f'expected true, got {value!r}')
         else:
@@ -170,6 +183,18 @@ def _events(data: Any, bodies: Sequence[str], constraints: Sequence[str],
     events.sort(key=Event.order)   # stable: events at one time keep their file order
     _check_names(events, list(constraints), items)
     return events, duration
+
+
+def _joint_values(value: Any, field: str, joints: Sequence[str]) -> dict:
+    """Check a ``joints`` event: ``{joint: value}`` of known joints, finite values."""
+    if not isinstance(value, dict) or not value:
+        raise SpecError(field, f'expected a mapping joint -> command, got {value!r}')
+    out = {}
+    for name, v in value.items():
+        if name not in joints:
+            raise SpecError(f'{field}.{name}', f'unknown joint; joints: {list(joints)}')
+        out[name] = finite_scalar(v, f'{field}.{name}')
+    return out
 
 
 def _wrench_events(at: float, value: Any, field: str, bodies: Sequence[str],
@@ -296,20 +321,24 @@ class Runner:
         self.events = list(events)
         self.writer = writer
         self.node = node.rstrip('/')
+        self.namespace = self.node.rsplit('/', 1)[0]   # '' for the root namespace
         self.sequence = 0
         self.largest_violation = 0.0
         self.last_metrics = None
         self.refused: list = []
 
-    def topic(self, private: str) -> str:
-        """Resolve a private topic name (``~/...``) under the node."""
-        return self.node + private[1:] if private.startswith('~') else private
+    def topic(self, name: str) -> str:
+        """Resolve a topic name: private (``~/...``), relative or absolute, as the node's."""
+        if name.startswith('~'):
+            return self.node + name[1:]
+        return name if name.startswith('/') else f'{self.namespace}/{name}'
 
     def run(self, duration: float, progress=None) -> int:
         """Run until ``duration`` s of simulated time have passed; return the steps taken."""
         session = self.session
         n_steps = int(round(duration / session.sim.dt))
         self._write_clock()
+        self._write_robots()
         self._write_state()
         t0 = time.perf_counter()
         last_report = t0
@@ -367,6 +396,21 @@ class Runner:
                                 f'{name!r}: {exc}')
         self._service_events(RemoveConstraint, '~/remove_constraint', request, response)
 
+    def _do_joints(self, values: dict) -> None:
+        """Command joints through their interfaces, as a ``~/joint_commands`` message."""
+        sim = self.session.sim
+        interfaces = sim.joint_interfaces() or dict.fromkeys(values, 'effort')
+        names = list(values)
+        arrays = {}
+        for field in ('position', 'velocity', 'effort'):
+            mine = [interfaces[n] == field for n in names]
+            arrays[field] = (np.array([values[n] if m else np.nan for n, m in zip(names, mine)])
+                             if any(mine) else np.zeros(0))
+        msg = conv.joint_state(Header(stamp=self.session.stamp()), names, arrays['position'],
+                               arrays['velocity'], arrays['effort'])
+        self.writer.write_msg(self.topic(JOINT_COMMANDS_TOPIC), self.session.now_ns(), msg)
+        sim.command_joints(values)
+
     def _do_reset(self, _: Any) -> None:
         request = Trigger.Request()
         self.session.reset()
@@ -391,6 +435,18 @@ class Runner:
     def _write_clock(self) -> None:
         self.writer.write_msg('/clock', self.session.now_ns(), Clock(clock=self.session.stamp()))
 
+    def _write_robots(self) -> None:
+        """Write robot_description (the first robot's, prefixed) and /tf_static, once."""
+        robots = self.session.scene.robots
+        if not robots:
+            return
+        t, stamp = self.session.now_ns(), self.session.stamp()
+        prefix, parsed = robots[0]
+        self.writer.write_msg(self.topic(ROBOT_DESCRIPTION_TOPIC), t,
+                              String(data=prefixed_xml(parsed.xml, prefix)))
+        self.writer.write_msg(TF_STATIC_TOPIC, t, TFMessage(
+            transforms=self.session.outputs.static_transforms(stamp)))
+
     def _write_state(self) -> None:
         t = self.session.now_ns()
         for topic, msg in self.session.snapshot():
@@ -398,6 +454,12 @@ class Runner:
             if topic == '~/metrics':
                 self.largest_violation = max(self.largest_violation, msg.constraint_violation)
                 self.last_metrics = msg
+        if self.session.sim.joint_names():
+            stamp = self.session.stamp()
+            self.writer.write_msg(self.topic(JOINT_STATES_TOPIC), t,
+                                  self.session.outputs.joint_states(stamp))
+            self.writer.write_msg(TF_TOPIC, t, TFMessage(
+                transforms=self.session.outputs.transforms(stamp)))
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -429,7 +491,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             'publish_rate': positive_scalar(args.publish_rate, '--publish-rate'),
             'integrator': args.integrator or ''})
         events, schedule_duration = load_schedule(
-            Path(args.schedule), sim.bodies.names, sim.constraint_names, settings)
+            Path(args.schedule), sim.bodies.names, sim.constraint_names, settings,
+            sim.joint_names())
         duration = args.duration or schedule_duration or scene.duration
         positive_scalar(duration, '--duration')
         late = _after_the_run(events, duration, dt)
