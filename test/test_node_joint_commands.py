@@ -14,6 +14,9 @@ from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
+import pytest
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from rigid_body_sim.ros.conversions import joint_state_arrays, time_seconds
 from rigid_body_sim.scene import load_scene
 from rigid_body_sim_interfaces.srv import Step
@@ -272,6 +275,37 @@ def test_bad_commands_are_refused_counted_and_leave_the_targets_as_they_were(ros
                            node=node).success
     ros.client.wait_for(lambda: time_seconds(states[-1].header.stamp) > t + 0.05,
                         'joint states while running', node=node)
+
+
+def _set_parameter(ros, node, name, value):
+    if isinstance(value, float):
+        pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+    else:
+        pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+    request = SetParameters.Request(parameters=[Parameter(name=name, value=pv)])
+    return ros.client.call(SetParameters, f'{NODE}/set_parameters', request,
+                           node=node).results[0]
+
+
+@pytest.mark.parametrize('name, value, group', [
+    # rkmk4 takes kd explicitly: (kd + 0.1) dt c = 0.1 x 15.4 > 1 at b_j2.
+    ('integrator', 'rkmk4', VELOCITY_GROUP),
+    # kp dt² c = 400 x 0.01 x 15.4 > 1 at a_j2.
+    ('physics_rate', 10.0, POSITION_GROUP),
+])
+def test_a_step_that_would_make_a_servo_unstable_is_refused(ros, name, value, group):
+    node = ros.start({'scene': str(SCENE), 'start_paused': True})
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    result = _set_parameter(ros, node, name, value)
+    assert not result.successful
+    assert f'command_groups.{group}: joint' in result.reason
+    assert 'the explicit drive would be unstable' in result.reason
+    # Nothing changed, nothing failed inside: the next diagnostics still show the scene's.
+    ros.client.wait_for(lambda: diags, 'diagnostics', node=node)
+    values = _values(diags[-1])
+    assert values['integrator'] == 'lie_poisson2' and values['dt_s'] == '0.001'
+    assert values['rejected_internal_error'] == '0'
+    _step(ros, node, 10)
 
 
 def _readme_group_row():

@@ -470,6 +470,7 @@ class SimNode(Node):
         try:
             trial = Settings(**vars(self.settings))
             trial.update({p.name: p.value for p in params if p.name in BY_NAME})
+            self.session.check_settings(trial)   # (servo gains at the new dt, integrator)
         except SpecError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)

@@ -24,6 +24,7 @@ from .inputs import check_group_command, check_joint_command, check_name_token, 
 from .outputs import body_topic, constraint_topic, group_topic, Outputs
 from .pacing import output_due, Totals
 from ..core import DivergenceError, InconsistentConstraintError, SpecError
+from ..core.integrators import integrator_class
 from ..scene import Scene
 
 
@@ -107,6 +108,20 @@ class Session:
         self.sim.set_tolerance(s.tolerance or self.scene_tolerance)
         if hasattr(self, 'outputs'):
             self.outputs.world_frame = s.world_frame
+
+    def check_settings(self, settings: Any) -> None:
+        """
+        Raise SpecError unless :meth:`configure` could apply ``settings``.
+
+        The servos' gains must stay stable at the new step and integrator
+        (:meth:`~rigid_body_sim.core.robots.JointDrives.check_stability`).
+        """
+        drives = self.sim.drives
+        if drives is None:
+            return
+        integrator = integrator_class(settings.integrator or self.scene_integrator)
+        drives.check_stability(self.sim.state, self.dt or 1.0 / settings.physics_rate,
+                               integrator.name)
 
     def full_topic(self, private: str) -> str:
         """Return the fully qualified name of a private topic ``~/...`` of the node."""
