@@ -7,9 +7,9 @@ since the last reset, the energy at the last reset, the queue of wrench
 messages (the latest per body) and of joint commands (efforts, position and
 velocity targets: the latest per joint), both applied before the next step,
 the checks of inputs with their rejection counts, and which outputs a step
-makes due. The node (:mod:`.node`) drives it from DDS and the wall clock; the experiment runner
-(:mod:`.experiment`) from a schedule, in lockstep. So both apply inputs and
-publish outputs the same way.
+makes due. The node (:mod:`.node`) drives it from DDS and the wall clock; the
+experiment runner (:mod:`.experiment`) from a schedule, in lockstep. So both
+apply inputs and publish outputs the same way.
 """
 
 from __future__ import annotations
