@@ -22,7 +22,7 @@ from rigid_body_sim.scene import load_scene
 from rigid_body_sim_interfaces.srv import Step
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from std_srvs.srv import SetBool
+from std_srvs.srv import SetBool, Trigger
 
 NODE = '/rigid_body_sim'
 SCENE = Path(__file__).resolve().parent / 'node_servo_arms.yaml'
@@ -183,6 +183,28 @@ def test_group_topics_drive_their_joints_in_the_groups_order(ros):
     assert abs(after['a_j1'][0] - 0.1) < 1e-3 and abs(after['a_j2'][0] + 0.4) < 1e-3
     _assert_equal(_at(ros, node, states, t, 'joint states'),
                   _core((TARGETS, SETTLE), ({'a_j1': 0.1}, SETTLE)).joint_state())
+
+
+def test_reset_brings_the_servos_back_to_holding_the_initial_state(ros):
+    node = ros.start({'scene': str(SCENE), 'start_paused': True})
+    states = ros.client.subscribe(JointState, '/joint_states')
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    pub = _publisher(ros, node, JointState, f'{NODE}/joint_commands')
+    pub.publish(MIXED)
+    _taken(ros, node, pub, diags, 0)
+    t = _step(ros, node, 500)
+    assert abs(_joints(_at(ros, node, states, t, 'joint states'))['b_j1'][1]) > 0.5
+    # A command queued but not yet stepped is dropped by the reset too.
+    pub.publish(JointState(name=['a_j1'], position=[1.0]))
+    _taken(ros, node, pub, diags, 1)
+    assert ros.client.call(Trigger, f'{NODE}/reset', Trigger.Request(), node=node).success
+    # From the initial state, the servos hold it (targets: the initial positions, rest):
+    # the arms stay where they are, bit for bit as the core without commands.
+    t = _step(ros, node, 300)
+    msg = _at(ros, node, states, t, 'joint states after the reset')
+    _assert_equal(msg, _core((None, 300)).joint_state())
+    np.testing.assert_array_equal(msg.position, 0.0)
+    np.testing.assert_array_equal(msg.velocity, 0.0)
 
 
 BAD_JOINT_COMMANDS = [
