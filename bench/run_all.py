@@ -14,7 +14,8 @@ Then ``bench/constraints.py`` (chains, trees, rings, joints), ``bench/knob_estim
 the reactions after a step; ``--skip-constraints`` skips these five),
 ``bench/mujoco_peer.py``, ``bench/robot_panda.py`` (the Franka Panda's URDF) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
-and ``bench/node.py`` (the ROS node through DDS: rates, costs, latency; ``--skip-node``).
+and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
+latency; with the Panda, joint_states and /tf at 1 kHz; ``--skip-node``).
 A benchmark that fails is reported and the others run on.
 
 Writes ``bench/out/*.md`` (the tables) and, when matplotlib is installed,
@@ -288,6 +289,9 @@ def sections(quick: bool, node_args: list) -> list:
                   '`--quick` run only `bench/out/accuracy_study.md` (not copied here).')),
         ('skip_node', 'node', node_args, report.Section(
             'The ROS node', f'./dev.sh python bench/node.py{q}', [T('node.md')])),
+        ('skip_node', 'node_robot', node_args, report.Section(
+            'The ROS node with a robot', f'./dev.sh python bench/node_robot.py{q}',
+            [T('node_robot.md')])),
     ]
 
 
@@ -299,12 +303,14 @@ def main(argv=None) -> int:
                    help='free bodies only (bench/constraints.py, knob_estimators.py, '
                         'tree_solve.py, shake_convergence.py and reactions.py run the rest)')
     p.add_argument('--skip-node', action='store_true',
-                   help='no ROS node benchmark (bench/node.py runs it)')
+                   help='no ROS node benchmarks (bench/node.py and bench/node_robot.py run '
+                        'them)')
     p.add_argument('--skip-mujoco', action='store_true',
                    help='no side-by-side with MuJoCo (bench/mujoco_peer.py, '
                         'bench/robot_panda.py and bench/accuracy_study.py run it)')
     p.add_argument('--max-wait', type=float, metavar='S',
-                   help='passed to bench/node.py (how long it waits for a quiet machine)')
+                   help='passed to bench/node.py and bench/node_robot.py (how long they '
+                        'wait for a quiet machine)')
     args = p.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     since = time.time()

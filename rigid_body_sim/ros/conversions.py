@@ -19,7 +19,7 @@ from geometry_msgs.msg import (Point, Pose, PoseStamped, Quaternion, Transform,
 import numpy as np
 from rigid_body_sim_interfaces.msg import BodyStates
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Float64MultiArray, Header
 
 NANOSECONDS = 1_000_000_000
 
@@ -150,6 +150,11 @@ def joint_state_arrays(msg: JointState) -> tuple:
     """Return ``(names, positions, velocities, efforts)`` of a JointState: a list, (k,) x 3."""
     return (list(msg.name), np.asarray(msg.position, dtype=float),
             np.asarray(msg.velocity, dtype=float), np.asarray(msg.effort, dtype=float))
+
+
+def multi_array_values(msg: Float64MultiArray) -> np.ndarray:
+    """Return a Float64MultiArray's ``data`` as a (k,) array (its ``layout`` is not read)."""
+    return np.asarray(msg.data, dtype=float)
 
 
 def transform_stamped(header: Header, child_frame_id: str, translation: np.ndarray,

@@ -31,13 +31,15 @@ class Rejection(enum.Enum):
     BAD_STEP = 'bad_step'                      # ~/step with too many steps
     DIVERGED = 'diverged'                      # a request the diverged state cannot serve
     INTERNAL_ERROR = 'internal_error'          # a request that raised unexpectedly (a bug)
-    # ~/joint_commands (sensor_msgs/JointState):
+    # ~/joint_commands (sensor_msgs/JointState) and <group>/commands (Float64MultiArray):
     UNKNOWN_JOINT = 'unknown_joint'            # a name that is no joint of the robots
-    NON_FINITE_EFFORT = 'non_finite_effort'    # NaN or inf in effort
-    JOINT_COMMAND_LENGTHS = 'joint_command_lengths'   # len(effort) != len(name)
-    NOT_EFFORT = 'not_effort'                  # position or velocity values: not yet
+    NON_FINITE_EFFORT = 'non_finite_effort'    # NaN or inf where an effort is required
+    NON_FINITE_TARGET = 'non_finite_target'    # NaN or inf where a position/velocity is
+    JOINT_COMMAND_LENGTHS = 'joint_command_lengths'   # an array's length != len(name)
+    WRONG_INTERFACE = 'wrong_interface'        # a value for a joint of another interface
     BAD_JOINT_COMMAND = 'bad_joint_command'    # no names, or a joint named twice
     EFFORT_TOO_LARGE = 'effort_too_large'      # beyond max_torque (rotary) / max_force
+    GROUP_COMMAND_SIZE = 'group_command_size'  # <group>/commands: len(data) != the group's
 
 
 class Rejected(ValueError):
@@ -122,64 +124,149 @@ def check_wrench(force: np.ndarray, torque: np.ndarray, frame_id: str, body: str
                    f'{world_frame!r} nor the body {body!r}')
 
 
+#: The ``sensor_msgs/JointState`` array of each interface.
+INTERFACE_FIELDS = ('position', 'velocity', 'effort')
+
+
+def _known_joints(joints: Sequence[str]) -> str:
+    known = list(joints)
+    return f'{known}' if len(known) <= 20 else f'{known[:20]} and {len(known) - 20} more'
+
+
+def _check_value(field: str, i: int, name: str, interface: str, value: float,
+                 limits: dict) -> None:
+    """Raise Rejected unless ``value`` can be joint ``name``'s command on ``interface``."""
+    if not math.isfinite(value):
+        cause = Rejection.NON_FINITE_EFFORT if interface == 'effort' \
+            else Rejection.NON_FINITE_TARGET
+        raise Rejected(cause, f'{field}[{i}] ({name}): must be finite, got {value!r}')
+    if interface == 'effort' and abs(value) > limits[name]:
+        raise Rejected(Rejection.EFFORT_TOO_LARGE,
+                       f'{field}[{i}] ({name}): magnitude {abs(value):.3g} exceeds '
+                       f'{limits[name]:.3g} (the parameter max_torque for a revolute '
+                       f'or continuous joint, max_force for a prismatic one)')
+
+
 def check_joint_command(names: Sequence[str], positions: np.ndarray, velocities: np.ndarray,
-                        efforts: np.ndarray, limits: dict) -> dict:
+                        efforts: np.ndarray, interfaces: dict, limits: dict) -> dict:
     """
-    Check a ``sensor_msgs/JointState`` command's arrays; return ``{joint: effort}``.
+    Check a ``sensor_msgs/JointState`` command's arrays; return ``{joint: command}``.
+
+    Each joint named is commanded through its own interface: its entry in that
+    interface's array (``position``, ``velocity`` or ``effort``) is required and
+    must be finite. The arrays of the other interfaces must be empty, or hold
+    NaN at that joint's index (the "not commanded" marker of mixed messages).
+    Every non-empty array has one entry per name.
 
     Parameters
     ----------
     names : sequence of str
         ``name``: the joints commanded.
     positions, velocities, efforts : ndarray, shape (k,) or (0,)
-        ``position``, ``velocity``, ``effort``; only efforts exist so far, so
-        ``position`` and ``velocity`` must be empty.
+        ``position`` (rad or m), ``velocity`` (rad/s or m/s), ``effort`` (N m or N).
+    interfaces : dict
+        ``{joint: 'effort' | 'position' | 'velocity'}`` of every joint that takes
+        commands.
     limits : dict
         ``{joint: largest |effort| accepted}`` of every joint that takes
         commands (N m or N: the parameters max_torque, max_force).
 
+    Returns
+    -------
+    dict
+        ``{joint: value}``: the effort, position target or velocity target of
+        each joint named, in the order of ``name``.
+
     Raises
     ------
     Rejected
-        Naming the field and the problem; nothing is commanded.
+        Naming the field, the index and the problem; nothing is commanded.
 
     """
     names = list(names)
+    arrays = dict(zip(INTERFACE_FIELDS, (positions, velocities, efforts)))
     if not names:
         raise Rejected(Rejection.BAD_JOINT_COMMAND,
-                       'name: empty: name the joints to command, with their effort')
-    for field, values in (('position', positions), ('velocity', velocities)):
-        if len(values):
-            raise Rejected(Rejection.NOT_EFFORT,
-                           f'{field}: {len(values)} values given, but only effort commands '
-                           f'exist so far (no joint has a position or velocity interface '
-                           f'yet): send name and effort, with position and velocity empty')
-    if len(efforts) != len(names):
-        raise Rejected(Rejection.JOINT_COMMAND_LENGTHS,
-                       f'effort: {len(efforts)} values for {len(names)} names: give one '
-                       f'effort per name')
+                       'name: empty: name the joints to command, each with its value in '
+                       'the array of its interface (position, velocity or effort)')
+    for field, values in arrays.items():
+        if len(values) and len(values) != len(names):
+            raise Rejected(Rejection.JOINT_COMMAND_LENGTHS,
+                           f'{field}: {len(values)} values for {len(names)} names: give '
+                           f'one {field} per name (NaN for joints not commanded by it), '
+                           f'or none')
     seen = set()
     for i, name in enumerate(names):
         if name in seen:
             raise Rejected(Rejection.BAD_JOINT_COMMAND,
                            f'name[{i}]: joint {shown(name)} is named twice')
         seen.add(name)
-        if name not in limits:
-            known = list(limits)
+        if name not in interfaces:
             raise Rejected(Rejection.UNKNOWN_JOINT,
                            f'name[{i}]: unknown joint {shown(name)}; joints: '
-                           + (f'{known}' if len(known) <= 20 else
-                              f'{known[:20]} and {len(known) - 20} more'))
-    for i, (name, value) in enumerate(zip(names, efforts.tolist())):
-        if not math.isfinite(value):
-            raise Rejected(Rejection.NON_FINITE_EFFORT,
-                           f'effort[{i}] ({name}): must be finite, got {value!r}')
-        if abs(value) > limits[name]:
-            raise Rejected(Rejection.EFFORT_TOO_LARGE,
-                           f'effort[{i}] ({name}): magnitude {abs(value):.3g} exceeds '
-                           f'{limits[name]:.3g} (the parameter max_torque for a revolute '
-                           f'or continuous joint, max_force for a prismatic one)')
-    return dict(zip(names, efforts.tolist()))
+                           + _known_joints(interfaces))
+    lists = {field: values.tolist() for field, values in arrays.items()}
+    out = {}
+    for i, name in enumerate(names):
+        interface = interfaces[name]
+        for field, values in lists.items():
+            if field != interface and values and values[i] == values[i]:   # (not NaN)
+                raise Rejected(Rejection.WRONG_INTERFACE,
+                               f'{field}[{i}] ({name}): {values[i]!r} given, but joint '
+                               f'{name!r} has the {interface} interface: give its value in '
+                               f'{interface}[{i}], and NaN (or an empty array) in {field}')
+        if not lists[interface]:
+            raise Rejected(Rejection.JOINT_COMMAND_LENGTHS,
+                           f'{interface}: empty, but name[{i}] ({name}) has the {interface} '
+                           f'interface: give one {interface} per name (NaN for joints not '
+                           f'commanded by it)')
+        value = lists[interface][i]
+        _check_value(interface, i, name, interface, value, limits)
+        out[name] = value
+    return out
+
+
+def check_group_command(group: str, joints: Sequence[str], interface: str,
+                        data: np.ndarray, limits: dict) -> dict:
+    """
+    Check a ``<group>/commands`` message's ``data``; return ``{joint: command}``.
+
+    As ros2_control's forward_command_controller takes it: one value per joint
+    of the group, in the group's order, for the group's interface. A NaN entry
+    leaves that joint's command as it is (all NaN: an empty dict, nothing to do).
+
+    Parameters
+    ----------
+    group : str
+        The group's name (for the messages).
+    joints : sequence of str
+        The group's joints, in the order of ``data``.
+    interface : {'effort', 'position', 'velocity'}
+        The group's interface: what ``data`` holds.
+    data : ndarray, shape (len(joints),)
+        N m or N, rad or m, rad/s or m/s.
+    limits : dict
+        ``{joint: largest |effort| accepted}`` (effort groups).
+
+    Raises
+    ------
+    Rejected
+        A wrong size, inf (NaN is "keep"), an effort beyond its limit; nothing
+        is commanded.
+
+    """
+    if len(data) != len(joints):
+        raise Rejected(Rejection.GROUP_COMMAND_SIZE,
+                       f'data: {len(data)} values for the {len(joints)} joints of group '
+                       f'{group!r} {list(joints)} ({interface}): give one per joint, in that '
+                       'order (NaN keeps the command of that joint)')
+    out = {}
+    for i, (name, value) in enumerate(zip(joints, data.tolist())):
+        if value != value:   # NaN: this joint keeps its command
+            continue
+        _check_value('data', i, name, interface, value, limits)
+        out[name] = value
+    return out
 
 
 def _optional_vector(value: Sequence[float], field: str) -> Any:

@@ -19,8 +19,11 @@ Topics (private, ``~`` = ``/<namespace>/rigid_body_sim``):
   ``~/constraints/<C>/wrench`` (WrenchStamped), ``/clock``, ``/diagnostics``.
 - robots (scenes with URDF robots), namespace-relative as ros2_control and
   robot_state_publisher name them: in ``~/joint_commands`` (sensor_msgs/JointState,
-  efforts); out ``joint_states`` (sensor_msgs/JointState), ``robot_description``
-  (std_msgs/String, transient local), ``/tf`` and ``/tf_static`` (tf2_msgs/TFMessage).
+  each joint through its interface: effort, position or velocity) and, per command
+  group of the scene, ``<group>/commands`` (std_msgs/Float64MultiArray, as
+  forward_command_controller's); out ``joint_states`` (sensor_msgs/JointState),
+  ``robot_description`` (std_msgs/String, transient local), ``/tf`` and ``/tf_static``
+  (tf2_msgs/TFMessage).
 
 See the README for the frames, points and conventions of every message.
 """
@@ -49,16 +52,16 @@ from rigid_body_sim_interfaces.msg import BodyStates, Metrics
 from rigid_body_sim_interfaces.srv import AddConstraint, RemoveConstraint, Step
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header, String
+from std_msgs.msg import Float64MultiArray, Header, String
 from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
 from .inputs import Rejected, Rejection, shown
-from .outputs import body_topic, constraint_topic, JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC, \
-    MARKERS_TOPIC, METRICS_TOPIC, ROBOT_DESCRIPTION_TOPIC, STATES_TOPIC, TF_STATIC_TOPIC, \
-    TF_TOPIC
+from .outputs import body_topic, constraint_topic, group_topic, JOINT_COMMANDS_TOPIC, \
+    JOINT_STATES_TOPIC, MARKERS_TOPIC, METRICS_TOPIC, ROBOT_DESCRIPTION_TOPIC, STATES_TOPIC, \
+    TF_STATIC_TOPIC, TF_TOPIC
 from .pacing import Pacer, WindowStats
 from .session import Due, Session
 from .settings import BY_NAME, PARAMETERS, Settings
@@ -211,13 +214,19 @@ class SimNode(Node):
                                             ServiceIntrospectionState.CONTENTS)
 
     def _make_robot_interfaces(self) -> None:
-        """joint_states, ~/joint_commands (with joints), robot_description, tf (robots)."""
+        """joint_states, ~/joint_commands, <group>/commands (joints), robot_description, tf."""
         self._joint_pub = self._tf_pub = self._tf_static_pub = None
         self._tf_stamp_ns: Optional[int] = None   # of the last /tf message
+        self._group_subs = {}
         if self.sim.joint_names():
             self._joint_pub = self.create_publisher(JointState, JOINT_STATES_TOPIC, 10)
             self._joint_sub = self.create_subscription(
                 JointState, JOINT_COMMANDS_TOPIC, self._on_joint_command, QoSProfile(depth=10))
+        for group in self.session.groups:   # (forward_command_controller's topic and QoS)
+            self._group_subs[group] = self.create_subscription(
+                Float64MultiArray, group_topic(group),
+                lambda msg, group=group: self._on_group_command(group, msg),
+                QoSProfile(depth=10))
         robots = self.session.scene.robots
         if robots:
             self._description_pub = self.create_publisher(String, ROBOT_DESCRIPTION_TOPIC,
@@ -319,6 +328,12 @@ class SimNode(Node):
             self.session.queue_joint_command(names, positions, velocities, efforts)
         except Rejected as exc:
             self._rejected(exc.cause, JOINT_COMMANDS_TOPIC, str(exc))
+
+    def _on_group_command(self, group: str, msg: Float64MultiArray) -> None:
+        try:
+            self.session.queue_group_command(group, conv.multi_array_values(msg))
+        except Rejected as exc:
+            self._rejected(exc.cause, group_topic(group), str(exc))
 
     # -- services -------------------------------------------------------------------------
 
@@ -455,6 +470,7 @@ class SimNode(Node):
         try:
             trial = Settings(**vars(self.settings))
             trial.update({p.name: p.value for p in params if p.name in BY_NAME})
+            self.session.check_settings(trial)   # (servo gains at the new dt, integrator)
         except SpecError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
@@ -661,6 +677,8 @@ class SimNode(Node):
             values['joint_velocity_limit_excursions'] = str(
                 counters['velocity_limit_excursions'])
             values['joint_efforts_superseded'] = str(session.efforts_superseded)
+            values['joint_targets_superseded'] = str(session.targets_superseded)
+            values['group_commands_all_nan'] = str(session.group_noops)
         rejected = session.totals.rejected
         for cause in Rejection:
             values[f'rejected_{cause.value}'] = str(rejected.get(cause.value, 0))

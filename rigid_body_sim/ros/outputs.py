@@ -50,6 +50,11 @@ def constraint_topic(name: str) -> str:
     return f'~/constraints/{name}/wrench'
 
 
+def group_topic(group: str) -> str:
+    """Return a command group's topic, namespace-relative (forward_command_controller's)."""
+    return f'{group}/commands'
+
+
 STATES_TOPIC = '~/body_states'
 METRICS_TOPIC = '~/metrics'
 MARKERS_TOPIC = '~/markers'

@@ -4,12 +4,12 @@ One simulation as the node serves it, without the transport: shared by the node 
 It holds what the node adds to a :class:`~rigid_body_sim.core.Simulation`: the
 published clock (monotonic across resets unless ``reset_time``), the step count
 since the last reset, the energy at the last reset, the queue of wrench
-messages (the latest per body) and of joint effort commands (the latest per
-joint), both applied before the next step, the checks of inputs with their
-rejection counts, and which outputs a step makes due. The
-node (:mod:`.node`) drives it from DDS and the wall clock; the experiment runner
-(:mod:`.experiment`) from a schedule, in lockstep. So both apply inputs and
-publish outputs the same way.
+messages (the latest per body) and of joint commands (efforts, position and
+velocity targets: the latest per joint), both applied before the next step,
+the checks of inputs with their rejection counts, and which outputs a step
+makes due. The node (:mod:`.node`) drives it from DDS and the wall clock; the
+experiment runner (:mod:`.experiment`) from a schedule, in lockstep. So both
+apply inputs and publish outputs the same way.
 """
 
 from __future__ import annotations
@@ -19,11 +19,12 @@ from typing import Any, NamedTuple, Optional
 import numpy as np
 
 from . import conversions as conv
-from .inputs import check_joint_command, check_name_token, check_wrench, \
-    constraint_from_request, Rejected, Rejection, shown
-from .outputs import body_topic, constraint_topic, Outputs
+from .inputs import check_group_command, check_joint_command, check_name_token, \
+    check_wrench, constraint_from_request, Rejected, Rejection, shown
+from .outputs import body_topic, constraint_topic, group_topic, Outputs
 from .pacing import output_due, Totals
 from ..core import DivergenceError, InconsistentConstraintError, SpecError
+from ..core.integrators import integrator_class
 from ..scene import Scene
 
 
@@ -49,12 +50,14 @@ class Session:
         s: the step, exactly (the runner's ``--dt``); default ``1 / physics_rate``.
     node_name : str
         The fully qualified name of the node whose private topics carry the
-        bodies' and constraints' names (their lengths are checked against it).
+        bodies' and constraints' names, and in whose namespace the command
+        groups' topics are (their lengths are checked against it).
 
     Raises
     ------
     SpecError
-        A body or constraint name that cannot be part of a ROS topic name.
+        A body, constraint or command group name that cannot be part of a ROS
+        topic name.
 
     """
 
@@ -67,6 +70,13 @@ class Session:
         for name in scene.simulation.constraint_names:
             check_name_token(name, f'scene {scene.source}: constraint name',
                              self.full_topic(constraint_topic(name)))
+        #: {group: (joints in the order of its commands, interface)}
+        self.groups = {name: (tuple(g.joints), g.interface.value) for name, g in
+                       (scene.simulation.drives.groups.items()
+                        if scene.simulation.drives is not None else ())}
+        for name in self.groups:
+            check_name_token(name, f'scene {scene.source}: command group name',
+                             self.full_relative_topic(group_topic(name)))
         self.scene = scene
         self.sim = scene.simulation
         self.settings = settings
@@ -79,10 +89,13 @@ class Session:
         self.totals = Totals()
         self.pending: dict = {}   # body -> (force, torque, frame): the latest message
         self.superseded = 0       # wrench messages replaced before a step used them
-        self.pending_efforts: dict = {}   # joint -> effort: the latest command
+        self.pending_commands: dict = {}   # joint -> effort or target: the latest command
         self.efforts_superseded = 0       # joint efforts replaced before a step used them
-        rotary = dict(zip(self.sim.joints.names, self.sim.joints.rotary.tolist()))
-        self._rotary = rotary   # joint -> revolute or continuous (else prismatic)
+        self.targets_superseded = 0       # position/velocity targets replaced alike
+        self.group_noops = 0              # <group>/commands messages of NaN only
+        #: {joint: 'effort' | 'position' | 'velocity'}; joints outside groups take efforts
+        self.interfaces = self.sim.joint_interfaces()
+        self._rotary = dict(zip(self.sim.joints.names, self.sim.joints.rotary.tolist()))
         self.offset_ns = 0        # published time = this + the simulation's own time
         self.step_count = 0       # steps since the last reset
         self.diverged: Optional[str] = None
@@ -96,9 +109,27 @@ class Session:
         if hasattr(self, 'outputs'):
             self.outputs.world_frame = s.world_frame
 
+    def check_settings(self, settings: Any) -> None:
+        """
+        Raise SpecError unless :meth:`configure` could apply ``settings``.
+
+        The servos' gains must stay stable at the new step and integrator
+        (:meth:`~rigid_body_sim.core.robots.JointDrives.check_stability`).
+        """
+        drives = self.sim.drives
+        if drives is None:
+            return
+        integrator = integrator_class(settings.integrator or self.scene_integrator)
+        drives.check_stability(self.sim.state, self.dt or 1.0 / settings.physics_rate,
+                               integrator.name)
+
     def full_topic(self, private: str) -> str:
         """Return the fully qualified name of a private topic ``~/...`` of the node."""
         return self.node_name.rstrip('/') + private[1:]
+
+    def full_relative_topic(self, relative: str) -> str:
+        """Return the fully qualified name of a topic relative to the node's namespace."""
+        return self.node_name.rsplit('/', 1)[0] + '/' + relative
 
     # -- time -----------------------------------------------------------------------------
 
@@ -138,43 +169,87 @@ class Session:
             self.superseded += 1   # two messages between steps: the later one wins
         self.pending[body] = (force, torque, frame)
 
+    def effort_limits(self) -> dict:
+        """``{joint: max_torque (revolute, continuous) or max_force (prismatic)}`` now."""
+        s = self.settings
+        return {name: s.max_torque if rotary else s.max_force
+                for name, rotary in self._rotary.items()}
+
     def queue_joint_command(self, names: list, positions: np.ndarray,
                             velocities: np.ndarray, efforts: np.ndarray) -> dict:
         """
-        Check a ``~/joint_commands`` message's arrays; queue its efforts for the next step.
+        Check a ``~/joint_commands`` message's arrays; queue its commands for the next step.
 
-        Returns the ``{joint: effort}`` queued; joints not named keep their commands.
+        Each joint is commanded through its interface (:data:`interfaces`): the
+        entry of its own array, NaN or nothing in the others (see
+        :func:`.inputs.check_joint_command`). Returns the ``{joint: command}``
+        queued; joints not named keep their commands.
 
         Raises
         ------
         Rejected
-            No names, position or velocity values, mismatched lengths, a joint
-            named twice, an unknown joint, NaN or inf, beyond max_torque or
-            max_force (counted); nothing is queued.
+            No names, mismatched lengths, a joint named twice, an unknown joint,
+            a value on another interface than the joint's, NaN or inf where a
+            value is required, beyond max_torque or max_force (counted); nothing
+            is queued.
 
         """
-        s = self.settings
-        limits = {name: s.max_torque if rotary else s.max_force
-                  for name, rotary in self._rotary.items()}
         try:
-            efforts = check_joint_command(names, positions, velocities, efforts, limits)
+            commands = check_joint_command(names, positions, velocities, efforts,
+                                           self.interfaces, self.effort_limits())
         except Rejected as exc:
             self.totals.reject(exc.cause.value)
             raise
-        self.efforts_superseded += sum(1 for name in efforts if name in self.pending_efforts)
-        self.pending_efforts.update(efforts)
-        return efforts
+        self._queue(commands)
+        return commands
+
+    def queue_group_command(self, group: str, data: np.ndarray) -> dict:
+        """
+        Check a ``<group>/commands`` message's data; queue its commands for the next step.
+
+        ``data``: one value per joint of the group, in its order, for its
+        interface; NaN keeps a joint's command. Returns the ``{joint: command}``
+        queued (empty for a message of NaN only: counted in :attr:`group_noops`).
+
+        Raises
+        ------
+        Rejected
+            A wrong size, inf, beyond max_torque or max_force (counted);
+            nothing is queued.
+
+        """
+        joints, interface = self.groups[group]
+        try:
+            commands = check_group_command(group, joints, interface, data,
+                                           self.effort_limits())
+        except Rejected as exc:
+            self.totals.reject(exc.cause.value)
+            raise
+        if not commands:
+            self.group_noops += 1
+        self._queue(commands)
+        return commands
+
+    def _queue(self, commands: dict) -> None:
+        """Queue checked commands; count those that replace one no step has used."""
+        for name in commands:
+            if name in self.pending_commands:
+                if self.interfaces[name] == 'effort':
+                    self.efforts_superseded += 1
+                else:
+                    self.targets_superseded += 1
+        self.pending_commands.update(commands)
 
     def apply_pending(self) -> None:
-        """Apply the queued wrenches (each at its body frame's origin, held) and efforts."""
+        """Apply the queued wrenches (each at its body frame's origin, held) and commands."""
         timeout = self.settings.wrench_timeout or None
         for body, (force, torque, frame) in self.pending.items():
             self.sim.apply_wrench(body, force, torque, frame=frame, point_body=(0.0, 0.0, 0.0),
                                   duration=timeout, key=f'topic:{body}')
         self.pending.clear()
-        if self.pending_efforts:
-            efforts, self.pending_efforts = self.pending_efforts, {}
-            self.sim.set_joint_efforts(efforts)   # (held until the next command per joint)
+        if self.pending_commands:
+            commands, self.pending_commands = self.pending_commands, {}
+            self.sim.command_joints(commands)   # (held until the next command per joint)
 
     def reset(self) -> None:
         """Back to the scene's initial state; time runs on unless ``reset_time``."""
@@ -184,7 +259,7 @@ class Session:
             self.offset_ns = self.now_ns() + int(round(self.sim.dt * conv.NANOSECONDS))
         self.sim.reset()   # keeps dt and the integrator; clears joint commands, counters
         self.pending.clear()
-        self.pending_efforts.clear()
+        self.pending_commands.clear()
         self.diverged = None
         self.step_count = 0
         self.energy0 = self.sim.diagnostics().total_energy
