@@ -18,7 +18,7 @@ from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.ros.conversions import joint_state_arrays, time_seconds, \
     transform_arrays
 from rigid_body_sim.scene import load_scene
-from rigid_body_sim.urdf import read_robot_xml
+from rigid_body_sim.urdf import parse_urdf, prefixed_xml, read_robot_xml
 from rigid_body_sim_interfaces.msg import BodyStates
 from rigid_body_sim_interfaces.srv import Step
 from sensor_msgs.msg import JointState
@@ -199,7 +199,11 @@ def test_the_second_robot_is_logged_as_not_on_robot_description(ros, tmp_path):
     node = ros.start({'scene': scene, 'start_paused': True})
     got = _latched(ros, String, '/robot_description')
     ros.client.wait_for(lambda: got, 'robot_description', node=node)
-    assert got[0].data == read_robot_xml(ARM)
+    # The first robot's URDF, its names prefixed as joint_states and /tf have them.
+    assert got[0].data == prefixed_xml(read_robot_xml(ARM), 'a_')
+    described = parse_urdf(got[0].data, 'robot_description')
+    assert [j.name for j in described.joints] == ['a_fix', 'a_camera_joint', 'a_j1', 'a_j2',
+                                                  'a_tool']
     ros.client.wait_for(lambda: 'robot_description carries the first' in node.log(),
                         'the log line', node=node)
 

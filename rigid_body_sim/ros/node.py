@@ -69,6 +69,7 @@ from .stopping import Stop, StopRequested
 from ..cli import default_scene_path
 from ..core import DivergenceError, SpecError
 from ..scene import load_scene, SceneError
+from ..urdf import prefixed_xml
 
 #: The most steps one ~/step request may ask for (the node serves nothing else meanwhile).
 MAX_STEPS_PER_REQUEST = 1_000_000
@@ -231,7 +232,8 @@ class SimNode(Node):
         if robots:
             self._description_pub = self.create_publisher(String, ROBOT_DESCRIPTION_TOPIC,
                                                           LATCHED)
-            self._description_pub.publish(String(data=robots[0][1].xml))
+            prefix, parsed = robots[0]   # named as joint_states and /tf name them
+            self._description_pub.publish(String(data=prefixed_xml(parsed.xml, prefix)))
             if self.settings.tf == 'links':
                 self._tf_pub = self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
                 self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED)
