@@ -66,7 +66,7 @@ from tf2_msgs.msg import TFMessage
 
 from . import conversions as conv
 from .bag import BagWriter
-from .inputs import check_wrench, constraint_from_request, Rejected
+from .inputs import check_wrench, constraint_from_request, INTERFACE_FIELDS, Rejected
 from .outputs import body_topic, JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC, \
     ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 from .session import Session
@@ -398,18 +398,21 @@ class Runner:
 
     def _do_joints(self, values: dict) -> None:
         """Command joints through their interfaces, as a ``~/joint_commands`` message."""
-        sim = self.session.sim
-        interfaces = sim.joint_interfaces() or dict.fromkeys(values, 'effort')
+        interfaces = self.session.interfaces
         names = list(values)
         arrays = {}
-        for field in ('position', 'velocity', 'effort'):
+        for field in INTERFACE_FIELDS:
             mine = [interfaces[n] == field for n in names]
             arrays[field] = (np.array([values[n] if m else np.nan for n, m in zip(names, mine)])
                              if any(mine) else np.zeros(0))
         msg = conv.joint_state(Header(stamp=self.session.stamp()), names, arrays['position'],
                                arrays['velocity'], arrays['effort'])
         self.writer.write_msg(self.topic(JOINT_COMMANDS_TOPIC), self.session.now_ns(), msg)
-        sim.command_joints(values)
+        try:   # the node's checks (max_torque, max_force), applied before the next step
+            self.session.queue_joint_command(names, arrays['position'], arrays['velocity'],
+                                             arrays['effort'])
+        except Rejected as exc:
+            self.refused.append(f't = {self.session.seconds():g} s: joints: {exc}')
 
     def _do_reset(self, _: Any) -> None:
         request = Trigger.Request()

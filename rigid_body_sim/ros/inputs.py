@@ -297,8 +297,9 @@ def constraint_from_request(req: Any, body_names: Sequence[str],
         check_name_token(req.name, 'name',
                          topic_of(req.name) if topic_of and isinstance(req.name, str) else None)
         if not isinstance(req.type, str) or len(req.type) > 40:
+            known = [t.value for t in JointType if t is not JointType.DRIVE]
             raise SpecError('type', f'unknown constraint type {shown(req.type)}; known: '
-                                    f'{[t.value for t in JointType]}')
+                                    f'{known}')
         kind = JointType.parse(req.type)
         if kind is JointType.GENERIC:
             raise SpecError('type', 'a generic constraint takes a Python function: add it '
