@@ -6,7 +6,8 @@ The node runs ``test/node_servo_arms.yaml`` in its own process: three copies of
 N m/rad, kd 40 N m s/rad, its group listing a_j2 before a_j1), ``b_`` on velocity
 servos (kd 100 N m s/rad), ``c_`` on efforts. What the servos do is checked as
 physics (targets reached within a bound from the gains and the time waited), and
-against the core run on the same scene in this one, bit for bit.
+against the core run on the same scene in this one, bit for bit. One test runs
+node_arm under gravity on exact drives (driving constraints) instead.
 """
 
 import math
@@ -362,3 +363,51 @@ def test_a_group_name_that_cannot_be_a_topic_stops_the_node_naming_it(ros, tmp_p
     ros.client.wait_for(lambda: node.proc.poll() is not None, 'the node to exit', node=None)
     assert node.proc.returncode == 2
     assert "command group name: 'bad__name' cannot be part of a ROS name" in node.log()
+
+
+EXACT_SCENE = """
+name: exact_arm
+dt: 0.001
+effects:
+  gravity: {{g_world: [0.0, 0.0, -9.81]}}
+robots:
+  - {{urdf: {arm}, initial_positions: {{j1: 0.2, j2: -0.3}}}}
+command_groups:
+  - {{name: arm_exact, joints: [j1, j2], interface: position, mode: exact}}
+"""
+
+
+def test_an_exact_drive_follows_its_target_and_reports_the_torque_it_takes(ros, tmp_path):
+    # node_arm under gravity with both joints on exact drives (driving constraints): they
+    # hold their initial angles, then close a commanded jump along exp(−t/τ) exactly,
+    # and joint_states' efforts are the drives' multipliers, as the core computes them.
+    scene = tmp_path / 'exact_arm.yaml'
+    scene.write_text(EXACT_SCENE.format(arm=SCENE.parent / 'urdf' / 'node_arm.urdf'))
+    node = ros.start({'scene': str(scene), 'start_paused': True})
+    states = ros.client.subscribe(JointState, '/joint_states')
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    group = _publisher(ros, node, Float64MultiArray, '/arm_exact/commands')
+    t = _step(ros, node, 100)
+    held = _at(ros, node, states, t, 'joint states')
+    # bound: SHAKE holds the rows to its tolerance, 1e-13 a step, from rest: 1e-11 rad.
+    np.testing.assert_allclose(held.position, [0.2, -0.3], atol=1e-11)
+    sim = load_scene(scene).simulation
+    sim.step(100)
+    _assert_equal(held, sim.joint_state())
+    assert abs(held.effort[0]) > 1.0   # j1 carries the arm against gravity
+    group.publish(Float64MultiArray(data=[0.5, NAN]))   # j2 keeps holding -0.3
+    _group_taken(ros, node, group, 2, diags, 0)
+    t = _step(ros, node, 60)
+    seen = len(diags)
+    moved = _at(ros, node, states, t, 'joint states')
+    # After 60 steps the jump of 0.3 rad is 0.3 exp(−60 dt / τ) from done (τ = 0.05 s):
+    # exactly, to SHAKE's tolerance per step: 1e-11.
+    assert moved.position[0] - 0.5 == pytest.approx(-0.3 * math.exp(-60e-3 / 0.05), abs=1e-11)
+    assert moved.position[1] == pytest.approx(-0.3, abs=1e-11)
+    sim.command_joints({'j1': 0.5})
+    sim.step(60)
+    _assert_equal(moved, sim.joint_state())
+    # The hinges hold (SHAKE's tolerance, with room: 1e-11); the drive's distance to go
+    # (1.8e-2 rad) is not counted as a violation. (/diagnostics comes once a second.)
+    ros.client.wait_for(lambda: len(diags) > seen, 'diagnostics after the steps', node=node)
+    assert float(_values(diags[-1])['constraint_violation']) < 1e-11
