@@ -240,3 +240,20 @@ def test_a_drives_tracking_error_is_not_a_constraint_violation(tmp_path):
     assert sim.diagnostics().constraint_violation < 1e-11
     expected = 0.3 * np.exp(-5 * sim.dt / 0.05)
     assert sim.constraint_violation()['axle_drive'] == pytest.approx(expected, abs=1e-11)
+
+
+def test_drives_keep_their_joints_rows_independent_and_tree_solved():
+    # A drive is its joint's sixth row on the joint's own pair of bodies: not a joint added
+    # twice (redundant rows, a dense solve with a truncated SVD), not a loop. The arm keeps
+    # the linear-time tree solve, and no factorization meets a redundant row.
+    from rigid_body_sim.core.kernels.layout import Solve
+    data = {'dt': 1e-3, 'effects': {'gravity': {'g_world': [0.0, 0.0, -G]}},
+            'robots': [{'urdf': urdf_path('arm7.urdf')}],
+            'command_groups': [{'name': 'exact', 'joints': ['joint2', 'joint4', 'joint6'],
+                                'interface': 'position', 'mode': 'exact'}]}
+    sim = scene_from_dict(data, urdf_path('scene.yaml')).simulation
+    [component] = sim.dynamics.solver.kernel_setup().components
+    assert len(component.rows) == 9 * 5 + 3 and component.solve is Solve.TREE
+    sim.step(20)
+    counters = sim.dynamics.solver.counters
+    assert counters.factorizations > 0 and counters.rank_deficient_solves == 0

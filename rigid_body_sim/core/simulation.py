@@ -455,7 +455,9 @@ class Simulation:
         -----
         Every value is validated before anything changes. Floating bases keep
         their pose and twist; the children of floating and planar joints keep
-        their pose and twist relative to their parent.
+        their pose and twist relative to their parent. Exact drives take the new
+        positions as their targets and hold them: a velocity given for a driven
+        joint is projected away with the rest of the velocities.
 
         """
         if not isinstance(positions, dict):

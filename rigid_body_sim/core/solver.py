@@ -67,7 +67,7 @@ import numpy as np
 
 from . import rotation as so3
 from .bodies import BodySet, State
-from .constraints import Constraint, ConstraintSet
+from .constraints import Constraint, ConstraintSet, JointType
 from .dynamics import SolverCounters
 from .errors import SpecError
 from .graph import closes_loop, component_labels, loop_structure, tree_structure
@@ -296,6 +296,10 @@ class ConstraintSolver:
         components = []
         joints_of: dict = {}   # component label -> (a, b) per constraint
         for r in cs.resolved:
+            if r.spec.type is JointType.DRIVE:
+                # A drive adds its joint's missing row to the joint's own pair of
+                # bodies: it never closes a loop, nor makes that pair redundant.
+                continue
             joints_of.setdefault(label[r.a], []).append((r.a, r.b))
         for lab in np.unique(label[touched]):
             bodies = np.flatnonzero(label == lab)
@@ -306,7 +310,7 @@ class ConstraintSolver:
             ra, rb = local[a[rows_global]], local[b[rows_global]]
             mc = len(rows_global)
             closure = np.zeros(0, dtype=np.int64)
-            ja, jb = np.array(joints_of[lab]).T
+            ja, jb = np.array(joints_of.get(lab, []), dtype=np.int64).reshape(-1, 2).T
             closes = closes_loop(local[ja], local[jb], len(bodies))
             # A loop through the world counts: its redundant rows go to the closure
             # (beyond DENSE_ROWS a loop among bodies must: the tree solve needs a tree).
