@@ -457,10 +457,11 @@ class Runner:
             if topic == '~/metrics':
                 self.largest_violation = max(self.largest_violation, msg.constraint_violation)
                 self.last_metrics = msg
-        if self.session.sim.joint_names():
-            stamp = self.session.stamp()
-            self.writer.write_msg(self.topic(JOINT_STATES_TOPIC), t,
+        stamp = self.session.stamp()
+        if self.session.sim.joint_names():   # (as the node: joint_states with joints,
+            self.writer.write_msg(self.topic(JOINT_STATES_TOPIC), t,   # /tf with robots)
                                   self.session.outputs.joint_states(stamp))
+        if self.session.scene.robots:
             self.writer.write_msg(TF_TOPIC, t, TFMessage(
                 transforms=self.session.outputs.transforms(stamp)))
 
