@@ -221,6 +221,10 @@ def test_unstable_gains_are_refused_with_the_bound(tmp_path):
     with pytest.raises(SpecError, match=r'> 1'):
         sim.set_step(dt=2e-3)
     assert sim.dt == 1e-3
+    # The same question without the change (the node asks it before a parameter changes).
+    with pytest.raises(SpecError, match=r'> 1'):
+        sim.check_step(dt=2e-3)
+    assert sim.check_step(dt=0.5e-3)[0] == 0.5e-3 and sim.dt == 1e-3
 
 
 @pytest.mark.parametrize('group, match', [

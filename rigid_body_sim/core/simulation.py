@@ -259,11 +259,7 @@ class Simulation:
         Time stays continuous: later steps end at ``now + k * dt``. Both values are
         validated before either changes.
         """
-        new_dt = self.dt if dt is None else positive_scalar(dt, 'dt')
-        cls = integrator_class(integrator) if integrator is not None else None
-        if self.drives is not None:
-            self.drives.check_stability(self.state, new_dt,
-                                        cls.name if cls is not None else self.integrator.name)
+        new_dt, cls = self.check_step(dt, integrator)
         if new_dt != self.dt:
             self._time_base = self.time
             self._steps = 0
@@ -271,6 +267,25 @@ class Simulation:
             self.dynamics.solver.dt = new_dt
         if cls is not None and cls is not type(self.integrator):
             self.integrator = cls(self.dynamics)
+
+    def check_step(self, dt: Optional[float] = None, integrator: Optional[str] = None) -> tuple:
+        """
+        Raise SpecError unless :meth:`set_step` would take these; changes nothing.
+
+        The step must be positive, the integrator known, and the joints' servos
+        stable with both (:meth:`.robots.JointDrives.check_stability`). Returns the
+        step (s) and the integrator class (None: unchanged).
+        """
+        new_dt = self.dt if dt is None else positive_scalar(dt, 'dt')
+        cls = integrator_class(integrator) if integrator is not None else None
+        if self.drives is not None:
+            self.drives.check_stability(self.state, new_dt,
+                                        cls.name if cls is not None else self.integrator.name)
+        return new_dt, cls
+
+    def command_groups(self) -> dict:
+        """Return ``{name: CommandGroup}``: the scene's command groups, joints in command order."""
+        return {} if self.drives is None else dict(self.drives.groups)
 
     def set_tolerance(self, tolerance: Optional[float], budget: Optional[int] = None,
                       estimator: Optional[str] = None) -> None:

@@ -24,7 +24,6 @@ from .inputs import check_group_command, check_joint_command, check_name_token, 
 from .outputs import body_topic, constraint_topic, group_topic, Outputs
 from .pacing import output_due, Totals
 from ..core import DivergenceError, InconsistentConstraintError, SpecError
-from ..core.integrators import integrator_class
 from ..scene import Scene
 
 
@@ -71,9 +70,8 @@ class Session:
             check_name_token(name, f'scene {scene.source}: constraint name',
                              self.full_topic(constraint_topic(name)))
         #: {group: (joints in the order of its commands, interface)}
-        self.groups = {name: (tuple(g.joints), g.interface.value) for name, g in
-                       (scene.simulation.drives.groups.items()
-                        if scene.simulation.drives is not None else ())}
+        self.groups = {name: (tuple(g.joints), g.interface.value)
+                       for name, g in scene.simulation.command_groups().items()}
         for name in self.groups:
             check_name_token(name, f'scene {scene.source}: command group name',
                              self.full_relative_topic(group_topic(name)))
@@ -116,12 +114,8 @@ class Session:
         The servos' gains must stay stable at the new step and integrator
         (:meth:`~rigid_body_sim.core.robots.JointDrives.check_stability`).
         """
-        drives = self.sim.drives
-        if drives is None:
-            return
-        integrator = integrator_class(settings.integrator or self.scene_integrator)
-        drives.check_stability(self.sim.state, self.dt or 1.0 / settings.physics_rate,
-                               integrator.name)
+        self.sim.check_step(self.dt or 1.0 / settings.physics_rate,
+                            settings.integrator or self.scene_integrator)
 
     def full_topic(self, private: str) -> str:
         """Return the fully qualified name of a private topic ``~/...`` of the node."""
