@@ -281,45 +281,64 @@ def stop(proc: subprocess.Popen, timeout: float = 60.0) -> int:
 
 # -- one run -----------------------------------------------------------------------------
 
-class Flipper:
+class FlipTimer:
+    """
+    Time input flips to the first output that shows each: the latency probes' bookkeeping.
+
+    A subclass publishes with :meth:`send` and calls :meth:`seen` when an output
+    shows the pending flip; ``missed`` counts flips that never showed before the next.
+    """
+
+    def __init__(self, pub) -> None:
+        self.pub = pub
+        self.pending: Optional[float] = None   # publish time of the flip not yet seen
+        self.samples: list = []
+        self.sent = self.missed = 0
+
+    def send(self, msg, measured: bool) -> None:
+        """Publish ``msg``; time it if ``measured``."""
+        if self.pending is not None:
+            self.missed += 1   # the previous flip never showed before this one
+        t = time.perf_counter()
+        self.pub.publish(msg)
+        self.pending = t if measured else None
+        self.sent += measured
+
+    def seen(self, t: float) -> None:
+        """Record that an output received at ``t`` (perf_counter) shows the pending flip."""
+        if self.pending is not None:
+            self.samples.append(t - self.pending)
+            self.pending = None
+
+
+class Flipper(FlipTimer):
     """Publish a flipping wrench and time each flip to the first twist that shows it."""
 
     def __init__(self, client: Client, body: str, force: float, axis: int) -> None:
-        self.pub = client.node.create_publisher(WrenchStamped, f'{NODE}/bodies/{body}/wrench',
-                                                QoSProfile(depth=10))
+        super().__init__(client.node.create_publisher(
+            WrenchStamped, f'{NODE}/bodies/{body}/wrench', QoSProfile(depth=10)))
         client.node.create_subscription(TwistStamped, f'{NODE}/bodies/{body}/twist',
                                         self._on_twist, QoSProfile(depth=100))
         self.force, self.axis = force, axis
         self.twists = 0
         self.last_v: Optional[float] = None
         self.sign = 0.0
-        self.pending: Optional[float] = None   # publish time of the flip not yet seen
-        self.samples: list = []
-        self.sent = self.missed = 0
 
     def publish(self, sign: float, measured: bool) -> None:
         """Publish force ``sign * F``; time it if ``measured``."""
         msg = WrenchStamped()
         msg.header.frame_id = 'world'
         setattr(msg.wrench.force, 'xyz'[self.axis], sign * self.force)
-        if self.pending is not None:
-            self.missed += 1   # the previous flip never showed before this one
         self.sign = sign
-        t = time.perf_counter()
-        self.pub.publish(msg)
-        self.pending = t if measured else None
-        self.sent += measured
+        self.send(msg, measured)
 
     def _on_twist(self, msg: TwistStamped) -> None:
         t = time.perf_counter()
         self.twists += 1
         v = getattr(msg.twist.linear, 'xyz'[self.axis])
         last, self.last_v = self.last_v, v
-        if self.pending is None or last is None:
-            return
-        if (v - last) * self.sign > 0.0:
-            self.samples.append(t - self.pending)
-            self.pending = None
+        if last is not None and (v - last) * self.sign > 0.0:
+            self.seen(t)
 
 
 def _windows(diags: list, t_from: float) -> list:

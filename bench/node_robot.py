@@ -52,8 +52,8 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import node as node_bench  # noqa: E402, I100
-from node import Client, cpu_seconds, markdown, others_cpu, processes, random_domain, \
-    ros_env, sim_node_command, stop, summarize, wait_quiet  # noqa: E402, I100
+from node import Client, cpu_seconds, FlipTimer, markdown, others_cpu, processes, \
+    random_domain, ros_env, sim_node_command, stop, summarize, wait_quiet  # noqa: E402, I100
 
 OUT = Path(__file__).resolve().parent / 'out'
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,30 +102,21 @@ def robot(workdir: Path) -> tuple:
     return label, path, joints
 
 
-class EffortFlipper:
+class EffortFlipper(FlipTimer):
     """Publish a flipping effort on one joint; time each flip to the joint_states showing it."""
 
     def __init__(self, client: Client, joint: str) -> None:
-        self.pub = client.node.create_publisher(JointState, f'{NODE}/joint_commands',
-                                                QoSProfile(depth=10))
+        super().__init__(client.node.create_publisher(JointState, f'{NODE}/joint_commands',
+                                                      QoSProfile(depth=10)))
         self.joint = joint
         self.index: Optional[int] = None
         self.value = 0.0
-        self.pending: Optional[float] = None   # publish time of the flip not yet seen
-        self.samples: list = []
-        self.sent = self.missed = 0
         self.states = 0
 
     def publish(self, value: float, measured: bool) -> None:
         """Publish effort ``value``; time it if ``measured``."""
-        if self.pending is not None:
-            self.missed += 1   # the previous flip never showed before this one
         self.value = value
-        msg = JointState(name=[self.joint], effort=[value])
-        t = time.perf_counter()
-        self.pub.publish(msg)
-        self.pending = t if measured else None
-        self.sent += measured
+        self.send(JointState(name=[self.joint], effort=[value]), measured)
 
     def on_joint_states(self, msg: JointState) -> None:
         """Time the pending flip if this message shows it."""
@@ -133,9 +124,8 @@ class EffortFlipper:
         self.states += 1
         if self.index is None:
             self.index = list(msg.name).index(self.joint)
-        if self.pending is not None and abs(msg.effort[self.index] - self.value) < 1e-9:
-            self.samples.append(t - self.pending)
-            self.pending = None
+        if abs(msg.effort[self.index] - self.value) < 1e-9:
+            self.seen(t)
 
 
 def run(label: str, scene: Path, joints: list, factor: float, duration: float,
