@@ -143,6 +143,18 @@ class Client:
         self.wait_for(future.done, f'reply from {name}', timeout, node)
         return future.result()
 
+    def set_parameter(self, node_name: str, name: str, value, node=None):
+        """Set one double or string parameter of ``node_name``; return its SetParametersResult."""
+        from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+        from rcl_interfaces.srv import SetParameters
+        if isinstance(value, float):
+            pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+        else:
+            pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+        request = SetParameters.Request(parameters=[Parameter(name=name, value=pv)])
+        return self.call(SetParameters, f'{node_name}/set_parameters', request,
+                         node=node).results[0]
+
     def close(self) -> None:
         """Destroy the node and shut the context down."""
         self.executor.shutdown()

@@ -13,8 +13,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
-from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.ros.conversions import body_states_arrays, time_seconds
 from rigid_body_sim.scene import load_scene
@@ -492,13 +490,7 @@ def test_a_bad_parameter_stops_start_up_naming_it(tmp_path):
 
 
 def _set_parameter(ros, node, name, value):
-    if isinstance(value, float):
-        pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
-    else:
-        pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
-    request = SetParameters.Request(parameters=[Parameter(name=name, value=pv)])
-    return ros.client.call(SetParameters, f'{NODE}/set_parameters', request,
-                           node=node).results[0]
+    return ros.client.set_parameter(NODE, name, value, node=node)
 
 
 def test_the_shipped_params_file_configures_the_node(ros, tmp_path):
@@ -895,11 +887,7 @@ def test_the_tolerance_parameter_turns_the_accuracy_knob_and_diagnostics_report_
     assert int(values['tolerance_substeps']) >= 4
     assert values['tolerance_misses_total'] == '0'
     # Off again at run time: 0 is the scene's (none).
-    request = SetParameters.Request(parameters=[Parameter(
-        name='tolerance', value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
-                                               double_value=0.0))])
-    result = ros.client.call(SetParameters, f'{NODE}/set_parameters', request, node=node)
-    assert result.results[0].successful
+    assert _set_parameter(ros, node, 'tolerance', 0.0).successful
     ros.client.wait_for(lambda: any({kv.key: kv.value for kv in d.status[0].values}
                                     .get('tolerance') == 'off' for d in diags),
                         'diagnostics with the knob off', node=node)

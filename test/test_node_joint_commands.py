@@ -16,8 +16,6 @@ from pathlib import Path
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
-from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
 from rigid_body_sim.ros.conversions import joint_state_arrays, time_seconds
 from rigid_body_sim.scene import load_scene
 from rigid_body_sim_interfaces.srv import Step
@@ -301,13 +299,7 @@ def test_bad_commands_are_refused_counted_and_leave_the_targets_as_they_were(ros
 
 
 def _set_parameter(ros, node, name, value):
-    if isinstance(value, float):
-        pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
-    else:
-        pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
-    request = SetParameters.Request(parameters=[Parameter(name=name, value=pv)])
-    return ros.client.call(SetParameters, f'{NODE}/set_parameters', request,
-                           node=node).results[0]
+    return ros.client.set_parameter(NODE, name, value, node=node)
 
 
 @pytest.mark.parametrize('name, value, group', [
