@@ -74,9 +74,10 @@ def _component(m=3, n=2):
     a, b = np.zeros(m, dtype=np.int64), np.full(m, n, dtype=np.int64)
     st = tree_structure(a[:0], b[:0], n)
     rows = {'kind': a.copy(), 'comp': a.copy(), 'row_a': a, 'row_b': b,
-            'row_par': np.zeros((m, 13)), 'key': -1}
+            'row_par': np.zeros((m, 13)), 'row_owner': np.arange(m), 'x_kind': a[:0],
+            'x_comp': a[:0], 'x_par': np.zeros((0, 13)), 'x_weight': np.zeros(0), 'key': -1}
     body = np.ones((n, 8))
-    trees = tuple(ck.tree_storage(st, np.zeros(0, dtype=np.int64), m) for _ in range(2))
+    trees = tuple(ck.tree_storage(st, np.zeros(0, dtype=np.int64), m, n) for _ in range(2))
     return ck, rows, ck.workspace(n, m, body), (ck.dense_storage(m), ck.dense_storage(m)), trees
 
 

@@ -18,8 +18,9 @@ def loop_solve(a, b, n, Ga, Gb, Ha, Hb, minv6, rhs, reg=0.0):
                 Ha is Ga and Hb is Gb)
     c, m = st.closure.size, a.size
     X, Y, F = np.zeros((c, m)), np.zeros((c, m)), np.zeros((c, c))
-    loop_schur(*t.arrays[:4], S, piv, P, Q, B, E, tmp, st.closure, a, b, Ga, Gb, Ha, Hb, minv6,
-               reg, X, Y, F, np.zeros(m), np.zeros((2, 6)))
+    own = np.arange(m, dtype=np.int64)   # one part a row: no coupled rows
+    loop_schur(*t.arrays[:4], S, piv, P, Q, B, E, tmp, st.closure, a, b, own, Ga, Gb, Ha, Hb,
+               minv6, reg, X, Y, F, np.zeros(m), np.zeros((2, n, 6)))
     out, z = np.zeros(m), np.zeros(c)
     loop_forward(*t.arrays[:4], S, piv, P, Q, B, E, tmp, st.closure, Y, rhs, out, z)
     loop_back(t.group_rows, st.closure, X, np.linalg.solve(F, z), out)

@@ -36,6 +36,10 @@ distance   distance                                             1
 drive      angle (rotary joint) or line (prismatic joint), with     1
            the joint coordinate's target; made by command groups
            of ``mode: exact`` (:mod:`.robots`), not by users
+mimic      a joint coordinate minus ``k`` times another's: one       1
+           row over up to four bodies (the angle or line of the
+           follower's pair plus a weighted *coupling part* on the
+           leader's pair); made by URDF ``<mimic>`` (:mod:`.robots`)
 generic    a user function Φ(x_a, R_a, x_b, R_b) (finite-difference Jacobian
            and γ unless given), evaluated one constraint at a time
 =========  ==================================================  ====
@@ -83,16 +87,22 @@ class JointType(enum.Enum):
     #: A joint coordinate held at a target (:class:`DriveGeometry`): made by the
     #: command groups of ``mode: exact``, not named by users.
     DRIVE = 'drive'
+    #: A joint coordinate tied to another's (:class:`Coupling`): made by URDF mimic
+    #: joints, not named by users.
+    MIMIC = 'mimic'
 
     @classmethod
     def parse(cls, value: Any, field_name: str = 'type') -> 'JointType':
-        """Return the joint type of a JointType or of its name (not 'drive': internal)."""
+        """Return the joint type of a JointType or of its name (not 'drive', 'mimic': internal)."""
         if isinstance(value, JointType):
             return value
-        known = [t.value for t in cls if t is not cls.DRIVE]
+        known = [t.value for t in cls if t not in (cls.DRIVE, cls.MIMIC)]
         if value == cls.DRIVE.value:
             raise SpecError(field_name, f"'drive' constraints are made by command groups of "
                                         f"mode 'exact' (robots); known types: {known}")
+        if value == cls.MIMIC.value:
+            raise SpecError(field_name, f"'mimic' constraints are made by URDF mimic joints "
+                                        f'(robots); known types: {known}')
         try:
             return cls(value)
         except ValueError:
@@ -149,6 +159,46 @@ class DriveGeometry:
 
 
 @dataclass(frozen=True)
+class Coupling:
+    """
+    The leader's side of a ``mimic`` constraint ``Φ = Φ_f − k Φ_l``.
+
+    ``Φ_f`` is the follower's coordinate minus the constraint's ``drive.target``
+    and ``Φ_l`` the leader's minus ``drive.target`` here (the angles each taken in
+    (−π, π], so both targets are chosen near where the joints move: :mod:`.robots`
+    takes the middle of the leader's limits and ``offset + k`` times it for the
+    follower, and the row is the URDF's ``q_f = k q_l + offset`` exactly while the
+    leader stays within π of that middle).
+
+    Parameters
+    ----------
+    body_a : str
+        The leader joint's child.
+    body_b : str or None
+        Its parent; None for the world.
+    drive : DriveGeometry
+        Where the leader's coordinate lives on them, and its reference (``target``).
+    multiplier : float
+        ``k``: the follower moves ``k`` times the leader (any non-zero finite number).
+
+    """
+
+    body_a: str
+    body_b: Optional[str]
+    drive: DriveGeometry
+    multiplier: float
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.drive, DriveGeometry):
+            raise SpecError('coupling.drive', f'expected a DriveGeometry, got {self.drive!r}')
+        k = finite_scalar(self.multiplier, 'coupling.multiplier')
+        if k == 0.0:
+            raise SpecError('coupling.multiplier', 'must be non-zero (a zero multiplier '
+                                                   'holds the follower still: a drive)')
+        object.__setattr__(self, 'multiplier', k)
+
+
+@dataclass(frozen=True)
 class Constraint:
     """
     A constraint as a user describes it.
@@ -177,7 +227,10 @@ class Constraint:
     length : float, optional
         m, for distance: default the current distance between the anchors.
     drive : DriveGeometry, optional
-        For drive (and only for it): the joint coordinate held and its target.
+        For drive and mimic (and only for them): the joint coordinate held and its
+        target (mimic: the follower's coordinate between ``body_a`` and ``body_b``).
+    coupling : Coupling, optional
+        For mimic (and only for it): the leader's coordinate and the multiplier.
     function : callable, optional
         For generic: ``phi(x_a, R_a, x_b, R_b) -> ndarray (k,)`` with centre of
         mass positions ``x`` (3,) and body-frame rotation matrices ``R`` (3, 3)
@@ -201,6 +254,7 @@ class Constraint:
     function: Optional[Callable] = None
     jacobian: Optional[Callable] = None
     drive: Optional[DriveGeometry] = None
+    coupling: Optional[Coupling] = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -249,9 +303,14 @@ class Constraint:
                 raise SpecError('jacobian', f'must be callable, got {self.jacobian!r}')
         elif self.function is not None or self.jacobian is not None:
             raise SpecError('function', f'only for generic constraints, not {jt.value}')
-        if (jt is JointType.DRIVE) != isinstance(self.drive, DriveGeometry):
-            raise SpecError('drive', 'a drive constraint needs its DriveGeometry, and only it'
-                                     f' has one (type {jt.value}, drive {self.drive!r})')
+        if (jt in (JointType.DRIVE, JointType.MIMIC)) != isinstance(self.drive, DriveGeometry):
+            raise SpecError('drive', 'drive and mimic constraints need a DriveGeometry, and '
+                                     f'only they have one (type {jt.value}, drive '
+                                     f'{self.drive!r})')
+        if (jt is JointType.MIMIC) != isinstance(self.coupling, Coupling):
+            raise SpecError('coupling', 'a mimic constraint needs its Coupling, and only it '
+                                        f'has one (type {jt.value}, coupling '
+                                        f'{self.coupling!r})')
 
 
 def perpendicular_frame(k: np.ndarray) -> np.ndarray:
@@ -287,10 +346,15 @@ class JacobianStructure:
             self.width = 6 * len(self.bodies_used)
             self.flat = rows * self.width + 6 * compact[cols // 6] + cols % 6
         else:
-            order = sp.csr_matrix((np.arange(len(rows), dtype=float), (rows, cols)),
-                                  shape=(m, 6 * n))
-            self.perm = order.data.astype(int)
-            self.indices, self.indptr = order.indices, order.indptr
+            # Entries in CSR order; a coupled row (mimic) may give one entry twice (two
+            # parts on one body): they are summed.
+            keys, self.entry = np.unique(rows.astype(np.int64) * (6 * n) + cols,
+                                         return_inverse=True)
+            self.entry = self.entry.ravel()
+            self.n_entries = len(keys)
+            self.indices = keys % (6 * n)
+            self.indptr = np.concatenate(
+                [[0], np.cumsum(np.bincount(keys // (6 * n), minlength=m))]).astype(np.int64)
 
 
 class RowJacobian:
@@ -308,19 +372,16 @@ class RowJacobian:
     def __init__(self, structure: JacobianStructure, values: np.ndarray) -> None:
         self.structure = st = structure
         self.m, self.n = st.m, st.n
-        #: Per-row blocks (Ga, Gb), each (m, 6), on bodies a and b of each row
-        #: (``ConstraintSet.all_row_a``/``all_row_b``); set by ``geometry`` for
-        #: sparse systems, None otherwise.
-        self.blocks: Optional[tuple] = None
         self.dense_mode = st.dense_mode
         if self.dense_mode:
             self.bodies_used = st.bodies_used
-            matrix = np.zeros(st.m * st.width)
-            matrix[st.flat] = values
+            # (Summed: a coupled row may give one entry twice.)
+            matrix = np.bincount(st.flat, weights=values, minlength=st.m * st.width)
             self.matrix = matrix.reshape(st.m, st.width)
         else:
-            self.matrix = sp.csr_matrix((values[st.perm], st.indices, st.indptr),
-                                        shape=(st.m, 6 * st.n))
+            self.matrix = sp.csr_matrix(
+                (np.bincount(st.entry, weights=values, minlength=st.n_entries), st.indices,
+                 st.indptr), shape=(st.m, 6 * st.n))
 
     def _cols(self, x6: np.ndarray) -> np.ndarray:
         return (x6[self.bodies_used] if self.dense_mode else x6).ravel()
@@ -373,6 +434,9 @@ class Geometry:
         returns them.
     g_generic : list of ndarray, shape (k, 12)
         Jacobians of the generic constraints, in row order.
+    g_coupling : ndarray, shape (2, e, 6)
+        Blocks of the coupling parts (mimic rows' leader sides), weighted, on their
+        bodies a and b.
 
     """
 
@@ -382,6 +446,7 @@ class Geometry:
         self.jacobian: Optional[RowJacobian] = None
         self.g_builtin = np.zeros((2, 0, 6))
         self.g_generic: list = []
+        self.g_coupling = np.zeros((2, 0, 6))
         self.n = len(pos)
         self._frames: Optional[tuple] = None
 
@@ -405,6 +470,16 @@ class Geometry:
                        np.ascontiguousarray(omega, dtype=float), cs.row_kind, cs.row_comp,
                        cs.row_a, cs.row_b, cs.row_par, self.g_builtin[0], self.g_builtin[1],
                        bool(need_gamma), phi_dot[:mb], gamma[:mb])
+        e = len(cs.x_row)
+        if e:
+            # Coupling parts: Φ̇ from their weighted blocks, γ weighted here.
+            x_dot, x_gamma = np.empty(e), np.zeros(e)
+            rows_rates(self.pos, self.quat, np.ascontiguousarray(vel, dtype=float),
+                       np.ascontiguousarray(omega, dtype=float), cs.x_kind, cs.x_comp,
+                       cs.x_a, cs.x_b, cs.x_par, self.g_coupling[0], self.g_coupling[1],
+                       bool(need_gamma), x_dot, x_gamma)
+            np.add.at(phi_dot, cs.x_row, x_dot)
+            np.add.at(gamma, cs.x_row, cs.x_weight * x_gamma)
         if not cs.generic:
             return phi_dot, gamma
         n = self.n
@@ -462,6 +537,9 @@ class ResolvedConstraint:
     n_rows: int = 0                        # generic: length of Φ
     anchor: tuple = ()                     # (r_a, r_b): anchor lever arms, principal frames
     rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    # mimic: the coupling part (kind, a, b, r_a, r_b, s, e, e2, scalar, weight) of its row
+    coupled: Optional[tuple] = None
+    coupled_anchor: tuple = ()             # mimic: the leader's joint point on its a and b
 
 
 class ConstraintSet:
@@ -481,6 +559,12 @@ class ConstraintSet:
     row_kind, row_comp, row_a, row_b : ndarray, shape (n_builtin_rows,), int64
     row_par : ndarray, shape (n_builtin_rows, kernels.layout.PAR_WIDTH)
         The built-in rows as :mod:`.kernels.rows` takes them (layout there).
+    x_kind, x_comp, x_a, x_b, x_par : ndarray, shape (e,) and (e, PAR_WIDTH)
+        The coupling parts (mimic rows' leader sides), built-in rows too.
+    x_row : ndarray, shape (e,), int64
+        The row each coupling part adds to.
+    x_weight : ndarray, shape (e,)
+        Each part's weight (``−k``).
 
     """
 
@@ -533,11 +617,15 @@ class ConstraintSet:
             ``((a, r_a), (b, r_b))``: body indices (``b == len(bodies)`` is the
             world) and each anchor's lever arm, ndarray, shape (3,), m, from the
             body's centre of mass in its principal frame (for the world, the
-            anchor's world position). Fixed when the constraint was added.
+            anchor's world position). Fixed when the constraint was added. A mimic
+            constraint has four: its follower joint's two, then its leader's.
 
         """
         res = self._get(name)
-        return (res.a, res.anchor[0]), (res.b, res.anchor[1])
+        out = ((res.a, res.anchor[0]), (res.b, res.anchor[1]))
+        if res.coupled is not None:
+            out += tuple(zip(res.coupled[1:3], res.coupled_anchor))
+        return out
 
     def _get(self, name: str) -> ResolvedConstraint:
         try:
@@ -651,7 +739,7 @@ class ConstraintSet:
             if jt is JointType.PLANAR:
                 # The anchors stay in the plane through b's anchor normal to k_b.
                 res.lines = [(r_a, r_b, fb[0], 0.0)]
-        if jt is JointType.DRIVE:
+        if jt in (JointType.DRIVE, JointType.MIMIC):
             dg = spec.drive
             if dg.rotary:
                 res.angles = [(V[a].T @ dg.e1_a, V[b].T @ dg.e1_b, V[b].T @ dg.e2_b,
@@ -659,6 +747,21 @@ class ConstraintSet:
             else:
                 res.lines = [(body_point(a, dg.p_a), body_point(b, dg.p_b), V[b].T @ dg.k_b,
                               dg.target)]
+        if jt is JointType.MIMIC:
+            cp = spec.coupling
+            la = bodies.lookup(cp.body_a, 'coupling.body_a')
+            lb = n if cp.body_b is None else bodies.lookup(cp.body_b, 'coupling.body_b')
+            if la == lb:
+                raise SpecError('coupling.body_b', f'a joint coordinate needs two bodies, '
+                                                   f'got {cp.body_a!r} twice')
+            dg = cp.drive
+            res.coupled_anchor = (body_point(la, dg.p_a), body_point(lb, dg.p_b))
+            if dg.rotary:
+                res.coupled = (KIND_ANGLE, la, lb, None, None, V[la].T @ dg.e1_a,
+                               V[lb].T @ dg.e1_b, V[lb].T @ dg.e2_b, dg.target, -cp.multiplier)
+            else:
+                res.coupled = (KIND_LINE, la, lb, *res.coupled_anchor, None, V[lb].T @ dg.k_b,
+                               None, dg.target, -cp.multiplier)
         if jt in (JointType.BALL, JointType.HINGE, JointType.FIXED):
             res.point = (r_a, r_b)
         if jt is JointType.DISTANCE:
@@ -693,6 +796,10 @@ class ConstraintSet:
                   for r, g in angles]
         # Flat row arrays for the kernels of .kernels.rows (and a compiled step).
         self.row_kind, self.row_comp, self.row_a, self.row_b, self.row_par = pack_rows(table)
+        coupled = [r for r in res if r.coupled is not None]
+        self.x_kind, self.x_comp, self.x_a, self.x_b, self.x_par = pack_rows(
+            [(c[0], 0, c[1], c[2], *c[3:9]) for c in (r.coupled for r in coupled)])
+        self.x_weight = np.array([r.coupled[9] for r in coupled], dtype=float)
         self.n_builtin_rows = len(table)
         self._gen = tuple(gens)
         # Row numbering: point, dot, line, distance and angle blocks, generic.
@@ -720,9 +827,13 @@ class ConstraintSet:
         for r in res:
             r.rows = np.array(rows[r.spec.name], dtype=int)
         self.n_rows = start
+        # A mimic constraint has one row: its coupling part adds to it.
+        self.x_row = np.array([r.rows[0] for r in coupled], dtype=np.int64)
         # Bodies that take part in any constraint (others need no constraint work).
         self.touched = np.unique(np.concatenate(
-            [np.array([r.a, r.b], dtype=int) for r in res] or [np.zeros(0, dtype=int)]))
+            [np.array([r.a, r.b], dtype=int) for r in res]
+            + [np.array(r.coupled[1:3], dtype=int) for r in coupled]
+            or [np.zeros(0, dtype=int)]))
         self.touched = self.touched[self.touched < len(self.bodies)]
         self._pattern()
         self.version = getattr(self, 'version', 0) + 1
@@ -734,11 +845,14 @@ class ConstraintSet:
         Compute the fixed sparsity pattern of G and where its values come from.
 
         The pattern lists, per primitive block (points, dots, lines, distances,
-        then each generic constraint), the entries on body a then those on body
-        b, row by row, dropping the world's. ``_value_index`` maps each kept
-        entry into the flat buffer of :meth:`geometry`: the built-in blocks
-        ``Ga`` (m_builtin, 6) and ``Gb`` (m_builtin, 6) raveled one after the
-        other, then per generic constraint its (k, 6) blocks on a and on b.
+        then each generic constraint, then the coupling parts), the entries on
+        body a then those on body b, row by row, dropping the world's.
+        ``_value_index`` maps each kept entry into the flat buffer of
+        :meth:`geometry`: the built-in blocks ``Ga`` (m_builtin, 6) and ``Gb``
+        (m_builtin, 6) raveled one after the other, then per generic constraint
+        its (k, 6) blocks on a and on b, then the coupling parts' (e, 6) blocks
+        on a and on b. A coupling part may share a body with its row's own
+        part: :class:`JacobianStructure` sums such entries.
         """
         n = len(self.bodies)
         mb = self.n_builtin_rows
@@ -755,6 +869,12 @@ class ConstraintSet:
             blocks.append((r, np.full(k, res.a), np.full(k, res.b),
                            offset + np.arange(6 * k), offset + 6 * k + np.arange(6 * k)))
             offset += 12 * k
+        e = len(self.x_row)
+        if e:
+            # The coupling parts' blocks (weighted) on their rows, after the generic ones.
+            x = np.arange(e)
+            blocks.append((self.x_row, self.x_a, self.x_b, offset + 6 * x[:, None] + six,
+                           offset + 6 * e + 6 * x[:, None] + six))
         for r, a, b, src_a, src_b in blocks:
             for body, origin in ((a, src_a), (b, src_b)):
                 rows.append(np.repeat(r, 6))
@@ -806,14 +926,17 @@ class ConstraintSet:
                 geo.g_generic.append(g_g)
                 start += res.n_rows
             flat = np.concatenate(parts)
+        e = len(self.x_row)
+        if e:
+            x_phi, xg = np.empty(e), np.empty((2, e, 6))
+            rows_geometry(pos, quat, self.x_kind, self.x_comp, self.x_a, self.x_b, self.x_par,
+                          x_phi, xg[0], xg[1])
+            np.add.at(phi, self.x_row, self.x_weight * x_phi)
+            xg *= self.x_weight[None, :, None]
+            geo.g_coupling = xg
+            flat = np.concatenate([flat, xg.ravel()])
         geo.phi, geo.g_builtin = phi, g
         geo.jacobian = RowJacobian(self._structure, flat[self._value_index])
-        if not geo.jacobian.dense_mode:
-            # The per-row blocks, for the tree solve (see solver.py).
-            geo.jacobian.blocks = (
-                (g[0], g[1]) if not self._gen else
-                (np.concatenate([g[0]] + [gg[:, :6] for gg in geo.g_generic]),
-                 np.concatenate([g[1]] + [gg[:, 6:] for gg in geo.g_generic])))
         return geo
 
     def evaluate(self, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,

@@ -329,7 +329,8 @@ class LoopStructure(NamedTuple):
     closure: np.ndarray
 
 
-def loop_structure(a, b, n_bodies: int, through_world: bool = False) -> Optional[LoopStructure]:
+def loop_structure(a, b, n_bodies: int, through_world: bool = False,
+                   forced=()) -> Optional[LoopStructure]:
     """
     Split the rows into a spanning forest and loop-closing rows (see :mod:`.kernels.loop_solve`).
 
@@ -340,20 +341,25 @@ def loop_structure(a, b, n_bodies: int, through_world: bool = False) -> Optional
     it leaves the system tree-structured; with ``through_world`` it is a node
     all the same, and a second joint to the world closes a loop: the redundant
     rows of such a loop (a four-bar's three) then meet the closure block's
-    truncated SVD instead of the tree solve's Tikhonov term.
+    truncated SVD instead of the tree solve's Tikhonov term. The rows in
+    ``forced`` are closure rows whatever the graph (rows that couple more than
+    the two bodies they are listed on: a mimic joint's), and form no edge.
     """
     a = np.asarray(a, dtype=np.int64).ravel()
     b = np.asarray(b, dtype=np.int64).ravel()
     n = int(n_bodies)
+    forced = set(np.asarray(forced, dtype=np.int64).ravel().tolist())
     pairs: dict = {}   # pair -> its index in first-row order
-    joins = [(b[r] != n or through_world) and b[r] != a[r] for r in range(a.size)]
+    joins = [(b[r] != n or through_world) and b[r] != a[r] and r not in forced
+             for r in range(a.size)]
     for ar, br, j in zip(a.tolist(), b.tolist(), joins):
         if j:
             pairs.setdefault((min(ar, br), max(ar, br)), len(pairs))
     ends = np.array(list(pairs), dtype=np.int64).reshape(-1, 2)
     closing = closing_edges(ends[:, 0], ends[:, 1], n + 1)
     closure = np.array([r for r in range(a.size)
-                        if joins[r] and closing[pairs[(min(a[r], b[r]), max(a[r], b[r]))]]],
+                        if r in forced
+                        or (joins[r] and closing[pairs[(min(a[r], b[r]), max(a[r], b[r]))]])],
                        dtype=np.int64)
     if not closure.size:
         return None

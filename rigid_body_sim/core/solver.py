@@ -182,14 +182,18 @@ class ComponentSetup(NamedTuple):
     multipliers: np.ndarray
     #: Its bodies' masses and moments as ``body`` columns (:data:`.kernels.layout.BODY`).
     inertia: np.ndarray
+    #: Indices (e,) of its coupling parts in the constraint set's ``x_*`` arrays (parts
+    #: ``m ..`` of its ``jac``).
+    couplings: np.ndarray
 
 
 class _ReactionPlan(NamedTuple):
     """Per (constraint, side on a body): where :meth:`ConstraintSolver.reactions` reads."""
 
     owner: tuple             # per component: the constraint index of each of its rows
+    row_owner: np.ndarray    # (m,) the constraint index of each row
     constraint: np.ndarray   # (k,) constraint index
-    side: np.ndarray         # (k,) 0: its body a, 1: its body b
+    side: np.ndarray         # (k,) 0: its body a, 1: its body b, 2 and 3: its leader's a, b
     body: np.ndarray         # (k,) body index
     lever: np.ndarray        # (k, 3) anchor from the centre of mass, principal frame (m)
     names: list              # (constraint name, body name) per entry
@@ -290,15 +294,18 @@ class ConstraintSolver:
         self._generic_keys.clear()
         n, mb = len(self.bodies), cs.n_builtin_rows
         a, b = cs.all_row_a, cs.all_row_b
-        label = component_labels(a, b, n)   # connected components, by their least body
+        # A coupled (mimic) row joins its leader's bodies to its follower's.
+        label = component_labels(np.concatenate([a, cs.x_a, cs.x_a]),
+                                 np.concatenate([b, cs.x_b, a[cs.x_row]]), n)
         touched = np.zeros(n, dtype=bool)
         touched[cs.touched] = True
         components = []
         joints_of: dict = {}   # component label -> (a, b) per constraint
         for r in cs.resolved:
-            if r.spec.type is JointType.DRIVE:
+            if r.spec.type in (JointType.DRIVE, JointType.MIMIC):
                 # A drive adds its joint's missing row to the joint's own pair of
-                # bodies: it never closes a loop, nor makes that pair redundant.
+                # bodies: it never closes a loop, nor makes that pair redundant. A
+                # mimic row is a closure row (below) whatever the graph.
                 continue
             joints_of.setdefault(label[r.a], []).append((r.a, r.b))
         for lab in np.unique(label[touched]):
@@ -312,10 +319,15 @@ class ConstraintSolver:
             closure = np.zeros(0, dtype=np.int64)
             ja, jb = np.array(joints_of.get(lab, []), dtype=np.int64).reshape(-1, 2).T
             closes = closes_loop(local[ja], local[jb], len(bodies))
+            # Coupling parts (mimic rows' leader sides): their rows couple up to four
+            # bodies, which the tree solve cannot take: closure rows of the loop solve.
+            xs = np.flatnonzero(label[cs.x_a] == lab)
+            x_local = np.searchsorted(rows_global, cs.x_row[xs])
             # A loop through the world counts: its redundant rows go to the closure
             # (beyond DENSE_ROWS a loop among bodies must: the tree solve needs a tree).
-            loops = (loop_structure(ra, rb, len(bodies), through_world=True)
-                     if closes and mc > min(LOOP_DENSE_ROWS, DENSE_ROWS) else None)
+            loops = (loop_structure(ra, rb, len(bodies), through_world=True, forced=x_local)
+                     if (closes and mc > min(LOOP_DENSE_ROWS, DENSE_ROWS))
+                     or (len(xs) and mc > KERNEL_DENSE_ROWS) else None)
             if loops is not None:
                 # Closed loops: the tree solve of a spanning forest and a dense
                 # system of the rows that close the loops.
@@ -329,7 +341,8 @@ class ConstraintSolver:
                 solve, d = Solve.TREE, 0
             # Two storages each: general, and the symmetric factor kept for the
             # current geometry (see kernels.constrained_step._sym_factor).
-            trees = (tree_storage(st, closure, mc), tree_storage(st, closure, mc))
+            trees = (tree_storage(st, closure, mc, len(bodies)),
+                     tree_storage(st, closure, mc, len(bodies)))
             body = np.zeros((len(bodies), BODY.width))
             body[:, BODY.start['inv_mass']] = self.bodies.inv_mass[bodies]
             j = BODY.start['moments']
@@ -342,13 +355,18 @@ class ConstraintSolver:
                 key = next(_KEYS)
                 GENERIC[key] = _GenericRows(cs, bodies, generic, len(builtin))
                 self._generic_keys.append(key)
-            rows = {'kind': cs.row_kind[builtin], 'comp': cs.row_comp[builtin], 'row_a': ra,
-                    'row_b': rb, 'row_par': np.ascontiguousarray(cs.row_par[builtin]),
+            rows = {'kind': cs.row_kind[builtin], 'comp': cs.row_comp[builtin],
+                    'row_a': np.concatenate([ra, local[cs.x_a[xs]]]),
+                    'row_b': np.concatenate([rb, local[cs.x_b[xs]]]),
+                    'row_par': np.ascontiguousarray(cs.row_par[builtin]),
+                    'row_owner': np.concatenate([np.arange(mc), x_local]).astype(np.int64),
+                    'x_kind': cs.x_kind[xs], 'x_comp': cs.x_comp[xs],
+                    'x_par': np.ascontiguousarray(cs.x_par[xs]), 'x_weight': cs.x_weight[xs],
                     'key': key}
-            packed, views = pack(rows, workspace(len(bodies), mc, body),
+            packed, views = pack(rows, workspace(len(bodies), mc, body, len(xs)),
                                  (dense_storage(d), dense_storage(d)), trees)
             components.append(ComponentSetup(bodies, rows_global, packed, views, solve,
-                                             np.zeros(mc), body))
+                                             np.zeros(mc), body, xs))
         setup = KernelSetup(np.flatnonzero(~touched), tuple(components), [None])
         self._kernel_cache = (cs, cs.version, setup)
         return setup
@@ -607,7 +625,8 @@ class ConstraintSolver:
         gyroscopic terms, applied wrenches: the multipliers a step's kick there
         uses), so these are the forces the joints carry at this instant. A
         constraint's share is ``−G_cᵀ λ_c`` of its own rows, on each of its two
-        bodies. Counts no work.
+        bodies (a mimic constraint: on its follower's two and its leader's two). Counts
+        no work.
 
         Parameters
         ----------
@@ -629,12 +648,20 @@ class ConstraintSolver:
         """
         lam = self.multipliers(dynamics, state)
         plan = self._reaction_plan()
-        gen = np.zeros((len(self.constraints), 2, 6))   # per constraint: on its a, on its b
+        # Per constraint: on its a, on its b; a mimic's also on its leader's a and b.
+        gen = np.zeros((len(self.constraints), 4, 6))
+        cs = self.constraints
         for comp, owner in zip(self.kernel_setup().components, plan.owner):
-            jac = comp.views['jac'][CURRENT]   # (2, m, 6): G of the state, bodies a and b
+            m = len(comp.rows)
+            jac = comp.views['jac'][CURRENT]   # (2, m + e, 6): G of the state, bodies a and b
             lam_c = lam[comp.rows][:, None]
-            np.add.at(gen[:, 0], owner, -jac[0] * lam_c)
-            np.add.at(gen[:, 1], owner, -jac[1] * lam_c)
+            np.add.at(gen[:, 0], owner, -jac[0, :m] * lam_c)
+            np.add.at(gen[:, 1], owner, -jac[1, :m] * lam_c)
+            if len(comp.couplings):
+                x_owner = plan.row_owner[cs.x_row[comp.couplings]]
+                lam_x = lam[cs.x_row[comp.couplings]][:, None]
+                np.add.at(gen[:, 2], x_owner, -jac[0, m:] * lam_x)
+                np.add.at(gen[:, 3], x_owner, -jac[1, m:] * lam_x)
         # Every (constraint, side) on a body at once: forces, torques, levers, anchors.
         g = gen[plan.constraint, plan.side]
         R = so3.quat_to_matrix(state.quat_principal_world[plan.body])
@@ -645,6 +672,18 @@ class ConstraintSolver:
         anchor = state.pos_com_world[plan.body] + lever
         out = {name: {} for name in self.constraints.names}
         for k, (name, body) in enumerate(plan.names):
+            first = out[name].get(body)
+            if first is not None:
+                # A mimic whose follower and leader share a body (a gripper's hand): the
+                # wrenches of both its parts there, summed, about the first anchor.
+                force = first['force_world'] + f[k]
+                torque = first['torque_com_world'] + tau_com[k]
+                out[name][body] = {
+                    'force_world': force, 'torque_com_world': torque,
+                    'torque_anchor_world': torque - so3.cross(
+                        first['anchor_world'] - state.pos_com_world[plan.body[k]], force),
+                    'anchor_world': first['anchor_world']}
+                continue
             out[name][body] = {'force_world': f[k], 'torque_com_world': tau_com[k],
                                'torque_anchor_world': tau_anchor[k], 'anchor_world': anchor[k]}
         return out
@@ -668,6 +707,7 @@ class ConstraintSolver:
                     lever.append(r_p)
                     names.append((name, self.bodies.names[b]))
         plan = _ReactionPlan(tuple(row_owner[comp.rows] for comp in setup.components),
+                             row_owner,
                              np.array(constraint, dtype=np.int64),
                              np.array(side, dtype=np.int64), np.array(body, dtype=np.int64),
                              np.array(lever, dtype=float).reshape(-1, 3), names)

@@ -159,7 +159,8 @@ class Outputs:
         torque in the body's frame, the torque about the body frame's origin (the
         point ``~/bodies/<B>/pose`` reports). For a constraint to the world, one
         more with ``frame_id`` the world frame: the wrench on the world, torque
-        about the world origin (equal and opposite).
+        about the world origin (equal and opposite). A mimic joint's row acts on the
+        bodies of both its joints.
         """
         sim = self.sim
         index = {n: i for i, n in enumerate(sim.bodies.names)}
@@ -180,7 +181,9 @@ class Outputs:
                                                        R.T @ torque_origin)))
                 on_world_f -= r.force_world
                 on_world_t -= r.torque_com_world + so3.cross(com[i], r.force_world)
-            if sim.dynamics.solver.constraints.spec(name).body_b is None:
+            spec = sim.dynamics.solver.constraints.spec(name)
+            if spec.body_b is None or (spec.coupling is not None
+                                       and spec.coupling.body_b is None):
                 out.append((topic, conv.wrench_stamped(
                     Header(stamp=stamp, frame_id=self.world_frame), on_world_f, on_world_t)))
         return out

@@ -53,11 +53,12 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      FR_WIDTH, FRAMES, FREE_ACC, FS_MODE, FS_VALID, G2, GENERAL, GT_LAMBDA, JAC,
                      JR, KIND, L_OFFSET, L_SHAPE, L_WIDTH, MINV, O_WIDTH, OMEGA_WORLD, P_CLOSING,
                      P_MAX_IT, P_MAX_ROT, P_MAX_SUB, P_OMEGA, P_POS_TOL, P_RANK_RTOL, P_REG, P_TAU,
-                     PHI, QUATS, ROTOR, ROW_A, ROW_B, ROW_PAR, Solve, STAGES, STORAGES, SYMMETRIC,
-                     T_B, T_CLOSURE, T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT, T_GROUP_PTR,
-                     T_GROUP_ROWS, T_P, T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W, T_WORK, T_X, T_XC,
-                     T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT, V_RHS, V_SOLUTION,
-                     VECTORS, VM, W_WIDTH, WATCH)
+                     PHI, QUATS, ROTOR, ROW_A, ROW_B, ROW_OWNER, ROW_PAR, Solve, STAGES, STORAGES,
+                     SYMMETRIC, T_B, T_CLOSURE, T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT,
+                     T_GROUP_PTR, T_GROUP_ROWS, T_P, T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W,
+                     T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT,
+                     V_RHS, V_SOLUTION, VECTORS, VM, W_WIDTH, WATCH, X_COMP, X_KIND, X_PAR,
+                     X_WEIGHT, XV_GAMMA, XV_PHI, XV_PHI_DOT, XVEC)
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
 from .methods import Method, ONE_STEP, TRIPLE_JUMP
@@ -74,12 +75,19 @@ CHOLESKY, LU, SVD, TREE = 0, 1, 2, 3
 
 
 @njit(cache=True, inline='always')
-def _schur(Ga, Gb, Ha, Hb, a, b, minv6, A):
-    """Dense ``A = G M⁻¹ Hᵀ`` (m, m) from the row blocks (world: ``b == n``)."""
-    m = Ga.shape[0]
+def _schur(Ga, Gb, Ha, Hb, a, b, own, minv6, A):
+    """
+    Dense ``A = G M⁻¹ Hᵀ`` (m, m) from the part blocks (world: ``b == n``).
+
+    Part ``i`` adds to row ``own[i]`` (see :data:`.layout.ROWS`).
+    """
+    parts = Ga.shape[0]
     n = minv6.shape[0]
-    for i in range(m):
-        for j in range(m):
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            A[i, j] = 0.0
+    for i in range(parts):
+        for j in range(parts):
             s = 0.0
             ai, bi, aj, bj = a[i], b[i], a[j], b[j]
             if ai == aj:
@@ -94,15 +102,19 @@ def _schur(Ga, Gb, Ha, Hb, a, b, minv6, A):
             if bi < n and bj < n and bi == bj:
                 for c in range(6):
                     s += Gb[i, c] * minv6[bi, c] * Hb[j, c]
-            A[i, j] = s
+            A[own[i], own[j]] += s
 
 
 @njit(cache=True)
-def _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6):
-    """Largest ``|diag(G M⁻¹ Hᵀ)|`` (1.0 if all are zero)."""
+def _peak_diagonal(Ga, Gb, Ha, Hb, a, b, m, minv6):
+    """
+    Largest ``|diag(G M⁻¹ Hᵀ)|`` of the ``m`` rows' own parts (1.0 if all are zero).
+
+    A scale for the pivots (coupling parts, if any, left out: an estimate).
+    """
     n = minv6.shape[0]
     peak = 0.0
-    for i in range(Ga.shape[0]):
+    for i in range(m):
         d = 0.0
         for c in range(6):
             d += Ga[i, c] * Ha[i, c] * minv6[a[i], c]
@@ -113,7 +125,7 @@ def _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6):
 
 
 @njit(cache=True)
-def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
+def _factor_tree(Ga, Gb, Ha, Hb, a, b, own, minv6, symmetric, par, cx, slot, counts):
     """
     Factorize ``G M⁻¹ Hᵀ`` by the tree solve (Tikhonov term for redundant rows).
 
@@ -136,7 +148,7 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     peak = 0.0   # the largest |diagonal entry|, computed once if needed
     if not pivot > rtol:
         counts[Count.RANK_DEFICIENT] += 1
-        peak = _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
+        peak = _peak_diagonal(Ga, Gb, Ha, Hb, a, b, _rows_count(cx), minv6)
         reg = par[P_REG] * peak
         tree_factor(tg_ptr, tg_rows, tg_child, tg_parent, t_side, Ga, Gb, Ha, Hb,
                     minv6, reg, tS, tpiv, tP, tQ, tB, tW, symmetric)
@@ -144,19 +156,19 @@ def _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
         return TREE
     closure, X, Y, work, g = tree[T_CLOSURE], tree[T_X], tree[T_Y], tree[T_WORK], tree[T_G]
     loop_schur(tg_ptr, tg_rows, tg_child, tg_parent, tS, tpiv, tP, tQ, tB, tree[T_E], tree[T_TMP],
-               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y,
+               closure, a, b, own, Ga, Gb, Ha, Hb, minv6, reg, X, Y,
                _f2(cx, DENSE0 + DENSE_SLOTS * slot + D_F),
                work, g)
     # Pivots of S are measured against the whole system's scale: a redundant closure row
     # leaves only rounding in S.
     if peak == 0.0:
-        peak = _peak_diagonal(Ga, Gb, Ha, Hb, a, b, minv6)
+        peak = _peak_diagonal(Ga, Gb, Ha, Hb, a, b, _rows_count(cx), minv6)
     tiny = rtol * peak
     return _factor_matrix(closure.shape[0], symmetric, tiny, tiny, cx, slot, counts)
 
 
 @njit(cache=True, inline='always')
-def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
+def _fac(Ga, Gb, Ha, Hb, a, b, own, minv6, symmetric, par, cx, slot, counts):
     """
     Factorize ``G M⁻¹ Hᵀ`` (``H = G`` if ``symmetric``) into the storages ``slot``.
 
@@ -165,8 +177,9 @@ def _fac(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
     the mode for :func:`_sol`.
     """
     if cx[CX_SOLVE] == Solve.DENSE:
-        return _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
-    return _factor_tree(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
+        return _factor_dense(Ga, Gb, Ha, Hb, a, b, own, minv6, symmetric, par, cx, slot,
+                             counts)
+    return _factor_tree(Ga, Gb, Ha, Hb, a, b, own, minv6, symmetric, par, cx, slot, counts)
 
 
 @njit(cache=True, inline='always')
@@ -191,7 +204,7 @@ def _sol(mode, rhs, out, cx, slot):
 
 
 @njit(cache=True, inline='always')
-def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts):
+def _factor_dense(Ga, Gb, Ha, Hb, a, b, own, minv6, symmetric, par, cx, slot, counts):
     """
     Factorize ``G M⁻¹ Hᵀ`` densely; returns the mode for :func:`_solve_dense`.
 
@@ -200,9 +213,9 @@ def _factor_dense(Ga, Gb, Ha, Hb, a, b, minv6, symmetric, par, cx, slot, counts)
     get the truncated SVD (minimum-norm solution).
     """
     counts[Count.FACTORIZATIONS] += 1
-    m = Ga.shape[0]
     F = _f2(cx, DENSE0 + DENSE_SLOTS * slot + D_F)
-    _schur(Ga, Gb, Ha, Hb, a, b, minv6, F)
+    m = F.shape[0]
+    _schur(Ga, Gb, Ha, Hb, a, b, own, minv6, F)
     scale = 0.0
     for i in range(m):
         scale = max(scale, abs(F[i, i]))
@@ -293,18 +306,19 @@ def _solve_dense(mode, rhs, out, cx, slot):
 
 
 @njit(cache=True, inline='always')
-def _gt_lambda(Ga, Gb, a, b, lam, out):
-    """``out = Gᵀ λ`` as (n, 6) (overwritten)."""
+def _gt_lambda(Ga, Gb, a, b, own, lam, out):
+    """``out = Gᵀ λ`` as (n, 6) (overwritten); part ``r`` carries ``λ[own[r]]``."""
     n = out.shape[0]
     for i in range(n):
         for c in range(6):
             out[i, c] = 0.0
     for r in range(Ga.shape[0]):
+        lr = lam[own[r]]
         for c in range(6):
-            out[a[r], c] += Ga[r, c] * lam[r]
+            out[a[r], c] += Ga[r, c] * lr
         if b[r] < n:
             for c in range(6):
-                out[b[r], c] += Gb[r, c] * lam[r]
+                out[b[r], c] += Gb[r, c] * lr
 
 
 @njit(cache=True, inline='always')
@@ -316,9 +330,10 @@ def _copy(src, dst):
 
 
 @njit(cache=True, inline='always')
-def _g_times(Ga, Gb, a, b, x6, out):
-    """``out = G x`` for generalized vectors ``x6`` (n, 6)."""
+def _g_times(Ga, Gb, a, b, own, x6, out):
+    """``out = G x`` (m,) for generalized vectors ``x6`` (n, 6); part ``r`` adds to ``own[r]``."""
     n = x6.shape[0]
+    m = out.shape[0]
     for r in range(Ga.shape[0]):
         s = 0.0
         for c in range(6):
@@ -326,7 +341,10 @@ def _g_times(Ga, Gb, a, b, x6, out):
         if b[r] < n:
             for c in range(6):
                 s += Gb[r, c] * x6[b[r], c]
-        out[r] = s
+        if r < m:
+            out[r] = s
+        else:
+            out[own[r]] += s
 
 
 # A component's arrays live in the buffers of :func:`pack`; the compiled step passes them
@@ -378,6 +396,18 @@ def _i1(cx, k):
 def _rows(cx):
     """Return the rows ``(kind, comp, a, b, par)`` (see :mod:`.rows`)."""
     return _i1(cx, KIND), _i1(cx, COMP), _i1(cx, ROW_A), _i1(cx, ROW_B), _f2(cx, ROW_PAR)
+
+
+@njit(cache=True)
+def _own(cx):
+    """Return ``row_owner`` (m + e,): the row each part adds to (see :data:`.layout.ROWS`)."""
+    return _i1(cx, ROW_OWNER)
+
+
+@njit(cache=True)
+def _rows_count(cx):
+    """Return m, the component's rows (multipliers)."""
+    return cx[CX_LAYOUT][PHI, L_SHAPE + 1]
 
 
 @njit(cache=True)
@@ -446,7 +476,8 @@ def _geometry(pos, quat, cx, which, counts):
 
     The built-in rows are the first ``len(kind)``; with ``key >= 0`` (``cx[CX_KEY]``)
     the generic rows after them are filled by :func:`generic_geometry` (Python,
-    in object mode). The rotations go to the scratch ``FRAMES``.
+    in object mode); then the coupling parts (:data:`.layout.ROWS`), weighted, each
+    added to its row's Φ. The rotations go to the scratch ``FRAMES``.
     """
     phi3, G3, R = _f2(cx, PHI), _f4(cx, JAC), _f3(cx, FRAMES)
     phi_w, Ga_w, Gb_w = phi3[which], G3[which, 0], G3[which, 1]
@@ -455,6 +486,18 @@ def _geometry(pos, quat, cx, which, counts):
     framed_geometry(pos, R, kind, comp, a, b, rpar, phi_w, Ga_w, Gb_w)
     if cx[CX_KEY] >= 0:
         _generic_geometry(cx[CX_KEY], pos, quat, phi_w, Ga_w, Gb_w)
+    x_kind = _i1(cx, X_KIND)
+    if x_kind.shape[0]:
+        m, own, weight = phi_w.shape[0], _own(cx), _f1(cx, X_WEIGHT)
+        xv = _f2(cx, XVEC)
+        framed_geometry(pos, R, x_kind, _i1(cx, X_COMP), a[m:], b[m:], _f2(cx, X_PAR),
+                        xv[XV_PHI], Ga_w[m:], Gb_w[m:])
+        for x in range(x_kind.shape[0]):
+            w = weight[x]
+            phi_w[own[m + x]] += w * xv[XV_PHI, x]
+            for c in range(6):
+                Ga_w[m + x, c] *= w
+                Gb_w[m + x, c] *= w
     counts[Count.GEOMETRY] += 1
     if which == CURRENT:
         _i1(cx, FACTOR_STATE)[FS_VALID] = 0   # the symmetric factor was of the geometry replaced
@@ -473,7 +516,7 @@ def _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts):
     fs = _i1(cx, FACTOR_STATE)
     if fs[FS_VALID] == 1:
         return fs[FS_MODE]
-    mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, SYMMETRIC, counts)
+    mode = _fac(Ga, Gb, Ga, Gb, a, b, _own(cx), minv6, True, par, cx, SYMMETRIC, counts)
     fs[FS_VALID] = 1
     fs[FS_MODE] = mode
     return mode
@@ -497,14 +540,25 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
                  True, vm[V_PHI_DOT], vm[V_GAMMA])
     if cx[CX_KEY] >= 0:
         _generic_rates(cx[CX_KEY], pos, quat, vel, om, Ga, Gb, a, b, kind.shape[0], vm)
+    x_kind = _i1(cx, X_KIND)
+    if x_kind.shape[0]:
+        # The coupling parts: Φ̇ from their (weighted) blocks, γ weighted here.
+        m, own, weight = phi.shape[0], _own(cx), _f1(cx, X_WEIGHT)
+        xv = _f2(cx, XVEC)
+        framed_rates(pos, vel, om, R, _f2(cx, OMEGA_WORLD), x_kind, _i1(cx, X_COMP), a[m:],
+                     b[m:], _f2(cx, X_PAR), Ga[m:], Gb[m:], True, xv[XV_PHI_DOT],
+                     xv[XV_GAMMA])
+        for x in range(x_kind.shape[0]):
+            vm[V_PHI_DOT, own[m + x]] += xv[XV_PHI_DOT, x]
+            vm[V_GAMMA, own[m + x]] += weight[x] * xv[XV_GAMMA, x]
     w = par[P_OMEGA]
-    _g_times(Ga, Gb, a, b, a6, vm[V_RHS])
+    _g_times(Ga, Gb, a, b, _own(cx), a6, vm[V_RHS])
     for r in range(phi.shape[0]):
         vm[V_RHS, r] += vm[V_GAMMA, r] + 2.0 * w * vm[V_PHI_DOT, r] + w * w * phi[r]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
     counts[Count.ACC_SOLVES] += 1
     _sol(mode, vm[V_RHS], lam, cx, SYMMETRIC)
-    _gt_lambda(Ga, Gb, a, b, lam, g6)
+    _gt_lambda(Ga, Gb, a, b, _own(cx), lam, g6)
 
 
 @njit(cache=True, inline='always')
@@ -605,13 +659,13 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
         for c in range(3):
             x6[i, c] = vel[i, c]
             x6[i, 3 + c] = mom[i, c] / body[i, B_MOMENTS + c]
-    _g_times(Ga, Gb, a, b, x6, vm[V_RHS])
+    _g_times(Ga, Gb, a, b, _own(cx), x6, vm[V_RHS])
     w = par[P_OMEGA]
     for r in range(phi.shape[0]):
         vm[V_RHS, r] += w * phi[r]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
     _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, SYMMETRIC)
-    _gt_lambda(Ga, Gb, a, b, vm[V_SOLUTION], g6)
+    _gt_lambda(Ga, Gb, a, b, _own(cx), vm[V_SOLUTION], g6)
     for i in range(n):
         for c in range(3):
             vel[i, c] = x6[i, c] - minv6[i, c] * g6[i, c]
@@ -643,9 +697,9 @@ def _project_positions(pos, quat, target, cx, par, counts):
         if norm <= par[P_POS_TOL] or it == max_it:
             break
         counts[Count.POS_ITERATIONS] += 1
-        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, GENERAL, counts)
+        mode = _fac(Ga, Gb, Ga, Gb, a, b, _own(cx), minv6, True, par, cx, GENERAL, counts)
         _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, GENERAL)
-        _gt_lambda(Ga, Gb, a, b, vm[V_SOLUTION], g6)
+        _gt_lambda(Ga, Gb, a, b, _own(cx), vm[V_SOLUTION], g6)
         for i in range(n):
             for c in range(3):
                 pos[i, c] -= minv6[i, c] * g6[i, c]
@@ -840,9 +894,10 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
         if refactor:
             _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, _f2(cx, ROTOR))
             _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
-            mode = _fac(Ga2, Gb2, GaS, GbS, a, b, minv6, False, par, cx, GENERAL, counts)
+            mode = _fac(Ga2, Gb2, GaS, GbS, a, b, _own(cx), minv6, False, par, cx, GENERAL,
+                        counts)
         _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, GENERAL)
-        _gt_lambda(GaS, GbS, a, b, vm[V_SOLUTION], g6)
+        _gt_lambda(GaS, GbS, a, b, _own(cx), vm[V_SOLUTION], g6)
         for i in range(n):
             for c in range(3):
                 vel[i, c] += -minv6[i, c] * g6[i, c] / h
@@ -1085,12 +1140,13 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
     return all_finite(pos, quat, vel, om)
 
 
-def workspace(n: int, m: int, body: np.ndarray) -> dict:
+def workspace(n: int, m: int, body: np.ndarray, e: int = 0) -> dict:
     """
     Arrays the constrained step works in, by name (allocated once per constraint set).
 
-    ``phi`` (3, m), ``jac`` (3, 2, m, 6): Φ and G of the geometries START,
-    CURRENT and END; ``vm`` (4, m) vectors; ``gt_lambda`` (n, 6) Gᵀλ;
+    ``phi`` (3, m), ``jac`` (3, 2, m + e, 6): Φ and G (its ``m + e`` parts, see
+    :data:`.layout.ROWS`) of the geometries START, CURRENT and END; ``vm`` (4, m)
+    vectors; ``xvec`` (3, e) the coupling parts' Φ, Φ̇, γ; ``gt_lambda`` (n, 6) Gᵀλ;
     ``free_acc`` (n, 6) free accelerations; ``force``, ``torque`` (n, 3);
     ``minv`` (n, 6) M⁻¹; ``factor_state`` (2,): [the symmetric factor is of the
     current geometry, its mode]; ``watch`` (n,): every body of the component.
@@ -1098,23 +1154,25 @@ def workspace(n: int, m: int, body: np.ndarray) -> dict:
     minv6 = np.empty((n, 6))
     minv6[:, :3] = body[:, B_INV_MASS:B_INV_MASS + 1]
     minv6[:, 3:] = 1.0 / body[:, B_MOMENTS:B_MOMENTS + 3]
-    return {'phi': np.zeros((3, m)), 'jac': np.zeros((3, 2, m, 6)), 'vm': np.zeros((4, m)),
+    return {'phi': np.zeros((3, m)), 'jac': np.zeros((3, 2, m + e, 6)), 'vm': np.zeros((4, m)),
+            'xvec': np.zeros((3, e)),
             'gt_lambda': np.zeros((n, 6)), 'free_acc': np.zeros((n, 6)),
             'force': np.zeros((n, 3)), 'torque': np.zeros((n, 3)), 'minv': minv6,
             'factor_state': np.zeros(2, dtype=np.int64), 'watch': np.ones(n, dtype=np.int64)}
 
 
-def scratch(n: int, m: int) -> dict:
+def scratch(n: int, m: int, parts: int) -> dict:
     """
     Scratch arrays of the constrained step, by name: nothing in them outlives a call.
 
     ``frames`` (n + 1, 3, 3) rotations, ``omega_world`` (n + 1, 3), ``jr`` (n, 3, 3)
-    J_r, ``g2`` (2, m, 6) G diag(I, J_r), ``vectors`` (2, m), ``body_vectors``
+    J_r, ``g2`` (2, parts, 6) G diag(I, J_r) (every part), ``vectors`` (2, m), ``body_vectors``
     (4, n, 3), ``quats`` (n, 4), ``stages`` (4, 5, n, 3) RKMK4 stages, ``rotor``
     (6, 3) rotor flow; they spare the step its allocations.
     """
     return {'frames': np.zeros((n + 1, 3, 3)), 'omega_world': np.zeros((n + 1, 3)),
-            'jr': np.zeros((n, 3, 3)), 'g2': np.zeros((2, m, 6)), 'vectors': np.zeros((2, m)),
+            'jr': np.zeros((n, 3, 3)), 'g2': np.zeros((2, parts, 6)),
+            'vectors': np.zeros((2, m)),
             'body_vectors': np.zeros((4, n, 3)), 'quats': np.zeros((n, 4)),
             'stages': np.zeros((4, 5, n, 3)), 'rotor': np.zeros((6, 3))}
 
@@ -1150,7 +1208,7 @@ def pack(rows: dict, ws: dict, dense: tuple, trees: tuple) -> tuple:
     n, m = ws['gt_lambda'].shape[0], ws['phi'].shape[1]
     named = {k: v for k, v in rows.items() if k != 'key'}
     named.update(ws)
-    named.update(scratch(n, m))
+    named.update(scratch(n, m, ws['jac'].shape[2]))
     for st, storage in zip(STORAGES, dense):
         named.update({f'{st}_dense_{k}': v for k, v in storage.items()})
     for st, storage in zip(STORAGES, trees):
@@ -1201,23 +1259,23 @@ def _tree_views(f, i, L, k):
             _v1(i, L, k + T_ROW_SIDE), _v3(f, L, k + T_S), _v2(i, L, k + T_PIV),
             _v3(f, L, k + T_P), _v3(f, L, k + T_Q), _v4(f, L, k + T_B), _v3(f, L, k + T_W),
             _v3(f, L, k + T_E), _v1(f, L, k + T_TMP), _v1(i, L, k + T_CLOSURE),
-            _v2(f, L, k + T_X), _v2(f, L, k + T_Y), _v1(f, L, k + T_WORK), _v2(f, L, k + T_G),
+            _v2(f, L, k + T_X), _v2(f, L, k + T_Y), _v1(f, L, k + T_WORK), _v3(f, L, k + T_G),
             _v1(f, L, k + T_Z), _v1(f, L, k + T_XC))
 
 
-def tree_storage(structure, closure: np.ndarray, m: int) -> dict:
+def tree_storage(structure, closure: np.ndarray, m: int, n: int) -> dict:
     """
-    One tree storage of a component with ``m`` rows, by name (:data:`.layout.TREE`).
+    One tree storage of a component of ``m`` rows and ``n`` bodies (:data:`.layout.TREE`).
 
     ``structure``: the :class:`..graph.TreeStructure` of the forest (its
     arrays and the factors of :func:`.tree_solve.factor_arrays`); ``closure``:
     the rows that close loops (empty for a forest), for which the storage also
-    holds ``x``, ``y`` (c, m), ``work`` (m,), ``g`` (2, 6) and the vectors
+    holds ``x``, ``y`` (c, m), ``work`` (m,), ``g`` (2, n, 6) and the vectors
     ``z``, ``xc`` (c,) of :mod:`.loop_solve`.
     """
     c = closure.shape[0]
     arrays = (*structure.arrays, *factor_arrays(structure), closure.astype(np.int64),
-              np.zeros((c, m)), np.zeros((c, m)), np.zeros(m), np.zeros((2, 6)), np.zeros(c),
+              np.zeros((c, m)), np.zeros((c, m)), np.zeros(m), np.zeros((2, n, 6)), np.zeros(c),
               np.zeros(c))
     if len(arrays) != len(TREE_FIELDS):
         raise ValueError(f'tree storage: expected {len(TREE_FIELDS)} arrays, got {len(arrays)}')
@@ -1311,9 +1369,9 @@ def component_reach(pos, quat, tolerance, max_iterations, par, solve, key, float
         best = min(best, norm)
         if stalled == 3:
             return best
-        mode = _fac(Ga, Gb, Ga, Gb, a, b, minv6, True, par, cx, GENERAL, counts)
+        mode = _fac(Ga, Gb, Ga, Gb, a, b, _own(cx), minv6, True, par, cx, GENERAL, counts)
         _sol(mode, phi, vm[V_SOLUTION], cx, GENERAL)
-        _gt_lambda(Ga, Gb, a, b, vm[V_SOLUTION], g6)
+        _gt_lambda(Ga, Gb, a, b, _own(cx), vm[V_SOLUTION], g6)
         for i in range(n):
             for c in range(3):
                 pos[i, c] -= minv6[i, c] * g6[i, c]

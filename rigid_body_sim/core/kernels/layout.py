@@ -289,17 +289,27 @@ STATE = Columns('state', [('pos', 3), ('quat', 4), ('vel', 3), ('om', 3)])
 
 # -- a component's packed arrays (constrained_step.pack) ------------------------------------
 
-#: The rows ``(kind, comp, a, b, par)`` of :mod:`.rows`.
+#: The rows ``(kind, comp, a, b, par)`` of :mod:`.rows`, and the coupling parts.
+#: A component has ``m`` rows (multipliers) and ``m + e`` *parts*: part ``r < m`` is row
+#: ``r``'s own (a built-in or generic row on bodies ``row_a[r]``, ``row_b[r]``); the ``e``
+#: parts after them add to rows that couple more than two bodies (a mimic joint: ``Φ =
+#: q_m − k q − c`` over the mimic's two bodies and its leader's two). Part ``m + x`` is the
+#: built-in row ``(x_kind, x_comp, row_a, row_b, x_par)[x]`` times ``x_weight[x]``, added to
+#: row ``row_owner[m + x]`` (``row_owner[r] = r`` for ``r < m``). ``G`` (``jac``) holds every
+#: part's blocks on its two bodies; Φ, λ and the solves have the ``m`` rows.
 ROWS = (('kind', 'i', 1), ('comp', 'i', 1), ('row_a', 'i', 1), ('row_b', 'i', 1),
-        ('row_par', 'f', 2))
+        ('row_par', 'f', 2), ('row_owner', 'i', 1), ('x_kind', 'i', 1), ('x_comp', 'i', 1),
+        ('x_par', 'f', 2), ('x_weight', 'f', 1))
 #: The workspace (constrained_step.workspace).
 WORKSPACE = (('phi', 'f', 2), ('jac', 'f', 4), ('vm', 'f', 2), ('gt_lambda', 'f', 2),
              ('free_acc', 'f', 2), ('force', 'f', 2), ('torque', 'f', 2), ('minv', 'f', 2),
-             ('factor_state', 'i', 1), ('watch', 'i', 1))
+             ('factor_state', 'i', 1), ('watch', 'i', 1), ('xvec', 'f', 2))
 #: The rows of the workspace's ``vm`` (4, m): Φ̇ and γ of the rows, a right-hand side,
-#: and a solution; and the entries of its ``factor_state`` (2,): whether the symmetric
+#: and a solution; the rows of its ``xvec`` (3, e): Φ, Φ̇ and γ of the coupling parts
+#: (unweighted); and the entries of its ``factor_state`` (2,): whether the symmetric
 #: factor is of the current geometry, and its mode.
 VM_ROWS = ('phi_dot', 'gamma', 'rhs', 'solution')
+XVEC_ROWS = ('x_phi', 'x_phi_dot', 'x_gamma')
 FACTOR_STATE_ENTRIES = ('valid', 'mode')
 #: The scratch arrays (constrained_step.scratch).
 SCRATCH = (('frames', 'f', 3), ('omega_world', 'f', 2), ('jr', 'f', 3), ('g2', 'f', 3),
@@ -315,7 +325,7 @@ TREE = Layout('tree storage', (
     ('group_parent', 'i', 1), ('row_side', 'i', 1), ('s', 'f', 3), ('piv', 'i', 2),
     ('p', 'f', 3), ('q', 'f', 3), ('b', 'f', 4), ('w', 'f', 3), ('e', 'f', 3),
     ('tmp', 'f', 1), ('closure', 'i', 1), ('x', 'f', 2), ('y', 'f', 2), ('work', 'f', 1),
-    ('g', 'f', 2), ('z', 'f', 1), ('xc', 'f', 1)))
+    ('g', 'f', 3), ('z', 'f', 1), ('xc', 'f', 1)))
 #: Which of a component's two storages of each kind: the general factorizations
 #: (SHAKE's), and the symmetric factor kept for the current geometry.
 STORAGES = ('general', 'symmetric')
@@ -351,6 +361,7 @@ _GROUPS = (
     ROW_PARAMETERS.constants('PAR_'), FRAME.constants('FR_'), OUTPUT.constants('O_'),
     JOINT.constants('J_'), STATE.constants('S_'),
     {'V_' + n.upper(): k for k, n in enumerate(VM_ROWS)},
+    {'XV_' + n[2:].upper(): k for k, n in enumerate(XVEC_ROWS)},
     {'FS_' + n.upper(): k for k, n in enumerate(FACTOR_STATE_ENTRIES)},
     COMPONENT.constants(), DENSE.constants('D_'), TREE.constants('T_'),
     {'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},

@@ -2,8 +2,8 @@
 Sparse solve of ``(G M⁻¹ Hᵀ + reg I) x = rhs`` for constraint graphs with closed loops.
 
 Conventions are those of :mod:`.tree_solve` (rows act on bodies ``a[r]`` and
-``b[r]``, ``b[r] == n`` the world; blocks ``Ga, Gb, Ha, Hb`` (m, 6); diagonal
-inverse masses ``minv6`` (n, 6)).
+``b[r]``, ``b[r] == n`` the world; blocks ``Ga, Gb, Ha, Hb`` (m + e, 6) with the
+coupling parts after the m rows; diagonal inverse masses ``minv6`` (n, 6)).
 
 Method
 ------
@@ -21,9 +21,11 @@ as in the capacitance-matrix method) gives::
     y = A_TT⁻¹ rhs_T,   S x_C = rhs_C − A_CT y,   x_T = y − X x_C
 
 The blocks ``A_TC = G_T M⁻¹ H_Cᵀ`` and ``A_CT = G_C M⁻¹ H_Tᵀ`` are computed
-from the row blocks: a column of ``A_TC`` is ``G_T`` applied to the (two-body)
-impulse response ``M⁻¹ H_jᵀ``, non-zero only on the forest rows that share a
-body with closure row ``j``. The cost is a tree factorization plus ``c`` tree
+from the row blocks: a column of ``A_TC`` is ``G_T`` applied to the impulse
+response ``M⁻¹ H_jᵀ``, non-zero only on the forest rows that share a body with
+closure row ``j``. A row that couples more than two bodies (a mimic joint's,
+made of parts, see :data:`.layout.ROWS`) is always a closure row: its response
+is the sum of its parts'. The cost is a tree factorization plus ``c`` tree
 solves and the products with ``X`` and ``A_CT`` (kept as (c, m) arrays, so a
 solve needs no blocks), ``O(c² m)``, and a dense ``c³``
 factorization of ``S`` (by the caller: :mod:`.constrained_step` factors it
@@ -43,32 +45,45 @@ from .tree_solve import tree_solve
 
 
 @njit(cache=True)
-def _response(r, a, b, Hblock_a, Hblock_b, minv6, n, g):
-    """``g`` (2, 6): ``M⁻¹ H_rᵀ`` on bodies ``a[r]`` (row 0) and ``b[r]`` (row 1)."""
-    for t in range(6):
-        g[0, t] = minv6[a[r], t] * Hblock_a[r, t]
-        g[1, t] = minv6[b[r], t] * Hblock_b[r, t] if b[r] < n else 0.0
+def _responses(j, a, b, own, Ga, Gb, Ha, Hb, minv6, g):
+    """
+    ``g[0] = M⁻¹ H_jᵀ`` and ``g[1] = M⁻¹ G_jᵀ`` (each (n, 6)) of row ``j``, over all its parts.
+
+    A row's parts are its own (``j``) and the coupling parts after the ``m`` rows
+    that add to it (``own[r] == j``, see :data:`.layout.ROWS`).
+    """
+    n = minv6.shape[0]
+    for i in range(n):
+        for t in range(6):
+            g[0, i, t] = 0.0
+            g[1, i, t] = 0.0
+    for r in range(Ga.shape[0]):
+        if own[r] != j:
+            continue
+        for t in range(6):
+            g[0, a[r], t] += minv6[a[r], t] * Ha[r, t]
+            g[1, a[r], t] += minv6[a[r], t] * Ga[r, t]
+        if b[r] < n:
+            for t in range(6):
+                g[0, b[r], t] += minv6[b[r], t] * Hb[r, t]
+                g[1, b[r], t] += minv6[b[r], t] * Gb[r, t]
 
 
 @njit(cache=True)
-def _apply(i, a, b, Ga, Gb, n, body0, body1, g):
-    """``G_i`` applied to a response ``g`` on bodies ``body0`` (g[0]) and ``body1`` (g[1])."""
+def _part_times(r, a, b, Ga, Gb, n, v):
+    """Part ``r``'s blocks applied to a generalized vector ``v`` (n, 6)."""
     s = 0.0
-    for side in range(2):
-        bi = a[i] if side == 0 else b[i]
-        if bi >= n:
-            continue
-        for k in range(2):
-            bk = body0 if k == 0 else body1
-            if bk == bi and bk < n:
-                for t in range(6):
-                    s += (Ga[i, t] if side == 0 else Gb[i, t]) * g[k, t]
+    for t in range(6):
+        s += Ga[r, t] * v[a[r], t]
+    if b[r] < n:
+        for t in range(6):
+            s += Gb[r, t] * v[b[r], t]
     return s
 
 
 @njit(cache=True)
 def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
-               closure, a, b, Ga, Gb, Ha, Hb, minv6, reg, X, Y, F, work, g):
+               closure, a, b, own, Ga, Gb, Ha, Hb, minv6, reg, X, Y, F, work, g):
     """
     Given the tree factors of ``A_TT``, compute ``X``, ``Y = A_CT`` and ``F = S``.
 
@@ -79,8 +94,9 @@ def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B
         the same ``G, H, minv6, reg``) and the solve's workspace.
     closure : ndarray of int64, shape (c,)
         The closure rows (:class:`..graph.LoopStructure`).
-    a, b, Ga, Gb, Ha, Hb, minv6, reg
-        The system (see the module docstring).
+    a, b, own, Ga, Gb, Ha, Hb, minv6, reg
+        The system (see the module docstring): ``m + e`` parts, part ``r`` adding
+        to row ``own[r]`` (:data:`.layout.ROWS`); the forest rows have no other part.
     X : ndarray, shape (c, m)
         Written: column ``k`` of ``A_TT⁻¹ A_TC`` as row ``k`` (zero at closure rows).
     Y : ndarray, shape (c, m)
@@ -90,37 +106,36 @@ def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B
         Written: the Schur complement ``A_CC + reg I − A_CT X``.
     work : ndarray, shape (m,)
         Workspace (overwritten).
-    g : ndarray, shape (2, 6)
+    g : ndarray, shape (2, n, 6)
         Workspace (overwritten).
 
     """
-    m = Ga.shape[0]
+    m = X.shape[1]
     n = minv6.shape[0]
     c = closure.shape[0]
     for k in range(c):
         j = closure[k]
+        _responses(j, a, b, own, Ga, Gb, Ha, Hb, minv6, g)
         for r in range(m):
             X[k, r] = 0.0
             Y[k, r] = 0.0
-        # Row k of A_CT: closure row j applied to each forest row's impulse response.
-        for r in group_rows:
-            if a[r] == a[j] or a[r] == b[j] or (b[r] < n and (b[r] == a[j] or b[r] == b[j])):
-                _response(r, a, b, Ha, Hb, minv6, n, g)
-                Y[k, r] = _apply(j, a, b, Ga, Gb, n, a[r], b[r], g)
-        # Column k of A_TC: the forest rows' response to an impulse along H_jᵀ, solved.
-        _response(j, a, b, Ha, Hb, minv6, n, g)
-        for r in range(m):
             work[r] = 0.0
+        # Row k of A_CT (closure row j applied to each forest row's impulse response,
+        # H_r M⁻¹ G_jᵀ), and column k of A_TC (G_r M⁻¹ H_jᵀ), solved.
         for r in group_rows:
-            if a[r] == a[j] or a[r] == b[j] or (b[r] < n and (b[r] == a[j] or b[r] == b[j])):
-                work[r] = _apply(r, a, b, Ga, Gb, n, a[j], b[j], g)
+            Y[k, r] = _part_times(r, a, b, Ha, Hb, n, g[1])
+            work[r] = _part_times(r, a, b, Ga, Gb, n, g[0])
         tree_solve(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
                    work, work)
         for r in group_rows:
             X[k, r] = work[r]
-        # Column k of A_CC.
+        # Column k of A_CC: each closure row's parts applied to M⁻¹ H_jᵀ.
         for i in range(c):
-            F[i, k] = _apply(closure[i], a, b, Ga, Gb, n, a[j], b[j], g)
+            F[i, k] = _part_times(closure[i], a, b, Ga, Gb, n, g[0])
+        for r in range(m, Ga.shape[0]):
+            for i in range(c):
+                if own[r] == closure[i]:
+                    F[i, k] += _part_times(r, a, b, Ga, Gb, n, g[0])
         F[k, k] += reg
     # S = A_CC + reg I − A_CT X.
     for i in range(c):
