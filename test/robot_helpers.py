@@ -1,5 +1,7 @@
 """Builders of small URDF robots and joint-space readings of a simulation, for the tests."""
 
+import re
+
 import numpy as np
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.scene import scene_from_dict
@@ -35,6 +37,27 @@ def robot(name, *elements):
 
 def _v(values):
     return ' '.join(repr(float(x)) for x in values)
+
+
+def without_mimic(text):
+    """Return URDF ``text`` with its ``<mimic>`` elements removed (the followers go free)."""
+    out = re.sub(r'<mimic[^>]*/>', '', text)
+    assert out != text
+    return out
+
+
+def arm7_free_fingers(tmp_path):
+    """
+    Write arm7 without its fingers' mimic and return the path.
+
+    For tests of other things (drives, damping) that set the fingers apart; the mimic
+    has its own tests (test_mimic_joints.py).
+    """
+    from joint_space_reference import urdf_path
+    path = tmp_path / 'arm7_free_fingers.urdf'
+    with open(urdf_path('arm7.urdf')) as f:
+        path.write_text(without_mimic(f.read()))
+    return str(path)
 
 
 def robot_scene(tmp_path, urdf_text, gravity=None, dt=1e-3, integrator='lie_poisson2',

@@ -14,7 +14,7 @@ import pytest
 from rigid_body_sim.core import SpecError
 from rigid_body_sim.core.robots import CommandGroup
 from rigid_body_sim.scene import scene_from_dict
-from robot_helpers import inertial, joint, joint_accelerations, link, robot
+from robot_helpers import arm7_free_fingers, inertial, joint, joint_accelerations, link, robot
 
 SPLITTINGS = ['symplectic_euler', 'lie_poisson2', 'lie_poisson4']
 INTEGRATORS = SPLITTINGS + ['rkmk4']
@@ -145,7 +145,7 @@ def test_rkmk4_closes_a_jump_within_its_baumgarte_envelope(tmp_path):
 
 
 @pytest.mark.parametrize('seed', [1, 2, 3])
-def test_exact_efforts_are_the_inverse_dynamics(seed):
+def test_exact_efforts_are_the_inverse_dynamics(seed, tmp_path):
     # arm7 with joints 2, 4, 6 driven exactly, the others free, at a random state where the
     # free joints move: the driven joints do not accelerate (Φ = Φ̇ = 0), the free ones
     # accelerate as M_ff q̈_f = −h_f − D_f q̇_f, and the drives' efforts are the inverse
@@ -153,7 +153,8 @@ def test_exact_efforts_are_the_inverse_dynamics(seed):
     rng = np.random.default_rng(seed)
     reference = JointSpaceModel.from_urdf(open(urdf_path('arm7.urdf')).read())
     driven = ['joint2', 'joint4', 'joint6']
-    data = {'dt': 1e-3, 'robots': [{'urdf': urdf_path('arm7.urdf')}],
+    # (the fingers apart: without their mimic, which test_mimic_joints.py covers)
+    data = {'dt': 1e-3, 'robots': [{'urdf': arm7_free_fingers(tmp_path)}],
             'effects': {'gravity': {'g_world': [0.0, 0.0, -G]}},
             'command_groups': [{'name': 'exact', 'joints': driven, 'interface': 'position',
                                 'mode': 'exact'}]}
@@ -245,7 +246,8 @@ def test_a_drives_tracking_error_is_not_a_constraint_violation(tmp_path):
 def test_drives_keep_their_joints_rows_independent_and_tree_solved():
     # A drive is its joint's sixth row on the joint's own pair of bodies: not a joint added
     # twice (redundant rows, a dense solve with a truncated SVD), not a loop. The arm keeps
-    # the linear-time tree solve, and no factorization meets a redundant row.
+    # the linear-time tree solve (its fingers' mimic row, over three bodies, is the loop
+    # solve's one closure row), and no factorization meets a redundant row.
     from rigid_body_sim.core.kernels.layout import Solve
     data = {'dt': 1e-3, 'effects': {'gravity': {'g_world': [0.0, 0.0, -G]}},
             'robots': [{'urdf': urdf_path('arm7.urdf')}],
@@ -253,7 +255,10 @@ def test_drives_keep_their_joints_rows_independent_and_tree_solved():
                                 'interface': 'position', 'mode': 'exact'}]}
     sim = scene_from_dict(data, urdf_path('scene.yaml')).simulation
     [component] = sim.dynamics.solver.kernel_setup().components
-    assert len(component.rows) == 9 * 5 + 3 and component.solve is Solve.TREE
+    assert len(component.rows) == 9 * 5 + 3 + 1 and component.solve is Solve.LOOP
+    closure = component.views['general_tree_closure']
+    mimic = sim.dynamics.solver.constraints.rows_of('finger_joint2_mimic')
+    assert component.rows[closure].tolist() == mimic.tolist()   # the mimic row alone
     sim.step(20)
     counters = sim.dynamics.solver.counters
     assert counters.factorizations > 0 and counters.rank_deficient_solves == 0

@@ -6,7 +6,7 @@ import pytest
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.core import SpecError
 from rigid_body_sim.scene import scene_from_dict, SceneError
-from robot_helpers import inertial, joint, joint_accelerations, link, robot
+from robot_helpers import arm7_free_fingers, inertial, joint, joint_accelerations, link, robot
 
 SPLITTINGS = ['symplectic_euler', 'lie_poisson2', 'lie_poisson4']
 I_AXLE = 0.5   # kg m², the wheel's moment about its axle
@@ -88,12 +88,13 @@ def test_rkmk4_refuses_damping_it_cannot_hold(tmp_path):
 
 
 @pytest.mark.parametrize('seed', [4, 5])
-def test_damped_arm_accelerations_are_the_joint_space_dynamics(seed):
-    # arm7 damps joints 1, 2, 4, 6 and 7: q̈ = M⁻¹ (τ − h − D q̇), compiled and numpy paths.
+def test_damped_arm_accelerations_are_the_joint_space_dynamics(seed, tmp_path):
+    # arm7 damps joints 1, 2, 4, 6 and 7: q̈ = M⁻¹ (τ − h − D q̇), compiled and numpy paths
+    # (the fingers apart: without their mimic, which test_mimic_joints.py covers).
     rng = np.random.default_rng(seed)
     reference = JointSpaceModel.from_urdf(open(urdf_path('arm7.urdf')).read())
     sim = scene_from_dict({'dt': 1e-3, 'effects': {'gravity': {}},
-                           'robots': [{'urdf': urdf_path('arm7.urdf')}]},
+                           'robots': [{'urdf': arm7_free_fingers(tmp_path)}]},
                           urdf_path('s.yaml')).simulation
     names = sim.joint_names()
     q = np.concatenate([rng.uniform(-2.5, 2.5, 7), rng.uniform(0.0, 0.04, 2)])

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.scene import scene_from_dict
-from robot_helpers import joint_accelerations
+from robot_helpers import arm7_free_fingers, joint_accelerations
 from scipy.integrate import solve_ivp
 
 
@@ -80,14 +80,14 @@ def test_rotated_frames_give_the_same_motion():
 
 
 @pytest.mark.parametrize('seed', [1, 2, 3])
-def test_arm7_accelerations_are_the_joint_space_dynamics(seed):
+def test_arm7_accelerations_are_the_joint_space_dynamics(seed, tmp_path):
     # q̈ of the maximal-coordinate solve (the step's multipliers) = M⁻¹ (τ − D q̇ − h) (the
-    # URDF's joint damping D), with the
-    # fixed hand lumped into link7 and the fingers on prismatic joints (their mimic is
-    # not enforced yet, so the reference's full model, which ignores it, applies).
+    # URDF's joint damping D), with the fixed hand lumped into link7 and the fingers on
+    # prismatic joints, here without their mimic (the reference's full model; the mimic
+    # is test_mimic_joints.py's).
     rng = np.random.default_rng(seed)
     reference = JointSpaceModel.from_urdf(open(urdf_path('arm7.urdf')).read())
-    sim = robot_sim('arm7.urdf')
+    sim = robot_sim(arm7_free_fingers(tmp_path))
     names = sim.joint_names()
     assert names == reference.joint_names
     q = np.concatenate([rng.uniform(-2.5, 2.5, 7), rng.uniform(0.0, 0.04, 2)])

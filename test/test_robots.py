@@ -418,7 +418,7 @@ def test_bad_joint_input_changes_nothing(tmp_path, call, match):
 def test_the_description_is_prefixed_as_the_simulation_names_things(tmp_path):
     from rigid_body_sim.urdf import parse_urdf, prefixed_xml
     text = robot('r', link('world'), link('a', inertial(1.0)), link('b', inertial(0.5)),
-                 joint('j1', 'continuous', 'world', 'a', axis=(0, 0, 1)),
+                 joint('j1', 'revolute', 'world', 'a', axis=(0, 0, 1)),
                  joint('j2', 'revolute', 'a', 'b', axis=(0, 1, 0),
                        extra='<limit effort="1" velocity="1" lower="-1" upper="1"/>'
                              '<mimic joint="j1" multiplier="2"/>'),
@@ -431,6 +431,7 @@ def test_the_description_is_prefixed_as_the_simulation_names_things(tmp_path):
     assert 'reference="left_b"' in parsed.xml
     sim = robot_scene(tmp_path, text, prefix='left_').simulation
     assert sim.joint_names() == ['left_j1', 'left_j2']
+    assert 'left_j2_mimic' in sim.constraint_names
     assert prefixed_xml(text, '') == text
 
 

@@ -34,6 +34,16 @@ Conversion rules
   whose links have no mass, on a joint that moves, is an error naming it.
 * Joint coordinates are 0 in the URDF's zero configuration, as the URDF's
   frames put it; revolute and continuous angles unwrap (they count turns).
+* A ``mimic`` joint (``q_f = k q_l + c``, follower f, leader l) is one more
+  constraint row, ``mimic`` (:class:`.constraints.Coupling`), over the
+  follower's two bodies and the leader's (a row of up to four bodies): exact,
+  as every joint, where MuJoCo and Gazebo make it a soft equality or a
+  controller. Its multiplier is the follower's effort (``−λ``) and adds ``kλ``
+  to the leader's. The follower's initial position and velocity follow the
+  leader's (a different one given is an error). Both joints must be revolute or
+  prismatic (not continuous: the row takes each angle within π of a reference,
+  the middle of the leader's limits, so a turning joint is refused); mimic
+  chains are followed, cycles refused.
 
 Joint efforts act as equal and opposite wrenches on the joint's two bodies:
 a torque ``τ k`` about the axis (revolute), a force ``τ k`` along it applied on
@@ -51,7 +61,7 @@ import numpy as np
 
 from . import rotation as so3
 from .bodies import RigidBody
-from .constraints import Constraint, DriveGeometry, JointType, perpendicular_frame
+from .constraints import Constraint, Coupling, DriveGeometry, JointType, perpendicular_frame
 from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
 from .errors import SpecError
 from .kernels.free_step import HAS_DRIVE_DAMPING, HAS_DRIVES
@@ -421,6 +431,47 @@ def _lump(group: list, frames: dict, links: dict) -> tuple:
     return mass, com, inertia
 
 
+def mimic_order(joints: Sequence[JointSpec]) -> list:
+    """
+    Return the mimic joints as ``(follower, (leader, k, c))``, each after its leader's own.
+
+    Raises SpecError (``joints.<name>.mimic``) for a follower or leader that is not
+    revolute or prismatic (a continuous one turns past the π the row allows), a
+    joint that mimics itself, and a cycle of mimics.
+    """
+    kind = {j.name: j.kind for j in joints}
+    mimics = {j.name: j.mimic for j in joints if j.mimic is not None}
+    for name, (leader, _, _) in mimics.items():
+        where = f'joints.{name}.mimic'
+        for role, joint in (('a follower', name), ('its leader', leader)):
+            if kind.get(joint) not in (JointKind.REVOLUTE, JointKind.PRISMATIC):
+                what = 'missing' if joint not in kind else kind[joint].value
+                raise SpecError(where, f'{role} ({joint!r}, {what}) must be a revolute or '
+                                       f'prismatic joint (the row holds angles within π of '
+                                       f'a reference: a continuous joint turns past it)')
+        if leader == name:
+            raise SpecError(where, f'joint {name!r} mimics itself')
+    order: list = []
+    done: set = set()
+    for name in mimics:
+        path = []
+        while name in mimics and name not in done:
+            if name in path:
+                raise SpecError(f'joints.{name}.mimic', f'mimic joints form a cycle: '
+                                                        f'{path[path.index(name):] + [name]}')
+            path.append(name)
+            name = mimics[name][0]
+        for follower in reversed(path):
+            order.append((follower, mimics[follower]))
+            done.add(follower)
+    return order
+
+
+def mimic_name(joint: str) -> str:
+    """Name of the constraint that makes ``joint`` follow its leader (a mimic joint)."""
+    return f'{joint}_mimic'
+
+
 def build_robot(spec: RobotSpec) -> RobotModel:
     """
     Convert a robot to bodies and constraints at its initial joint positions.
@@ -452,6 +503,16 @@ def build_robot(spec: RobotSpec) -> RobotModel:
             finite_scalar(value, f'{key}.{name}')
     q0 = {name: float(spec.initial_positions.get(name, 0.0)) for name in one_dof}
     qd0 = {name: float(spec.initial_velocities.get(name, 0.0)) for name in one_dof}
+    for name, (leader, k, c) in mimic_order(spec.joints):
+        # A follower starts where its leader puts it (a contradicting value is an error).
+        for key, values, value in (('initial_positions', q0, k * q0[leader] + c),
+                                   ('initial_velocities', qd0, k * qd0[leader])):
+            given = getattr(spec, key).get(name)
+            if given is not None and abs(float(given) - value) > 1e-9 * max(1.0, abs(value)):
+                raise SpecError(f'{key}.{name}', f'joint {name!r} mimics {leader!r} ({name} = '
+                                                 f'{k:g} {leader} + {c:g}): {value!r} follows '
+                                                 f'from {leader!r}, got {float(given)!r}')
+            values[name] = value
 
     # Forward kinematics at the initial positions: every link frame in the world.
     base_p = finite_array(spec.base_xyz, 'base_pose.xyz', (3,))
@@ -558,9 +619,6 @@ def build_robot(spec: RobotSpec) -> RobotModel:
         if j.friction > 0.0:
             notes.append(f'joint {pre + j.name!r}: Coulomb friction {j.friction} is read but '
                          f'not simulated yet')
-        if j.mimic is not None:
-            notes.append(f'joint {pre + j.name!r}: mimic of {j.mimic[0]!r} is read but not '
-                         f'enforced yet (the joint moves freely)')
     index = {j.spec.name: i for i, j in enumerate(joints)}
     order = [index[tree.parent_joint[n].name] for n in tree.order[1:]
              if tree.parent_joint[n].name in index]
@@ -639,11 +697,44 @@ class JointSpace:
                                          velocity_limit=self.velocity_limit[i])
                                for i in range(k)]).reshape(k, JOINT.width)
         self._rates = np.zeros(k)
+        #: Mimic joints ``(follower, leader, k, c)`` (indices), each after its leader's own.
+        self.mimics = [(self.index[m.spec.prefix + f], self.index[m.spec.prefix + leader], km, c)
+                       for m in self.models
+                       for f, (leader, km, c) in mimic_order(m.spec.joints)]
         self.reset()
 
     def __len__(self) -> int:
         """Return the number of one-coordinate joints."""
         return len(self.joints)
+
+    def drive_geometry(self, i: int, target: float) -> DriveGeometry:
+        """Where joint ``i``'s coordinate lives on its child (a) and parent (b), and a target."""
+        R = self.R_jp[i]
+        return DriveGeometry(rotary=bool(self.rotary[i]), e1_a=self.e1[i], e1_b=R @ self.e1[i],
+                             e2_b=R @ self.e2[i], k_b=R @ self.axis[i], p_a=np.zeros(3),
+                             p_b=self.p_jp[i], target=float(target))
+
+    def mimic_constraints(self) -> list:
+        """
+        Return one ``mimic`` constraint per mimic joint (named :func:`mimic_name`).
+
+        ``Φ = (q_f − c − k r) − k (q_l − r)`` with each angle taken within π of
+        its reference: ``r`` the middle of the leader's limits (0 without both),
+        ``c + k r`` for the follower (see :class:`.constraints.Coupling`).
+        """
+        out = []
+        for f, leader, k, c in self.mimics:
+            spec = self.joints[leader].spec
+            ref = (0.5 * (spec.lower + spec.upper)
+                   if spec.lower is not None and spec.upper is not None else 0.0)
+            jf, jl = self.joints[f], self.joints[leader]
+            out.append(Constraint(
+                mimic_name(jf.name), JointType.MIMIC, jf.child_body, jf.parent_body,
+                anchor_a_body=np.zeros(3), anchor_b_body=self.p_jp[f],
+                drive=self.drive_geometry(f, c + k * ref),
+                coupling=Coupling(jl.child_body, jl.parent_body,
+                                  self.drive_geometry(leader, ref), k)))
+        return out
 
     def reset(self) -> None:
         """Forget the commands, the counted turns and the counters."""
@@ -766,7 +857,8 @@ class JointSpace:
 
         Bodies not driven by a one-coordinate joint (floating bases, the children
         of floating, planar or kept fixed joints) keep their pose relative to
-        their parent; every joint not named keeps its coordinate and rate.
+        their parent; every joint not named keeps its coordinate and rate, but a
+        mimic joint follows its leader.
 
         Returns
         -------
@@ -782,6 +874,16 @@ class JointSpace:
         for name, value in velocities.items():
             qd[self.lookup(name, f'velocities.{name}')] = finite_scalar(value,
                                                                         f'velocities.{name}')
+        for f, leader, k, c in self.mimics:
+            # A follower goes where its leader puts it (a contradicting value is refused).
+            name = self.names[f]
+            for key, given, x, want in (('positions', positions, q, k * q[leader] + c),
+                                        ('velocities', velocities, qd, k * qd[leader])):
+                if name in given and not abs(x[f] - want) <= 1e-9 * max(1.0, abs(want)):
+                    raise SpecError(f'{key}.{name}', f'joint {name!r} mimics '
+                                                     f'{self.names[leader]!r}: {want!r} follows '
+                                                     f'from it, got {x[f]!r}')
+                x[f] = want
         p, R, v, w = (x.copy() for x in self._with_world(out))
         p0, R0, v0, w0 = (x.copy() for x in self._with_world(out))
         index = self.index
@@ -951,6 +1053,13 @@ class JointDrives(Effect):
                 self.interface[i] = group.interface
                 self.kp[i], self.kd[i] = group.kp, group.kd
                 self.exact[i] = group.mode == 'exact'
+                leader = next((space.names[lead] for f, lead, _, _ in space.mimics if f == i),
+                              None)
+                if self.exact[i] and leader is not None:
+                    raise SpecError(f'{where}.joints[{j}]',
+                                    f'joint {name!r} mimics {leader!r}: its motion is its '
+                                    f"leader's, an exact drive would contradict it (drive "
+                                    f'{leader!r} instead)')
         self.damping = np.array([j.spec.damping for j in space.joints]).reshape(k)
         self.servo = self.kp + self.kd > 0.0
         self.rows_of = np.flatnonzero(self.servo | (self.damping > 0.0))
@@ -994,13 +1103,9 @@ class JointDrives(Effect):
         js = self.space
         out = []
         for i in np.flatnonzero(self.exact):
-            j, R = js.joints[i], js.R_jp[i]
-            geometry = DriveGeometry(rotary=bool(js.rotary[i]), e1_a=js.e1[i],
-                                     e1_b=R @ js.e1[i], e2_b=R @ js.e2[i], k_b=R @ js.axis[i],
-                                     p_a=np.zeros(3), p_b=js.p_jp[i],
-                                     target=float(positions[i]))
+            j = js.joints[i]
             out.append(Constraint(drive_name(j.name), JointType.DRIVE, j.child_body,
-                                  j.parent_body, drive=geometry))
+                                  j.parent_body, drive=js.drive_geometry(i, positions[i])))
         return out
 
     def inverse_inertias(self, state: Any) -> np.ndarray:

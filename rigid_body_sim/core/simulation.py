@@ -36,7 +36,7 @@ from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .kernels import free_step
 from .robots import (build_robot, CommandGroup, drive_name, Interface, JointDrives, JointSpace,
-                     JointState, RobotSpec)
+                     JointState, mimic_name, RobotSpec)
 from .solver import ConstraintSolver
 from .validate import finite_scalar, positive_scalar
 
@@ -154,6 +154,9 @@ class Simulation:
             except SpecError as exc:
                 raise exc.within(f'effects[{i}]') from None
         self.joints = JointSpace(self.bodies.names, self.robots)
+        # Mimic joints: one row each, with the robots' joints (they must hold from the start).
+        self._mimic_names = [mimic_name(self.joints.names[f]) for f, _, _, _ in self.joints.mimics]
+        constraints += self.joints.mimic_constraints()
         self.drives: Optional[JointDrives] = None
         if len(self.joints) or command_groups:
             drives = JointDrives(self.joints, command_groups)
@@ -429,7 +432,9 @@ class Simulation:
 
         Positions are 0 in the URDF's zero configuration; angles count turns.
         Efforts: the effort command that acted over the last step, plus the joint's
-        servo and damping at the current state (what a joint torque sensor reads).
+        servo and damping at the current state (what a joint torque sensor reads),
+        an exact drive's multiplier, and a mimic row's (on the follower and, times
+        ``k``, on the leader).
         """
         js = self.joints.state(self._outputs_now(), self.time - 0.5 * self.dt)
         efforts = js.efforts
@@ -443,6 +448,15 @@ class Simulation:
             rows = [solver.constraints.rows_of(name)[0] for name in self._drive_names]
             efforts = efforts.copy()
             efforts[self._exact] -= lam[rows]
+        if self._mimic_names:
+            # A mimic row Φ = q_f − k q_l − c applies −λ along q_f and kλ along q_l.
+            solver = self.dynamics.solver
+            lam = solver.multipliers(self.dynamics, self.state)
+            efforts = efforts.copy()
+            for (f, leader, k, _), name in zip(self.joints.mimics, self._mimic_names):
+                lam_r = lam[solver.constraints.rows_of(name)[0]]
+                efforts[f] -= lam_r
+                efforts[leader] += k * lam_r
         js = JointState(js.names, js.positions, js.velocities, efforts)
         if names is None:
             return js
@@ -472,7 +486,9 @@ class Simulation:
         their pose and twist; the children of floating and planar joints keep
         their pose and twist relative to their parent. Exact drives take the new
         positions as their targets and hold them: a velocity given for a driven
-        joint is projected away with the rest of the velocities.
+        joint is projected away with the rest of the velocities. Mimic joints
+        follow their leaders (a value given for one that contradicts its
+        leader's is refused).
 
         """
         if not isinstance(positions, dict):
@@ -602,6 +618,10 @@ class Simulation:
             joint = self.joints.names[self._exact[self._drive_names.index(name)]]
             raise SpecError('name', f'{name!r} is the exact drive of joint {joint!r} (a '
                                     f'command group of mode exact): it cannot be removed')
+        if name in self._mimic_names:
+            joint = self.joints.names[self.joints.mimics[self._mimic_names.index(name)][0]]
+            raise SpecError('name', f'{name!r} makes joint {joint!r} follow its leader (a URDF '
+                                    f'mimic joint): it cannot be removed')
         spec = self.dynamics.solver.constraints.remove(name)
         self.dynamics.changed()
         return spec
@@ -696,7 +716,7 @@ class Simulation:
         constraints = self.dynamics.solver.constraints
         out = {}
         for name in constraints.names:
-            (a, r_a), _ = constraints.anchors(name)
+            (a, r_a) = constraints.anchors(name)[0]
             lever = so3.rotate(s.quat_principal_world[a], np.asarray(r_a))
             out[name] = s.pos_com_world[a] + lever
         return out
