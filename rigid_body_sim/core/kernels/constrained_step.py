@@ -58,6 +58,7 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      T_GROUP_ROWS, T_P, T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W, T_WORK, T_X, T_XC,
                      T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT, V_RHS, V_SOLUTION,
                      VECTORS, VM, W_WIDTH, WATCH)
+from .layout import PAR_RATE, PAR_SCALAR, TARGETS
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
 from .methods import Method, ONE_STEP, TRIPLE_JUMP
@@ -460,6 +461,41 @@ def _geometry(pos, quat, cx, which, counts):
         _i1(cx, FACTOR_STATE)[FS_VALID] = 0   # the symmetric factor was of the geometry replaced
 
 
+@njit(cache=True)
+def _save_targets(cx):
+    """
+    Keep the rows' targets at the start of a call (scratch ``TARGETS``); True if any moves.
+
+    A row moves when its ``rate`` (``ċ``, :data:`.layout.ROW_PARAMETERS`) is not zero:
+    an exact velocity drive's target ``c(t) = c_start + ċ t`` during the call.
+    """
+    rpar, saved = _f2(cx, ROW_PAR), _f1(cx, TARGETS)
+    moving = False
+    for k in range(rpar.shape[0]):
+        saved[k] = rpar[k, PAR_SCALAR]
+        if rpar[k, PAR_RATE] != 0.0:
+            moving = True
+    return moving
+
+
+@njit(cache=True)
+def _targets_at(cx, s):
+    """
+    Move the moving rows' targets to ``s`` (s) after the start of the call: ``c_start + ċ s``.
+
+    Every evaluation of Φ in a step is at the time of its configuration: SHAKE's
+    end at the (sub)step's end, the stages of ``rkmk4`` at theirs. ``s`` is the
+    same expression for the end of one (sub)step and the start of the next, so
+    the geometry a (sub)step ends with is the next one's start, bit for bit;
+    ``s = 0`` restores the start (a step redone with more sub-steps).
+    """
+    rpar, saved = _f2(cx, ROW_PAR), _f1(cx, TARGETS)
+    for k in range(rpar.shape[0]):
+        rate = rpar[k, PAR_RATE]
+        if rate != 0.0:
+            rpar[k, PAR_SCALAR] = saved[k] + rate * s
+
+
 @njit(cache=True, inline='always')
 def _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts):
     """
@@ -484,8 +520,9 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
     """
     λ of the acceleration-level solve at the current geometry; ``GT_LAMBDA`` gets ``Gᵀλ``.
 
-    ``FREE_ACC`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ``. The
-    solve uses the symmetric factor (see :func:`_sym_factor`).
+    ``FREE_ACC`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ`` with
+    ``Φ̇ = Gν − ċ`` (a moving target's rate, :func:`.rows.framed_rates`; ``c̈ = 0``).
+    The solve uses the symmetric factor (see :func:`_sym_factor`).
     """
     phi, G = _f2(cx, PHI)[CURRENT], _f4(cx, JAC)
     Ga, Gb = G[CURRENT, 0], G[CURRENT, 1]
@@ -593,7 +630,8 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     """
     Project velocities onto ``Φ̇ = −ωΦ`` at the current geometry, in place.
 
-    The solve uses the symmetric factor (see :func:`_sym_factor`).
+    ``Φ̇ = Gν − ċ``: a moving target's rows (exact velocity drives) get
+    ``Gν = ċ − ωΦ``. The solve uses the symmetric factor (see :func:`_sym_factor`).
     """
     n = pos.shape[0]
     counts[Count.VEL_PROJECTIONS] += 1
@@ -609,6 +647,9 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     w = par[P_OMEGA]
     for r in range(phi.shape[0]):
         vm[V_RHS, r] += w * phi[r]
+    rpar = _f2(cx, ROW_PAR)
+    for r in range(rpar.shape[0]):   # the built-in rows; generic ones do not move
+        vm[V_RHS, r] -= rpar[r, PAR_RATE]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
     _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, SYMMETRIC)
     _gt_lambda(Ga, Gb, a, b, vm[V_SOLUTION], g6)
@@ -877,12 +918,15 @@ def _rounding_floor(pos, m):
 
 @njit(cache=True, inline='always')
 def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, par,
-               last_resort, lam, c_valid, counts):
+               last_resort, lam, c_valid, counts, s0, s1):
     """
     One (sub)step of a splitting method with RATTLE; returns (converged, c_valid).
 
     SHAKE factorizes into the storages ``GENERAL``; the kicks and the velocity
-    projection solve with the symmetric factor in ``SYMMETRIC``.
+    projection solve with the symmetric factor in ``SYMMETRIC``. The (sub)step runs
+    from ``s0`` to ``s1`` (s) after the start of the call, ``s1 − s0 = dt``: moving
+    targets are at ``s0`` on entry and at ``s1`` on return (:func:`_targets_at`);
+    each sub-step of the triple jump (one goes back in time) ends on its own.
     """
     n = pos.shape[0]
     symmetric = method != Method.SYMPLECTIC_EULER
@@ -895,8 +939,11 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
     for i in range(n):
         for c in range(3):
             mom[i, c] = om[i, c] * body[i, B_MOMENTS + c]
+    elapsed = 0.0
     for sub in range(n_sub):
         h = weights[sub] * dt
+        elapsed += weights[sub]
+        end = s1 if sub == n_sub - 1 else s0 + elapsed * (s1 - s0)
         if not c_valid:
             _geometry(pos, quat, cx, CURRENT, counts)
             c_valid = True
@@ -911,6 +958,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
             drives.damping_flow(pos, quat, vel, mom, body, wrench, first, False)
         _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, cx, par, lam, c_valid,
               counts)
+        _targets_at(cx, end)   # SHAKE's end lands on the targets of its time
         if not _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts):
             return False, False
         if symmetric and (damping or joint_damping):
@@ -935,9 +983,13 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
 
 @njit(cache=True, inline='always')
 def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_valid, counts,
-           err):
+           err, s0, s1):
     """
     One RKMK4 (sub)step with constraint forces at every stage, then Φ̇ = −ωΦ.
+
+    The (sub)step runs from ``s0`` to ``s1`` (s) after the start of the call: each
+    stage evaluates moving targets at its time (``s0``, the midpoint twice, ``s1``;
+    :func:`_targets_at`), which stay at ``s1`` on return.
 
     With ``err`` of length 1, the slopes at the end (constraint forces included,
     before the velocity projection) give the embedded estimate
@@ -955,6 +1007,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
         rkmk4_stage(s, h, pos, quat, vel, om, kp, kv, kw, kr, p, q, v, w, u, counts)
         if s:
             c_valid = False
+            _targets_at(cx, s1 if s == 3 else s0 + 0.5 * (s1 - s0))
         counts[Count.RHS] += 1
         _free_accelerations(p, q, v, w, body, gforce, wrench, flags, a6, force, torque, counts)
         if not c_valid:
@@ -1055,8 +1108,11 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         counts[Count.CAPPED] += 1   # the work of one step stays bounded; the caller reports it
         k = max_sub
     valid0 = c_valid
+    moving = _save_targets(cx)
     while True:
         last_resort = k >= max_sub
+        if moving:
+            _targets_at(cx, 0.0)   # a redone step starts from the targets of its start
         _copy(pos0, pos)
         _copy(quat0, quat)
         _copy(vel0, vel)
@@ -1066,13 +1122,16 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         if k > 1:
             counts[Count.SUBSTEPS] += k
         h = dt / k
-        for _ in range(k):
+        for j in range(k):
+            # The (sub)step's times after the start: the last one ends at dt exactly.
+            s0, s1 = j * h, (dt if j == k - 1 else (j + 1) * h)
             if method == Method.RKMK4:
                 _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam,
-                       c_valid, counts, err)
+                       c_valid, counts, err, s0, s1)
             else:
                 ok, c_valid = _splitting(method, pos, quat, vel, om, h, body, gforce, wrench,
-                                         flags, cx, par, last_resort, lam, c_valid, counts)
+                                         flags, cx, par, last_resort, lam, c_valid, counts,
+                                         s0, s1)
                 if not ok:
                     break
             c_valid = True
@@ -1111,12 +1170,14 @@ def scratch(n: int, m: int) -> dict:
     ``frames`` (n + 1, 3, 3) rotations, ``omega_world`` (n + 1, 3), ``jr`` (n, 3, 3)
     J_r, ``g2`` (2, m, 6) G diag(I, J_r), ``vectors`` (2, m), ``body_vectors``
     (4, n, 3), ``quats`` (n, 4), ``stages`` (4, 5, n, 3) RKMK4 stages, ``rotor``
-    (6, 3) rotor flow; they spare the step its allocations.
+    (6, 3) rotor flow, ``targets`` (m,) the rows' targets at the start of the call
+    (see :func:`_targets_at`); they spare the step its allocations.
     """
     return {'frames': np.zeros((n + 1, 3, 3)), 'omega_world': np.zeros((n + 1, 3)),
             'jr': np.zeros((n, 3, 3)), 'g2': np.zeros((2, m, 6)), 'vectors': np.zeros((2, m)),
             'body_vectors': np.zeros((4, n, 3)), 'quats': np.zeros((n, 4)),
-            'stages': np.zeros((4, 5, n, 3)), 'rotor': np.zeros((6, 3))}
+            'stages': np.zeros((4, 5, n, 3)), 'rotor': np.zeros((6, 3)),
+            'targets': np.zeros(m)}
 
 
 def dense_storage(d: int) -> dict:
