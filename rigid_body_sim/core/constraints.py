@@ -59,7 +59,7 @@ import scipy.sparse as sp
 from . import rotation as so3
 from .bodies import BodySet, State
 from .errors import SpecError
-from .kernels.layout import PAR_RATE, PAR_SCALAR
+from .kernels.layout import PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0
 from .kernels.rows import (KIND_ANGLE, KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT,
                            pack_rows, rows_geometry, rows_rates)
 from .validate import finite_array, finite_scalar, positive_scalar
@@ -623,7 +623,7 @@ class ConstraintSet:
             res = self._drive(name)
             rate, t0 = res.motion
             target = res.angles[0][3] if res.angles else res.lines[0][3]
-            out[i] = target + rate * (time - t0)
+            out[i] = target + rate * (float(time) - t0)
         return out
 
     def drive_targets_at(self, time: float) -> np.ndarray:
@@ -634,10 +634,13 @@ class ConstraintSet:
         function of time, so a step redone, sub-stepped, or taken twice from one
         state (the accuracy knob's doubling) sees the same targets.
         """
-        rows, target, rate, t0 = self._anchors
+        rows = self._anchors[0]
         self.time = float(time)
         if len(rows):
-            self.row_par[rows, PAR_SCALAR] = target + rate * (self.time - t0)
+            # The kernels' expression (kernels.constrained_step._targets_at), bit for bit.
+            p = self.row_par
+            p[rows, PAR_SCALAR] = p[rows, PAR_C0] + p[rows, PAR_RATE] * (self.time
+                                                                        - p[rows, PAR_T0])
         return rows
 
     @property
@@ -661,7 +664,10 @@ class ConstraintSet:
             np.array([r.motion[0] for r in drives]), np.array([r.motion[1] for r in drives]))
         self.moving = bool(np.any(self._anchors[2] != 0.0))
         if len(drives):
-            self.row_par[self._anchors[0], PAR_RATE] = self._anchors[2]
+            rows = self._anchors[0]
+            self.row_par[rows, PAR_C0] = self._anchors[1]
+            self.row_par[rows, PAR_RATE] = self._anchors[2]
+            self.row_par[rows, PAR_T0] = self._anchors[3]
 
     def remove(self, name: str) -> Constraint:
         """Remove constraint ``name``; returns its spec."""

@@ -110,6 +110,7 @@ from .errors import SpecError
 from .kernels import constrained_step as ckern
 from .kernels import free_step as kern
 from .kernels import methods
+from .kernels.layout import P_T_END, P_T_START
 from .kernels.views import Pinned
 
 
@@ -191,6 +192,8 @@ class Integrator:
             # Moving drive targets (exact velocity drives): the kernels take them at the
             # start and leave them at the end (t_end: the time the next step starts from).
             solver.targets_at(state.time)
+            par = self._kernel_parameters()
+            par[P_T_START], par[P_T_END] = state.time, t_end
             solver.kernel_time = None   # until the kernels return: one may raise half-way
             if not len(setup.free) and len(setup.components) == 1:
                 new = self._whole_step(state, dt, t_end, setup, err)

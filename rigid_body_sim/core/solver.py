@@ -74,7 +74,7 @@ from .graph import closes_loop, component_labels, loop_structure, tree_structure
 from .kernels.constrained_step import (component_multipliers, component_project_velocities,
                                        component_reach, CURRENT, dense_storage, GENERIC, pack,
                                        tree_storage, workspace)
-from .kernels.layout import BODY, PAR, PAR_RATE, PAR_SCALAR, Solve
+from .kernels.layout import BODY, PAR, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0, Solve
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -399,7 +399,7 @@ class ConstraintSolver:
         setup = c[2]
         setup.geometry_of[0] = None
         self.kernel_time = cs.time
-        columns = [PAR_SCALAR, PAR_RATE] if rates else [PAR_SCALAR]
+        columns = [PAR_SCALAR, PAR_RATE, PAR_C0, PAR_T0] if rates else [PAR_SCALAR]
         for comp in setup.components:
             local = np.searchsorted(comp.rows, rows)
             found = comp.rows[np.minimum(local, len(comp.rows) - 1)] == rows
@@ -415,7 +415,7 @@ class ConstraintSolver:
                        pos_tol=self.position_tolerance, max_it=float(self.max_iterations),
                        rank_rtol=self.rank_rtol, reg=self.regularization, closing=closing,
                        max_rot=np.inf if max_rotation is None else float(max_rotation),
-                       max_sub=float(max_substeps))
+                       max_sub=float(max_substeps), t_start=0.0, t_end=0.0)
 
     # -- the compiled solve outside a step ----------------------------------------------
 

@@ -25,8 +25,11 @@ happen inside the call.
 Parameters array ``par`` (float64)
 ----------------------------------
 ``[time_constant, omega, position_tolerance, max_iterations, rank_rtol,
-regularization, closing, max_rotation, max_substeps]`` (see
-:class:`..solver.ConstraintSolver` and :class:`..integrators.Integrator`).
+regularization, closing, max_rotation, max_substeps, t_start, t_end]`` (see
+:class:`..solver.ConstraintSolver` and :class:`..integrators.Integrator`; the
+times, s, of the step's start and end are read only where a row's target moves:
+an exact velocity drive's, ``c0 + ċ (t − t0)`` at the time of each configuration
+the step evaluates, left at ``t_end``).
 
 Work counts (``counts``: the simulation's int64 tally of work counters, which
 the kernels add to; see :class:`..dynamics.Dynamics`): the slots below.
@@ -58,7 +61,7 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      T_GROUP_ROWS, T_P, T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W, T_WORK, T_X, T_XC,
                      T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT, V_RHS, V_SOLUTION,
                      VECTORS, VM, W_WIDTH, WATCH)
-from .layout import PAR_RATE, PAR_SCALAR, TARGETS
+from .layout import P_T_END, P_T_START, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
 from .methods import Method, ONE_STEP, TRIPLE_JUMP
@@ -462,38 +465,31 @@ def _geometry(pos, quat, cx, which, counts):
 
 
 @njit(cache=True)
-def _save_targets(cx):
-    """
-    Keep the rows' targets at the start of a call (scratch ``TARGETS``); True if any moves.
-
-    A row moves when its ``rate`` (``ċ``, :data:`.layout.ROW_PARAMETERS`) is not zero:
-    an exact velocity drive's target ``c(t) = c_start + ċ t`` during the call.
-    """
-    rpar, saved = _f2(cx, ROW_PAR), _f1(cx, TARGETS)
-    moving = False
+def _moving(cx):
+    """Tell whether some row's target moves (a ``rate`` ċ, :data:`.layout.ROW_PARAMETERS`)."""
+    rpar = _f2(cx, ROW_PAR)
     for k in range(rpar.shape[0]):
-        saved[k] = rpar[k, PAR_SCALAR]
         if rpar[k, PAR_RATE] != 0.0:
-            moving = True
-    return moving
+            return True
+    return False
 
 
 @njit(cache=True)
-def _targets_at(cx, s):
+def _targets_at(cx, t):
     """
-    Move the moving rows' targets to ``s`` (s) after the start of the call: ``c_start + ċ s``.
+    Put the moving rows' targets at the time ``t`` (s): ``c0 + ċ (t − t0)``.
 
-    Every evaluation of Φ in a step is at the time of its configuration: SHAKE's
-    end at the (sub)step's end, the stages of ``rkmk4`` at theirs. ``s`` is the
-    same expression for the end of one (sub)step and the start of the next, so
-    the geometry a (sub)step ends with is the next one's start, bit for bit;
-    ``s = 0`` restores the start (a step redone with more sub-steps).
+    An exact velocity drive's target, a function of time (the expression of
+    :meth:`..constraints.ConstraintSet.drive_targets_at`, so Python and the kernels
+    agree bit for bit). Every evaluation of Φ in a step is at the time of its
+    configuration: SHAKE's end at the (sub)step's end, the stages of ``rkmk4`` at
+    theirs; a step redone with more sub-steps starts again from its start's.
     """
-    rpar, saved = _f2(cx, ROW_PAR), _f1(cx, TARGETS)
+    rpar = _f2(cx, ROW_PAR)
     for k in range(rpar.shape[0]):
         rate = rpar[k, PAR_RATE]
         if rate != 0.0:
-            rpar[k, PAR_SCALAR] = saved[k] + rate * s
+            rpar[k, PAR_SCALAR] = rpar[k, PAR_C0] + rate * (t - rpar[k, PAR_T0])
 
 
 @njit(cache=True, inline='always')
@@ -924,9 +920,9 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
 
     SHAKE factorizes into the storages ``GENERAL``; the kicks and the velocity
     projection solve with the symmetric factor in ``SYMMETRIC``. The (sub)step runs
-    from ``s0`` to ``s1`` (s) after the start of the call, ``s1 − s0 = dt``: moving
-    targets are at ``s0`` on entry and at ``s1`` on return (:func:`_targets_at`);
-    each sub-step of the triple jump (one goes back in time) ends on its own.
+    from the time ``s0`` to ``s1`` (s), ``s1 − s0 = dt`` to rounding: moving targets
+    are at ``s0`` on entry and at ``s1`` on return (:func:`_targets_at`); each
+    sub-step of the triple jump (one goes back in time) ends on its own.
     """
     n = pos.shape[0]
     symmetric = method != Method.SYMPLECTIC_EULER
@@ -987,8 +983,8 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
     """
     One RKMK4 (sub)step with constraint forces at every stage, then Φ̇ = −ωΦ.
 
-    The (sub)step runs from ``s0`` to ``s1`` (s) after the start of the call: each
-    stage evaluates moving targets at its time (``s0``, the midpoint twice, ``s1``;
+    The (sub)step runs from the time ``s0`` to ``s1`` (s): each stage evaluates
+    moving targets at its time (``s0``, the midpoint twice, ``s1``;
     :func:`_targets_at`), which stay at ``s1`` on return.
 
     With ``err`` of length 1, the slopes at the end (constraint forces included,
@@ -1108,11 +1104,12 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         counts[Count.CAPPED] += 1   # the work of one step stays bounded; the caller reports it
         k = max_sub
     valid0 = c_valid
-    moving = _save_targets(cx)
+    moving = _moving(cx)
+    t_start, t_end = par[P_T_START], par[P_T_END]
     while True:
         last_resort = k >= max_sub
         if moving:
-            _targets_at(cx, 0.0)   # a redone step starts from the targets of its start
+            _targets_at(cx, t_start)   # a redone step starts from the targets of its start
         _copy(pos0, pos)
         _copy(quat0, quat)
         _copy(vel0, vel)
@@ -1123,8 +1120,9 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
             counts[Count.SUBSTEPS] += k
         h = dt / k
         for j in range(k):
-            # The (sub)step's times after the start: the last one ends at dt exactly.
-            s0, s1 = j * h, (dt if j == k - 1 else (j + 1) * h)
+            # The (sub)step's times: the last one ends at the step's end exactly.
+            s0 = t_start + j * h
+            s1 = t_end if j == k - 1 else t_start + (j + 1) * h
             if method == Method.RKMK4:
                 _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam,
                        c_valid, counts, err, s0, s1)
@@ -1170,14 +1168,12 @@ def scratch(n: int, m: int) -> dict:
     ``frames`` (n + 1, 3, 3) rotations, ``omega_world`` (n + 1, 3), ``jr`` (n, 3, 3)
     J_r, ``g2`` (2, m, 6) G diag(I, J_r), ``vectors`` (2, m), ``body_vectors``
     (4, n, 3), ``quats`` (n, 4), ``stages`` (4, 5, n, 3) RKMK4 stages, ``rotor``
-    (6, 3) rotor flow, ``targets`` (m,) the rows' targets at the start of the call
-    (see :func:`_targets_at`); they spare the step its allocations.
+    (6, 3) rotor flow; they spare the step its allocations.
     """
     return {'frames': np.zeros((n + 1, 3, 3)), 'omega_world': np.zeros((n + 1, 3)),
             'jr': np.zeros((n, 3, 3)), 'g2': np.zeros((2, m, 6)), 'vectors': np.zeros((2, m)),
             'body_vectors': np.zeros((4, n, 3)), 'quats': np.zeros((n, 4)),
-            'stages': np.zeros((4, 5, n, 3)), 'rotor': np.zeros((6, 3)),
-            'targets': np.zeros(m)}
+            'stages': np.zeros((4, 5, n, 3)), 'rotor': np.zeros((6, 3))}
 
 
 def dense_storage(d: int) -> dict:
