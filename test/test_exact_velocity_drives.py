@@ -1,5 +1,5 @@
 """
-Exact velocity drives (``interface: velocity, mode: exact``): a driving constraint whose target moves.
+Exact velocity drives (``interface: velocity, mode: exact``): a moving driving constraint.
 
 The drive holds ``q − c(t) = 0`` with ``c(t) = c₀ + v* (t − t₀)``, one more row of the
 multiplier solve, so the joint follows ``q̇ = v*`` exactly and its effort is the row's

@@ -639,8 +639,8 @@ class ConstraintSet:
         if len(rows):
             # The kernels' expression (kernels.constrained_step._targets_at), bit for bit.
             p = self.row_par
-            p[rows, PAR_SCALAR] = p[rows, PAR_C0] + p[rows, PAR_RATE] * (self.time
-                                                                        - p[rows, PAR_T0])
+            p[rows, PAR_SCALAR] = p[rows, PAR_C0] + p[rows, PAR_RATE] * (
+                self.time - p[rows, PAR_T0])
         return rows
 
     @property

@@ -61,7 +61,7 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
-from .layout import PAR_E, PAR_E2, PAR_RA, PAR_RB, PAR_RATE, PAR_S, PAR_SCALAR, PAR_WIDTH
+from .layout import PAR_E, PAR_E2, PAR_RA, PAR_RATE, PAR_RB, PAR_S, PAR_SCALAR, PAR_WIDTH
 from .so3 import quat_matrix
 
 KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE, KIND_ANGLE = 0, 1, 2, 3, 4
