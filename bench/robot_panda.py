@@ -10,14 +10,16 @@ the same URDF text, changed in two ways so that both simulate the same mechanism
 
 * the two finger joints (prismatic; ``panda_finger_joint2`` has a ``<mimic>`` of
   ``panda_finger_joint1``) become fixed at q = 0 and the ``<mimic>`` goes. Left
-  prismatic, ours reads the mimic but does not enforce it yet (each finger would
-  slide freely, and past its unenforced limits), while MuJoCo 4.0.0's URDF import
-  turns it into a soft joint equality (``mjEQ_JOINT``, default solref/solimp) and
-  enforces the URDF's finger limits. Fixed, the fingers are lumped into link 7 in
-  both: the arm's 7 revolute joints are the only coordinates;
+  prismatic, ours enforces the mimic exactly (one row) but not yet the fingers'
+  position limits, so the fingers would slide out of their range as the arm
+  swings, while MuJoCo 4.0.0's URDF import turns the mimic into a soft joint
+  equality (``mjEQ_JOINT``, default solref/solimp) and enforces the URDF's finger
+  limits. Fixed, the fingers are lumped into link 7 in both: the arm's 7 revolute
+  joints are the only coordinates;
 * ``<dynamics>`` goes (damping 0.003 N m s/rad on the arm joints, 0.3 N s/m on the
-  fingers): MuJoCo's URDF import applies it as joint damping (and ``friction`` as
-  ``frictionloss``); ours reads it and does not simulate it yet.
+  fingers; friction 0): MuJoCo's URDF import applies it as joint damping (and
+  ``friction`` as ``frictionloss``); ours would damp by an exact flow, and does not
+  simulate friction yet: without it, both simulate the same undamped mechanism.
 
 The position limits stay in the URDF: ours reads them and does not enforce them yet;
 MuJoCo's are switched off after loading (``jnt_limited = 0``), because the swing

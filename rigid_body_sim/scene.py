@@ -46,7 +46,8 @@ A scene file::
          mode: servo, kp: 100.0, kd: 5.0}   # effort | position | velocity; N m/rad, N m s/rad
       - {name: wrist, joints: [joint3], interface: position, mode: exact}
                                     # exact: a driving constraint q = q* (no gains); its
-                                    # multiplier is the joint's effort
+                                    # multiplier is the joint's effort; on the velocity
+                                    # interface its target moves: q̇ = v* exactly
 
 A URDF or xacro file is a scene by itself: its robot, with gravity, ``dt``
 0.001 s, ``duration`` 10 s, floating unless it has a ``world`` link.

@@ -207,8 +207,7 @@ def test_a_hinge_goes_the_shorter_way_to_its_target(tmp_path):
 
 
 def test_exact_drive_specs_are_checked():
-    with pytest.raises(SpecError, match='mode.*exact velocity drives are not implemented'):
-        CommandGroup('g', ['j'], interface='velocity', mode='exact')
+    assert CommandGroup('g', ['j'], interface='velocity', mode='exact').kd == 0.0
     with pytest.raises(SpecError, match='mode.*effort has nothing to hold'):
         CommandGroup('g', ['j'], interface='effort', mode='exact')
     with pytest.raises(SpecError, match='kp.*an exact drive has no gains'):

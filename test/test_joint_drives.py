@@ -232,8 +232,11 @@ def test_unstable_gains_are_refused_with_the_bound(tmp_path):
     ({'name': 'g', 'joints': ['axle'], 'interface': 'torque'}, r'interface: must be'),
     ({'name': 'g', 'joints': ['axle'], 'interface': 'position', 'mode': 'exact', 'kp': 1.0},
      r'kp: an exact drive has no gains'),
-    ({'name': 'g', 'joints': ['axle'], 'interface': 'velocity', 'mode': 'exact'},
-     r"mode: 'exact' drives exist for the position interface only .*not implemented yet"),
+    ({'name': 'g', 'joints': ['axle'], 'interface': 'effort', 'mode': 'exact'},
+     r"mode: 'exact' drives exist for the position and velocity interfaces .*nothing to "
+     r'hold'),
+    ({'name': 'g', 'joints': ['axle'], 'interface': 'velocity', 'mode': 'exact', 'kd': 1.0},
+     r'kd: an exact drive has no gains'),
     ({'name': 'g', 'joints': ['axle'], 'interface': 'position'}, r'kp: a position servo'),
     ({'name': 'g', 'joints': ['nope'], 'interface': 'effort'},
      r"joints\[0\]: unknown joint 'nope'"),

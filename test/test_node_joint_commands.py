@@ -403,3 +403,47 @@ def test_an_exact_drive_follows_its_target_and_reports_the_torque_it_takes(ros, 
     # (1.8e-2 rad) is not counted as a violation. (/diagnostics comes once a second.)
     ros.client.wait_for(lambda: len(diags) > seen, 'diagnostics after the steps', node=node)
     assert float(_values(diags[-1])['constraint_violation']) < 1e-11
+
+
+SPIN_SCENE = EXACT_SCENE.replace('name: exact_arm', 'name: spin_arm').replace(
+    'name: arm_exact, joints: [j1, j2], interface: position',
+    'name: arm_spin, joints: [j1, j2], interface: velocity')
+
+
+def test_an_exact_velocity_drive_moves_at_its_velocity_through_both_topics(ros, tmp_path):
+    # node_arm under gravity with both joints on exact velocity drives: a group command
+    # turns j1 at 0.5 rad/s (j2 keeps v* = 0, held), then ~/joint_commands turns j2 at
+    # −1 rad/s from where it is; each joint is on its line q_s + v* (t − t_s), and the
+    # node's joint_states are the core's on the same commands, bit for bit.
+    assert 'interface: velocity, mode: exact' in SPIN_SCENE
+    scene = tmp_path / 'spin_arm.yaml'
+    scene.write_text(SPIN_SCENE.format(arm=SCENE.parent / 'urdf' / 'node_arm.urdf'))
+    node = ros.start({'scene': str(scene), 'start_paused': True})
+    states = ros.client.subscribe(JointState, '/joint_states')
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    group = _publisher(ros, node, Float64MultiArray, '/arm_spin/commands')
+    joints = _publisher(ros, node, JointState, f'{NODE}/joint_commands')
+    group.publish(Float64MultiArray(data=[0.5, NAN]))
+    _group_taken(ros, node, group, 2, diags, 0)
+    t1 = _step(ros, node, 100)
+    moved = _at(ros, node, states, t1, 'joint states')
+    # bound: SHAKE lands each step on the target of its end, to its tolerance (1e-13), and
+    # the target's rounding: 1e-12; held j2 as the exact position test's (1e-11).
+    assert moved.position[0] == pytest.approx(0.2 + 0.5 * t1, abs=1e-12)
+    assert moved.position[1] == pytest.approx(-0.3, abs=1e-11)
+    assert moved.velocity[0] == pytest.approx(0.5, abs=1e-10)   # bound: ω 1e-12 + rounding
+    sim = load_scene(scene).simulation
+    sim.command_joints({'j1': 0.5})
+    sim.step(100)
+    _assert_equal(moved, sim.joint_state())
+    assert abs(moved.effort[0]) > 1.0   # j1 carries the arm against gravity
+    joints.publish(JointState(name=['j2'], velocity=[-1.0]))
+    joints.publish(JointState(name=['j1'], velocity=[NAN]))   # refused: j1 keeps 0.5 rad/s
+    _counted(ros, node, diags, 'rejected_non_finite_target', 1)
+    t2 = _step(ros, node, 50)
+    turned = _at(ros, node, states, t2, 'joint states')
+    assert turned.position[0] == pytest.approx(0.2 + 0.5 * t2, abs=1e-12)
+    assert turned.position[1] == pytest.approx(-0.3 - 1.0 * (t2 - t1), abs=1e-11)
+    sim.command_joints({'j2': -1.0})
+    sim.step(50)
+    _assert_equal(turned, sim.joint_state())

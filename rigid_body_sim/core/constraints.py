@@ -34,8 +34,10 @@ fixed      point + the three dots of slider                     6
 planar     dot(k_a, e1_b) + dot(k_a, e2_b) + line(k_b)          3
 distance   distance                                             1
 drive      angle (rotary joint) or line (prismatic joint), with     1
-           the joint coordinate's target; made by command groups
-           of ``mode: exact`` (:mod:`.robots`), not by users
+           the joint coordinate's target, which may move at a rate
+           (``c(t) = c₀ + ċ (t − t₀)``, exact velocity drives); made
+           by command groups of ``mode: exact`` (:mod:`.robots`), not
+           by users
 mimic      a joint coordinate minus ``k`` times another's: one       1
            row over up to four bodies (the angle or line of the
            follower's pair plus a weighted *coupling part* on the
@@ -61,7 +63,7 @@ import scipy.sparse as sp
 from . import rotation as so3
 from .bodies import BodySet, State
 from .errors import SpecError
-from .kernels.layout import PAR_SCALAR
+from .kernels.layout import PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0
 from .kernels.rows import (KIND_ANGLE, KIND_DISTANCE, KIND_DOT, KIND_LINE, KIND_POINT,
                            pack_rows, rows_geometry, rows_rates)
 from .validate import finite_array, finite_scalar, positive_scalar
@@ -134,7 +136,10 @@ class DriveGeometry:
     p_a, p_b : array_like, shape (3,)
         m, prismatic: the points whose separation along ``k_b`` is the slide.
     target : float
-        rad or m: the coordinate held.
+        rad or m: the coordinate held (when the constraint is added).
+    rate : float
+        rad/s or m/s: how fast the target moves (an exact velocity drive), from
+        the time the constraint is added: ``c(t) = target + rate (t − t_added)``.
 
     """
 
@@ -146,12 +151,14 @@ class DriveGeometry:
     p_a: Any = (0.0, 0.0, 0.0)
     p_b: Any = (0.0, 0.0, 0.0)
     target: float = 0.0
+    rate: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'rotary', bool(self.rotary))
         for key in ('e1_a', 'e1_b', 'e2_b', 'k_b', 'p_a', 'p_b'):
             object.__setattr__(self, key, finite_array(getattr(self, key), key, (3,)))
         object.__setattr__(self, 'target', finite_scalar(self.target, 'target'))
+        object.__setattr__(self, 'rate', finite_scalar(self.rate, 'rate'))
         units = ('e1_a', 'e1_b', 'e2_b') if self.rotary else ('k_b',)
         for key in units:
             if abs(float(np.linalg.norm(getattr(self, key))) - 1.0) > 1e-9:
@@ -533,6 +540,8 @@ class ResolvedConstraint:
     dots: list = field(default_factory=list)   # [(s_a, e_b, target)]
     lines: list = field(default_factory=list)  # [(r_a, r_b, e_b, offset)]
     angles: list = field(default_factory=list)  # [(s_a, e_b, e2_b, target)]
+    # A drive's target (in angles or lines) is c at time t0; it moves at rate ċ.
+    motion: tuple = (0.0, 0.0)              # (ċ, t0)
     distance: Optional[tuple] = None       # (r_a, r_b, L)
     n_rows: int = 0                        # generic: length of Φ
     anchor: tuple = ()                     # (r_a, r_b): anchor lever arms, principal frames
@@ -558,7 +567,13 @@ class ConstraintSet:
         The point, dot, line, distance and angle rows (in this order).
     row_kind, row_comp, row_a, row_b : ndarray, shape (n_builtin_rows,), int64
     row_par : ndarray, shape (n_builtin_rows, kernels.layout.PAR_WIDTH)
-        The built-in rows as :mod:`.kernels.rows` takes them (layout there).
+        The built-in rows as :mod:`.kernels.rows` takes them (layout there): a
+        drive's scalar is its target at :attr:`time`, its rate the target's.
+    time : float
+        s: the time the drives' targets in ``row_par`` are of (see
+        :meth:`drive_targets_at`).
+    moving : bool
+        Some drive's target moves (an exact velocity drive with a rate).
     x_kind, x_comp, x_a, x_b, x_par : ndarray, shape (e,) and (e, PAR_WIDTH)
         The coupling parts (mimic rows' leader sides), built-in rows too.
     x_row : ndarray, shape (e,), int64
@@ -572,6 +587,7 @@ class ConstraintSet:
         self.bodies = bodies
         self._resolved: dict[str, ResolvedConstraint] = {}
         self.n_rows = 0
+        self.time = 0.0
         self._build()
 
     # -- adding and removing (between steps) -----------------------------------------------
@@ -647,38 +663,99 @@ class ConstraintSet:
         self._resolved[spec.name] = res
         self._build()
 
-    def set_drive_targets(self, names: list, targets: np.ndarray) -> np.ndarray:
+    def set_drive_targets(self, names: list, targets: np.ndarray, time: float,
+                          rates: Optional[np.ndarray] = None) -> np.ndarray:
         """
-        Move the targets of ``drive`` constraints (between steps); returns their rows.
+        Set the targets of ``drive`` constraints (between steps); returns their rows.
 
         Parameters
         ----------
         names : list of str
             Drive constraints.
         targets : ndarray, shape (k,)
-            rad or m, finite (the caller validates them).
+            rad or m, finite (the caller validates them): each target at ``time``.
+        time : float
+            s: when the targets are those; the set's targets are then of this time
+            (:meth:`drive_targets_at`).
+        rates : ndarray, shape (k,), optional
+            rad/s or m/s: how fast each target moves from ``time`` on (default 0:
+            held).
 
         Returns
         -------
         ndarray of int, shape (k,)
             Each drive's row in Φ, G and λ (a built-in row: its ``row_par`` scalar is
-            the target). Only that scalar changes: ``G`` does not depend on it.
+            the target, its rate the rate). Only those change: ``G`` does not depend
+            on them.
 
         """
         rows = np.empty(len(names), dtype=int)
-        for i, (name, target) in enumerate(zip(names, targets)):
-            res = self._get(name)
-            if res.spec.type is not JointType.DRIVE:
-                raise SpecError('name', f'constraint {name!r} is a {res.spec.type.value}, '
-                                        f'not a drive')
+        rates = np.zeros(len(names)) if rates is None else rates
+        for i, (name, target, rate) in enumerate(zip(names, targets, rates)):
+            res = self._drive(name)
             target = float(target)
             if res.angles:
                 res.angles[0] = res.angles[0][:3] + (target,)
             else:
                 res.lines[0] = res.lines[0][:3] + (target,)
+            res.motion = (float(rate), float(time))
             rows[i] = res.rows[0]
-            self.row_par[rows[i], PAR_SCALAR] = target
+        self._drive_anchors()
+        self.drive_targets_at(time)
         return rows
+
+    def drive_targets(self, names: list, time: float) -> np.ndarray:
+        """Targets (k,) of ``drive`` constraints at ``time`` (s), rad or m."""
+        out = np.empty(len(names))
+        for i, name in enumerate(names):
+            res = self._drive(name)
+            rate, t0 = res.motion
+            target = res.angles[0][3] if res.angles else res.lines[0][3]
+            out[i] = target + rate * (float(time) - t0)
+        return out
+
+    def drive_targets_at(self, time: float) -> np.ndarray:
+        """
+        Put the drives' targets at ``time`` (s) into ``row_par``; returns the drives' rows.
+
+        ``c(t) = c₀ + ċ (t − t₀)`` from each drive's target ``c₀`` set at ``t₀``: a
+        function of time, so a step redone, sub-stepped, or taken twice from one
+        state (the accuracy knob's doubling) sees the same targets.
+        """
+        rows = self._anchors[0]
+        self.time = float(time)
+        if len(rows):
+            # The kernels' expression (kernels.constrained_step._targets_at), bit for bit.
+            p = self.row_par
+            p[rows, PAR_SCALAR] = p[rows, PAR_C0] + p[rows, PAR_RATE] * (
+                self.time - p[rows, PAR_T0])
+        return rows
+
+    @property
+    def drive_rows(self) -> np.ndarray:
+        """Return the drives' rows (k,) in Φ, G and λ, in the order they were added."""
+        return self._anchors[0]
+
+    def _drive(self, name: str) -> ResolvedConstraint:
+        res = self._get(name)
+        if res.spec.type is not JointType.DRIVE:
+            raise SpecError('name', f'constraint {name!r} is a {res.spec.type.value}, '
+                                    f'not a drive')
+        return res
+
+    def _drive_anchors(self) -> None:
+        """Collect each drive's row, target c₀, rate ċ and time t₀ as arrays."""
+        drives = [r for r in self._resolved.values() if r.spec.type is JointType.DRIVE]
+        self._anchors = (
+            np.array([r.rows[0] for r in drives], dtype=int),
+            np.array([r.angles[0][3] if r.angles else r.lines[0][3] for r in drives]),
+            np.array([r.motion[0] for r in drives]), np.array([r.motion[1] for r in drives]))
+        self.moving = bool(np.any(self._anchors[2] != 0.0))
+        if len(drives):
+            rows = self._anchors[0]
+            self.row_par[rows, PAR_C0] = self._anchors[1]
+            self.row_par[rows, PAR_RATE] = self._anchors[2]
+            self.row_par[rows, PAR_T0] = self._anchors[3]
 
     def remove(self, name: str) -> Constraint:
         """Remove constraint ``name``; returns its spec."""
@@ -741,6 +818,7 @@ class ConstraintSet:
                 res.lines = [(r_a, r_b, fb[0], 0.0)]
         if jt in (JointType.DRIVE, JointType.MIMIC):
             dg = spec.drive
+            res.motion = (dg.rate, float(state.time))
             if dg.rotary:
                 res.angles = [(V[a].T @ dg.e1_a, V[b].T @ dg.e1_b, V[b].T @ dg.e2_b,
                                dg.target)]
@@ -829,6 +907,9 @@ class ConstraintSet:
         self.n_rows = start
         # A mimic constraint has one row: its coupling part adds to it.
         self.x_row = np.array([r.rows[0] for r in coupled], dtype=np.int64)
+        # The drives' targets at the set's time, and their rates.
+        self._drive_anchors()
+        self.drive_targets_at(self.time)
         # Bodies that take part in any constraint (others need no constraint work).
         self.touched = np.unique(np.concatenate(
             [np.array([r.a, r.b], dtype=int) for r in res]

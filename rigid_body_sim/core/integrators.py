@@ -110,6 +110,7 @@ from .errors import SpecError
 from .kernels import constrained_step as ckern
 from .kernels import free_step as kern
 from .kernels import methods
+from .kernels.layout import P_T_END, P_T_START
 from .kernels.views import Pinned
 
 
@@ -185,7 +186,21 @@ class Integrator:
         err = _NO_ESTIMATE if error is None else error
         if not self.dynamics.constrained:
             return self._free_step(state, dt, t_end, err)
-        setup = self.dynamics.solver.kernel_setup()
+        solver = self.dynamics.solver
+        setup = solver.kernel_setup()
+        if solver.constraints.moving:
+            # Moving drive targets (exact velocity drives): the kernels take them at the
+            # start and leave them at the end (t_end: the time the next step starts from).
+            solver.targets_at(state.time)
+            par = self._kernel_parameters()
+            par[P_T_START], par[P_T_END] = state.time, t_end
+            solver.kernel_time = None   # until the kernels return: one may raise half-way
+            if not len(setup.free) and len(setup.components) == 1:
+                new = self._whole_step(state, dt, t_end, setup, err)
+            else:
+                new = self._constrained_step(state, dt, t_end, setup, err)
+            solver.kernel_time = t_end
+            return new
         if not len(setup.free) and len(setup.components) == 1:
             return self._whole_step(state, dt, t_end, setup, err)
         return self._constrained_step(state, dt, t_end, setup, err)

@@ -940,14 +940,16 @@ class CommandGroup:
     interface : {'effort', 'position', 'velocity'}
     mode : {'servo', 'exact'}
         ``servo``: a PD drive ``τ = clip(kp (q* − q) + kd (v* − q̇), ±effort)``
-        (MuJoCo's position and velocity actuators). ``exact`` (position groups):
-        the driving constraint ``q − q* = 0``, one more row of the multiplier
-        solve, so the joint follows its target exactly (a jump is closed along
-        ``exp(−t / constraint_time_constant)``, as any violated constraint) and
-        its effort is the row's multiplier: the torque the motion takes, not
-        limited by the URDF effort (that needs bounded rows). A hinge goes the
-        shorter way (within π) to its target. Exact velocity drives are not
-        implemented yet and are refused.
+        (MuJoCo's position and velocity actuators). ``exact`` (position and
+        velocity groups): the driving constraint ``q − c(t) = 0``, one more row of
+        the multiplier solve, so the joint follows its target exactly and its
+        effort is the row's multiplier: the torque the motion takes, not limited
+        by the URDF effort (that needs bounded rows). A position group's target
+        is ``c = q*``: a jump is closed along ``exp(−t /
+        constraint_time_constant)``, as any violated constraint, and a hinge goes
+        the shorter way (within π). A velocity group's target moves, ``c(t) = c₀ +
+        v* (t − t₀)`` from where it was when ``v*`` was commanded (no jump), so
+        ``q̇ = v*`` exactly; a hinge may turn without end.
     kp : float
         N m/rad or N/m, > 0 for position servos; 0 for velocity ones.
     kd : float
@@ -983,11 +985,10 @@ class CommandGroup:
         if kp < 0.0 or kd < 0.0:
             raise SpecError('kp' if kp < 0.0 else 'kd', 'gains must be >= 0')
         if self.mode == 'exact':
-            if interface is not Interface.POSITION:
-                why = ("exact velocity drives are not implemented yet; use 'servo'"
-                       if interface is Interface.VELOCITY else 'an effort has nothing to hold')
-                raise SpecError('mode', f"'exact' drives exist for the position interface "
-                                        f'only (a {interface.value} group: {why})')
+            if interface is Interface.EFFORT:
+                raise SpecError('mode', "'exact' drives exist for the position and velocity "
+                                        'interfaces (an effort group: an effort has nothing '
+                                        'to hold)')
             if kp or kd:
                 raise SpecError('kp' if kp else 'kd', f'an exact drive has no gains (it is a '
                                                       f'constraint), got kp {kp!r}, kd {kd!r}')

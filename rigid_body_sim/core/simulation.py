@@ -485,8 +485,10 @@ class Simulation:
         Every value is validated before anything changes. Floating bases keep
         their pose and twist; the children of floating and planar joints keep
         their pose and twist relative to their parent. Exact drives take the new
-        positions as their targets and hold them: a velocity given for a driven
-        joint is projected away with the rest of the velocities. Mimic joints
+        positions as their targets: position drives hold them, velocity drives move
+        them on at their commanded velocity from now. A velocity given for a driven
+        joint is projected, with the rest of the velocities, onto the drive's (0,
+        or the velocity drive's ``v*``). Mimic joints
         follow their leaders (a value given for one that contradicts its
         leader's is refused).
 
@@ -511,11 +513,12 @@ class Simulation:
                     (float(value) - self.joints.positions[i]) / (2.0 * np.pi))
         if self.drives is not None:
             self.drives.center[:] = self.joints.positions
-            if len(self._exact):   # exact drives hold the joints where they were set
-                self.dynamics.solver.set_drive_targets(self._drive_names,
-                                                       self.joints.positions[self._exact])
+            if len(self._exact):   # exact drives start where the joints were set
+                self.dynamics.solver.set_drive_targets(
+                    self._drive_names, self.joints.positions[self._exact], self.time,
+                    self._drive_rates(self._exact))
             self.dynamics.changed()
-        # (after the drives' targets: the projection onto Φ̇ = −ωΦ must see them hold)
+        # (after the drives' targets: the projection onto Φ̇ = −ωΦ must see them)
         self._reconcile_velocities()
 
     def set_joint_efforts(self, efforts: dict, duration: Optional[float] = None) -> None:
@@ -548,7 +551,9 @@ class Simulation:
 
         Effort joints as :meth:`set_joint_efforts`; position and velocity servos
         and exact drives get a new target, held until replaced. Validated before
-        anything changes.
+        anything changes. An exact position drive's target is the position; an
+        exact velocity drive's target moves at the velocity from where it is now
+        (the position target does not jump), from the next step on.
         """
         if not isinstance(values, dict):
             raise SpecError('values', f'expected a mapping joint -> command, got {values!r}')
@@ -566,11 +571,21 @@ class Simulation:
             idx = np.array(list(targets), dtype=int)
             values = np.array(list(targets.values()))
             self.drives.set_targets(idx, values)
-            exact = self.drives.exact[idx]
-            if np.any(exact):
-                self.dynamics.solver.set_drive_targets(
-                    [drive_name(self.joints.names[i]) for i in idx[exact]], values[exact])
+            exact = idx[self.drives.exact[idx]]
+            if len(exact):
+                names = [drive_name(self.joints.names[i]) for i in exact]
+                solver = self.dynamics.solver
+                velocity = self.drives.interface_is(Interface.VELOCITY)[exact]
+                # A velocity drive's target continues from where it is now.
+                targets = np.where(velocity, solver.drive_targets(names, self.time),
+                                   values[self.drives.exact[idx]])
+                solver.set_drive_targets(names, targets, self.time, self._drive_rates(exact))
             self.dynamics.changed()
+
+    def _drive_rates(self, idx: np.ndarray) -> np.ndarray:
+        """Rates (k,) of the exact drives of joints ``idx``: v* for velocity drives, else 0."""
+        velocity = self.drives.interface_is(Interface.VELOCITY)[idx]
+        return np.where(velocity, self.drives.v_target[idx], 0.0)
 
     def joint_counters(self) -> dict:
         """Return the counts since the last reset: clamped efforts, velocity-limit excursions."""

@@ -74,7 +74,7 @@ from .graph import closes_loop, component_labels, loop_structure, tree_structure
 from .kernels.constrained_step import (component_multipliers, component_project_velocities,
                                        component_reach, CURRENT, dense_storage, GENERIC, pack,
                                        tree_storage, workspace)
-from .kernels.layout import BODY, PAR, PAR_SCALAR, Solve
+from .kernels.layout import BODY, PAR, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0, Solve
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -257,6 +257,9 @@ class ConstraintSolver:
         self._kernel_cache: Optional[tuple] = None
         self._plan: Optional[tuple] = None
         self._par: Optional[tuple] = None
+        #: s: the time the kernels' copies of the drives' targets are of (None: unknown,
+        #: a step raised half-way). A step moves them from its start to its end.
+        self.kernel_time: Optional[float] = None
         # Keys of this solver's generic rows in kernels.constrained_step.GENERIC, dropped
         # when the setup is rebuilt or the solver is collected.
         self._generic_keys: list = []
@@ -369,30 +372,59 @@ class ConstraintSolver:
                                              np.zeros(mc), body, xs))
         setup = KernelSetup(np.flatnonzero(~touched), tuple(components), [None])
         self._kernel_cache = (cs, cs.version, setup)
+        self.kernel_time = cs.time   # the copies' targets are the set's
         return setup
 
-    def set_drive_targets(self, names: list, targets: np.ndarray) -> None:
+    def set_drive_targets(self, names: list, targets: np.ndarray, time: float,
+                          rates: Optional[np.ndarray] = None) -> None:
         """
-        Move the targets of ``drive`` constraints, in the set and in the kernels' copies.
+        Set the targets of ``drive`` constraints at ``time`` (s), and their rates.
 
-        Only the rows' ``row_par`` scalars change (not the rows' structure), so the
+        In the set and in the kernels' copies (:meth:`.ConstraintSet.set_drive_targets`):
+        ``targets`` (k,) rad or m, ``rates`` (k,) rad/s or m/s (default 0). Only the
+        rows' ``row_par`` scalars and rates change (not the rows' structure), so the
         kernel setup is kept; its workspaces no longer hold the geometry of the
         current state (Φ changed).
         """
-        rows = self.constraints.set_drive_targets(names, targets)
+        self.constraints.set_drive_targets(names, targets, time, rates)
+        self._copy_targets(True)
+
+    def drive_targets(self, names: list, time: float) -> np.ndarray:
+        """Targets (k,) of ``drive`` constraints at ``time`` (s), rad or m."""
+        return self.constraints.drive_targets(names, time)
+
+    def targets_at(self, time: float) -> None:
+        """
+        Put the kernels' copies of moving drive targets at ``time`` (s), if they are not.
+
+        A step leaves them at its end (the kernels advance them by ``ċ dt``): the
+        next step from there finds them in place and keeps its geometry. A call
+        from another time (a step taken again from the same state, the multipliers
+        at a state set by hand) rewrites them from :meth:`.ConstraintSet.drive_targets_at`.
+        """
+        if not self.constraints.moving or self.kernel_time == time:
+            return
+        self.constraints.drive_targets_at(time)
+        self._copy_targets(False)
+
+    def _copy_targets(self, rates: bool) -> None:
+        """Copy the drives' targets (and ``rates``) of the set into the kernels' rows."""
+        cs = self.constraints
+        rows = cs.drive_rows
         c = self._kernel_cache
-        if c is None or c[0] is not self.constraints or c[1] != self.constraints.version \
-                or c[2] is None:
+        if c is None or c[0] is not cs or c[1] != cs.version or c[2] is None:
             return   # the next setup copies the new targets
         setup = c[2]
         setup.geometry_of[0] = None
+        self.kernel_time = cs.time
+        columns = [PAR_SCALAR, PAR_RATE, PAR_C0, PAR_T0] if rates else [PAR_SCALAR]
         for comp in setup.components:
             local = np.searchsorted(comp.rows, rows)
             found = comp.rows[np.minimum(local, len(comp.rows) - 1)] == rows
             mine = (local < len(comp.rows)) & found
             if np.any(mine):
-                comp.views['row_par'][local[mine], PAR_SCALAR] = \
-                    self.constraints.row_par[rows[mine], PAR_SCALAR]
+                for col in columns:
+                    comp.views['row_par'][local[mine], col] = cs.row_par[rows[mine], col]
 
     def kernel_parameters(self, max_rotation: Optional[float], max_substeps: int,
                           closing: float) -> np.ndarray:
@@ -401,7 +433,7 @@ class ConstraintSolver:
                        pos_tol=self.position_tolerance, max_it=float(self.max_iterations),
                        rank_rtol=self.rank_rtol, reg=self.regularization, closing=closing,
                        max_rot=np.inf if max_rotation is None else float(max_rotation),
-                       max_sub=float(max_substeps))
+                       max_sub=float(max_substeps), t_start=0.0, t_end=0.0)
 
     # -- the compiled solve outside a step ----------------------------------------------
 
@@ -431,6 +463,7 @@ class ConstraintSolver:
         Afterwards each component's workspace holds G and Gᵀλ of ``state``.
         """
         setup = self.kernel_setup()
+        self.targets_at(state.time)
         current = setup.geometry_of[0] is state.y
         setup.geometry_of[0] = None   # until every component is done: one may raise
         par = self._settings()
@@ -452,7 +485,9 @@ class ConstraintSolver:
         return lam
 
     def violation(self, state: State) -> np.ndarray:
-        """Φ (m,) at ``state``."""
+        """Φ (m,) at ``state`` (a drive's with its target at the state's time)."""
+        if self.constraints.moving:
+            self.constraints.drive_targets_at(state.time)
         return self.constraints.geometry(state.pos_com_world, state.quat_principal_world).phi
 
     def closest_reach(self, pos: np.ndarray, quat: np.ndarray, tolerance: float,
@@ -600,6 +635,7 @@ class ConstraintSolver:
         work is counted.
         """
         setup = self.kernel_setup()
+        self.targets_at(state.time)
         # Of the positions, but never of the new state's buffer.
         setup.geometry_of[0] = None
         par = self._settings()

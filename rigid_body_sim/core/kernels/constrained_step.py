@@ -25,8 +25,11 @@ happen inside the call.
 Parameters array ``par`` (float64)
 ----------------------------------
 ``[time_constant, omega, position_tolerance, max_iterations, rank_rtol,
-regularization, closing, max_rotation, max_substeps]`` (see
-:class:`..solver.ConstraintSolver` and :class:`..integrators.Integrator`).
+regularization, closing, max_rotation, max_substeps, t_start, t_end]`` (see
+:class:`..solver.ConstraintSolver` and :class:`..integrators.Integrator`; the
+times, s, of the step's start and end are read only where a row's target moves:
+an exact velocity drive's, ``c0 + ċ (t − t0)`` at the time of each configuration
+the step evaluates, left at ``t_end``).
 
 Work counts (``counts``: the simulation's int64 tally of work counters, which
 the kernels add to; see :class:`..dynamics.Dynamics`): the slots below.
@@ -59,6 +62,7 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT,
                      V_RHS, V_SOLUTION, VECTORS, VM, W_WIDTH, WATCH, X_COMP, X_KIND, X_PAR,
                      X_WEIGHT, XV_GAMMA, XV_PHI, XV_PHI_DOT, XVEC)
+from .layout import P_T_END, P_T_START, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
 from .methods import Method, ONE_STEP, TRIPLE_JUMP
@@ -503,6 +507,34 @@ def _geometry(pos, quat, cx, which, counts):
         _i1(cx, FACTOR_STATE)[FS_VALID] = 0   # the symmetric factor was of the geometry replaced
 
 
+@njit(cache=True)
+def _moving(cx):
+    """Tell whether some row's target moves (a ``rate`` ċ, :data:`.layout.ROW_PARAMETERS`)."""
+    rpar = _f2(cx, ROW_PAR)
+    for k in range(rpar.shape[0]):
+        if rpar[k, PAR_RATE] != 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _targets_at(cx, t):
+    """
+    Put the moving rows' targets at the time ``t`` (s): ``c0 + ċ (t − t0)``.
+
+    An exact velocity drive's target, a function of time (the expression of
+    :meth:`..constraints.ConstraintSet.drive_targets_at`, so Python and the kernels
+    agree bit for bit). Every evaluation of Φ in a step is at the time of its
+    configuration: SHAKE's end at the (sub)step's end, the stages of ``rkmk4`` at
+    theirs; a step redone with more sub-steps starts again from its start's.
+    """
+    rpar = _f2(cx, ROW_PAR)
+    for k in range(rpar.shape[0]):
+        rate = rpar[k, PAR_RATE]
+        if rate != 0.0:
+            rpar[k, PAR_SCALAR] = rpar[k, PAR_C0] + rate * (t - rpar[k, PAR_T0])
+
+
 @njit(cache=True, inline='always')
 def _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts):
     """
@@ -527,8 +559,9 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
     """
     λ of the acceleration-level solve at the current geometry; ``GT_LAMBDA`` gets ``Gᵀλ``.
 
-    ``FREE_ACC`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ``. The
-    solve uses the symmetric factor (see :func:`_sym_factor`).
+    ``FREE_ACC`` holds the free accelerations (n, 6); ``Φ̈ = −2ωΦ̇ − ω²Φ`` with
+    ``Φ̇ = Gν − ċ`` (a moving target's rate, :func:`.rows.framed_rates`; ``c̈ = 0``).
+    The solve uses the symmetric factor (see :func:`_sym_factor`).
     """
     phi, G = _f2(cx, PHI)[CURRENT], _f4(cx, JAC)
     Ga, Gb = G[CURRENT, 0], G[CURRENT, 1]
@@ -647,7 +680,8 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     """
     Project velocities onto ``Φ̇ = −ωΦ`` at the current geometry, in place.
 
-    The solve uses the symmetric factor (see :func:`_sym_factor`).
+    ``Φ̇ = Gν − ċ``: a moving target's rows (exact velocity drives) get
+    ``Gν = ċ − ωΦ``. The solve uses the symmetric factor (see :func:`_sym_factor`).
     """
     n = pos.shape[0]
     counts[Count.VEL_PROJECTIONS] += 1
@@ -663,6 +697,9 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     w = par[P_OMEGA]
     for r in range(phi.shape[0]):
         vm[V_RHS, r] += w * phi[r]
+    rpar = _f2(cx, ROW_PAR)
+    for r in range(rpar.shape[0]):   # the built-in rows; generic ones do not move
+        vm[V_RHS, r] -= rpar[r, PAR_RATE]
     mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
     _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, SYMMETRIC)
     _gt_lambda(Ga, Gb, a, b, _own(cx), vm[V_SOLUTION], g6)
@@ -932,12 +969,15 @@ def _rounding_floor(pos, m):
 
 @njit(cache=True, inline='always')
 def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, par,
-               last_resort, lam, c_valid, counts):
+               last_resort, lam, c_valid, counts, s0, s1):
     """
     One (sub)step of a splitting method with RATTLE; returns (converged, c_valid).
 
     SHAKE factorizes into the storages ``GENERAL``; the kicks and the velocity
-    projection solve with the symmetric factor in ``SYMMETRIC``.
+    projection solve with the symmetric factor in ``SYMMETRIC``. The (sub)step runs
+    from the time ``s0`` to ``s1`` (s), ``s1 − s0 = dt`` to rounding: moving targets
+    are at ``s0`` on entry and at ``s1`` on return (:func:`_targets_at`); each
+    sub-step of the triple jump (one goes back in time) ends on its own.
     """
     n = pos.shape[0]
     symmetric = method != Method.SYMPLECTIC_EULER
@@ -950,8 +990,11 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
     for i in range(n):
         for c in range(3):
             mom[i, c] = om[i, c] * body[i, B_MOMENTS + c]
+    elapsed = 0.0
     for sub in range(n_sub):
         h = weights[sub] * dt
+        elapsed += weights[sub]
+        end = s1 if sub == n_sub - 1 else s0 + elapsed * (s1 - s0)
         if not c_valid:
             _geometry(pos, quat, cx, CURRENT, counts)
             c_valid = True
@@ -966,6 +1009,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
             drives.damping_flow(pos, quat, vel, mom, body, wrench, first, False)
         _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, cx, par, lam, c_valid,
               counts)
+        _targets_at(cx, end)   # SHAKE's end lands on the targets of its time
         if not _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts):
             return False, False
         if symmetric and (damping or joint_damping):
@@ -990,9 +1034,13 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
 
 @njit(cache=True, inline='always')
 def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_valid, counts,
-           err):
+           err, s0, s1):
     """
     One RKMK4 (sub)step with constraint forces at every stage, then Φ̇ = −ωΦ.
+
+    The (sub)step runs from the time ``s0`` to ``s1`` (s): each stage evaluates
+    moving targets at its time (``s0``, the midpoint twice, ``s1``;
+    :func:`_targets_at`), which stay at ``s1`` on return.
 
     With ``err`` of length 1, the slopes at the end (constraint forces included,
     before the velocity projection) give the embedded estimate
@@ -1010,6 +1058,7 @@ def _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam, c_v
         rkmk4_stage(s, h, pos, quat, vel, om, kp, kv, kw, kr, p, q, v, w, u, counts)
         if s:
             c_valid = False
+            _targets_at(cx, s1 if s == 3 else s0 + 0.5 * (s1 - s0))
         counts[Count.RHS] += 1
         _free_accelerations(p, q, v, w, body, gforce, wrench, flags, a6, force, torque, counts)
         if not c_valid:
@@ -1110,8 +1159,12 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         counts[Count.CAPPED] += 1   # the work of one step stays bounded; the caller reports it
         k = max_sub
     valid0 = c_valid
+    moving = _moving(cx)
+    t_start, t_end = par[P_T_START], par[P_T_END]
     while True:
         last_resort = k >= max_sub
+        if moving:
+            _targets_at(cx, t_start)   # a redone step starts from the targets of its start
         _copy(pos0, pos)
         _copy(quat0, quat)
         _copy(vel0, vel)
@@ -1121,13 +1174,17 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         if k > 1:
             counts[Count.SUBSTEPS] += k
         h = dt / k
-        for _ in range(k):
+        for j in range(k):
+            # The (sub)step's times: the last one ends at the step's end exactly.
+            s0 = t_start + j * h
+            s1 = t_end if j == k - 1 else t_start + (j + 1) * h
             if method == Method.RKMK4:
                 _rkmk4(pos, quat, vel, om, h, body, gforce, wrench, flags, cx, par, lam,
-                       c_valid, counts, err)
+                       c_valid, counts, err, s0, s1)
             else:
                 ok, c_valid = _splitting(method, pos, quat, vel, om, h, body, gforce, wrench,
-                                         flags, cx, par, last_resort, lam, c_valid, counts)
+                                         flags, cx, par, last_resort, lam, c_valid, counts,
+                                         s0, s1)
                 if not ok:
                     break
             c_valid = True

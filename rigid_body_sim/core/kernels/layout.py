@@ -275,13 +275,17 @@ JOINT = Columns('joint', [('parent', 1), ('child', 1), ('rotary', 1), ('p_jp', 3
                           ('velocity_limit', 1)])
 #: ``row_par`` (m, PAR_WIDTH) of the constraint rows (:mod:`.rows`): the lever arms on
 #: bodies a and b (principal frames), the axes s and e, a second axis e2 of body b (angle
-#: rows), and a scalar (a length, a cosine, a joint drive's target).
+#: rows), a scalar (a length, a cosine, a joint drive's target), and how that scalar
+#: moves with time t: ``scalar = c0 + rate (t − t0)`` (``rate`` ċ, 1/s: an exact velocity
+#: drive's target velocity, 0 otherwise; then ``Φ̇ = G ν − ċ``, and a step puts the
+#: scalar at the time of each configuration it evaluates).
 ROW_PARAMETERS = Columns('row par', [('ra', 3), ('rb', 3), ('s', 3), ('e', 3), ('e2', 3),
-                                     ('scalar', 1)])
-#: ``par`` of the constrained kernels: the solver's and the integrator's settings.
+                                     ('scalar', 1), ('rate', 1), ('c0', 1), ('t0', 1)])
+#: ``par`` of the constrained kernels: the solver's and the integrator's settings, and the
+#: times (s) a step starts and ends at (moving drive targets, see ``ROW_PARAMETERS``).
 PAR = Columns('par', [('tau', 1), ('omega', 1), ('pos_tol', 1), ('max_it', 1),
                       ('rank_rtol', 1), ('reg', 1), ('closing', 1), ('max_rot', 1),
-                      ('max_sub', 1)])
+                      ('max_sub', 1), ('t_start', 1), ('t_end', 1)])
 
 #: A state buffer ``y`` (13 n) of :class:`..bodies.State`: blocks of n rows each, in
 #: this order (``S_POS`` etc. are each block's first entry divided by n).

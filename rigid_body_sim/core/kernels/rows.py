@@ -29,6 +29,8 @@ Row description (m built-in rows)
     12:15         ``e2``     angle: a second unit vector in body b, ``⟂ e``
     15            scalar     dot: target ``c``; line: offset ``c``; distance: length
                              ``L``; angle: target ``c`` (rad)
+    16            rate       ``ċ``, how fast the scalar moves (1/s; m/s or rad/s for
+                             an exact velocity drive's line or angle row), else 0
     ============  =========  =====================================================
 
 Rows, with anchors ``P = x + R r``, ``d = P_a − P_b``, ``u = R_a s``,
@@ -40,7 +42,12 @@ Rows, with anchors ``P = x + R r``, ``d = P_a − P_b``, ``u = R_a s``,
 * distance: ``Φ = |d| − L``;
 * angle: ``Φ = wrap(θ − c)``, ``θ = atan2(ε₂ · u, ε · u)`` the rotation of ``u``
   about ``ε × ε₂`` (a hinge's joint angle), the difference taken in ``(−π, π]``:
-  a driven hinge goes the shorter way to its target.
+  a driven hinge goes the shorter way to its target (``c`` may count turns).
+
+A row whose scalar moves (``rate`` ``ċ``: an exact velocity drive's target
+``c(t)``) has ``Φ̇ = G ν − ċ`` (and ``c̈ = 0``: ``γ`` is unchanged); the scalar
+itself is the target at the time of the configuration, which the caller moves
+(:func:`.constrained_step._targets_at` inside a step).
 
 The Jacobian rows are with respect to ``(δx_com_world, δΘ_principal)`` of each
 body (``δR = R hat(δΘ)``): ``Ga`` (m, 6) on body a, ``Gb`` (m, 6) on body b
@@ -54,7 +61,7 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
-from .layout import PAR_E, PAR_E2, PAR_RA, PAR_RB, PAR_S, PAR_SCALAR, PAR_WIDTH
+from .layout import PAR_E, PAR_E2, PAR_RA, PAR_RATE, PAR_RB, PAR_S, PAR_SCALAR, PAR_WIDTH
 from .so3 import quat_matrix
 
 KIND_POINT, KIND_DOT, KIND_LINE, KIND_DISTANCE, KIND_ANGLE = 0, 1, 2, 3, 4
@@ -70,8 +77,8 @@ def pack_rows(rows: list) -> tuple:
     Parameters
     ----------
     rows : list of tuple
-        ``(kind, comp, a, b, r_a, r_b, s, e, e2, scalar)`` per row; vectors (3,)
-        or None for zero.
+        ``(kind, comp, a, b, r_a, r_b, s, e, e2, scalar)`` or ``(..., scalar, rate)``
+        per row; vectors (3,) or None for zero; ``rate`` 0 when not given.
 
     Returns
     -------
@@ -85,12 +92,14 @@ def pack_rows(rows: list) -> tuple:
     a = np.zeros(m, dtype=np.int64)
     b = np.zeros(m, dtype=np.int64)
     par = np.zeros((m, PAR_WIDTH))
-    for k, (kd, c, ia, ib, r_a, r_b, s, e, e2, scalar) in enumerate(rows):
+    for k, row in enumerate(rows):
+        kd, c, ia, ib, r_a, r_b, s, e, e2, scalar = row[:10]
         kind[k], comp[k], a[k], b[k] = kd, c, ia, ib
         for col, vec in ((PAR_RA, r_a), (PAR_RB, r_b), (PAR_S, s), (PAR_E, e), (PAR_E2, e2)):
             if vec is not None:
                 par[k, col:col + 3] = vec
         par[k, PAR_SCALAR] = scalar
+        par[k, PAR_RATE] = row[10] if len(row) > 10 else 0.0
     return kind, comp, a, b, par
 
 
@@ -326,7 +335,7 @@ def rows_rates(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, omega: np.nda
                par: np.ndarray, Ga: np.ndarray, Gb: np.ndarray, need_gamma: bool,
                phi_dot_out: np.ndarray, gamma_out: np.ndarray) -> None:
     """
-    ``Φ̇ = G ν`` and ``γ = Ġ ν`` of the built-in rows.
+    ``Φ̇ = G ν − ċ`` and ``γ = Ġ ν`` of the built-in rows (``ċ``: the rows' ``rate``).
 
     Parameters
     ----------
@@ -347,7 +356,7 @@ def rows_rates(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, omega: np.nda
     need_gamma : bool
         False: γ is set to zero.
     phi_dot_out : ndarray, shape (m,)
-        Output: Φ̇.
+        Output: Φ̇ (``G ν`` less the rate of a moving target).
     gamma_out : ndarray, shape (m,)
         Output: γ, the velocity-product term of ``Φ̈ = G ν̇ + γ``.
 
@@ -386,7 +395,7 @@ def framed_rates(pos: np.ndarray, vel: np.ndarray, omega: np.ndarray, R: np.ndar
         if j < n:
             for c in range(3):
                 rate += Gb[k, c] * vel[j, c] + Gb[k, 3 + c] * omega[j, c]
-        phi_dot_out[k] = rate
+        phi_dot_out[k] = rate - par[k, PAR_RATE]
         if not need_gamma:
             gamma_out[k] = 0.0
             continue
