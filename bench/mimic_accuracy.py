@@ -25,12 +25,10 @@ from pathlib import Path
 import sys
 import tempfile
 
-import numpy as np
-
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / 'test'))   # the tests' scenes and joint-space reference
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / 'test'))   # the tests' scenes
 
 from joint_space_reference import JointSpaceModel, urdf_path  # noqa: E402
+import numpy as np  # noqa: E402
 from robot_helpers import joint_accelerations  # noqa: E402
 from test_mimic_joints import (load, reduced_accelerations, reduced_reference,  # noqa: E402
                                two_arms)
