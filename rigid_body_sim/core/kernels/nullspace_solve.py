@@ -1,0 +1,661 @@
+"""
+Prototype: the tree solve of ``G M⁻¹ Gᵀ λ = rhs`` in inertia (articulated-body) form.
+
+This is the premise check of issue 19 (``../shared/research/chain-perf.md``,
+option 1 and Appendix A), not yet a path of the step. It solves the same
+system as :func:`.tree_solve.tree_factor` / :func:`.tree_solve.tree_solve`
+with ``H = G`` and ``reg = 0``, for forests whose groups are the built-in
+joints, but eliminates each joint's ``d = 6 − k`` freedoms instead of its
+``k`` rows.
+
+Formulation
+-----------
+With ``M a = Gᵀ λ`` and ``G a = rhs``, ``λ = (G M⁻¹ Gᵀ)⁻¹ rhs``: the
+multipliers are those of the KKT system ``[[M, −Gᵀ], [G, 0]]``, which is
+eliminated body by body, leaves first (Featherstone's articulated-body
+recursion, derived as block elimination of this augmented system by Pai,
+Ascher & Kry, ICRA 2000; the null-space method of Benzi, Golub & Liesen,
+Acta Numerica 2005, §6, applied per joint). Everything is in world axes at
+each body's centre of mass: ``ν = (v, ω)``, ``ω = R Ω``, so a row's block
+``(g_v, g_Ω)`` on a body becomes ``w = (g_v, R g_Ω)`` and ``M_b = diag(m I,
+R J Rᵀ)``.
+
+Per joint ``x`` (child body ``c``; parent body ``p``, or the world), with the
+child blocks ``W_c`` (6 x k) of its rows, everything is read from the rows'
+own blocks, so it holds where ``Φ ≠ 0`` too:
+
+* a point row's child block is ``s (e_j, ρ_c × e_j)`` (``s = ±1``: the
+  child is body a or b), which gives the lever ``ρ_c`` from the child's
+  centre of mass to its anchor, and the parent's gives ``ρ_p``; a dot row's
+  is ``(0, t)``; a line row's ``(f, τ)`` with ``f ⟂ τ``;
+* the shift ``X = [[I, −[d]×], [0, I]]`` (``v_c = v_p + ω_p × d``, ``ω_c =
+  ω_p``) with ``W_cᵀ X = −W_pᵀ`` for every row: ``d = ρ_p − ρ_c`` when the
+  joint has point rows, and for a slider's line rows (``f_k × d = τ_ck +
+  τ_pk =: σ_k``, ``f_1 ⟂ f_2`` unit) ``d = σ_1 × f_1 + ((σ_2 × f_2) · f_1)
+  f_1`` (that is ``x_c − x_p``); dot rows hold for any ``d``;
+* the motion subspace ``S`` (6 x d) with ``W_cᵀ S = 0``: hinge ``n = t_1 ×
+  t_2``, ``S = (ρ_c × n, n)``; ball ``S = ([ρ_c]×, I)``; slider ``n = f_1 ×
+  f_2``, ``S = (n, 0)``; fixed: none;
+* a particular solution ``g`` of ``W_cᵀ g = c`` (``c``: the rows' rhs),
+  from dual bases of the dot torques (``b_i · t_j = δ_ij``: for two,
+  ``b_1 = t_2 × n / |n|²``, ``b_2 = n × t_1 / |n|²``; for three, the
+  reciprocal basis ``t_j × t_k / det``) and of a slider's line directions:
+  ``g_ω = Σ c_dot,i b_i``, then ``g_v = s c_pt − g_ω × ρ_c`` (point rows) or
+  ``g_v = Σ (c_line,k − τ_k · g_ω) b_line,k`` (slider).
+
+Factor (leaves first): ``I^A_c = M_c + Σ_children Xᵀ Ia X``, ``U = I^A_c S``,
+``D = Sᵀ U``, ``Ia = I^A_c − U D⁻¹ Uᵀ``, ``I^A_p += Xᵀ Ia X``.
+
+Solve: up, ``z = p_c + I^A_c g``, ``q₀ = −D⁻¹ Sᵀ z``, ``p_p += Xᵀ (z + U
+q₀)``; down, ``y = X a_p`` (0 at the world), ``a_c = y + g + S (q₀ − D⁻¹ Uᵀ
+y)``; then the joint's wrench on its child ``F = I^A_c a_c + p_c = W_c λ``,
+read with the same dual bases: point rows ``λ = s F_v``, dot rows ``λ_i = b_i
+· (F_ω − ρ_c × F_v)``; a slider's lines ``λ_k = b_line,k · F_v``, its dots
+``b_i · (F_ω − Σ λ_k τ_k)``.
+
+Scope of the prototype: each tree hangs from one body joined to the world
+(no free-floating root, no second joint to the world, no rows on one body,
+no immovable body, no redundant rows); :func:`nullspace_structure` returns
+None otherwise. The unsymmetric SHAKE matrix ``G_E D M⁻¹ G_Sᵀ`` is not built
+here (it extends: ``K = M diag(I, J_r⁻¹)``, ``S_E, X_E`` from the end rows,
+``S_S, X_S`` from the start rows, Appendix A).
+
+The kernels are compiled with numba (``@njit(cache=True)``), take only numpy
+arrays and scalars, and allocate nothing.
+"""
+
+from __future__ import annotations
+
+from numba import njit
+import numpy as np
+
+FIXED, HINGE, BALL, SLIDER = 0, 1, 2, 3
+# Slots of a joint's rows in ``j_rows``: the point rows by component, the dots, the lines.
+SLOT_POINT, SLOT_DOT, SLOT_LINE, N_SLOTS = 0, 3, 6, 8
+# Vectors of a joint in ``JV``: lever, shift, point-row signs, dual bases, line torques.
+V_RHO, V_D, V_SIGN, V_DUAL, V_LDUAL, V_TAU, N_VECS = 0, 1, 2, 3, 6, 8, 10
+_DOF = np.array([0, 1, 3, 1], dtype=np.int64)
+
+_KIND_POINT, _KIND_DOT, _KIND_LINE = 0, 1, 2   # as in .rows
+
+
+def nullspace_structure(a, b, kind, comp, n_bodies: int):
+    """
+    Recognize the joints of a row set and order them leaves first (plain Python, once).
+
+    Parameters
+    ----------
+    a, b : array_like of int, shape (m,)
+        Bodies of each row (``b == n_bodies``: the world).
+    kind, comp : array_like of int, shape (m,)
+        The rows' kinds and point components (``.rows`` conventions).
+    n_bodies : int
+        Number of bodies.
+
+    Returns
+    -------
+    tuple or None
+        ``(j_child, j_parent, j_type, j_rows, j_cside)``: per joint, leaves first, its
+        child body, parent body (``-1``: the world), type code, rows by slot (``-1``:
+        none) and whether each slot's child block is in ``Gb`` (1) or ``Ga`` (0). None
+        when the rows are outside the prototype's scope (see the module docstring).
+
+    """
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    n = int(n_bodies)
+    groups: dict = {}
+    for r in range(a.size):
+        if a[r] == b[r]:
+            return None
+        key = (min(a[r], b[r]), max(a[r], b[r]))
+        groups.setdefault(key, []).append(r)
+    adjacent = [[] for _ in range(n)]
+    world = {}
+    for key, rows in groups.items():
+        if key[1] == n:
+            world[key[0]] = rows
+        else:
+            adjacent[key[0]].append((key[1], rows))
+            adjacent[key[1]].append((key[0], rows))
+    parent = np.full(n, -2, dtype=np.int64)
+    up_rows = [None] * n
+    order = []
+    for root in sorted(world):
+        if parent[root] != -2:
+            return None   # a second joint to the world: a loop through it
+        parent[root] = -1
+        up_rows[root] = world[root]
+        order.append(root)
+        head = len(order) - 1
+        while head < len(order):
+            body = order[head]
+            head += 1
+            for other, rows in adjacent[body]:
+                if other == parent[body]:
+                    continue
+                if parent[other] != -2:
+                    return None   # a closed loop
+                parent[other] = body
+                up_rows[other] = rows
+                order.append(other)
+    if any(adjacent[i] and parent[i] == -2 for i in range(n)):
+        return None   # a free-floating tree: not in the prototype
+    nj = len(order)
+    j_child = np.array(order[::-1], dtype=np.int64)
+    j_parent = parent[j_child]
+    j_type = np.zeros(nj, dtype=np.int64)
+    j_rows = np.full((nj, N_SLOTS), -1, dtype=np.int64)
+    j_cside = np.zeros((nj, N_SLOTS), dtype=np.int64)
+    kind = np.asarray(kind)
+    comp = np.asarray(comp)
+    for j, c in enumerate(j_child.tolist()):
+        rows = up_rows[c]
+        pts = [r for r in rows if kind[r] == _KIND_POINT]
+        dots = [r for r in rows if kind[r] == _KIND_DOT]
+        lines = [r for r in rows if kind[r] == _KIND_LINE]
+        counts = (len(pts), len(dots), len(lines), len(rows))
+        types = {(3, 3, 0, 6): FIXED, (3, 2, 0, 5): HINGE, (3, 0, 0, 3): BALL,
+                 (0, 3, 2, 5): SLIDER}
+        if counts not in types or sorted(int(comp[r]) for r in pts) != [0, 1, 2][:len(pts)]:
+            return None
+        j_type[j] = types[counts]
+        for r in pts:
+            j_rows[j, SLOT_POINT + comp[r]] = r
+        for i, r in enumerate(dots):
+            j_rows[j, SLOT_DOT + i] = r
+        for i, r in enumerate(lines):
+            j_rows[j, SLOT_LINE + i] = r
+        for s in range(N_SLOTS):
+            r = j_rows[j, s]
+            if r >= 0:
+                j_cside[j, s] = 0 if a[r] == c else 1
+    return j_child, j_parent, j_type, j_rows, j_cside
+
+
+def nullspace_arrays(n_joints: int, n_bodies: int) -> tuple:
+    """
+    Allocate the factor and work arrays (once).
+
+    Returns
+    -------
+    tuple
+        ``(IA, JS, JU, JD, JV, work, P, Acc, JG, JQ)``: articulated inertias (n, 6, 6);
+        per joint S, U (nj, 6, 3), D⁻¹ (nj, 3, 3), vectors (nj, N_VECS, 3); a (6, 6)
+        factor workspace; the solve's bias forces P and accelerations Acc (n, 6),
+        particular solutions JG (nj, 6) and ``q₀`` JQ (nj, 3).
+
+    """
+    nj, n = n_joints, n_bodies
+    return (np.zeros((n, 6, 6)), np.zeros((nj, 6, 3)), np.zeros((nj, 6, 3)),
+            np.zeros((nj, 3, 3)), np.zeros((nj, N_VECS, 3)), np.zeros((6, 6)),
+            np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((nj, 6)), np.zeros((nj, 3)))
+
+
+@njit(cache=True)
+def _world_torque(G, r, R, body, out, k):
+    """``out[k] = R[body] @ G[r, 3:6]``: a block's angular part in world axes."""
+    g0, g1, g2 = G[r, 3], G[r, 4], G[r, 5]
+    out[k, 0] = R[body, 0, 0] * g0 + R[body, 0, 1] * g1 + R[body, 0, 2] * g2
+    out[k, 1] = R[body, 1, 0] * g0 + R[body, 1, 1] * g1 + R[body, 1, 2] * g2
+    out[k, 2] = R[body, 2, 0] * g0 + R[body, 2, 1] * g1 + R[body, 2, 2] * g2
+
+
+@njit(cache=True)
+def _add_shifted(W, IA, p, d0, d1, d2):
+    """
+    ``IA[p] += Xᵀ W X`` for the shift ``X = [[I, −[d]×], [0, I]]`` (W symmetric).
+
+    With ``W = [[A, B], [Bᵀ, C]]``: ``Xᵀ W X = [[A, B'], [B'ᵀ, C']]``, ``B' = B − A [d]×``
+    (row i: ``B_i + d × A_i``), ``C' = C − Bᵀ[d]× + [d]× B'`` (symmetric).
+    """
+    # B' over W[0:3, 3:6] (the lower-left block keeps Bᵀ).
+    for i in range(3):
+        a0, a1, a2 = W[i, 0], W[i, 1], W[i, 2]
+        W[i, 3] += d1 * a2 - d2 * a1
+        W[i, 4] += d2 * a0 - d0 * a2
+        W[i, 5] += d0 * a1 - d1 * a0
+    # C' = C − Bᵀ[d]× + [d]× B': (Bᵀ[d]×)_ij = (B col i × d)_j, ([d]× B')_ij = (d × B' col j)_i.
+    for i in range(3):
+        b0, b1, b2 = W[3 + i, 0], W[3 + i, 1], W[3 + i, 2]   # B col i
+        m0 = b1 * d2 - b2 * d1
+        m1 = b2 * d0 - b0 * d2
+        m2 = b0 * d1 - b1 * d0
+        for j in range(i, 3):
+            c0, c1, c2 = W[0, 3 + j], W[1, 3 + j], W[2, 3 + j]   # B' col j
+            if i == 0:
+                e = d1 * c2 - d2 * c1
+            elif i == 1:
+                e = d2 * c0 - d0 * c2
+            else:
+                e = d0 * c1 - d1 * c0
+            mj = m0 if j == 0 else (m1 if j == 1 else m2)
+            v = W[3 + i, 3 + j] - mj + e
+            IA[p, 3 + i, 3 + j] += v
+            if j != i:
+                IA[p, 3 + j, 3 + i] += v
+    for i in range(3):
+        for j in range(3):
+            IA[p, i, j] += W[i, j]
+            v = W[i, 3 + j]
+            IA[p, i, 3 + j] += v
+            IA[p, 3 + j, i] += v
+
+
+@njit(cache=True)
+def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, R,
+                     IA, JS, JU, JD, JV, work):
+    """
+    Factorize ``G M⁻¹ Gᵀ`` in inertia form, leaves first (allocation-free).
+
+    Parameters
+    ----------
+    j_child, j_parent, j_type, j_rows, j_cside : ndarray of int64
+        From :func:`nullspace_structure`.
+    Ga, Gb : ndarray of float64, shape (m, 6)
+        The rows' blocks (``(δx_world, δΘ_principal)``, as for ``tree_factor``).
+    minv6 : ndarray of float64, shape (n, 6)
+        Diagonal inverse masses (all positive).
+    R : ndarray of float64, shape (n + 1, 3, 3)
+        Principal-to-world rotations (:func:`.rows.frames`).
+    IA, JS, JU, JD, JV, work : ndarray
+        From :func:`nullspace_arrays` (overwritten: the factors).
+
+    Returns
+    -------
+    float
+        The smallest ``D`` over its scale ``Σ S_i² I^A_ii`` (the pivots of the joint
+        freedoms; 1 without any): small for a nearly massless subtree.
+
+    """
+    n = minv6.shape[0]
+    for i in range(n):
+        m = 1.0 / minv6[i, 0]
+        j0, j1, j2 = 1.0 / minv6[i, 3], 1.0 / minv6[i, 4], 1.0 / minv6[i, 5]
+        for r in range(6):
+            for t in range(6):
+                IA[i, r, t] = 0.0
+        IA[i, 0, 0] = m
+        IA[i, 1, 1] = m
+        IA[i, 2, 2] = m
+        for r in range(3):
+            x0, x1, x2 = j0 * R[i, r, 0], j1 * R[i, r, 1], j2 * R[i, r, 2]
+            for t in range(r, 3):
+                v = x0 * R[i, t, 0] + x1 * R[i, t, 1] + x2 * R[i, t, 2]
+                IA[i, 3 + r, 3 + t] = v
+                IA[i, 3 + t, 3 + r] = v
+    smallest = 1.0
+    for j in range(j_child.shape[0]):
+        c = j_child[j]
+        p = j_parent[j]
+        typ = j_type[j]
+        # Child torques of the rows in world axes: points 0, 1 (lever), dots, lines.
+        rho0 = rho1 = rho2 = 0.0
+        d0 = d1 = d2 = 0.0
+        if typ != SLIDER:
+            for s in range(2):
+                r = j_rows[j, s]
+                if j_cside[j, s] == 0:
+                    _world_torque(Ga, r, R, c, JV[j], V_TAU + s)
+                    JV[j, V_SIGN, s] = Ga[r, s]
+                else:
+                    _world_torque(Gb, r, R, c, JV[j], V_TAU + s)
+                    JV[j, V_SIGN, s] = Gb[r, s]
+            r = j_rows[j, 2]
+            JV[j, V_SIGN, 2] = Ga[r, 2] if j_cside[j, 2] == 0 else Gb[r, 2]
+            s0, s1 = JV[j, V_SIGN, 0], JV[j, V_SIGN, 1]
+            # τ_0 = s0 ρ × e_x = s0 (0, ρz, −ρy); τ_1 = s1 (−ρz, 0, ρx).
+            rho0 = s1 * JV[j, V_TAU + 1, 2]
+            rho1 = -s0 * JV[j, V_TAU, 2]
+            rho2 = s0 * JV[j, V_TAU, 1]
+            if p >= 0:
+                for s in range(2):
+                    r = j_rows[j, s]
+                    if j_cside[j, s] == 0:
+                        _world_torque(Gb, r, R, p, JV[j], V_TAU + s)
+                    else:
+                        _world_torque(Ga, r, R, p, JV[j], V_TAU + s)
+                # The parent's signs are −s: ρ_p = −(the same reading).
+                d0 = -s1 * JV[j, V_TAU + 1, 2] - rho0
+                d1 = s0 * JV[j, V_TAU, 2] - rho1
+                d2 = -s0 * JV[j, V_TAU, 1] - rho2
+        JV[j, V_RHO, 0], JV[j, V_RHO, 1], JV[j, V_RHO, 2] = rho0, rho1, rho2
+        # Dot torques t_i (child, world) into the dual slots, inverted below.
+        nd = 2 if typ == HINGE else (0 if typ == BALL else 3)
+        for i in range(nd):
+            r = j_rows[j, SLOT_DOT + i]
+            if j_cside[j, SLOT_DOT + i] == 0:
+                _world_torque(Ga, r, R, c, JV[j], V_DUAL + i)
+            else:
+                _world_torque(Gb, r, R, c, JV[j], V_DUAL + i)
+        if typ == HINGE:
+            t0, t1, t2 = JV[j, V_DUAL, 0], JV[j, V_DUAL, 1], JV[j, V_DUAL, 2]
+            u0, u1, u2 = JV[j, V_DUAL + 1, 0], JV[j, V_DUAL + 1, 1], JV[j, V_DUAL + 1, 2]
+            n0, n1, n2 = t1 * u2 - t2 * u1, t2 * u0 - t0 * u2, t0 * u1 - t1 * u0
+            inv = 1.0 / (n0 * n0 + n1 * n1 + n2 * n2)
+            # b1 = u × n / |n|², b2 = n × t / |n|².
+            JV[j, V_DUAL, 0] = (u1 * n2 - u2 * n1) * inv
+            JV[j, V_DUAL, 1] = (u2 * n0 - u0 * n2) * inv
+            JV[j, V_DUAL, 2] = (u0 * n1 - u1 * n0) * inv
+            JV[j, V_DUAL + 1, 0] = (n1 * t2 - n2 * t1) * inv
+            JV[j, V_DUAL + 1, 1] = (n2 * t0 - n0 * t2) * inv
+            JV[j, V_DUAL + 1, 2] = (n0 * t1 - n1 * t0) * inv
+            JS[j, 0, 0] = rho1 * n2 - rho2 * n1
+            JS[j, 1, 0] = rho2 * n0 - rho0 * n2
+            JS[j, 2, 0] = rho0 * n1 - rho1 * n0
+            JS[j, 3, 0], JS[j, 4, 0], JS[j, 5, 0] = n0, n1, n2
+        elif nd == 3:
+            t0, t1, t2 = JV[j, V_DUAL, 0], JV[j, V_DUAL, 1], JV[j, V_DUAL, 2]
+            u0, u1, u2 = JV[j, V_DUAL + 1, 0], JV[j, V_DUAL + 1, 1], JV[j, V_DUAL + 1, 2]
+            w0, w1, w2 = JV[j, V_DUAL + 2, 0], JV[j, V_DUAL + 2, 1], JV[j, V_DUAL + 2, 2]
+            x0, x1, x2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+            y0, y1, y2 = w1 * t2 - w2 * t1, w2 * t0 - w0 * t2, w0 * t1 - w1 * t0
+            z0, z1, z2 = t1 * u2 - t2 * u1, t2 * u0 - t0 * u2, t0 * u1 - t1 * u0
+            inv = 1.0 / (t0 * x0 + t1 * x1 + t2 * x2)
+            JV[j, V_DUAL, 0], JV[j, V_DUAL, 1], JV[j, V_DUAL, 2] = x0 * inv, x1 * inv, x2 * inv
+            JV[j, V_DUAL + 1, 0], JV[j, V_DUAL + 1, 1] = y0 * inv, y1 * inv
+            JV[j, V_DUAL + 1, 2] = y2 * inv
+            JV[j, V_DUAL + 2, 0], JV[j, V_DUAL + 2, 1] = z0 * inv, z1 * inv
+            JV[j, V_DUAL + 2, 2] = z2 * inv
+        if typ == SLIDER:
+            # Line rows: f_k (child, world) and τ_k; σ_k = τ_ck + τ_pk gives d.
+            for k in range(2):
+                r = j_rows[j, SLOT_LINE + k]
+                if j_cside[j, SLOT_LINE + k] == 0:
+                    _world_torque(Ga, r, R, c, JV[j], V_TAU + k)
+                    _world_torque(Gb, r, R, p if p >= 0 else R.shape[0] - 1, work, k)
+                    for t in range(3):
+                        JV[j, V_LDUAL + k, t] = Ga[r, t]
+                else:
+                    _world_torque(Gb, r, R, c, JV[j], V_TAU + k)
+                    _world_torque(Ga, r, R, p if p >= 0 else R.shape[0] - 1, work, k)
+                    for t in range(3):
+                        JV[j, V_LDUAL + k, t] = Gb[r, t]
+            f0, f1, f2 = JV[j, V_LDUAL, 0], JV[j, V_LDUAL, 1], JV[j, V_LDUAL, 2]
+            h0, h1, h2 = JV[j, V_LDUAL + 1, 0], JV[j, V_LDUAL + 1, 1], JV[j, V_LDUAL + 1, 2]
+            if p >= 0:
+                a0 = JV[j, V_TAU, 0] + work[0, 0]
+                a1 = JV[j, V_TAU, 1] + work[0, 1]
+                a2 = JV[j, V_TAU, 2] + work[0, 2]
+                b0 = JV[j, V_TAU + 1, 0] + work[1, 0]
+                b1 = JV[j, V_TAU + 1, 1] + work[1, 1]
+                b2 = JV[j, V_TAU + 1, 2] + work[1, 2]
+                # d = σ1 × f1 + ((σ2 × f2) · f1) f1
+                e = (b1 * h2 - b2 * h1) * f0 + (b2 * h0 - b0 * h2) * f1 + (b0 * h1 - b1 * h0) * f2
+                d0 = a1 * f2 - a2 * f1 + e * f0
+                d1 = a2 * f0 - a0 * f2 + e * f1
+                d2 = a0 * f1 - a1 * f0 + e * f2
+            n0, n1, n2 = f1 * h2 - f2 * h1, f2 * h0 - f0 * h2, f0 * h1 - f1 * h0
+            inv = 1.0 / (n0 * n0 + n1 * n1 + n2 * n2)
+            JV[j, V_LDUAL, 0] = (h1 * n2 - h2 * n1) * inv
+            JV[j, V_LDUAL, 1] = (h2 * n0 - h0 * n2) * inv
+            JV[j, V_LDUAL, 2] = (h0 * n1 - h1 * n0) * inv
+            JV[j, V_LDUAL + 1, 0] = (n1 * f2 - n2 * f1) * inv
+            JV[j, V_LDUAL + 1, 1] = (n2 * f0 - n0 * f2) * inv
+            JV[j, V_LDUAL + 1, 2] = (n0 * f1 - n1 * f0) * inv
+            JS[j, 0, 0], JS[j, 1, 0], JS[j, 2, 0] = n0, n1, n2
+            JS[j, 3, 0] = JS[j, 4, 0] = JS[j, 5, 0] = 0.0
+        JV[j, V_D, 0], JV[j, V_D, 1], JV[j, V_D, 2] = d0, d1, d2
+        # U = I^A S, D = Sᵀ U, Ia = I^A − U D⁻¹ Uᵀ (into work).
+        dof = _DOF[typ]
+        if dof == 1:
+            s0, s1, s2 = JS[j, 0, 0], JS[j, 1, 0], JS[j, 2, 0]
+            s3, s4, s5 = JS[j, 3, 0], JS[j, 4, 0], JS[j, 5, 0]
+            dd = 0.0
+            scale = 0.0
+            for i in range(6):
+                u = ((IA[c, i, 0] * s0 + IA[c, i, 1] * s1) + (IA[c, i, 2] * s2 + IA[c, i, 3] * s3)
+                     + (IA[c, i, 4] * s4 + IA[c, i, 5] * s5))
+                JU[j, i, 0] = u
+                si = JS[j, i, 0]
+                dd += si * u
+                scale += si * si * IA[c, i, i]
+            if dd < smallest * scale:
+                smallest = dd / scale
+            dinv = 1.0 / dd
+            JD[j, 0, 0] = dinv
+            if p >= 0:
+                for i in range(6):
+                    ui = JU[j, i, 0] * dinv
+                    for t in range(i, 6):
+                        work[i, t] = IA[c, i, t] - ui * JU[j, t, 0]
+                for i in range(1, 6):
+                    for t in range(i):
+                        work[i, t] = work[t, i]
+        elif dof == 3:
+            # Ball: S = ([ρ]×, I); S col k = (ρ × e_k, e_k).
+            for k in range(3):
+                for i in range(6):
+                    JS[j, i, k] = 0.0
+                JS[j, 3 + k, k] = 1.0
+            JS[j, 1, 0], JS[j, 2, 0] = rho2, -rho1
+            JS[j, 0, 1], JS[j, 2, 1] = -rho2, rho0
+            JS[j, 0, 2], JS[j, 1, 2] = rho1, -rho0
+            for k in range(3):
+                for i in range(6):
+                    u = 0.0
+                    for t in range(6):
+                        u += IA[c, i, t] * JS[j, t, k]
+                    JU[j, i, k] = u
+            for k in range(3):
+                for q in range(3):
+                    v = 0.0
+                    for t in range(6):
+                        v += JS[j, t, k] * JU[j, t, q]
+                    work[k, q] = v
+            # D⁻¹ by the adjugate (D symmetric positive definite).
+            a00, a01, a02 = work[0, 0], work[0, 1], work[0, 2]
+            a11, a12, a22 = work[1, 1], work[1, 2], work[2, 2]
+            c00 = a11 * a22 - a12 * a12
+            c01 = a02 * a12 - a01 * a22
+            c02 = a01 * a12 - a02 * a11
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            inv = 1.0 / det
+            JD[j, 0, 0] = c00 * inv
+            JD[j, 0, 1] = JD[j, 1, 0] = c01 * inv
+            JD[j, 0, 2] = JD[j, 2, 0] = c02 * inv
+            JD[j, 1, 1] = (a00 * a22 - a02 * a02) * inv
+            JD[j, 1, 2] = JD[j, 2, 1] = (a01 * a02 - a00 * a12) * inv
+            JD[j, 2, 2] = (a00 * a11 - a01 * a01) * inv
+            for k in range(3):
+                sc = 0.0
+                for t in range(6):
+                    sc += JS[j, t, k] * JS[j, t, k] * IA[c, t, t]
+                if work[k, k] < smallest * sc:
+                    smallest = work[k, k] / sc
+            if p >= 0:
+                for i in range(6):
+                    # (U D⁻¹)_i
+                    v0 = JU[j, i, 0] * JD[j, 0, 0] + JU[j, i, 1] * JD[j, 1, 0] + \
+                        JU[j, i, 2] * JD[j, 2, 0]
+                    v1 = JU[j, i, 0] * JD[j, 0, 1] + JU[j, i, 1] * JD[j, 1, 1] + \
+                        JU[j, i, 2] * JD[j, 2, 1]
+                    v2 = JU[j, i, 0] * JD[j, 0, 2] + JU[j, i, 1] * JD[j, 1, 2] + \
+                        JU[j, i, 2] * JD[j, 2, 2]
+                    for t in range(i, 6):
+                        work[i, t] = IA[c, i, t] - (v0 * JU[j, t, 0] + v1 * JU[j, t, 1]
+                                                    + v2 * JU[j, t, 2])
+                for i in range(1, 6):
+                    for t in range(i):
+                        work[i, t] = work[t, i]
+        elif p >= 0:   # fixed: nothing eliminated
+            for i in range(6):
+                for t in range(6):
+                    work[i, t] = IA[c, i, t]
+        if p >= 0:
+            _add_shifted(work, IA, p, d0, d1, d2)
+    return smallest
+
+
+@njit(cache=True)
+def nullspace_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Acc, JG, JQ,
+                    rhs, out):
+    """
+    Solve ``G M⁻¹ Gᵀ λ = rhs`` with the factors of :func:`nullspace_factor` (allocation-free).
+
+    ``P``, ``Acc`` (n, 6), ``JG`` (nj, 6) and ``JQ`` (nj, 3) are workspace from
+    :func:`nullspace_arrays`; ``out`` (m,) receives ``λ`` (and ``Acc`` the body
+    accelerations ``M⁻¹ Gᵀ λ`` in world axes, ``(a_v, a_ω)``).
+    """
+    nj = j_child.shape[0]
+    for j in range(nj):
+        c = j_child[j]
+        for t in range(6):
+            P[c, t] = 0.0
+    # Up: g, z = p_c + I^A g, q₀ = −D⁻¹ Sᵀ z, p_p += Xᵀ (z + U q₀).
+    for j in range(nj):
+        c = j_child[j]
+        p = j_parent[j]
+        typ = j_type[j]
+        w0 = w1 = w2 = 0.0
+        if typ == HINGE:
+            c1, c2 = rhs[j_rows[j, SLOT_DOT]], rhs[j_rows[j, SLOT_DOT + 1]]
+            w0 = c1 * JV[j, V_DUAL, 0] + c2 * JV[j, V_DUAL + 1, 0]
+            w1 = c1 * JV[j, V_DUAL, 1] + c2 * JV[j, V_DUAL + 1, 1]
+            w2 = c1 * JV[j, V_DUAL, 2] + c2 * JV[j, V_DUAL + 1, 2]
+        elif typ != BALL:
+            c1, c2 = rhs[j_rows[j, SLOT_DOT]], rhs[j_rows[j, SLOT_DOT + 1]]
+            c3 = rhs[j_rows[j, SLOT_DOT + 2]]
+            w0 = c1 * JV[j, V_DUAL, 0] + c2 * JV[j, V_DUAL + 1, 0] + c3 * JV[j, V_DUAL + 2, 0]
+            w1 = c1 * JV[j, V_DUAL, 1] + c2 * JV[j, V_DUAL + 1, 1] + c3 * JV[j, V_DUAL + 2, 1]
+            w2 = c1 * JV[j, V_DUAL, 2] + c2 * JV[j, V_DUAL + 1, 2] + c3 * JV[j, V_DUAL + 2, 2]
+        if typ == SLIDER:
+            e1 = rhs[j_rows[j, SLOT_LINE]] - (JV[j, V_TAU, 0] * w0 + JV[j, V_TAU, 1] * w1
+                                              + JV[j, V_TAU, 2] * w2)
+            e2 = rhs[j_rows[j, SLOT_LINE + 1]] - (JV[j, V_TAU + 1, 0] * w0
+                                                  + JV[j, V_TAU + 1, 1] * w1
+                                                  + JV[j, V_TAU + 1, 2] * w2)
+            v0 = e1 * JV[j, V_LDUAL, 0] + e2 * JV[j, V_LDUAL + 1, 0]
+            v1 = e1 * JV[j, V_LDUAL, 1] + e2 * JV[j, V_LDUAL + 1, 1]
+            v2 = e1 * JV[j, V_LDUAL, 2] + e2 * JV[j, V_LDUAL + 1, 2]
+        else:
+            r0, r1, r2 = JV[j, V_RHO, 0], JV[j, V_RHO, 1], JV[j, V_RHO, 2]
+            v0 = JV[j, V_SIGN, 0] * rhs[j_rows[j, 0]] - (w1 * r2 - w2 * r1)
+            v1 = JV[j, V_SIGN, 1] * rhs[j_rows[j, 1]] - (w2 * r0 - w0 * r2)
+            v2 = JV[j, V_SIGN, 2] * rhs[j_rows[j, 2]] - (w0 * r1 - w1 * r0)
+        JG[j, 0], JG[j, 1], JG[j, 2] = v0, v1, v2
+        JG[j, 3], JG[j, 4], JG[j, 5] = w0, w1, w2
+        z0 = P[c, 0] + ((IA[c, 0, 0] * v0 + IA[c, 0, 1] * v1) + (IA[c, 0, 2] * v2
+                        + IA[c, 0, 3] * w0) + (IA[c, 0, 4] * w1 + IA[c, 0, 5] * w2))
+        z1 = P[c, 1] + ((IA[c, 1, 0] * v0 + IA[c, 1, 1] * v1) + (IA[c, 1, 2] * v2
+                        + IA[c, 1, 3] * w0) + (IA[c, 1, 4] * w1 + IA[c, 1, 5] * w2))
+        z2 = P[c, 2] + ((IA[c, 2, 0] * v0 + IA[c, 2, 1] * v1) + (IA[c, 2, 2] * v2
+                        + IA[c, 2, 3] * w0) + (IA[c, 2, 4] * w1 + IA[c, 2, 5] * w2))
+        z3 = P[c, 3] + ((IA[c, 3, 0] * v0 + IA[c, 3, 1] * v1) + (IA[c, 3, 2] * v2
+                        + IA[c, 3, 3] * w0) + (IA[c, 3, 4] * w1 + IA[c, 3, 5] * w2))
+        z4 = P[c, 4] + ((IA[c, 4, 0] * v0 + IA[c, 4, 1] * v1) + (IA[c, 4, 2] * v2
+                        + IA[c, 4, 3] * w0) + (IA[c, 4, 4] * w1 + IA[c, 4, 5] * w2))
+        z5 = P[c, 5] + ((IA[c, 5, 0] * v0 + IA[c, 5, 1] * v1) + (IA[c, 5, 2] * v2
+                        + IA[c, 5, 3] * w0) + (IA[c, 5, 4] * w1 + IA[c, 5, 5] * w2))
+        dof = _DOF[typ]
+        for k in range(dof):
+            JQ[j, k] = -((JS[j, 0, k] * z0 + JS[j, 1, k] * z1) + (JS[j, 2, k] * z2
+                         + JS[j, 3, k] * z3) + (JS[j, 4, k] * z4 + JS[j, 5, k] * z5))
+        if dof == 1:
+            JQ[j, 0] *= JD[j, 0, 0]
+        elif dof == 3:
+            u0, u1, u2 = JQ[j, 0], JQ[j, 1], JQ[j, 2]
+            for k in range(3):
+                JQ[j, k] = JD[j, k, 0] * u0 + JD[j, k, 1] * u1 + JD[j, k, 2] * u2
+        if p >= 0:
+            for k in range(dof):
+                q = JQ[j, k]
+                z0 += JU[j, 0, k] * q
+                z1 += JU[j, 1, k] * q
+                z2 += JU[j, 2, k] * q
+                z3 += JU[j, 3, k] * q
+                z4 += JU[j, 4, k] * q
+                z5 += JU[j, 5, k] * q
+            d0, d1, d2 = JV[j, V_D, 0], JV[j, V_D, 1], JV[j, V_D, 2]
+            P[p, 0] += z0
+            P[p, 1] += z1
+            P[p, 2] += z2
+            P[p, 3] += z3 + (d1 * z2 - d2 * z1)
+            P[p, 4] += z4 + (d2 * z0 - d0 * z2)
+            P[p, 5] += z5 + (d0 * z1 - d1 * z0)
+    # Down: y = X a_p, a_c = y + g + S (q₀ − D⁻¹ Uᵀ y), F = I^A a_c + p_c = W_c λ.
+    for j in range(nj - 1, -1, -1):
+        c = j_child[j]
+        p = j_parent[j]
+        typ = j_type[j]
+        dof = _DOF[typ]
+        y0 = y1 = y2 = y3 = y4 = y5 = 0.0
+        if p >= 0:
+            d0, d1, d2 = JV[j, V_D, 0], JV[j, V_D, 1], JV[j, V_D, 2]
+            y3, y4, y5 = Acc[p, 3], Acc[p, 4], Acc[p, 5]
+            y0 = Acc[p, 0] + (y4 * d2 - y5 * d1)
+            y1 = Acc[p, 1] + (y5 * d0 - y3 * d2)
+            y2 = Acc[p, 2] + (y3 * d1 - y4 * d0)
+        a0 = y0 + JG[j, 0]
+        a1 = y1 + JG[j, 1]
+        a2 = y2 + JG[j, 2]
+        a3 = y3 + JG[j, 3]
+        a4 = y4 + JG[j, 4]
+        a5 = y5 + JG[j, 5]
+        if dof == 1:
+            q = JQ[j, 0]
+            if p >= 0:
+                q -= JD[j, 0, 0] * ((JU[j, 0, 0] * y0 + JU[j, 1, 0] * y1)
+                                    + (JU[j, 2, 0] * y2 + JU[j, 3, 0] * y3)
+                                    + (JU[j, 4, 0] * y4 + JU[j, 5, 0] * y5))
+            a0 += JS[j, 0, 0] * q
+            a1 += JS[j, 1, 0] * q
+            a2 += JS[j, 2, 0] * q
+            a3 += JS[j, 3, 0] * q
+            a4 += JS[j, 4, 0] * q
+            a5 += JS[j, 5, 0] * q
+        elif dof == 3:
+            e0 = e1 = e2 = 0.0
+            if p >= 0:
+                e0 = ((JU[j, 0, 0] * y0 + JU[j, 1, 0] * y1) + (JU[j, 2, 0] * y2
+                      + JU[j, 3, 0] * y3) + (JU[j, 4, 0] * y4 + JU[j, 5, 0] * y5))
+                e1 = ((JU[j, 0, 1] * y0 + JU[j, 1, 1] * y1) + (JU[j, 2, 1] * y2
+                      + JU[j, 3, 1] * y3) + (JU[j, 4, 1] * y4 + JU[j, 5, 1] * y5))
+                e2 = ((JU[j, 0, 2] * y0 + JU[j, 1, 2] * y1) + (JU[j, 2, 2] * y2
+                      + JU[j, 3, 2] * y3) + (JU[j, 4, 2] * y4 + JU[j, 5, 2] * y5))
+            q0 = JQ[j, 0] - (JD[j, 0, 0] * e0 + JD[j, 0, 1] * e1 + JD[j, 0, 2] * e2)
+            q1 = JQ[j, 1] - (JD[j, 1, 0] * e0 + JD[j, 1, 1] * e1 + JD[j, 1, 2] * e2)
+            q2 = JQ[j, 2] - (JD[j, 2, 0] * e0 + JD[j, 2, 1] * e1 + JD[j, 2, 2] * e2)
+            # S = ([ρ]×, I): S q = (ρ × q, q).
+            r0, r1, r2 = JV[j, V_RHO, 0], JV[j, V_RHO, 1], JV[j, V_RHO, 2]
+            a0 += r1 * q2 - r2 * q1
+            a1 += r2 * q0 - r0 * q2
+            a2 += r0 * q1 - r1 * q0
+            a3 += q0
+            a4 += q1
+            a5 += q2
+        Acc[c, 0], Acc[c, 1], Acc[c, 2] = a0, a1, a2
+        Acc[c, 3], Acc[c, 4], Acc[c, 5] = a3, a4, a5
+        f0 = P[c, 0] + ((IA[c, 0, 0] * a0 + IA[c, 0, 1] * a1) + (IA[c, 0, 2] * a2
+                        + IA[c, 0, 3] * a3) + (IA[c, 0, 4] * a4 + IA[c, 0, 5] * a5))
+        f1 = P[c, 1] + ((IA[c, 1, 0] * a0 + IA[c, 1, 1] * a1) + (IA[c, 1, 2] * a2
+                        + IA[c, 1, 3] * a3) + (IA[c, 1, 4] * a4 + IA[c, 1, 5] * a5))
+        f2 = P[c, 2] + ((IA[c, 2, 0] * a0 + IA[c, 2, 1] * a1) + (IA[c, 2, 2] * a2
+                        + IA[c, 2, 3] * a3) + (IA[c, 2, 4] * a4 + IA[c, 2, 5] * a5))
+        f3 = P[c, 3] + ((IA[c, 3, 0] * a0 + IA[c, 3, 1] * a1) + (IA[c, 3, 2] * a2
+                        + IA[c, 3, 3] * a3) + (IA[c, 3, 4] * a4 + IA[c, 3, 5] * a5))
+        f4 = P[c, 4] + ((IA[c, 4, 0] * a0 + IA[c, 4, 1] * a1) + (IA[c, 4, 2] * a2
+                        + IA[c, 4, 3] * a3) + (IA[c, 4, 4] * a4 + IA[c, 4, 5] * a5))
+        f5 = P[c, 5] + ((IA[c, 5, 0] * a0 + IA[c, 5, 1] * a1) + (IA[c, 5, 2] * a2
+                        + IA[c, 5, 3] * a3) + (IA[c, 5, 4] * a4 + IA[c, 5, 5] * a5))
+        if typ == SLIDER:
+            l1 = JV[j, V_LDUAL, 0] * f0 + JV[j, V_LDUAL, 1] * f1 + JV[j, V_LDUAL, 2] * f2
+            l2 = JV[j, V_LDUAL + 1, 0] * f0 + JV[j, V_LDUAL + 1, 1] * f1 \
+                + JV[j, V_LDUAL + 1, 2] * f2
+            out[j_rows[j, SLOT_LINE]] = l1
+            out[j_rows[j, SLOT_LINE + 1]] = l2
+            h0 = f3 - (l1 * JV[j, V_TAU, 0] + l2 * JV[j, V_TAU + 1, 0])
+            h1 = f4 - (l1 * JV[j, V_TAU, 1] + l2 * JV[j, V_TAU + 1, 1])
+            h2 = f5 - (l1 * JV[j, V_TAU, 2] + l2 * JV[j, V_TAU + 1, 2])
+        else:
+            out[j_rows[j, 0]] = JV[j, V_SIGN, 0] * f0
+            out[j_rows[j, 1]] = JV[j, V_SIGN, 1] * f1
+            out[j_rows[j, 2]] = JV[j, V_SIGN, 2] * f2
+            r0, r1, r2 = JV[j, V_RHO, 0], JV[j, V_RHO, 1], JV[j, V_RHO, 2]
+            h0 = f3 - (r1 * f2 - r2 * f1)
+            h1 = f4 - (r2 * f0 - r0 * f2)
+            h2 = f5 - (r0 * f1 - r1 * f0)
+        nd = 2 if typ == HINGE else (0 if typ == BALL else 3)
+        for i in range(nd):
+            out[j_rows[j, SLOT_DOT + i]] = (JV[j, V_DUAL + i, 0] * h0 + JV[j, V_DUAL + i, 1] * h1
+                                            + JV[j, V_DUAL + i, 2] * h2)
