@@ -158,11 +158,11 @@ class Mechanism:
 
     @property
     def m(self) -> int:
-        """Number of rows."""
+        """Return the number of rows."""
         return int(self.a.size)
 
     def dense_A_longdouble(self):
-        """``A = G M⁻¹ Gᵀ`` in extended precision (np.longdouble) from the float64 blocks."""
+        """Return ``A = G M⁻¹ Gᵀ`` in extended precision (np.longdouble) from the blocks."""
         n, m = self.n, self.m
         G = np.zeros((m, 6 * n + 6), dtype=np.longdouble)
         r = np.arange(m)
@@ -174,7 +174,7 @@ class Mechanism:
 
     def reference(self, rhs_columns):
         """
-        ``A⁻¹ rhs`` to about ``cond(A) · 1e-19`` (iterative refinement, residuals in longdouble).
+        Return ``A⁻¹ rhs`` to about ``cond(A) · 1e-19`` (refined with longdouble residuals).
 
         Returns ``(x, cond(A))``.
         """

@@ -193,12 +193,18 @@ def nullspace_arrays(n_joints: int, n_bodies: int) -> tuple:
 
 
 @njit(cache=True)
-def _world_torque(G, r, R, body, out, k):
-    """``out[k] = R[body] @ G[r, 3:6]``: a block's angular part in world axes."""
+def _world_torque(G, r, R, body):
+    """``R[body] @ G[r, 3:6]`` as a 3-tuple: a block's angular part in world axes."""
     g0, g1, g2 = G[r, 3], G[r, 4], G[r, 5]
-    out[k, 0] = R[body, 0, 0] * g0 + R[body, 0, 1] * g1 + R[body, 0, 2] * g2
-    out[k, 1] = R[body, 1, 0] * g0 + R[body, 1, 1] * g1 + R[body, 1, 2] * g2
-    out[k, 2] = R[body, 2, 0] * g0 + R[body, 2, 1] * g1 + R[body, 2, 2] * g2
+    return (R[body, 0, 0] * g0 + R[body, 0, 1] * g1 + R[body, 0, 2] * g2,
+            R[body, 1, 0] * g0 + R[body, 1, 1] * g1 + R[body, 1, 2] * g2,
+            R[body, 2, 0] * g0 + R[body, 2, 1] * g1 + R[body, 2, 2] * g2)
+
+
+@njit(cache=True)
+def _put3(A, j, k, v):
+    """``A[j, k] = v`` (a 3-tuple)."""
+    A[j, k, 0], A[j, k, 1], A[j, k, 2] = v[0], v[1], v[2]
 
 
 @njit(cache=True)
@@ -296,10 +302,10 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
             for s in range(2):
                 r = j_rows[j, s]
                 if j_cside[j, s] == 0:
-                    _world_torque(Ga, r, R, c, JV[j], V_TAU + s)
+                    _put3(JV, j, V_TAU + s, _world_torque(Ga, r, R, c))
                     JV[j, V_SIGN, s] = Ga[r, s]
                 else:
-                    _world_torque(Gb, r, R, c, JV[j], V_TAU + s)
+                    _put3(JV, j, V_TAU + s, _world_torque(Gb, r, R, c))
                     JV[j, V_SIGN, s] = Gb[r, s]
             r = j_rows[j, 2]
             JV[j, V_SIGN, 2] = Ga[r, 2] if j_cside[j, 2] == 0 else Gb[r, 2]
@@ -312,9 +318,9 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
                 for s in range(2):
                     r = j_rows[j, s]
                     if j_cside[j, s] == 0:
-                        _world_torque(Gb, r, R, p, JV[j], V_TAU + s)
+                        _put3(JV, j, V_TAU + s, _world_torque(Gb, r, R, p))
                     else:
-                        _world_torque(Ga, r, R, p, JV[j], V_TAU + s)
+                        _put3(JV, j, V_TAU + s, _world_torque(Ga, r, R, p))
                 # The parent's signs are −s: ρ_p = −(the same reading).
                 d0 = -s1 * JV[j, V_TAU + 1, 2] - rho0
                 d1 = s0 * JV[j, V_TAU, 2] - rho1
@@ -325,9 +331,9 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
         for i in range(nd):
             r = j_rows[j, SLOT_DOT + i]
             if j_cside[j, SLOT_DOT + i] == 0:
-                _world_torque(Ga, r, R, c, JV[j], V_DUAL + i)
+                _put3(JV, j, V_DUAL + i, _world_torque(Ga, r, R, c))
             else:
-                _world_torque(Gb, r, R, c, JV[j], V_DUAL + i)
+                _put3(JV, j, V_DUAL + i, _world_torque(Gb, r, R, c))
         if typ == HINGE:
             t0, t1, t2 = JV[j, V_DUAL, 0], JV[j, V_DUAL, 1], JV[j, V_DUAL, 2]
             u0, u1, u2 = JV[j, V_DUAL + 1, 0], JV[j, V_DUAL + 1, 1], JV[j, V_DUAL + 1, 2]
@@ -362,13 +368,15 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
             for k in range(2):
                 r = j_rows[j, SLOT_LINE + k]
                 if j_cside[j, SLOT_LINE + k] == 0:
-                    _world_torque(Ga, r, R, c, JV[j], V_TAU + k)
-                    _world_torque(Gb, r, R, p if p >= 0 else R.shape[0] - 1, work, k)
+                    _put3(JV, j, V_TAU + k, _world_torque(Ga, r, R, c))
+                    tp = _world_torque(Gb, r, R, p if p >= 0 else R.shape[0] - 1)
+                    work[k, 0], work[k, 1], work[k, 2] = tp[0], tp[1], tp[2]
                     for t in range(3):
                         JV[j, V_LDUAL + k, t] = Ga[r, t]
                 else:
-                    _world_torque(Gb, r, R, c, JV[j], V_TAU + k)
-                    _world_torque(Ga, r, R, p if p >= 0 else R.shape[0] - 1, work, k)
+                    _put3(JV, j, V_TAU + k, _world_torque(Gb, r, R, c))
+                    tp = _world_torque(Ga, r, R, p if p >= 0 else R.shape[0] - 1)
+                    work[k, 0], work[k, 1], work[k, 2] = tp[0], tp[1], tp[2]
                     for t in range(3):
                         JV[j, V_LDUAL + k, t] = Gb[r, t]
             f0, f1, f2 = JV[j, V_LDUAL, 0], JV[j, V_LDUAL, 1], JV[j, V_LDUAL, 2]
@@ -431,18 +439,18 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
             JS[j, 1, 0], JS[j, 2, 0] = rho2, -rho1
             JS[j, 0, 1], JS[j, 2, 1] = -rho2, rho0
             JS[j, 0, 2], JS[j, 1, 2] = rho1, -rho0
-            for k in range(3):
-                for i in range(6):
-                    u = 0.0
-                    for t in range(6):
-                        u += IA[c, i, t] * JS[j, t, k]
-                    JU[j, i, k] = u
-            for k in range(3):
-                for q in range(3):
-                    v = 0.0
-                    for t in range(6):
-                        v += JS[j, t, k] * JU[j, t, q]
-                    work[k, q] = v
+            # U = I^A S: row i is (I^A_i,0:3 × ρ) + I^A_i,3:6; D = Sᵀ U, column q is
+            # (U_0:3,q × ρ) + U_3:6,q.
+            for i in range(6):
+                x0, x1, x2 = IA[c, i, 0], IA[c, i, 1], IA[c, i, 2]
+                JU[j, i, 0] = (x1 * rho2 - x2 * rho1) + IA[c, i, 3]
+                JU[j, i, 1] = (x2 * rho0 - x0 * rho2) + IA[c, i, 4]
+                JU[j, i, 2] = (x0 * rho1 - x1 * rho0) + IA[c, i, 5]
+            for q in range(3):
+                x0, x1, x2 = JU[j, 0, q], JU[j, 1, q], JU[j, 2, q]
+                work[0, q] = (x1 * rho2 - x2 * rho1) + JU[j, 3, q]
+                work[1, q] = (x2 * rho0 - x0 * rho2) + JU[j, 4, q]
+                work[2, q] = (x0 * rho1 - x1 * rho0) + JU[j, 5, q]
             # D⁻¹ by the adjugate (D symmetric positive definite).
             a00, a01, a02 = work[0, 0], work[0, 1], work[0, 2]
             a11, a12, a22 = work[1, 1], work[1, 2], work[2, 2]
