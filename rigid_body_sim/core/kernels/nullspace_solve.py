@@ -53,6 +53,23 @@ read with the same dual bases: point rows ``λ = s F_v``, dot rows ``λ_i = b_i
 · (F_ω − ρ_c × F_v)``; a slider's lines ``λ_k = b_line,k · F_v``, its dots
 ``b_i · (F_ω − Σ λ_k τ_k)``.
 
+A ball is eliminated through its anchor. There (``Y = X(−ρ_c)``, ``S = Y (0,
+I)``) ``Yᵀ I^A_c Y = [[A, B̂], [B̂ᵀ, D]]`` with ``B̂ = U_0:3``, so ``Ia`` is
+exactly ``Y⁻ᵀ [[K, 0], [0, 0]] Y⁻¹``: a point mass ``K = A − B̂ D⁻¹ B̂ᵀ`` at
+the anchor, which the parent receives at its own lever ``ρ_p`` as ``X(ρ_p)ᵀ
+[[K, 0], [0, 0]] X(ρ_p)``. ``K`` is formed from ``D = L diag(δ) Lᵀ`` as ``A −
+Σ_k w_k w_kᵀ / δ_k`` (``w = L⁻¹ B̂ᵀ``), each term bounded by ``A``. In the
+solve the ball passes up the force ``f = z_v + B̂ q₀`` at its anchor (``(f,
+ρ_p × f)`` to the parent); down, with the parent's anchor acceleration ``ŷ =
+a_p,v + a_p,ω × ρ_p``, ``ω̇_c = q₀ − D⁻¹ B̂ᵀ ŷ``, ``a_c = (ŷ + g_v + ρ_c ×
+ω̇_c, ω̇_c)`` and ``λ = s (f + K ŷ)``. Written as the general recursion, with
+``D⁻¹`` explicit (an adjugate), the ball lost accuracy in the factor: the
+update ``U D⁻¹ Uᵀ`` has rounding errors of order ``eps |U| |D⁻¹| |Uᵀ|``, up to
+50 times ``|I^A|`` on random ball chains, and a step's error then perturbed the
+parent's ``D`` by up to 8e-13 relative (1.4e-14 as above); λ was off by up to
+1.2e-12 at cond(A) 6e3 (now 2e-15, see ``test/test_nullspace_premise.py``).
+``q₀ = −D⁻¹ Sᵀ z`` with an explicit ``D⁻¹`` alone costs a factor of about 10.
+
 Scope of the prototype: each tree hangs from one body joined to the world
 (no free-floating root, no second joint to the world, no rows on one body,
 no immovable body, no redundant rows); :func:`nullspace_structure` returns
@@ -74,6 +91,8 @@ FIXED, HINGE, BALL, SLIDER = 0, 1, 2, 3
 SLOT_POINT, SLOT_DOT, SLOT_LINE, N_SLOTS = 0, 3, 6, 8
 # Vectors of a joint in ``JV``: lever, shift, point-row signs, dual bases, line torques.
 V_RHO, V_D, V_SIGN, V_DUAL, V_LDUAL, V_TAU, N_VECS = 0, 1, 2, 3, 6, 8, 10
+# A ball's (it has no line rows): the parent's lever ρ_p.
+V_RHOP = V_LDUAL
 _DOF = np.array([0, 1, 3, 1], dtype=np.int64)
 
 _KIND_POINT, _KIND_DOT, _KIND_LINE = 0, 1, 2   # as in .rows
@@ -181,9 +200,10 @@ def nullspace_arrays(n_joints: int, n_bodies: int) -> tuple:
     -------
     tuple
         ``(IA, JS, JU, JD, JV, work, P, Acc, JG, JQ)``: articulated inertias (n, 6, 6);
-        per joint S, U (nj, 6, 3), D⁻¹ (nj, 3, 3), vectors (nj, N_VECS, 3); a (6, 6)
-        factor workspace; the solve's bias forces P and accelerations Acc (n, 6),
-        particular solutions JG (nj, 6) and ``q₀`` JQ (nj, 3).
+        per joint S, U (nj, 6, 3; a ball's: K and B̂ D⁻¹), D⁻¹ (nj, 3, 3; a ball's:
+        ``L diag(δ) Lᵀ``), vectors (nj, N_VECS, 3); a (6, 6) factor workspace; the
+        solve's bias forces P and accelerations Acc (n, 6), particular solutions JG (nj,
+        6; a ball's: ``g_v`` and ``f``) and ``q₀`` JQ (nj, 3).
 
     """
     nj, n = n_joints, n_bodies
@@ -249,6 +269,65 @@ def _add_shifted(W, IA, p, d0, d1, d2):
 
 
 @njit(cache=True)
+def _add_point_mass(JU, j, IA, p, e0, e1, e2):
+    """
+    ``IA[p] += X(e)ᵀ [[K, 0], [0, 0]] X(e)``: a point mass ``K = JU[j, 0:3]`` at ``e``.
+
+    That is ``[[K, E], [Eᵀ, [e]× E]]`` with ``E = −K [e]×`` (row i: ``e × K_i``):
+    :func:`_add_shifted` with ``B = C = 0``, without their terms.
+    """
+    k00, k01, k02 = JU[j, 0, 0], JU[j, 0, 1], JU[j, 0, 2]
+    k11, k12, k22 = JU[j, 1, 1], JU[j, 1, 2], JU[j, 2, 2]
+    # E rows e × K_i.
+    x00, x01, x02 = e1 * k02 - e2 * k01, e2 * k00 - e0 * k02, e0 * k01 - e1 * k00
+    x10, x11, x12 = e1 * k12 - e2 * k11, e2 * k01 - e0 * k12, e0 * k11 - e1 * k01
+    x20, x21, x22 = e1 * k22 - e2 * k12, e2 * k02 - e0 * k22, e0 * k12 - e1 * k02
+    IA[p, 0, 0] += k00
+    IA[p, 1, 1] += k11
+    IA[p, 2, 2] += k22
+    IA[p, 0, 1] += k01
+    IA[p, 1, 0] += k01
+    IA[p, 0, 2] += k02
+    IA[p, 2, 0] += k02
+    IA[p, 1, 2] += k12
+    IA[p, 2, 1] += k12
+    IA[p, 0, 3] += x00
+    IA[p, 0, 4] += x01
+    IA[p, 0, 5] += x02
+    IA[p, 1, 3] += x10
+    IA[p, 1, 4] += x11
+    IA[p, 1, 5] += x12
+    IA[p, 2, 3] += x20
+    IA[p, 2, 4] += x21
+    IA[p, 2, 5] += x22
+    IA[p, 3, 0] += x00
+    IA[p, 4, 0] += x01
+    IA[p, 5, 0] += x02
+    IA[p, 3, 1] += x10
+    IA[p, 4, 1] += x11
+    IA[p, 5, 1] += x12
+    IA[p, 3, 2] += x20
+    IA[p, 4, 2] += x21
+    IA[p, 5, 2] += x22
+    # [e]× E: entry (i, t) is (e × E col t)_i, symmetric.
+    c00 = e1 * x20 - e2 * x10
+    c11 = e2 * x01 - e0 * x21
+    c22 = e0 * x12 - e1 * x02
+    c01 = e1 * x21 - e2 * x11
+    c02 = e1 * x22 - e2 * x12
+    c12 = e2 * x02 - e0 * x22
+    IA[p, 3, 3] += c00
+    IA[p, 4, 4] += c11
+    IA[p, 5, 5] += c22
+    IA[p, 3, 4] += c01
+    IA[p, 4, 3] += c01
+    IA[p, 3, 5] += c02
+    IA[p, 5, 3] += c02
+    IA[p, 4, 5] += c12
+    IA[p, 5, 4] += c12
+
+
+@njit(cache=True)
 def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, R,
                      IA, JS, JU, JD, JV, work):
     """
@@ -297,6 +376,7 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
         typ = j_type[j]
         # Child torques of the rows in world axes: points 0, 1 (lever), dots, lines.
         rho0 = rho1 = rho2 = 0.0
+        rp0 = rp1 = rp2 = 0.0
         d0 = d1 = d2 = 0.0
         if typ != SLIDER:
             for s in range(2):
@@ -322,9 +402,10 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
                     else:
                         _put3(JV, j, V_TAU + s, _world_torque(Ga, r, R, p))
                 # The parent's signs are −s: ρ_p = −(the same reading).
-                d0 = -s1 * JV[j, V_TAU + 1, 2] - rho0
-                d1 = s0 * JV[j, V_TAU, 2] - rho1
-                d2 = -s0 * JV[j, V_TAU, 1] - rho2
+                rp0 = -s1 * JV[j, V_TAU + 1, 2]
+                rp1 = s0 * JV[j, V_TAU, 2]
+                rp2 = -s0 * JV[j, V_TAU, 1]
+                d0, d1, d2 = rp0 - rho0, rp1 - rho1, rp2 - rho2
         JV[j, V_RHO, 0], JV[j, V_RHO, 1], JV[j, V_RHO, 2] = rho0, rho1, rho2
         # Dot torques t_i (child, world) into the dual slots, inverted below.
         nd = 2 if typ == HINGE else (0 if typ == BALL else 3)
@@ -451,41 +532,50 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
                 work[0, q] = (x1 * rho2 - x2 * rho1) + JU[j, 3, q]
                 work[1, q] = (x2 * rho0 - x0 * rho2) + JU[j, 4, q]
                 work[2, q] = (x0 * rho1 - x1 * rho0) + JU[j, 5, q]
-            # D⁻¹ by the adjugate (D symmetric positive definite).
-            a00, a01, a02 = work[0, 0], work[0, 1], work[0, 2]
-            a11, a12, a22 = work[1, 1], work[1, 2], work[2, 2]
-            c00 = a11 * a22 - a12 * a12
-            c01 = a02 * a12 - a01 * a22
-            c02 = a01 * a12 - a02 * a11
-            det = a00 * c00 + a01 * c01 + a02 * c02
-            inv = 1.0 / det
-            JD[j, 0, 0] = c00 * inv
-            JD[j, 0, 1] = JD[j, 1, 0] = c01 * inv
-            JD[j, 0, 2] = JD[j, 2, 0] = c02 * inv
-            JD[j, 1, 1] = (a00 * a22 - a02 * a02) * inv
-            JD[j, 1, 2] = JD[j, 2, 1] = (a01 * a02 - a00 * a12) * inv
-            JD[j, 2, 2] = (a00 * a11 - a01 * a01) * inv
             for k in range(3):
                 sc = 0.0
                 for t in range(6):
                     sc += JS[j, t, k] * JS[j, t, k] * IA[c, t, t]
                 if work[k, k] < smallest * sc:
                     smallest = work[k, k] / sc
+            # D = L diag(δ) Lᵀ (L unit lower; JD holds L below the diagonal, 1 / δ on it).
+            a00, a01, a02 = work[0, 0], work[0, 1], work[0, 2]
+            a11, a12, a22 = work[1, 1], work[1, 2], work[2, 2]
+            r0 = 1.0 / a00
+            l10 = a01 * r0
+            l20 = a02 * r0
+            r1 = 1.0 / (a11 - l10 * a01)
+            m12 = a12 - l20 * a01
+            l21 = m12 * r1
+            r2 = 1.0 / (a22 - l20 * a02 - l21 * m12)
+            JD[j, 0, 0], JD[j, 1, 1], JD[j, 2, 2] = r0, r1, r2
+            JD[j, 1, 0], JD[j, 2, 0], JD[j, 2, 1] = l10, l20, l21
+            JD[j, 0, 1] = JD[j, 0, 2] = JD[j, 1, 2] = 0.0
+            # The subtree passes on a point mass at the anchor, K = A − B̂ D⁻¹ B̂ᵀ (B̂ =
+            # U_0:3 = A [ρ]× + B), formed as A − Σ_k w_k w_kᵀ / δ_k with w = L⁻¹ B̂ᵀ (each
+            # term <= A: no growth). The solve takes K (into U_0:3) and B̂ D⁻¹ = wᵀ
+            # diag(δ)⁻¹ L⁻ᵀ... (into U_3:6); it reads no other part of U for a ball.
+            for i in range(3):
+                w0 = JU[j, i, 0]
+                w1 = JU[j, i, 1] - l10 * w0
+                w2 = JU[j, i, 2] - l20 * w0 - l21 * w1
+                work[3 + i, 0], work[3 + i, 1], work[3 + i, 2] = w0, w1, w2
+                e2 = w2 * r2
+                e1 = w1 * r1 - l21 * e2
+                JU[j, 3 + i, 0] = w0 * r0 - l10 * e1 - l20 * e2
+                JU[j, 3 + i, 1] = e1
+                JU[j, 3 + i, 2] = e2
             if p >= 0:
-                for i in range(6):
-                    # (U D⁻¹)_i
-                    v0 = JU[j, i, 0] * JD[j, 0, 0] + JU[j, i, 1] * JD[j, 1, 0] + \
-                        JU[j, i, 2] * JD[j, 2, 0]
-                    v1 = JU[j, i, 0] * JD[j, 0, 1] + JU[j, i, 1] * JD[j, 1, 1] + \
-                        JU[j, i, 2] * JD[j, 2, 1]
-                    v2 = JU[j, i, 0] * JD[j, 0, 2] + JU[j, i, 1] * JD[j, 1, 2] + \
-                        JU[j, i, 2] * JD[j, 2, 2]
-                    for t in range(i, 6):
-                        work[i, t] = IA[c, i, t] - (v0 * JU[j, t, 0] + v1 * JU[j, t, 1]
-                                                    + v2 * JU[j, t, 2])
-                for i in range(1, 6):
-                    for t in range(i):
-                        work[i, t] = work[t, i]
+                for i in range(3):
+                    for t in range(i, 3):
+                        v = IA[c, i, t] - ((work[3 + i, 0] * work[3 + t, 0] * r0
+                                            + work[3 + i, 1] * work[3 + t, 1] * r1)
+                                           + work[3 + i, 2] * work[3 + t, 2] * r2)
+                        JU[j, i, t] = v
+                        JU[j, t, i] = v
+                JV[j, V_RHOP, 0], JV[j, V_RHOP, 1], JV[j, V_RHOP, 2] = rp0, rp1, rp2
+                _add_point_mass(JU, j, IA, p, rp0, rp1, rp2)
+            continue
         elif p >= 0:   # fixed: nothing eliminated
             for i in range(6):
                 for t in range(6):
@@ -493,6 +583,96 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
         if p >= 0:
             _add_shifted(work, IA, p, d0, d1, d2)
     return smallest
+
+
+@njit(cache=True, inline='always')
+def _ball_up(j, c, p, j_rows, IA, JD, JU, JV, P, JG, JQ, rhs):
+    """
+    Take a ball's up step: ``q₀ = −D⁻¹ Sᵀ z`` and the force ``f`` it passes to its parent.
+
+    In the anchor frame the ball's bias wrench ``z + U q₀`` is the pure force ``f = z_v
+    + B̂ q₀`` at the anchor (its moment there is ``Sᵀ z + D q₀ = 0``): the parent gets
+    ``(f, ρ_p × f)``. ``g = (s c, 0)``; ``z = p_c + I^A g``; ``f`` goes to ``JG[j, 3:6]``.
+    """
+    v0 = JV[j, V_SIGN, 0] * rhs[j_rows[j, 0]]
+    v1 = JV[j, V_SIGN, 1] * rhs[j_rows[j, 1]]
+    v2 = JV[j, V_SIGN, 2] * rhs[j_rows[j, 2]]
+    JG[j, 0], JG[j, 1], JG[j, 2] = v0, v1, v2
+    z0 = P[c, 0] + (IA[c, 0, 0] * v0 + IA[c, 0, 1] * v1 + IA[c, 0, 2] * v2)
+    z1 = P[c, 1] + (IA[c, 1, 0] * v0 + IA[c, 1, 1] * v1 + IA[c, 1, 2] * v2)
+    z2 = P[c, 2] + (IA[c, 2, 0] * v0 + IA[c, 2, 1] * v1 + IA[c, 2, 2] * v2)
+    z3 = P[c, 3] + (IA[c, 3, 0] * v0 + IA[c, 3, 1] * v1 + IA[c, 3, 2] * v2)
+    z4 = P[c, 4] + (IA[c, 4, 0] * v0 + IA[c, 4, 1] * v1 + IA[c, 4, 2] * v2)
+    z5 = P[c, 5] + (IA[c, 5, 0] * v0 + IA[c, 5, 1] * v1 + IA[c, 5, 2] * v2)
+    # Sᵀ z = z_ω − ρ × z_v (the moment about the anchor), then L Lᵀ q₀ = −Sᵀ z.
+    r0, r1, r2 = JV[j, V_RHO, 0], JV[j, V_RHO, 1], JV[j, V_RHO, 2]
+    t0 = z3 - (r1 * z2 - r2 * z1)
+    t1 = z4 - (r2 * z0 - r0 * z2)
+    t2 = z5 - (r0 * z1 - r1 * z0)
+    q0, q1, q2 = _ldl_solve(JD, j, -t0, -t1, -t2)
+    JQ[j, 0], JQ[j, 1], JQ[j, 2] = q0, q1, q2
+    # f = z_v + B̂ q₀ = z_v − (B̂ D⁻¹) Sᵀ z: off q₀'s chain of dependent operations.
+    f0 = z0 - (JU[j, 3, 0] * t0 + JU[j, 3, 1] * t1 + JU[j, 3, 2] * t2)
+    f1 = z1 - (JU[j, 4, 0] * t0 + JU[j, 4, 1] * t1 + JU[j, 4, 2] * t2)
+    f2 = z2 - (JU[j, 5, 0] * t0 + JU[j, 5, 1] * t1 + JU[j, 5, 2] * t2)
+    JG[j, 3], JG[j, 4], JG[j, 5] = f0, f1, f2
+    if p >= 0:
+        e0, e1, e2 = JV[j, V_RHOP, 0], JV[j, V_RHOP, 1], JV[j, V_RHOP, 2]
+        P[p, 0] += f0
+        P[p, 1] += f1
+        P[p, 2] += f2
+        P[p, 3] += e1 * f2 - e2 * f1
+        P[p, 4] += e2 * f0 - e0 * f2
+        P[p, 5] += e0 * f1 - e1 * f0
+
+
+@njit(cache=True, inline='always')
+def _ball_down(j, c, p, j_rows, JD, JU, JV, Acc, JG, JQ, out):
+    """
+    Take a ball's down step: its child's acceleration and ``λ = s (f + K ŷ)``.
+
+    ``ŷ = a_p,v + a_p,ω × ρ_p`` is the parent's anchor acceleration (0 at the world);
+    the child's ``ω̇ = q₀ − D⁻¹ B̂ᵀ ŷ`` (the parent's ``ω̇`` drops out exactly), ``a_v =
+    ŷ + g_v + ρ_c × ω̇``; the joint force on the child, ``F_v = K (ŷ + g_v) + (f − K g_v)``,
+    is ``f + K ŷ`` (at the world, ``ŷ = 0`` and ``F_v = z_v + B̂ q₀``).
+    """
+    y0 = y1 = y2 = 0.0
+    q0, q1, q2 = JQ[j, 0], JQ[j, 1], JQ[j, 2]
+    f0, f1, f2 = JG[j, 3], JG[j, 4], JG[j, 5]
+    if p >= 0:
+        e0, e1, e2 = JV[j, V_RHOP, 0], JV[j, V_RHOP, 1], JV[j, V_RHOP, 2]
+        w0, w1, w2 = Acc[p, 3], Acc[p, 4], Acc[p, 5]
+        y0 = Acc[p, 0] + (w1 * e2 - w2 * e1)
+        y1 = Acc[p, 1] + (w2 * e0 - w0 * e2)
+        y2 = Acc[p, 2] + (w0 * e1 - w1 * e0)
+        # D⁻¹ B̂ᵀ ŷ = (B̂ D⁻¹)ᵀ ŷ.
+        q0 -= JU[j, 3, 0] * y0 + JU[j, 4, 0] * y1 + JU[j, 5, 0] * y2
+        q1 -= JU[j, 3, 1] * y0 + JU[j, 4, 1] * y1 + JU[j, 5, 1] * y2
+        q2 -= JU[j, 3, 2] * y0 + JU[j, 4, 2] * y1 + JU[j, 5, 2] * y2
+        f0 += JU[j, 0, 0] * y0 + JU[j, 0, 1] * y1 + JU[j, 0, 2] * y2
+        f1 += JU[j, 1, 0] * y0 + JU[j, 1, 1] * y1 + JU[j, 1, 2] * y2
+        f2 += JU[j, 2, 0] * y0 + JU[j, 2, 1] * y1 + JU[j, 2, 2] * y2
+    a0 = y0 + JG[j, 0]
+    a1 = y1 + JG[j, 1]
+    a2 = y2 + JG[j, 2]
+    r0, r1, r2 = JV[j, V_RHO, 0], JV[j, V_RHO, 1], JV[j, V_RHO, 2]
+    Acc[c, 0] = a0 + (r1 * q2 - r2 * q1)
+    Acc[c, 1] = a1 + (r2 * q0 - r0 * q2)
+    Acc[c, 2] = a2 + (r0 * q1 - r1 * q0)
+    Acc[c, 3], Acc[c, 4], Acc[c, 5] = q0, q1, q2
+    out[j_rows[j, 0]] = JV[j, V_SIGN, 0] * f0
+    out[j_rows[j, 1]] = JV[j, V_SIGN, 1] * f1
+    out[j_rows[j, 2]] = JV[j, V_SIGN, 2] * f2
+
+
+@njit(cache=True, inline='always')
+def _ldl_solve(JD, j, b0, b1, b2):
+    """``D⁻¹ b`` with joint j's ``D = L diag(δ) Lᵀ`` (``JD[j]``: L below the diagonal, 1 / δ)."""
+    x1 = b1 - JD[j, 1, 0] * b0
+    x2 = (b2 - JD[j, 2, 0] * b0 - JD[j, 2, 1] * x1) * JD[j, 2, 2]
+    x1 = x1 * JD[j, 1, 1] - JD[j, 2, 1] * x2
+    x0 = b0 * JD[j, 0, 0] - JD[j, 1, 0] * x1 - JD[j, 2, 0] * x2
+    return x0, x1, x2
 
 
 @njit(cache=True)
@@ -515,6 +695,9 @@ def nullspace_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Ac
         c = j_child[j]
         p = j_parent[j]
         typ = j_type[j]
+        if typ == BALL:
+            _ball_up(j, c, p, j_rows, IA, JD, JU, JV, P, JG, JQ, rhs)
+            continue
         w0 = w1 = w2 = 0.0
         if typ == HINGE:
             c1, c2 = rhs[j_rows[j, SLOT_DOT]], rhs[j_rows[j, SLOT_DOT + 1]]
@@ -586,6 +769,9 @@ def nullspace_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Ac
         c = j_child[j]
         p = j_parent[j]
         typ = j_type[j]
+        if typ == BALL:
+            _ball_down(j, c, p, j_rows, JD, JU, JV, Acc, JG, JQ, out)
+            continue
         dof = _DOF[typ]
         y0 = y1 = y2 = y3 = y4 = y5 = 0.0
         if p >= 0:
