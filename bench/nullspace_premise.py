@@ -49,8 +49,11 @@ from rigid_body_sim.core.kernels.tree_solve import (  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / 'out'
 
+# The loops are compiled afresh each run (not cache=True): numba's cache of a caller is
+# keyed on the caller's file only, so a cached loop would keep running a kernel since edited.
 
-@njit(cache=True)
+
+@njit
 def old_factor_loop(number, group_ptr, group_rows, group_child, group_parent, row_side, Ga, Gb,
                     minv6, S, piv, P, Q, B, W):
     """Call tree_factor (symmetric, reg 0) ``number`` times."""
@@ -61,7 +64,7 @@ def old_factor_loop(number, group_ptr, group_rows, group_child, group_parent, ro
     return pivot
 
 
-@njit(cache=True)
+@njit
 def new_factor_loop(number, j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, R,
                     IA, JS, JU, JD, JV, work):
     """Call nullspace_factor ``number`` times."""
@@ -72,7 +75,7 @@ def new_factor_loop(number, j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, 
     return pivot
 
 
-@njit(cache=True)
+@njit
 def old_solve_loop(number, group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B,
                    E, tmp, rhs, out):
     """Call tree_solve ``number`` times."""
@@ -81,7 +84,7 @@ def old_solve_loop(number, group_ptr, group_rows, group_child, group_parent, S, 
                    rhs, out)
 
 
-@njit(cache=True)
+@njit
 def new_solve_loop(number, j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Acc, JG,
                    JQ, rhs, out):
     """Call nullspace_solve ``number`` times."""
