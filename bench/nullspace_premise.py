@@ -14,7 +14,8 @@ information, chains of 30 of each other type):
   ``nullspace_solve`` against :func:`~rigid_body_sim.core.kernels.tree_solve.tree_factor`
   (``H = G``, symmetric, ``reg = 0``) / ``tree_solve``, largest over the states and
   right-hand sides; and each one's error against an extended-precision reference
-  (iterative refinement with ``np.longdouble`` residuals), with the largest cond(A);
+  (iterative refinement with double-double residuals from the blocks,
+  ``Mechanism.reference``), with the largest cond(A);
 * **time per call** of the factorization and of the solve, both measured inside a
   compiled loop (the step calls them from compiled code: Python's dispatch, a few µs
   per call with this many arguments, is in neither), old and new interleaved
@@ -243,7 +244,7 @@ def main(argv=None):
     text = (f'# Issue 19 premise: null-space (articulated-inertia) tree solve vs tree_solve\n\n'
             f'Agreement: largest ‖λ_new − λ_old‖∞ / ‖λ_old‖∞ over {states} random states x '
             f'{n_rhs} random rhs per case; "ref": an extended-precision reference '
-            f'(longdouble residuals). Times: µs per call inside a compiled loop, median '
+            f'(double-double residuals). Times: µs per call inside a compiled loop, median '
             f'[min–max] of {repeats} interleaved repetitions; ratios of the medians.\n\n'
             + table(rows) + '\n')
     print(text)
