@@ -67,8 +67,10 @@ a_p,v + a_p,ω × ρ_p``, ``ω̇_c = q₀ − D⁻¹ B̂ᵀ ŷ``, ``a_c = (ŷ + 
 update ``U D⁻¹ Uᵀ`` has rounding errors of order ``eps |U| |D⁻¹| |Uᵀ|``, up to
 50 times ``|I^A|`` on random ball chains, and a step's error then perturbed the
 parent's ``D`` by up to 8e-13 relative (1.4e-14 as above); λ was off by up to
-1.2e-12 at cond(A) 6e3 (now 2e-15, see ``test/test_nullspace_premise.py``).
-``q₀ = −D⁻¹ Sᵀ z`` with an explicit ``D⁻¹`` alone costs a factor of about 10.
+1.2e-12 at cond(A) 6e3 (now 8.3e-15: ``bench/nullspace_premise.py``, whose
+worst case over all joint types is 5.5e-14, ``test/test_nullspace_premise.py``).
+``q₀ = −D⁻¹ Sᵀ z`` with an explicit ``D⁻¹`` alone makes λ's error about 10
+times larger.
 
 Scope of the prototype: each tree hangs from one body joined to the world
 (no free-floating root, no second joint to the world, no rows on one body,
@@ -78,7 +80,9 @@ here (it extends: ``K = M diag(I, J_r⁻¹)``, ``S_E, X_E`` from the end rows,
 ``S_S, X_S`` from the start rows, Appendix A).
 
 The kernels are compiled with numba (``@njit(cache=True)``), take only numpy
-arrays and scalars, and allocate nothing.
+arrays and scalars, and allocate nothing. The ball's solve steps are inlined
+(``inline='always'``): called, with this many arrays, they made the solve 2.5
+times slower.
 """
 
 from __future__ import annotations
