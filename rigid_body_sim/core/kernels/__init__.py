@@ -13,10 +13,13 @@ They import only one another, numba, numpy and math; never the classes of
 ``free_step``
     A whole step of bodies no constraint couples; outputs, state distances.
 ``rows``
-    The constraint rows' geometry and rates (point, dot, line, distance).
+    The constraint rows' geometry and rates (point, dot, line, distance, angle).
 ``tree_solve``, ``loop_solve``
     The constraint system of a forest in tree order, and of a spanning forest
     plus the Schur complement of the rows that close loops.
+``nullspace_solve``
+    A prototype (issue 19, not yet a path of the step): a forest's system in
+    articulated-inertia form, each joint's freedoms eliminated instead of its rows.
 ``constrained_step``
     A whole step of one component of the constraint graph (RATTLE and SHAKE).
 
