@@ -60,3 +60,24 @@ def test_one_hard_push_cannot_make_a_step_take_unbounded_work(integrator):
     spin = np.abs(sim.state.ang_vel_principal).max()
     assert sim.work()['capped_steps'] > 0 or spin * sim.dt / sim.integrator.max_rotation \
         <= cap, spin
+
+
+@pytest.mark.parametrize('integrator', ['symplectic_euler', 'lie_poisson2'])
+def test_a_projection_left_above_the_tolerance_is_counted(integrator):
+    # SHAKE given one Newton iteration (max_iterations = 1) on a pendulum swinging fast at
+    # dt = 0.01 s: the first drift misses Φ by ~1e-4 m, one Newton step leaves ~1e-8 (its
+    # quadratic convergence), far above the 1e-13 m tolerance: every step ends unconverged,
+    # is kept, and is counted. With the default six iterations none is.
+    def swing(max_iterations):
+        bob = RigidBody('bob', 1.0, [1e-3] * 3, position_world=[0.5, 0.0, 0.0],
+                        linear_velocity_world=[0.0, 0.0, -6.0])
+        sim = Simulation([bob], [], integrator, 1e-2,
+                         [Constraint('rod', 'ball', 'bob', None, anchor_world=[0.0, 0.0, 0.0])])
+        sim.dynamics.solver.max_iterations = max_iterations
+        sim.step(50)
+        return sim.work()['unconverged_projections'], sim.diagnostics().constraint_violation
+
+    count, violation = swing(1)
+    assert count > 0 and violation > 1e-12
+    count, violation = swing(6)
+    assert count == 0 and violation < 1e-12

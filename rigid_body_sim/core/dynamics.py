@@ -116,12 +116,18 @@ class WorkCounters(TalliedCounters):
         called for exceeded ``Integrator.max_substeps``: they were taken in
         ``max_substeps`` sub-steps, each turning by more than ``max_rotation``
         (bounded work, lower accuracy; the node reports them on diagnostics).
+    unconverged_projections : int
+        (Sub)steps whose position projection (SHAKE, or its last resort) ended
+        after ``max_iterations`` with ``|Φ − target|`` above the tolerance (and
+        above the coordinates' rounding): the step was kept, less accurate; the
+        node reports them on diagnostics.
 
     """
 
     SLOTS = {'steps': STEPS, 'rhs_evaluations': Count.RHS, 'kick_evaluations': Count.KICK,
              'gyroscopic_body_evaluations': Count.GYRO, 'rotation_updates': Count.ROT,
-             'substeps': Count.SUBSTEPS, 'retries': Count.RETRIES, 'capped_steps': Count.CAPPED}
+             'substeps': Count.SUBSTEPS, 'retries': Count.RETRIES, 'capped_steps': Count.CAPPED,
+             'unconverged_projections': Count.UNCONVERGED}
 
 
 class SolverCounters(TalliedCounters):

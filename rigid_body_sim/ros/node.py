@@ -666,6 +666,7 @@ class SimNode(Node):
             'substeps_total': str(work.get('substeps', 0)),
             'retries_total': str(work.get('retries', 0)),
             'capped_steps_total': str(work.get('capped_steps', 0)),
+            'unconverged_projections_total': str(work.get('unconverged_projections', 0)),
             'tolerance': 'off' if accuracy.tolerance is None else f'{accuracy.tolerance:.3g}',
             'error_estimate': f'{accuracy.error_estimate:.3g}',
             'tolerance_substeps': str(accuracy.substeps),

@@ -731,7 +731,11 @@ def _project_positions(pos, quat, target, cx, par, counts):
         for r in range(phi.shape[0]):
             vm[V_RHS, r] = phi[r] - target[r]
             norm = max(norm, abs(vm[V_RHS, r]))
-        if norm <= par[P_POS_TOL] or it == max_it:
+        if norm <= par[P_POS_TOL]:
+            break
+        if it == max_it:
+            if norm > _rounding_floor(pos, phi.shape[0]):
+                counts[Count.UNCONVERGED] += 1
             break
         counts[Count.POS_ITERATIONS] += 1
         mode = _fac(Ga, Gb, Ga, Gb, a, b, _own(cx), minv6, True, par, cx, GENERAL, counts)
@@ -906,7 +910,11 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
         for r in range(m):
             vm[V_RHS, r] = phiE[r] - target[r]
             norm = max(norm, abs(vm[V_RHS, r]))
-        if norm <= par[P_POS_TOL] or it == max_it:
+        if norm <= par[P_POS_TOL]:
+            break
+        if it == max_it:
+            if norm > _rounding_floor(pos, m):
+                counts[Count.UNCONVERGED] += 1   # accepted above the tolerance: reported
             break
         if norm > 0.5 * previous:
             if norm <= _rounding_floor(pos, m):

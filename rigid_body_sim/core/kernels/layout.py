@@ -218,6 +218,9 @@ class Count(IntEnum):
     #: Steps whose sub-steps were capped at max_substeps (each then turns by more than
     #: max_rotation): the bound on the work of one step, reported, never silent.
     CAPPED = 15
+    #: (Sub)steps whose positions SHAKE (or its last-resort projection) left above the
+    #: tolerance after max_iterations: less accurate, reported, never silent.
+    UNCONVERGED = 16
 
 
 N_COUNTS = len(Count)
