@@ -35,15 +35,19 @@ def scene(tmp_path, text, groups, gravity=True, integrator='lie_poisson2', dt=1e
     return scene_from_dict(data, str(tmp_path / 'scene.yaml')).simulation
 
 
-def pendulum(tmp_path, **kw):
-    """Build a bob of MASS at LENGTH along x from a world hinge about y (q tips it down)."""
-    text = robot('p', link('world'),
+def pendulum_urdf():
+    """Return a bob of MASS at LENGTH along x from a world hinge 'pivot' about y."""
+    return robot('p', link('world'),
                  link('rod', inertial(MASS, (LENGTH, 0, 0), (0.2, -0.1, 0.3), ixx=0.01,
                                       iyy=0.02, izz=0.015)),
                  joint('pivot', 'continuous', 'world', 'rod', xyz=(0, 0, 1), axis=(0, 1, 0),
                        extra='<limit effort="1e9" velocity="1e9"/>'))
-    return scene(tmp_path, text, [{'name': 'hold', 'joints': ['pivot'],
-                                   'interface': 'position', 'mode': 'exact'}], **kw)
+
+
+def pendulum(tmp_path, **kw):
+    """Build the pendulum of :func:`pendulum_urdf` held by an exact drive (q tips it down)."""
+    return scene(tmp_path, pendulum_urdf(), [{'name': 'hold', 'joints': ['pivot'],
+                                             'interface': 'position', 'mode': 'exact'}], **kw)
 
 
 def wheel(tmp_path, **kw):

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from rigid_body_sim.core import SpecError
 from robot_helpers import inertial, joint, link, robot
-from test_exact_drives import G, I_AXLE, INTEGRATORS, LENGTH, MASS, scene, SPLITTINGS
+from test_exact_drives import G, I_AXLE, INTEGRATORS, MASS, pendulum_urdf, scene, SPLITTINGS
 
 OMEGA = 20.0     # 1/s: the Baumgarte rate, 1 / the default time constant (0.05 s)
 SHAKE_TOL = 1e-13   # rad or m: SHAKE's position tolerance, per (sub)step
@@ -39,13 +39,8 @@ def velocity_group(joints):
 
 
 def pendulum(tmp_path, **kw):
-    """Build a bob of MASS at LENGTH along x from a world hinge about y (q tips it down)."""
-    text = robot('p', link('world'),
-                 link('rod', inertial(MASS, (LENGTH, 0, 0), (0.2, -0.1, 0.3), ixx=0.01,
-                                      iyy=0.02, izz=0.015)),
-                 joint('pivot', 'continuous', 'world', 'rod', xyz=(0, 0, 1), axis=(0, 1, 0),
-                       extra='<limit effort="1e9" velocity="1e9"/>'))
-    return scene(tmp_path, text, velocity_group(['pivot']), **kw)
+    """Return the bob of ``test_exact_drives.pendulum_urdf``, its pivot turned at v*."""
+    return scene(tmp_path, pendulum_urdf(), velocity_group(['pivot']), **kw)
 
 
 def wheel(tmp_path, rpy=(0.0, 0.0, 0.0), **kw):
