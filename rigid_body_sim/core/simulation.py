@@ -440,19 +440,17 @@ class Simulation:
         efforts = js.efforts
         if self.drives is not None and len(self.drives.rows_of):
             efforts = efforts + self.drives.efforts(js.positions, js.velocities)
+        if len(self._exact) or self._mimic_names:
+            solver = self.dynamics.solver
+            lam = solver.multipliers(self.dynamics, self.state)
+            efforts = efforts.copy()
         if len(self._exact):
             # An exact drive's effort is its row's multiplier: Φ = q − q*, so the
             # generalized force its reaction −Gᵀλ applies along q is −λ.
-            solver = self.dynamics.solver
-            lam = solver.multipliers(self.dynamics, self.state)
             rows = [solver.constraints.rows_of(name)[0] for name in self._drive_names]
-            efforts = efforts.copy()
             efforts[self._exact] -= lam[rows]
         if self._mimic_names:
             # A mimic row Φ = q_f − k q_l − c applies −λ along q_f and kλ along q_l.
-            solver = self.dynamics.solver
-            lam = solver.multipliers(self.dynamics, self.state)
-            efforts = efforts.copy()
             for (f, leader, k, _), name in zip(self.joints.mimics, self._mimic_names):
                 lam_r = lam[solver.constraints.rows_of(name)[0]]
                 efforts[f] -= lam_r
@@ -488,9 +486,8 @@ class Simulation:
         positions as their targets: position drives hold them, velocity drives move
         them on at their commanded velocity from now. A velocity given for a driven
         joint is projected, with the rest of the velocities, onto the drive's (0,
-        or the velocity drive's ``v*``). Mimic joints
-        follow their leaders (a value given for one that contradicts its
-        leader's is refused).
+        or the velocity drive's ``v*``). Mimic joints follow their leaders (a value
+        given for one that contradicts its leader's is refused).
 
         """
         if not isinstance(positions, dict):
