@@ -137,7 +137,8 @@ class SolverCounters(TalliedCounters):
              'rank_deficient_solves': Count.RANK_DEFICIENT,
              'projection_fallbacks': Count.FALLBACKS, 'acceleration_solves': Count.ACC_SOLVES,
              'position_iterations': Count.POS_ITERATIONS,
-             'velocity_projections': Count.VEL_PROJECTIONS}
+             'velocity_projections': Count.VEL_PROJECTIONS,
+             'inertia_form_fallbacks': Count.INERTIA_FALLBACKS}
 
 
 class Dynamics:

@@ -21,10 +21,15 @@ ill-conditioned the mass ratios make it (a point mass on a rod: 1e9).
 The matrix ``G M⁻¹ Gᵀ`` couples only constraints that share a body: block
 tridiagonal for chains, tree-shaped for trees. Chains and trees are eliminated
 in tree order by :mod:`.kernels.tree_solve` (Baraff 1996; linear in the number
-of links); components of at most :data:`KERNEL_DENSE_ROWS` rows are factorized
-densely, which is faster at that size; a closed loop, among bodies or through
-the world, is solved by the tree solve of a spanning forest and the Schur
-complement of the rows that close the loops (:mod:`.kernels.loop_solve`).
+of links); where every joint of the forest is a built-in fixed, hinge, ball or
+slider joint hanging from the world, the symmetric systems are eliminated in
+inertia form instead (:mod:`.kernels.nullspace_solve`: each joint's freedoms,
+not its rows; the same multipliers, at a fifth of the work per hinge; see
+:attr:`ConstraintSolver.inertia_form`); components of at most
+:data:`KERNEL_DENSE_ROWS` rows are factorized densely, which is faster at that
+size; a closed loop, among bodies or through the world, is solved by the tree
+solve of a spanning forest and the Schur complement of the rows that close the
+loops (:mod:`.kernels.loop_solve`).
 
 There is one implementation of this solve: the compiled kernels of
 :mod:`.kernels.constrained_step`. A step calls it, and so does this class for
@@ -72,9 +77,10 @@ from .dynamics import SolverCounters
 from .errors import SpecError
 from .graph import closes_loop, component_labels, loop_structure, tree_structure
 from .kernels.constrained_step import (component_multipliers, component_project_velocities,
-                                       component_reach, CURRENT, dense_storage, GENERIC, pack,
-                                       tree_storage, workspace)
+                                       component_reach, CURRENT, dense_storage, GENERIC,
+                                       nullspace_storage, pack, tree_storage, workspace)
 from .kernels.layout import BODY, PAR, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0, Solve
+from .kernels.nullspace_solve import nullspace_structure
 from .validate import positive_scalar
 
 if TYPE_CHECKING:
@@ -264,6 +270,30 @@ class ConstraintSolver:
         # when the setup is rebuilt or the solver is collected.
         self._generic_keys: list = []
         weakref.finalize(self, _drop_generic, self._generic_keys)
+        self._inertia_form = True
+
+    @property
+    def inertia_form(self) -> bool:
+        """
+        Whether forests of recognized joints solve their symmetric systems in inertia form.
+
+        True (the default): a tree-solved component whose joints are all built-in
+        ``fixed``, ``hinge``, ``ball`` or ``slider`` joints, each tree hanging from
+        the world by one joint (:func:`.kernels.nullspace_solve.nullspace_structure`
+        recognizes them), factorizes ``G M⁻¹ Gᵀ`` by eliminating each joint's
+        freedoms (:mod:`.kernels.nullspace_solve`), and falls back to the
+        row-space tree solve at a state where a joint's freedom has next to no
+        inertia (a pivot at most ``rank_rtol`` of its scale). Every other
+        component (generic, distance or drive rows, redundant rows, a free-floating
+        tree) always takes the row-space tree solve. False: every component does
+        (a comparison: the two agree to rounding).
+        """
+        return self._inertia_form
+
+    @inertia_form.setter
+    def inertia_form(self, value: bool) -> None:
+        self._inertia_form = bool(value)
+        self._kernel_cache = None   # rebuilt with or without the inertia form
 
     @property
     def omega(self) -> float:
@@ -342,6 +372,11 @@ class ConstraintSolver:
             else:
                 st = tree_structure(ra, rb, len(bodies))
                 solve, d = Solve.TREE, 0
+            # The inertia form, where every joint is recognized (built-in rows only).
+            joints = None
+            if solve == Solve.TREE and self._inertia_form and np.all(rows_global < mb):
+                joints = nullspace_structure(ra, rb, cs.row_kind[rows_global],
+                                             cs.row_comp[rows_global], len(bodies))
             # Two storages each: general, and the symmetric factor kept for the
             # current geometry (see kernels.constrained_step._sym_factor).
             trees = (tree_storage(st, closure, mc, len(bodies)),
@@ -367,7 +402,8 @@ class ConstraintSolver:
                     'x_par': np.ascontiguousarray(cs.x_par[xs]), 'x_weight': cs.x_weight[xs],
                     'key': key}
             packed, views = pack(rows, workspace(len(bodies), mc, body, len(xs)),
-                                 (dense_storage(d), dense_storage(d)), trees)
+                                 (dense_storage(d), dense_storage(d)), trees,
+                                 nullspace_storage(joints, len(bodies)))
             components.append(ComponentSetup(bodies, rows_global, packed, views, solve,
                                              np.zeros(mc), body, xs))
         setup = KernelSetup(np.flatnonzero(~touched), tuple(components), [None])

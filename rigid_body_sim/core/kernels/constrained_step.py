@@ -62,10 +62,14 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT,
                      V_RHS, V_SOLUTION, VECTORS, VM, W_WIDTH, WATCH, X_COMP, X_KIND, X_PAR,
                      X_WEIGHT, XV_GAMMA, XV_PHI, XV_PHI_DOT, XVEC)
+from .layout import (NS_ACC, NS_CHILD, NS_CSIDE, NS_IA, NS_JD, NS_JG, NS_JQ, NS_JS, NS_JU,
+                     NS_JV, NS_P, NS_PARENT, NS_ROWS, NS_TYPE, NS_WORK, NULLSPACE0)
+from .layout import NULLSPACE as NULLSPACE_FIELDS
 from .layout import P_T_END, P_T_START, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import loop_back, loop_forward, loop_schur
 from .methods import Method, ONE_STEP, TRIPLE_JUMP
+from .nullspace_solve import N_SLOTS, nullspace_arrays, nullspace_factor, nullspace_solve
 from .rows import framed_geometry, framed_rates, frames
 from .so3 import normalize_quaternions, positive_product, quat_exp_multiply
 from .tree_solve import _lu, _lu_solve_vec, factor_arrays, tree_factor, tree_solve
@@ -75,7 +79,7 @@ from .views import Pinned, pinned, pinned_int, raw, raw_slice
 ROUNDING_ULPS = 16.0
 
 # Factorization modes (internal: what _fac returns and _sol reads).
-CHOLESKY, LU, SVD, TREE = 0, 1, 2, 3
+CHOLESKY, LU, SVD, TREE, NULLSPACE = 0, 1, 2, 3, 4
 
 
 @njit(cache=True, inline='always')
@@ -192,6 +196,12 @@ def _sol(mode, rhs, out, cx, slot):
     solve = cx[CX_SOLVE]
     if solve == Solve.DENSE:
         _solve_dense(mode, rhs, out, cx, slot)
+        return
+    if mode == NULLSPACE:
+        ns = _nullspace(cx)
+        nullspace_solve(ns[NS_CHILD], ns[NS_PARENT], ns[NS_TYPE], ns[NS_ROWS], ns[NS_IA],
+                        ns[NS_JS], ns[NS_JU], ns[NS_JD], ns[NS_JV], ns[NS_P], ns[NS_ACC],
+                        ns[NS_JG], ns[NS_JQ], rhs, out)
         return
     t = _tree(cx, slot)
     if solve == Solve.TREE:
@@ -428,6 +438,17 @@ def _tree(cx, slot):
     return _tree_views(cx[CX_FLOATS], cx[CX_INTS], cx[CX_LAYOUT], TREE0 + TREE_SLOTS * slot)
 
 
+@njit(cache=True)
+def _nullspace(cx):
+    """Return the null-space storage (:func:`nullspace_storage`), indexed by ``NS_*`` slots."""
+    f, i, L, k = cx[CX_FLOATS], cx[CX_INTS], cx[CX_LAYOUT], NULLSPACE0
+    return (_v1(i, L, k + NS_CHILD), _v1(i, L, k + NS_PARENT), _v1(i, L, k + NS_TYPE),
+            _v2(i, L, k + NS_ROWS), _v2(i, L, k + NS_CSIDE), _v3(f, L, k + NS_IA),
+            _v3(f, L, k + NS_JS), _v3(f, L, k + NS_JU), _v3(f, L, k + NS_JD),
+            _v3(f, L, k + NS_JV), _v2(f, L, k + NS_WORK), _v2(f, L, k + NS_P),
+            _v2(f, L, k + NS_ACC), _v2(f, L, k + NS_JG), _v2(f, L, k + NS_JQ))
+
+
 # Generic rows (a user's Python function) are evaluated by Python from inside the
 # compiled step (numba's object mode): the kernel calls these with the key of its
 # component, registered by the solver (see ConstraintSolver.kernel_setup).
@@ -536,19 +557,39 @@ def _targets_at(cx, t):
 
 
 @njit(cache=True, inline='always')
-def _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts):
+def _sym_factor(quat, Ga, Gb, a, b, minv6, par, cx, counts):
     """
-    Factorize ``G M⁻¹ Gᵀ`` of the current geometry, or reuse its factors.
+    Factorize ``G M⁻¹ Gᵀ`` of the current geometry (at ``quat``), or reuse its factors.
 
     A splitting step's second kick and its velocity projection, and the next
     step's first kick, all solve with the matrix of one configuration: it is
     factorized once, into the storages ``SYMMETRIC``. The workspace's factor
     state (``FACTOR_STATE``) is [the factors are of the current geometry, their mode].
+
+    A forest whose joints are all recognized (a non-empty null-space storage) is
+    factorized in inertia form (:mod:`.nullspace_solve`: each joint's freedoms
+    eliminated, not its rows), unless a joint's pivot ``D`` is at most
+    ``rank_rtol`` of its scale (a freedom with next to no inertia): then, and for
+    every other component, by :func:`_fac`.
     """
     fs = _i1(cx, FACTOR_STATE)
     if fs[FS_VALID] == 1:
         return fs[FS_MODE]
-    mode = _fac(Ga, Gb, Ga, Gb, a, b, _own(cx), minv6, True, par, cx, SYMMETRIC, counts)
+    mode = -1
+    ns = _nullspace(cx)
+    if cx[CX_SOLVE] == Solve.TREE and ns[NS_CHILD].shape[0] > 0:
+        counts[Count.FACTORIZATIONS] += 1
+        R = _f3(cx, FRAMES)
+        frames(quat, R)
+        pivot = nullspace_factor(ns[NS_CHILD], ns[NS_PARENT], ns[NS_TYPE], ns[NS_ROWS],
+                                 ns[NS_CSIDE], Ga, Gb, minv6, R, ns[NS_IA], ns[NS_JS],
+                                 ns[NS_JU], ns[NS_JD], ns[NS_JV], ns[NS_WORK])
+        if pivot > par[P_RANK_RTOL]:
+            mode = NULLSPACE
+        else:
+            counts[Count.INERTIA_FALLBACKS] += 1
+    if mode < 0:
+        mode = _fac(Ga, Gb, Ga, Gb, a, b, _own(cx), minv6, True, par, cx, SYMMETRIC, counts)
     fs[FS_VALID] = 1
     fs[FS_MODE] = mode
     return mode
@@ -588,7 +629,7 @@ def _multipliers(pos, quat, vel, om, cx, par, lam, counts):
     _g_times(Ga, Gb, a, b, _own(cx), a6, vm[V_RHS])
     for r in range(phi.shape[0]):
         vm[V_RHS, r] += vm[V_GAMMA, r] + 2.0 * w * vm[V_PHI_DOT, r] + w * w * phi[r]
-    mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
+    mode = _sym_factor(quat, Ga, Gb, a, b, minv6, par, cx, counts)
     counts[Count.ACC_SOLVES] += 1
     _sol(mode, vm[V_RHS], lam, cx, SYMMETRIC)
     _gt_lambda(Ga, Gb, a, b, _own(cx), lam, g6)
@@ -700,7 +741,7 @@ def _project_velocities(pos, quat, vel, mom, body, cx, par, counts):
     rpar = _f2(cx, ROW_PAR)
     for r in range(rpar.shape[0]):   # the built-in rows; generic ones do not move
         vm[V_RHS, r] -= rpar[r, PAR_RATE]
-    mode = _sym_factor(Ga, Gb, a, b, minv6, par, cx, counts)
+    mode = _sym_factor(quat, Ga, Gb, a, b, minv6, par, cx, counts)
     _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, SYMMETRIC)
     _gt_lambda(Ga, Gb, a, b, _own(cx), vm[V_SOLUTION], g6)
     for i in range(n):
@@ -1256,7 +1297,7 @@ def dense_storage(d: int) -> dict:
 # What is where: :data:`.layout.COMPONENT`.
 
 
-def pack(rows: dict, ws: dict, dense: tuple, trees: tuple) -> tuple:
+def pack(rows: dict, ws: dict, dense: tuple, trees: tuple, nullspace: dict) -> tuple:
     """
     Copy a component's arrays into two buffers; return ``(packed, views)``.
 
@@ -1264,7 +1305,8 @@ def pack(rows: dict, ws: dict, dense: tuple, trees: tuple) -> tuple:
     ``key`` (its generic rows, -1 if none); ``ws`` the workspace of
     :func:`workspace`, to which the scratch arrays of :func:`scratch` are added;
     ``dense`` and ``trees`` two storages each (:data:`.layout.STORAGES` order)
-    of :func:`dense_storage` and :func:`tree_storage`. Every array is checked
+    of :func:`dense_storage` and :func:`tree_storage`, and ``nullspace`` the
+    storage of :func:`nullspace_storage`. Every array is checked
     against :data:`.layout.COMPONENT` by name. ``packed`` is ``(key, floats,
     ints, layout)``, the arguments of :func:`packed_step`; ``views`` a dict of
     the same names, as views into the buffers (what the compiled step reads
@@ -1278,6 +1320,7 @@ def pack(rows: dict, ws: dict, dense: tuple, trees: tuple) -> tuple:
         named.update({f'{st}_dense_{k}': v for k, v in storage.items()})
     for st, storage in zip(STORAGES, trees):
         named.update({f'{st}_tree_{k}': v for k, v in storage.items()})
+    named.update({f'nullspace_{k}': v for k, v in nullspace.items()})
     arrays = COMPONENT.check(named)
     layout = np.zeros((len(arrays), L_WIDTH), dtype=np.int64)
     sizes = {'f': 0, 'i': 0}
@@ -1345,6 +1388,25 @@ def tree_storage(structure, closure: np.ndarray, m: int, n: int) -> dict:
     if len(arrays) != len(TREE_FIELDS):
         raise ValueError(f'tree storage: expected {len(TREE_FIELDS)} arrays, got {len(arrays)}')
     return dict(zip((f.name for f in TREE_FIELDS.fields), arrays))
+
+
+def nullspace_storage(structure, n: int) -> dict:
+    """
+    Return the null-space storage of a component of ``n`` bodies (:data:`.layout.NULLSPACE`).
+
+    ``structure``: the joints of :func:`.nullspace_solve.nullspace_structure`, or
+    None (the component takes the row-space tree solve: no joints, empty factors).
+    """
+    if structure is None:
+        structure = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
+                     np.zeros(0, dtype=np.int64), np.zeros((0, N_SLOTS), dtype=np.int64),
+                     np.zeros((0, N_SLOTS), dtype=np.int64))
+        n = 0
+    arrays = (*structure, *nullspace_arrays(len(structure[0]), n))
+    if len(arrays) != len(NULLSPACE_FIELDS):
+        raise ValueError(f'null-space storage: expected {len(NULLSPACE_FIELDS)} arrays, '
+                         f'got {len(arrays)}')
+    return dict(zip((f.name for f in NULLSPACE_FIELDS.fields), arrays))
 
 
 # ----------------------------------------------------------------------------------------

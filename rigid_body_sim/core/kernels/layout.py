@@ -221,6 +221,9 @@ class Count(IntEnum):
     #: (Sub)steps whose positions SHAKE (or its last-resort projection) left above the
     #: tolerance after max_iterations: less accurate, reported, never silent.
     UNCONVERGED = 16
+    #: Symmetric factorizations in inertia form that fell back to the row-space tree solve
+    #: (a joint's freedom with next to no inertia, see constrained_step._sym_factor).
+    INERTIA_FALLBACKS = 17
 
 
 N_COUNTS = len(Count)
@@ -333,12 +336,23 @@ TREE = Layout('tree storage', (
     ('p', 'f', 3), ('q', 'f', 3), ('b', 'f', 4), ('w', 'f', 3), ('e', 'f', 3),
     ('tmp', 'f', 1), ('closure', 'i', 1), ('x', 'f', 2), ('y', 'f', 2), ('work', 'f', 1),
     ('g', 'f', 3), ('z', 'f', 1), ('xc', 'f', 1)))
+#: The null-space (inertia-form) storage (constrained_step.nullspace_storage) of a forest
+#: whose joints are all recognized (:func:`.nullspace_solve.nullspace_structure`): per
+#: joint, leaves first, its child and parent body, type and rows by slot and which block
+#: is the child's; the factors (articulated inertias, S, U, D, the joint vectors) and the
+#: solve's workspace. Empty (no joints) when the component takes the row-space tree solve.
+NULLSPACE = Layout('null-space storage', (
+    ('child', 'i', 1), ('parent', 'i', 1), ('type', 'i', 1), ('rows', 'i', 2),
+    ('cside', 'i', 2), ('ia', 'f', 3), ('js', 'f', 3), ('ju', 'f', 3), ('jd', 'f', 3),
+    ('jv', 'f', 3), ('work', 'f', 2), ('p', 'f', 2), ('acc', 'f', 2), ('jg', 'f', 2),
+    ('jq', 'f', 2)))
 #: Which of a component's two storages of each kind: the general factorizations
 #: (SHAKE's), and the symmetric factor kept for the current geometry.
 STORAGES = ('general', 'symmetric')
 COMPONENT = Layout('component', ROWS + WORKSPACE + SCRATCH + tuple(
     (f'{st}_dense_{f.name}', f.kind, f.ndim) for st in STORAGES for f in DENSE.fields)
-    + tuple((f'{st}_tree_{f.name}', f.kind, f.ndim) for st in STORAGES for f in TREE.fields))
+    + tuple((f'{st}_tree_{f.name}', f.kind, f.ndim) for st in STORAGES for f in TREE.fields)
+    + tuple((f'nullspace_{f.name}', f.kind, f.ndim) for f in NULLSPACE.fields))
 
 #: A packed buffer's layout table (n_arrays, L_WIDTH), one row per array of
 #: :data:`COMPONENT`: its first entry in its buffer, then its shape (up to 4 dimensions).
@@ -371,12 +385,14 @@ _GROUPS = (
     {'XV_' + n[2:].upper(): k for k, n in enumerate(XVEC_ROWS)},
     {'FS_' + n.upper(): k for k, n in enumerate(FACTOR_STATE_ENTRIES)},
     COMPONENT.constants(), DENSE.constants('D_'), TREE.constants('T_'),
+    NULLSPACE.constants('NS_'),
     {'CX_' + n.upper(): k for k, n in enumerate(CONTEXT)},
     LAYOUT_TABLE.constants('L_'),
     FREE_TABLE.constants('FT_'), COMPONENT_TABLE.constants('CT_'),
     # Where each storage starts in COMPONENT, and how many slots one takes.
     {'DENSE0': COMPONENT.index['general_dense_f'], 'DENSE_SLOTS': len(DENSE),
-     'TREE0': COMPONENT.index['general_tree_group_ptr'], 'TREE_SLOTS': len(TREE)},
+     'TREE0': COMPONENT.index['general_tree_group_ptr'], 'TREE_SLOTS': len(TREE),
+     'NULLSPACE0': COMPONENT.index['nullspace_child']},
     # Which storage (GENERAL or SYMMETRIC).
     {st.upper(): k for k, st in enumerate(STORAGES)},
 )
@@ -389,6 +405,6 @@ for _group in _GROUPS:
 globals().update(_CONSTANTS)
 __all__ = ['BODY', 'COMPONENT', 'COMPONENT_TABLE', 'CONTEXT', 'Columns', 'Count', 'DENSE',
            'Field', 'FRAME', 'FREE_TABLE', 'JOINT', 'Layout', 'LAYOUT_TABLE', 'N_COUNTS',
-           'OUTPUT', 'PAR',
+           'NULLSPACE', 'OUTPUT', 'PAR',
            'ROW_PARAMETERS', 'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH',
            'WRENCH_APPLIED', 'WRENCH_DRIVE', *_CONSTANTS]
