@@ -25,7 +25,10 @@ import pytest
 from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation
 from rigid_body_sim.core.kernels.constrained_step import CURRENT
 from rigid_body_sim.core.kernels.layout import Solve, V_RHS
+from rigid_body_sim.core.mechanisms import four_bar, ring
+from test_mimic_joints import load as load_robot
 
+EPS = np.finfo(float).eps
 NEW_BOUND = 2e-13   # the premise's bound on the inertia-form solve (module docstring)
 LINK = 0.1   # m
 
@@ -40,6 +43,17 @@ class StepBlocks(Mechanism):
         self.minv6 = views['minv'].copy()
         self.n = self.minv6.shape[0]
         self.rhs = views['vm'][V_RHS].copy()
+        self.own = views['row_owner'].copy()
+
+    def dense_A(self):
+        """Return ``A = G M⁻¹ Gᵀ`` and ``G`` (m, 6n), each row the sum of its parts."""
+        n, m = self.n, self.rhs.size
+        G = np.zeros((m, 6 * n + 6))
+        for r in range(self.a.size):   # a part on one body adds to its row's entries there
+            G[self.own[r], 6 * self.a[r]:6 * self.a[r] + 6] += self.Ga[r]
+            G[self.own[r], 6 * self.b[r]:6 * self.b[r] + 6] += self.Gb[r]
+        G = G[:, :6 * n]
+        return G @ (self.minv6.ravel()[:, None] * G.T), G
 
 
 def mechanism(seed, kinds, parents, spin_tip=None):
@@ -165,7 +179,7 @@ def test_a_freedom_without_inertia_is_solved_or_falls_back_counted(rank_rtol):
     err = relative(lam[comp.rows], ref[:, 0])
     # bound: the row-space solve's normwise bound 2 cond(A) eps (cond measured here),
     # and for the inertia form the module docstring's
-    assert err < (2.0 * cond * np.finfo(float).eps if fell_back else NEW_BOUND), err
+    assert err < (2.0 * cond * EPS if fell_back else NEW_BOUND), err
 
 
 def test_the_rule_names_what_takes_the_row_space_solve():
@@ -198,3 +212,35 @@ def test_the_rule_names_what_takes_the_row_space_solve():
     # A free-floating tree (its root joined to nothing): not in the inertia form's scope.
     comp = setup(parents=[-2] + list(range(7)))
     assert comp.solve == Solve.TREE and comp.views['nullspace_child'].size == 0
+
+
+def kept_condition(system):
+    """Return A's condition over its singular values above 1e-13 of the largest."""
+    sv = np.linalg.svd(system.dense_A()[0], compute_uv=False)
+    return sv[0] / sv[sv > 1e-13 * sv[0]][-1]
+
+
+def test_a_loop_solves_its_spanning_forest_in_inertia_form():
+    # arm7: its fingers' mimic row is the loop solve's one closure row, over a forest of
+    # nine recognized joints: the full system has full rank, and the reference holds it.
+    new, system, comp, counters = solve_at(lambda: load_robot('arm7.urdf'), True, steps=3)
+    assert comp.solve == Solve.LOOP and comp.views['nullspace_child'].size == 9
+    ref = system.reference(system.rhs[:, None])[0][:, 0]
+    # bound: the module docstring's; the closure row's complement is formed from the
+    # forest's solves (each within it) and solved densely (cond(A) eps relative, below)
+    assert relative(new, ref) < NEW_BOUND + 2.0 * kept_condition(system) * EPS
+
+
+@pytest.mark.parametrize('scene', ['four_bar', 'ring'])
+def test_a_loop_with_redundant_rows_agrees_with_the_row_space_forest(scene):
+    # A planar loop modelled in 3-D has redundant closure rows: the minimum-norm λ of a
+    # truncated SVD of the closure complement, from either forest solve.
+    build = {'four_bar': lambda: four_bar('lie_poisson2', 1e-3),
+             'ring': lambda: ring(12, 'lie_poisson2')}[scene]
+    new, system, comp, _ = solve_at(build, True, steps=3)
+    assert comp.solve == Solve.LOOP and comp.views['nullspace_child'].size > 0
+    old, *_ = solve_at(build, False, steps=3)
+    # bound: both are backward stable for the kept part of A (redundant rows out), whose
+    # condition is measured: normwise 2 cond eps each, and the same again for the states,
+    # which the steps before moved by rounding
+    assert relative(new, old) < 8.0 * kept_condition(system) * EPS

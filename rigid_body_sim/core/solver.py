@@ -372,11 +372,13 @@ class ConstraintSolver:
             else:
                 st = tree_structure(ra, rb, len(bodies))
                 solve, d = Solve.TREE, 0
-            # The inertia form, where every joint is recognized (built-in rows only).
+            # The inertia form, where every joint of the forest is recognized (built-in
+            # rows only; a loop solve's closure rows apart).
             joints = None
-            if solve == Solve.TREE and self._inertia_form and np.all(rows_global < mb):
+            if solve != Solve.DENSE and self._inertia_form and np.all(rows_global < mb):
                 joints = nullspace_structure(ra, rb, cs.row_kind[rows_global],
-                                             cs.row_comp[rows_global], len(bodies))
+                                             cs.row_comp[rows_global], len(bodies),
+                                             only=st.group_rows)
             # Two storages each: general, and the symmetric factor kept for the
             # current geometry (see kernels.constrained_step._sym_factor).
             trees = (tree_storage(st, closure, mc, len(bodies)),

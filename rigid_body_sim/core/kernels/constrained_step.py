@@ -67,7 +67,8 @@ from .layout import (NS_ACC, NS_CHILD, NS_CSIDE, NS_IA, NS_JD, NS_JG, NS_JQ, NS_
 from .layout import NULLSPACE as NULLSPACE_FIELDS
 from .layout import P_T_END, P_T_START, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0
 from .layout import TREE as TREE_FIELDS
-from .loop_solve import loop_back, loop_forward, loop_schur
+from .loop_solve import (loop_back, loop_close, loop_column, loop_column_solved, loop_forward,
+                         loop_reduce, loop_rhs, loop_schur)
 from .methods import Method, ONE_STEP, TRIPLE_JUMP
 from .nullspace_solve import N_SLOTS, nullspace_arrays, nullspace_factor, nullspace_solve
 from .rows import framed_geometry, framed_rates, frames
@@ -78,8 +79,9 @@ from .views import Pinned, pinned, pinned_int, raw, raw_slice
 # SHAKE's rounding floor in units of the coordinates' rounding (see _rounding_floor).
 ROUNDING_ULPS = 16.0
 
-# Factorization modes (internal: what _fac returns and _sol reads).
-CHOLESKY, LU, SVD, TREE, NULLSPACE = 0, 1, 2, 3, 4
+# Factorization modes (internal: what _fac returns and _sol reads); INERTIA is added when
+# the forest of a tree or loop solve is factorized in inertia form (see _sym_factor).
+CHOLESKY, LU, SVD, TREE, INERTIA = 0, 1, 2, 3, 8
 
 
 @njit(cache=True, inline='always')
@@ -190,6 +192,39 @@ def _fac(Ga, Gb, Ha, Hb, a, b, own, minv6, symmetric, par, cx, slot, counts):
     return _factor_tree(Ga, Gb, Ha, Hb, a, b, own, minv6, symmetric, par, cx, slot, counts)
 
 
+@njit(cache=True)
+def _inertia_solve(cx, rhs, out):
+    """``out = A_TT⁻¹ rhs`` at the forest's rows, with its factors in inertia form."""
+    ns = _nullspace(cx)
+    nullspace_solve(ns[NS_CHILD], ns[NS_PARENT], ns[NS_TYPE], ns[NS_ROWS], ns[NS_IA],
+                    ns[NS_JS], ns[NS_JU], ns[NS_JD], ns[NS_JV], ns[NS_P], ns[NS_ACC],
+                    ns[NS_JG], ns[NS_JQ], rhs, out)
+
+
+@njit(cache=True)
+def _inertia_loop(Ga, Gb, a, b, minv6, par, cx, counts):
+    """
+    Factorize the closure rows' Schur complement over a forest in inertia form.
+
+    As :func:`_factor_tree` for ``SOLVE_LOOP`` (symmetric, into the storages
+    ``SYMMETRIC``), with :func:`_inertia_solve` as the forest's solve; its rows
+    are recognized joints, never redundant (no Tikhonov term). Returns the mode of
+    the dense factor of the complement.
+    """
+    tree = _tree(cx, SYMMETRIC)
+    rows, closure, X, Y = tree[T_GROUP_ROWS], tree[T_CLOSURE], tree[T_X], tree[T_Y]
+    work, g = tree[T_WORK], tree[T_G]
+    F = _f2(cx, DENSE0 + DENSE_SLOTS * SYMMETRIC + D_F)
+    own = _own(cx)
+    for k in range(closure.shape[0]):
+        loop_column(k, rows, closure, a, b, own, Ga, Gb, Ga, Gb, minv6, 0.0, X, Y, F, work, g)
+        _inertia_solve(cx, work, work)
+        loop_column_solved(k, rows, X, work)
+    loop_close(rows, X, Y, F)
+    tiny = par[P_RANK_RTOL] * _peak_diagonal(Ga, Gb, Ga, Gb, a, b, _rows_count(cx), minv6)
+    return _factor_matrix(closure.shape[0], True, tiny, tiny, cx, SYMMETRIC, counts)
+
+
 @njit(cache=True, inline='always')
 def _sol(mode, rhs, out, cx, slot):
     """Solve with the factors in the storages ``slot`` (see :func:`_fac`)."""
@@ -197,22 +232,27 @@ def _sol(mode, rhs, out, cx, slot):
     if solve == Solve.DENSE:
         _solve_dense(mode, rhs, out, cx, slot)
         return
-    if mode == NULLSPACE:
-        ns = _nullspace(cx)
-        nullspace_solve(ns[NS_CHILD], ns[NS_PARENT], ns[NS_TYPE], ns[NS_ROWS], ns[NS_IA],
-                        ns[NS_JS], ns[NS_JU], ns[NS_JD], ns[NS_JV], ns[NS_P], ns[NS_ACC],
-                        ns[NS_JG], ns[NS_JQ], rhs, out)
-        return
+    inertia = mode >= INERTIA
+    if inertia:
+        mode -= INERTIA
     t = _tree(cx, slot)
     if solve == Solve.TREE:
-        tree_solve(t[T_GROUP_PTR], t[T_GROUP_ROWS], t[T_GROUP_CHILD], t[T_GROUP_PARENT],
-                   t[T_S], t[T_PIV], t[T_P], t[T_Q], t[T_B], t[T_E], t[T_TMP], rhs, out)
+        if inertia:
+            _inertia_solve(cx, rhs, out)
+        else:
+            tree_solve(t[T_GROUP_PTR], t[T_GROUP_ROWS], t[T_GROUP_CHILD], t[T_GROUP_PARENT],
+                       t[T_S], t[T_PIV], t[T_P], t[T_Q], t[T_B], t[T_E], t[T_TMP], rhs, out)
         return
     # Closed loops: forest, then the closure rows' Schur complement, then back.
     z, xc = t[T_Z], t[T_XC]
-    loop_forward(t[T_GROUP_PTR], t[T_GROUP_ROWS], t[T_GROUP_CHILD], t[T_GROUP_PARENT],
-                 t[T_S], t[T_PIV], t[T_P], t[T_Q], t[T_B], t[T_E], t[T_TMP], t[T_CLOSURE],
-                 t[T_Y], rhs, out, z)
+    if inertia:
+        loop_rhs(t[T_CLOSURE], rhs, z)
+        _inertia_solve(cx, rhs, out)
+        loop_reduce(t[T_GROUP_ROWS], t[T_CLOSURE], t[T_Y], out, z)
+    else:
+        loop_forward(t[T_GROUP_PTR], t[T_GROUP_ROWS], t[T_GROUP_CHILD], t[T_GROUP_PARENT],
+                     t[T_S], t[T_PIV], t[T_P], t[T_Q], t[T_B], t[T_E], t[T_TMP],
+                     t[T_CLOSURE], t[T_Y], rhs, out, z)
     _solve_dense(mode, z, xc, cx, slot)
     loop_back(t[T_GROUP_ROWS], t[T_CLOSURE], t[T_X], xc, out)
 
@@ -566,18 +606,18 @@ def _sym_factor(quat, Ga, Gb, a, b, minv6, par, cx, counts):
     factorized once, into the storages ``SYMMETRIC``. The workspace's factor
     state (``FACTOR_STATE``) is [the factors are of the current geometry, their mode].
 
-    A forest whose joints are all recognized (a non-empty null-space storage) is
-    factorized in inertia form (:mod:`.nullspace_solve`: each joint's freedoms
-    eliminated, not its rows), unless a joint's pivot ``D`` is at most
-    ``rank_rtol`` of its scale (a freedom with next to no inertia): then, and for
-    every other component, by :func:`_fac`.
+    A forest whose joints are all recognized (a non-empty null-space storage: a
+    tree solve's, or a loop solve's spanning forest) is factorized in inertia form
+    (:mod:`.nullspace_solve`: each joint's freedoms eliminated, not its rows),
+    unless a joint's pivot ``D`` is at most ``rank_rtol`` of its scale (a freedom
+    with next to no inertia): then, and for every other component, by :func:`_fac`.
     """
     fs = _i1(cx, FACTOR_STATE)
     if fs[FS_VALID] == 1:
         return fs[FS_MODE]
     mode = -1
     ns = _nullspace(cx)
-    if cx[CX_SOLVE] == Solve.TREE and ns[NS_CHILD].shape[0] > 0:
+    if ns[NS_CHILD].shape[0] > 0:
         counts[Count.FACTORIZATIONS] += 1
         R = _f3(cx, FRAMES)
         frames(quat, R)
@@ -585,7 +625,10 @@ def _sym_factor(quat, Ga, Gb, a, b, minv6, par, cx, counts):
                                  ns[NS_CSIDE], Ga, Gb, minv6, R, ns[NS_IA], ns[NS_JS],
                                  ns[NS_JU], ns[NS_JD], ns[NS_JV], ns[NS_WORK])
         if pivot > par[P_RANK_RTOL]:
-            mode = NULLSPACE
+            if cx[CX_SOLVE] == Solve.TREE:
+                mode = TREE + INERTIA
+            else:
+                mode = _inertia_loop(Ga, Gb, a, b, minv6, par, cx, counts) + INERTIA
         else:
             counts[Count.INERTIA_FALLBACKS] += 1
     if mode < 0:

@@ -82,10 +82,68 @@ def _part_times(r, a, b, Ga, Gb, n, v):
 
 
 @njit(cache=True)
+def loop_column(k, group_rows, closure, a, b, own, Ga, Gb, Ha, Hb, minv6, reg, X, Y, F, work,
+                g):
+    """
+    Column ``k`` of :func:`loop_schur` up to its forest solve (any solve of ``A_TT``).
+
+    Writes row ``k`` of ``Y = A_CT``, column ``k`` of ``A_CC + reg I`` into ``F``,
+    zeroes row ``k`` of ``X`` and puts column ``k`` of ``A_TC`` into ``work`` (at
+    the forest rows; zero elsewhere): the caller solves ``A_TT`` in place on
+    ``work``, then calls :func:`loop_column_solved`.
+    """
+    m = X.shape[1]
+    n = minv6.shape[0]
+    c = closure.shape[0]
+    j = closure[k]
+    _responses(j, a, b, own, Ga, Gb, Ha, Hb, minv6, g)
+    for r in range(m):
+        X[k, r] = 0.0
+        Y[k, r] = 0.0
+        work[r] = 0.0
+    # Row k of A_CT (closure row j applied to each forest row's impulse response,
+    # H_r M⁻¹ G_jᵀ), and column k of A_TC (G_r M⁻¹ H_jᵀ), to be solved.
+    for r in group_rows:
+        Y[k, r] = _part_times(r, a, b, Ha, Hb, n, g[1])
+        work[r] = _part_times(r, a, b, Ga, Gb, n, g[0])
+    # Column k of A_CC: each closure row's parts applied to M⁻¹ H_jᵀ.
+    for i in range(c):
+        F[i, k] = _part_times(closure[i], a, b, Ga, Gb, n, g[0])
+    for r in range(m, Ga.shape[0]):
+        for i in range(c):
+            if own[r] == closure[i]:
+                F[i, k] += _part_times(r, a, b, Ga, Gb, n, g[0])
+    F[k, k] += reg
+
+
+@njit(cache=True)
+def loop_column_solved(k, group_rows, X, work):
+    """Row ``k`` of ``X``: the solved column ``A_TT⁻¹ A_TC e_k`` in ``work`` (forest rows)."""
+    for r in group_rows:
+        X[k, r] = work[r]
+
+
+@njit(cache=True)
+def loop_close(group_rows, X, Y, F):
+    """Finish the Schur complement: ``F −= A_CT X`` (every column of X and Y written)."""
+    c = F.shape[0]
+    for i in range(c):
+        for k in range(c):
+            s = 0.0
+            for r in group_rows:
+                s += Y[i, r] * X[k, r]
+            F[i, k] -= s
+
+
+@njit(cache=True)
 def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
                closure, a, b, own, Ga, Gb, Ha, Hb, minv6, reg, X, Y, F, work, g):
     """
     Given the tree factors of ``A_TT``, compute ``X``, ``Y = A_CT`` and ``F = S``.
+
+    Per closure row :func:`loop_column`, the tree solve, :func:`loop_column_solved`;
+    then :func:`loop_close` (another solve of ``A_TT``, such as the inertia form of
+    :mod:`.nullspace_solve`, takes the tree solve's place the same way).
 
     Parameters
     ----------
@@ -110,40 +168,30 @@ def loop_schur(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B
         Workspace (overwritten).
 
     """
-    m = X.shape[1]
-    n = minv6.shape[0]
-    c = closure.shape[0]
-    for k in range(c):
-        j = closure[k]
-        _responses(j, a, b, own, Ga, Gb, Ha, Hb, minv6, g)
-        for r in range(m):
-            X[k, r] = 0.0
-            Y[k, r] = 0.0
-            work[r] = 0.0
-        # Row k of A_CT (closure row j applied to each forest row's impulse response,
-        # H_r M⁻¹ G_jᵀ), and column k of A_TC (G_r M⁻¹ H_jᵀ), solved.
-        for r in group_rows:
-            Y[k, r] = _part_times(r, a, b, Ha, Hb, n, g[1])
-            work[r] = _part_times(r, a, b, Ga, Gb, n, g[0])
+    for k in range(closure.shape[0]):
+        loop_column(k, group_rows, closure, a, b, own, Ga, Gb, Ha, Hb, minv6, reg, X, Y, F,
+                    work, g)
         tree_solve(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
                    work, work)
+        loop_column_solved(k, group_rows, X, work)
+    loop_close(group_rows, X, Y, F)
+
+
+@njit(cache=True)
+def loop_rhs(closure, rhs, z):
+    """Before a solve's forest solve: ``z = rhs_C`` (``rhs`` may then be overwritten)."""
+    for k in range(closure.shape[0]):
+        z[k] = rhs[closure[k]]
+
+
+@njit(cache=True)
+def loop_reduce(group_rows, closure, Y, out, z):
+    """After it (``out_T = A_TT⁻¹ rhs_T``): ``z −= A_CT out_T``, the rhs of ``S x_C = z``."""
+    for k in range(closure.shape[0]):
+        s = 0.0
         for r in group_rows:
-            X[k, r] = work[r]
-        # Column k of A_CC: each closure row's parts applied to M⁻¹ H_jᵀ.
-        for i in range(c):
-            F[i, k] = _part_times(closure[i], a, b, Ga, Gb, n, g[0])
-        for r in range(m, Ga.shape[0]):
-            for i in range(c):
-                if own[r] == closure[i]:
-                    F[i, k] += _part_times(r, a, b, Ga, Gb, n, g[0])
-        F[k, k] += reg
-    # S = A_CC + reg I − A_CT X.
-    for i in range(c):
-        for k in range(c):
-            s = 0.0
-            for r in group_rows:
-                s += Y[i, r] * X[k, r]
-            F[i, k] -= s
+            s += Y[k, r] * out[r]
+        z[k] -= s
 
 
 @njit(cache=True)
@@ -153,18 +201,13 @@ def loop_forward(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q,
     First half of a solve: ``out_T = A_TT⁻¹ rhs_T`` and ``z = rhs_C − A_CT out_T``.
 
     ``out`` (m,) may be ``rhs``; ``z`` (c,) is the right-hand side of ``S x_C = z``
-    (solved by the caller), then :func:`loop_back` finishes.
+    (solved by the caller), then :func:`loop_back` finishes. :func:`loop_rhs` and
+    :func:`loop_reduce` around the tree solve (or another solve of ``A_TT``).
     """
-    c = closure.shape[0]
-    for k in range(c):
-        z[k] = rhs[closure[k]]
+    loop_rhs(closure, rhs, z)
     tree_solve(group_ptr, group_rows, group_child, group_parent, S, piv, P, Q, B, E, tmp,
                rhs, out)
-    for k in range(c):
-        s = 0.0
-        for r in group_rows:
-            s += Y[k, r] * out[r]
-        z[k] -= s
+    loop_reduce(group_rows, closure, Y, out, z)
 
 
 @njit(cache=True)

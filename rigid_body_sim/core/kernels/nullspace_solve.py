@@ -102,7 +102,7 @@ _DOF = np.array([0, 1, 3, 1], dtype=np.int64)
 _KIND_POINT, _KIND_DOT, _KIND_LINE = 0, 1, 2   # as in .rows
 
 
-def nullspace_structure(a, b, kind, comp, n_bodies: int):
+def nullspace_structure(a, b, kind, comp, n_bodies: int, only=None):
     """
     Recognize the joints of a row set and order them leaves first (plain Python, once).
 
@@ -114,6 +114,9 @@ def nullspace_structure(a, b, kind, comp, n_bodies: int):
         The rows' kinds and point components (``.rows`` conventions).
     n_bodies : int
         Number of bodies.
+    only : array_like of int, optional
+        The rows to take (default: all): the forest of a loop solve leaves its
+        closure rows out.
 
     Returns
     -------
@@ -128,7 +131,7 @@ def nullspace_structure(a, b, kind, comp, n_bodies: int):
     b = np.asarray(b, dtype=np.int64)
     n = int(n_bodies)
     groups: dict = {}
-    for r in range(a.size):
+    for r in (range(a.size) if only is None else np.asarray(only, dtype=np.int64).tolist()):
         if a[r] == b[r]:
             return None
         key = (min(a[r], b[r]), max(a[r], b[r]))
