@@ -180,7 +180,6 @@ class Pair:
                        self.out)
         return self.out.copy()
 
-
     def old_shake_factor(self, number=1):
         """Factor SHAKE's matrix with tree_factor(symmetric=False)."""
         m, sh = self.mech, self.shake
@@ -344,7 +343,7 @@ def main(argv=None):
             f'[min–max] of {repeats} interleaved repetitions (all eight timings of a case '
             f'interleaved); ratios of the medians.\n\n'
             + table(rows, 0) + '\n\n'
-            '## SHAKE\'s unsymmetric matrix: shake_factor / shake_solve vs '
+            "## SHAKE's unsymmetric matrix: shake_factor / shake_solve vs "
             'tree_factor(symmetric=False) / tree_solve\n\n'
             'The end configuration is the start moved by a random drift (about 0.05 rad and '
             '5 mm per body); J_r the right Jacobians over it, or I + 0.1 N(0, 1) on every '

@@ -53,7 +53,17 @@ Y_S⁻ᵀ [[K̂, 0], [0, 0]] Y_E⁻¹`` exactly, a point "mass" ``K̂ = A − B�
 step passes the force ``f = z_v + B̂_E q₀`` at the start anchor (``(f, ρ_p,S × f)``
 to the parent); down, with the parent's end-anchor acceleration ``ŷ = a_p,v + a_p,ω
 × ρ_p,E``, ``ω̇_c = q₀ − D⁻¹ B̂_Sᵀ ŷ``, ``a_c = (ŷ + g_v + ρ_c,E × ω̇_c, ω̇_c)`` and ``λ
-= s (f + K̂ ŷ)``.
+= s (f + K̂ ŷ)``. Measured on SHAKE ball chains of 30 (``bench/nullspace_shake_ball.py``,
+12 seeds): the general recursion is off the reference by up to 1.9e-12 with an
+explicit ``D⁻¹`` (the adjugate) and 2.0e-14 with LU solves, the anchor form by 5.7e-15
+(and it is cheaper).
+
+Accuracy (``test/test_nullspace_shake.py``, ``bench/nullspace_premise.py``): at most
+1.6e-14 off the reference on random mechanisms (drift 0.05 rad), where today's
+``tree_solve`` is off by up to 7e-11. Without positive definiteness a joint's ``D``
+can cancel further than in the symmetric case: on near-straight hinge chains the
+relative pivot falls to 3e-5 and the error grows as eps / pivot (1.7e-11 there,
+today's 2.5e-11).
 
 The kernels are compiled with numba (``@njit(cache=True)``), take only numpy
 arrays and scalars, allocate nothing, and run as Python with
