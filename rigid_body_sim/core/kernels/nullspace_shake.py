@@ -361,6 +361,14 @@ def shake_factor(j_child, j_parent, j_type, j_rows, j_cside, GaE, GbE, GaS, GbS,
         ``Σ_i |S_S,i S_E,i I^A_ii|`` (1 without any): small for a nearly massless
         subtree, or where ``D`` needs pivoting (then fall back).
 
+    Notes
+    -----
+    The start side (``JV[:, S:]``, ``JS[:, :, 3:6]``) depends on the start rows only,
+    which stay the same for all of a step's SHAKE iterations (and are the rows of the
+    symmetric factorization at the start); reading them is about a third of this
+    factorization's time (hinge chain of 50: 15.0 µs, 10.1 µs without, compiled), which a
+    caller could share instead.
+
     """
     n = minv6.shape[0]
     for i in range(n):
