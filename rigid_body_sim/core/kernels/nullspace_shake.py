@@ -45,7 +45,7 @@ near symmetric positive definite for a drift's small rotations, and the returned
 ratio (the smallest ``|δ|`` over its scale) lets a caller fall back where it is not.
 
 A ball is eliminated through its anchor, as in :mod:`.nullspace_solve`, now with two
-anchors frames ``Y_E = X(−ρ_c,E)``, ``Y_S = X(−ρ_c,S)`` (``S = Y (0, I)``): ``Y_Sᵀ I^A
+anchor frames ``Y_E = X(−ρ_c,E)``, ``Y_S = X(−ρ_c,S)`` (``S = Y (0, I)``): ``Y_Sᵀ I^A
 Y_E = [[A, B̂_E], [B̂_Sᵀ, D]]`` (``B̂_E = U_E,0:3``, ``B̂_S = U_S,0:3``), so ``Ia =
 Y_S⁻ᵀ [[K̂, 0], [0, 0]] Y_E⁻¹`` exactly, a point "mass" ``K̂ = A − B̂_E D⁻¹ B̂_Sᵀ`` (3 x
 3, unsymmetric) that the parent receives as ``X(ρ_p,S)ᵀ [[K̂, 0], [0, 0]] X(ρ_p,E)``.
@@ -62,8 +62,10 @@ Accuracy (``test/test_nullspace_shake.py``, ``bench/nullspace_premise.py``): at 
 1.6e-14 off the reference on random mechanisms (drift 0.05 rad), where today's
 ``tree_solve`` is off by up to 7e-11. Without positive definiteness a joint's ``D``
 can cancel further than in the symmetric case: on near-straight hinge chains the
-relative pivot falls to 3e-5 and the error grows as eps / pivot (1.7e-11 there,
-today's 2.5e-11).
+relative pivot falls to 3e-5 and the error grows as eps / pivot (up to 2.5e-11
+measured there, as much as today's). Drifts of 1 to 2 rad, beyond a sub-step's
+``max_rotation`` (0.25 rad), lose more: up to 3.5e-11 where today's solve has 8e-13
+(the test's ``test_large_step``).
 
 The kernels are compiled with numba (``@njit(cache=True)``), take only numpy
 arrays and scalars, allocate nothing, and run as Python with
