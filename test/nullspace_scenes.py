@@ -104,6 +104,8 @@ class Mechanism:
         Rotations of the displaced state (:func:`frames`).
     phi : ndarray, shape (m,)
         The rows' Φ there.
+    pos, quat, par : ndarray
+        The displaced state and the rows' parameters (``pack_rows``).
 
     """
 
@@ -149,6 +151,7 @@ class Mechanism:
         pos = pos + off * rng.normal(size=pos.shape)
         quat = np.array([unit(q + 0.5 * off * rng.normal(size=4)) for q in quat])
         m = len(rows)
+        self.pos, self.quat, self.par = pos, quat, par
         self.phi = np.empty(m)
         self.Ga, self.Gb = np.empty((m, 6)), np.empty((m, 6))
         rows_geometry(pos, quat, self.kind, self.comp, self.a, self.b, par, self.phi,
@@ -198,6 +201,107 @@ class Mechanism:
             resid = (rhs - wh) - wl
             xh, xl = _dd_add(xh, xl, scipy.linalg.lu_solve(lu, resid))
         return xh + xl, float(np.linalg.cond(A))
+
+
+class ShakeSystem:
+    """
+    SHAKE's Newton matrix ``A = G_E diag(I, J_r) M⁻¹ G_Sᵀ`` on a mechanism (issue 19).
+
+    The start configuration is the mechanism's (displaced) state; the end is the start
+    moved by a small random step (``step`` m per ``LINK`` in position, about ``step`` rad
+    in orientation), as a drift moves it.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    rng : numpy.random.Generator
+    step : float
+        Size of the drift.
+    jacobian : str
+        ``'right'``: ``J_r`` of each body's rotation over the drift
+        (``constrained_step._right_jacobians``, as for isotropic bodies; not symmetric);
+        ``'random'``: ``I + 0.1 N(0, 1)`` per body (a general 3 x 3, as an anisotropic
+        body's carried through its rotor flows).
+
+    Attributes
+    ----------
+    GaS, GbS, GaE, GbE : ndarray, shape (m, 6)
+        The blocks at the start and at the end.
+    RS, RE : ndarray, shape (n + 1, 3, 3)
+        The rotations there.
+    Jr : ndarray, shape (n, 3, 3)
+    Ga2, Gb2 : ndarray, shape (m, 6)
+        ``G_E diag(I, J_r)`` as the step forms it (``_apply_jacobians``).
+
+    """
+
+    def __init__(self, mech, rng, step=0.05, jacobian='right'):
+        from rigid_body_sim.core.kernels.constrained_step import (_apply_jacobians,
+                                                                  _right_jacobians)
+        self.mech = mech
+        n, m = mech.n, mech.m
+        self.GaS, self.GbS, self.RS = mech.Ga, mech.Gb, mech.R
+        pos = mech.pos + step * LINK * rng.normal(size=mech.pos.shape)
+        quat = np.array([unit(q + 0.5 * step * rng.normal(size=4)) for q in mech.quat])
+        self.phiE = np.empty(m)
+        self.GaE, self.GbE = np.empty((m, 6)), np.empty((m, 6))
+        rows_geometry(pos, quat, mech.kind, mech.comp, mech.a, mech.b, mech.par, self.phiE,
+                      self.GaE, self.GbE)
+        self.RE = np.empty((n + 1, 3, 3))
+        frames(quat, self.RE)
+        self.Jr = np.empty((n, 3, 3))
+        if jacobian == 'right':
+            _right_jacobians(mech.quat, quat, self.Jr)
+        else:
+            self.Jr[:] = np.eye(3) + 0.1 * rng.normal(size=(n, 3, 3))
+        self.Ga2, self.Gb2 = np.empty((m, 6)), np.empty((m, 6))
+        _apply_jacobians(self.GaE, self.GbE, mech.a, mech.b, self.Jr, self.Ga2, self.Gb2)
+
+    def dense(self):
+        """Return ``G_E``, ``D = diag(I, J_r)`` per body and ``G_S`` (dense, float64)."""
+        mech = self.mech
+        n = mech.n
+        D = np.zeros((6 * n, 6 * n))
+        for i in range(n):
+            D[6 * i:6 * i + 3, 6 * i:6 * i + 3] = np.eye(3)
+            D[6 * i + 3:6 * i + 6, 6 * i + 3:6 * i + 6] = self.Jr[i]
+        return dense_G(mech, self.GaE, self.GbE), D, dense_G(mech, self.GaS, self.GbS)
+
+    def reference(self, rhs_columns, iterations=6):
+        """
+        Return ``A⁻¹ rhs`` refined with double-double residuals, and cond(A).
+
+        As :meth:`Mechanism.reference`: the residual ``rhs − G_E (D (M⁻¹ (G_Sᵀ x)))`` from
+        the blocks and ``J_r`` in double-double arithmetic (``A`` exactly as the data
+        define it, ``D`` not rounded into ``G_E``), ``x`` kept as a double-double sum, the
+        corrections solved with the float64 ``A``.
+        """
+        GE, D, GS = self.dense()
+        minv = self.mech.minv6.ravel()
+        A = GE @ D @ (minv[:, None] * GS.T)
+        rhs = np.asarray(rhs_columns, dtype=float)
+        lu = scipy.linalg.lu_factor(A)
+        xh = scipy.linalg.lu_solve(lu, rhs)
+        xl = np.zeros_like(xh)
+        for _ in range(iterations):
+            yh, yl = _dd_matmul(GS.T, xh, xl)
+            yh, yl = _dd_scale(yh, yl, minv[:, None])
+            yh, yl = _dd_matmul(D, yh, yl)
+            wh, wl = _dd_matmul(GE, yh, yl)
+            resid = (rhs - wh) - wl
+            xh, xl = _dd_add(xh, xl, scipy.linalg.lu_solve(lu, resid))
+        return xh + xl, float(np.linalg.cond(A))
+
+
+def dense_G(mech, Ga, Gb):
+    """Return the dense ``G`` (m, 6n) of blocks ``Ga``, ``Gb`` on the mechanism's rows."""
+    n, m = mech.n, mech.m
+    G = np.zeros((m, 6 * n + 6))
+    r = np.arange(m)
+    for k in range(6):
+        G[r, 6 * mech.a + k] += Ga[:, k]   # a != b: one block per entry, exact
+        G[r, 6 * mech.b + k] += Gb[:, k]
+    return G[:, :6 * n]
 
 
 _SPLIT = 134217729.0   # 2^27 + 1 (Dekker)
