@@ -62,14 +62,17 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT,
                      V_RHS, V_SOLUTION, VECTORS, VM, W_WIDTH, WATCH, X_COMP, X_KIND, X_PAR,
                      X_WEIGHT, XV_GAMMA, XV_PHI, XV_PHI_DOT, XVEC)
-from .layout import (NS_ACC, NS_CHILD, NS_CSIDE, NS_IA, NS_JD, NS_JG, NS_JQ, NS_JS, NS_JU,
-                     NS_JV, NS_P, NS_PARENT, NS_ROWS, NS_TYPE, NS_WORK, NULLSPACE0)
+from .layout import (NS_ACC, NS_CHILD, NS_CSIDE, NS_FRAMES_START, NS_IA, NS_JD, NS_JG, NS_JQ,
+                     NS_JS, NS_JU, NS_JV, NS_P, NS_PARENT, NS_ROWS, NS_SHAKE_ACC, NS_SHAKE_IA,
+                     NS_SHAKE_JD, NS_SHAKE_JG, NS_SHAKE_JQ, NS_SHAKE_JS, NS_SHAKE_JU,
+                     NS_SHAKE_JV, NS_SHAKE_P, NS_SHAKE_WORK, NS_TYPE, NS_WORK, NULLSPACE0)
 from .layout import NULLSPACE as NULLSPACE_FIELDS
 from .layout import P_T_END, P_T_START, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0
 from .layout import TREE as TREE_FIELDS
 from .loop_solve import (loop_back, loop_close, loop_column, loop_column_solved, loop_forward,
                          loop_reduce, loop_rhs, loop_schur)
 from .methods import Method, ONE_STEP, TRIPLE_JUMP
+from .nullspace_shake import shake_arrays, shake_factor, shake_solve
 from .nullspace_solve import N_SLOTS, nullspace_arrays, nullspace_factor, nullspace_solve
 from .rows import framed_geometry, framed_rates, frames
 from .so3 import normalize_quaternions, positive_product, quat_exp_multiply
@@ -193,12 +196,22 @@ def _fac(Ga, Gb, Ha, Hb, a, b, own, minv6, symmetric, par, cx, slot, counts):
 
 
 @njit(cache=True)
-def _inertia_solve(cx, rhs, out):
-    """``out = A_TT⁻¹ rhs`` at the forest's rows, with its factors in inertia form."""
+def _inertia_solve(cx, slot, rhs, out):
+    """
+    ``out = A_TT⁻¹ rhs`` at the forest's rows, with its factors in inertia form.
+
+    ``slot`` SYMMETRIC: the symmetric factors (:func:`_sym_factor`); GENERAL: SHAKE's
+    (:func:`_shake_inertia`). ``out`` may be ``rhs``.
+    """
     ns = _nullspace(cx)
-    nullspace_solve(ns[NS_CHILD], ns[NS_PARENT], ns[NS_TYPE], ns[NS_ROWS], ns[NS_IA],
-                    ns[NS_JS], ns[NS_JU], ns[NS_JD], ns[NS_JV], ns[NS_P], ns[NS_ACC],
-                    ns[NS_JG], ns[NS_JQ], rhs, out)
+    if slot == SYMMETRIC:
+        nullspace_solve(ns[NS_CHILD], ns[NS_PARENT], ns[NS_TYPE], ns[NS_ROWS], ns[NS_IA],
+                        ns[NS_JS], ns[NS_JU], ns[NS_JD], ns[NS_JV], ns[NS_P], ns[NS_ACC],
+                        ns[NS_JG], ns[NS_JQ], rhs, out)
+    else:
+        IA, JS, JU, JD, JV, work, P, Acc, JG, JQ = _shake_factors(cx)
+        shake_solve(ns[NS_CHILD], ns[NS_PARENT], ns[NS_TYPE], ns[NS_ROWS], IA, JS, JU, JD, JV,
+                    P, Acc, JG, JQ, rhs, out)
 
 
 @njit(cache=True)
@@ -218,11 +231,55 @@ def _inertia_loop(Ga, Gb, a, b, minv6, par, cx, counts):
     own = _own(cx)
     for k in range(closure.shape[0]):
         loop_column(k, rows, closure, a, b, own, Ga, Gb, Ga, Gb, minv6, 0.0, X, Y, F, work, g)
-        _inertia_solve(cx, work, work)
+        _inertia_solve(cx, SYMMETRIC, work, work)
         loop_column_solved(k, rows, X, work)
     loop_close(rows, X, Y, F)
     tiny = par[P_RANK_RTOL] * _peak_diagonal(Ga, Gb, Ga, Gb, a, b, _rows_count(cx), minv6)
     return _factor_matrix(closure.shape[0], True, tiny, tiny, cx, SYMMETRIC, counts)
+
+
+@njit(cache=True)
+def _shake_inertia(quat_s, GaE, GbE, GaS, GbS, a, b, Jr, minv6, par, cx, counts):
+    """
+    Factorize SHAKE's ``G_E diag(I, J_r) M⁻¹ G_Sᵀ`` in inertia form, or return -1.
+
+    Where the component's forest is recognized (a non-empty null-space storage):
+    :func:`.nullspace_shake.shake_factor` with the start rotations (of ``quat_s``)
+    and the end's (the scratch ``FRAMES``, of the current geometry), into the storage's
+    ``shake_*`` factors; a loop solve's closure complement then as in
+    :func:`_factor_tree`, with that forest solve (the rows' ``G_E diag(I, J_r)`` into
+    the scratch ``G2``). Returns the mode for :func:`_sol` (storages ``GENERAL``), or
+    -1 where a joint's pivot is at most ``rank_rtol`` of its scale (counted: the
+    caller factorizes by the row-space path).
+    """
+    ns = _nullspace(cx)
+    counts[Count.FACTORIZATIONS] += 1
+    IA, JS, JU, JD, JV, work, P, Acc, JG, JQ = _shake_factors(cx)
+    RS = _v3(cx[CX_FLOATS], cx[CX_LAYOUT], NULLSPACE0 + NS_FRAMES_START)
+    frames(quat_s, RS)
+    ratio = shake_factor(ns[NS_CHILD], ns[NS_PARENT], ns[NS_TYPE], ns[NS_ROWS], ns[NS_CSIDE],
+                         GaE, GbE, GaS, GbS, Jr, minv6, RS, _f3(cx, FRAMES), IA, JS, JU, JD,
+                         JV, work)
+    if not ratio > par[P_RANK_RTOL]:
+        counts[Count.INERTIA_FALLBACKS] += 1
+        return -1
+    if cx[CX_SOLVE] == Solve.TREE:
+        return TREE + INERTIA
+    g2 = _f3(cx, G2)
+    Ga2, Gb2 = g2[0], g2[1]
+    _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
+    tree = _tree(cx, GENERAL)
+    rows, closure, X, Y = tree[T_GROUP_ROWS], tree[T_CLOSURE], tree[T_X], tree[T_Y]
+    F = _f2(cx, DENSE0 + DENSE_SLOTS * GENERAL + D_F)
+    own = _own(cx)
+    for k in range(closure.shape[0]):
+        loop_column(k, rows, closure, a, b, own, Ga2, Gb2, GaS, GbS, minv6, 0.0, X, Y, F,
+                    tree[T_WORK], tree[T_G])
+        _inertia_solve(cx, GENERAL, tree[T_WORK], tree[T_WORK])
+        loop_column_solved(k, rows, X, tree[T_WORK])
+    loop_close(rows, X, Y, F)
+    tiny = par[P_RANK_RTOL] * _peak_diagonal(Ga2, Gb2, GaS, GbS, a, b, _rows_count(cx), minv6)
+    return _factor_matrix(closure.shape[0], False, tiny, tiny, cx, GENERAL, counts) + INERTIA
 
 
 @njit(cache=True, inline='always')
@@ -238,7 +295,7 @@ def _sol(mode, rhs, out, cx, slot):
     t = _tree(cx, slot)
     if solve == Solve.TREE:
         if inertia:
-            _inertia_solve(cx, rhs, out)
+            _inertia_solve(cx, slot, rhs, out)
         else:
             tree_solve(t[T_GROUP_PTR], t[T_GROUP_ROWS], t[T_GROUP_CHILD], t[T_GROUP_PARENT],
                        t[T_S], t[T_PIV], t[T_P], t[T_Q], t[T_B], t[T_E], t[T_TMP], rhs, out)
@@ -247,7 +304,7 @@ def _sol(mode, rhs, out, cx, slot):
     z, xc = t[T_Z], t[T_XC]
     if inertia:
         loop_rhs(t[T_CLOSURE], rhs, z)
-        _inertia_solve(cx, rhs, out)
+        _inertia_solve(cx, slot, rhs, out)
         loop_reduce(t[T_GROUP_ROWS], t[T_CLOSURE], t[T_Y], out, z)
     else:
         loop_forward(t[T_GROUP_PTR], t[T_GROUP_ROWS], t[T_GROUP_CHILD], t[T_GROUP_PARENT],
@@ -480,13 +537,24 @@ def _tree(cx, slot):
 
 @njit(cache=True)
 def _nullspace(cx):
-    """Return the null-space storage (:func:`nullspace_storage`), indexed by ``NS_*`` slots."""
+    """Return the null-space storage's joints and symmetric factors, by ``NS_*`` slots."""
     f, i, L, k = cx[CX_FLOATS], cx[CX_INTS], cx[CX_LAYOUT], NULLSPACE0
     return (_v1(i, L, k + NS_CHILD), _v1(i, L, k + NS_PARENT), _v1(i, L, k + NS_TYPE),
             _v2(i, L, k + NS_ROWS), _v2(i, L, k + NS_CSIDE), _v3(f, L, k + NS_IA),
             _v3(f, L, k + NS_JS), _v3(f, L, k + NS_JU), _v3(f, L, k + NS_JD),
             _v3(f, L, k + NS_JV), _v2(f, L, k + NS_WORK), _v2(f, L, k + NS_P),
             _v2(f, L, k + NS_ACC), _v2(f, L, k + NS_JG), _v2(f, L, k + NS_JQ))
+
+
+@njit(cache=True)
+def _shake_factors(cx):
+    """Return SHAKE's unsymmetric factors ``(IA, JS, JU, JD, JV, work, P, Acc, JG, JQ)``."""
+    f, L, k = cx[CX_FLOATS], cx[CX_LAYOUT], NULLSPACE0
+    return (_v3(f, L, k + NS_SHAKE_IA), _v3(f, L, k + NS_SHAKE_JS), _v3(f, L, k + NS_SHAKE_JU),
+            _v3(f, L, k + NS_SHAKE_JD), _v3(f, L, k + NS_SHAKE_JV),
+            _v2(f, L, k + NS_SHAKE_WORK), _v2(f, L, k + NS_SHAKE_P),
+            _v2(f, L, k + NS_SHAKE_ACC), _v2(f, L, k + NS_SHAKE_JG),
+            _v2(f, L, k + NS_SHAKE_JQ))
 
 
 # Generic rows (a user's Python function) are evaluated by Python from inside the
@@ -1022,9 +1090,14 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
         # size of the corrections), and the iteration stays Newton's to that order.
         if refactor:
             _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, _f2(cx, ROTOR))
-            _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
-            mode = _fac(Ga2, Gb2, GaS, GbS, a, b, _own(cx), minv6, False, par, cx, GENERAL,
-                        counts)
+            mode = -1
+            if _nullspace(cx)[NS_CHILD].shape[0] > 0:   # the forest in inertia form
+                mode = _shake_inertia(quat_s, GaE, GbE, GaS, GbS, a, b, Jr, minv6, par, cx,
+                                      counts)
+            if mode < 0:
+                _apply_jacobians(GaE, GbE, a, b, Jr, Ga2, Gb2)
+                mode = _fac(Ga2, Gb2, GaS, GbS, a, b, _own(cx), minv6, False, par, cx,
+                            GENERAL, counts)
         _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, GENERAL)
         _gt_lambda(GaS, GbS, a, b, _own(cx), vm[V_SOLUTION], g6)
         for i in range(n):
@@ -1445,7 +1518,9 @@ def nullspace_storage(structure, n: int) -> dict:
                      np.zeros(0, dtype=np.int64), np.zeros((0, N_SLOTS), dtype=np.int64),
                      np.zeros((0, N_SLOTS), dtype=np.int64))
         n = 0
-    arrays = (*structure, *nullspace_arrays(len(structure[0]), n))
+    nj = len(structure[0])
+    arrays = (*structure, *nullspace_arrays(nj, n), *shake_arrays(nj, n),
+              np.zeros((n + 1, 3, 3)))
     if len(arrays) != len(NULLSPACE_FIELDS):
         raise ValueError(f'null-space storage: expected {len(NULLSPACE_FIELDS)} arrays, '
                          f'got {len(arrays)}')

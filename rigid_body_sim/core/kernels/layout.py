@@ -339,13 +339,16 @@ TREE = Layout('tree storage', (
 #: The null-space (inertia-form) storage (constrained_step.nullspace_storage) of a forest
 #: whose joints are all recognized (:func:`.nullspace_solve.nullspace_structure`): per
 #: joint, leaves first, its child and parent body, type and rows by slot and which block
-#: is the child's; the factors (articulated inertias, S, U, D, the joint vectors) and the
-#: solve's workspace. Empty (no joints) when the component takes the row-space tree solve.
+#: is the child's; the symmetric factors (articulated inertias, S, U, D, the joint
+#: vectors) and the solve's workspace (:mod:`.nullspace_solve`); SHAKE's unsymmetric ones
+#: (``shake_*``, :mod:`.nullspace_shake`) and the start configuration's rotations. Empty
+#: (no joints) when the component takes the row-space tree solve.
+_FACTORS = (('ia', 'f', 3), ('js', 'f', 3), ('ju', 'f', 3), ('jd', 'f', 3), ('jv', 'f', 3),
+            ('work', 'f', 2), ('p', 'f', 2), ('acc', 'f', 2), ('jg', 'f', 2), ('jq', 'f', 2))
 NULLSPACE = Layout('null-space storage', (
     ('child', 'i', 1), ('parent', 'i', 1), ('type', 'i', 1), ('rows', 'i', 2),
-    ('cside', 'i', 2), ('ia', 'f', 3), ('js', 'f', 3), ('ju', 'f', 3), ('jd', 'f', 3),
-    ('jv', 'f', 3), ('work', 'f', 2), ('p', 'f', 2), ('acc', 'f', 2), ('jg', 'f', 2),
-    ('jq', 'f', 2)))
+    ('cside', 'i', 2)) + _FACTORS + tuple((f'shake_{f[0]}',) + f[1:] for f in _FACTORS)
+    + (('frames_start', 'f', 3),))
 #: Which of a component's two storages of each kind: the general factorizations
 #: (SHAKE's), and the symmetric factor kept for the current geometry.
 STORAGES = ('general', 'symmetric')
