@@ -60,7 +60,10 @@ def test_slot_indices_are_generated_from_the_one_declaration():
     assert layout.COMPONENT.fields[layout.PHI].name == 'phi'
     assert layout.COMPONENT.fields[layout.TREE0 + layout.TREE_SLOTS + layout.T_XC].name == (
         'symmetric_tree_xc')
-    assert layout.TREE0 + layout.TREE_SLOTS * 2 == len(layout.COMPONENT)
+    assert layout.TREE0 + layout.TREE_SLOTS * 2 == layout.NULLSPACE0
+    assert layout.COMPONENT.fields[layout.NULLSPACE0 + layout.NS_SHAKE_JQ].name == (
+        'nullspace_shake_jq')
+    assert layout.NULLSPACE0 + len(layout.NULLSPACE) == len(layout.COMPONENT)
     assert layout.COMPONENT.fields[layout.DENSE0 + layout.DENSE_SLOTS + layout.D_VT].name == (
         'symmetric_dense_vt')
     assert layout.BODY.width == layout.B_WIDTH == 8
@@ -78,12 +81,13 @@ def _component(m=3, n=2):
             'x_comp': a[:0], 'x_par': np.zeros((0, 13)), 'x_weight': np.zeros(0), 'key': -1}
     body = np.ones((n, 8))
     trees = tuple(ck.tree_storage(st, np.zeros(0, dtype=np.int64), m, n) for _ in range(2))
+    trees = (trees, ck.nullspace_storage(None, n))
     return ck, rows, ck.workspace(n, m, body), (ck.dense_storage(m), ck.dense_storage(m)), trees
 
 
 def test_pack_takes_arrays_by_name_and_returns_named_views():
     ck, rows, ws, dense, trees = _component()
-    packed, views = ck.pack(rows, ws, dense, trees)
+    packed, views = ck.pack(rows, ws, dense, *trees)
     assert packed[0] == -1
     views['phi'][1, 2] = 7.0
     from rigid_body_sim.core.kernels.layout import L_OFFSET, PHI
@@ -95,15 +99,15 @@ def test_pack_refuses_a_missing_or_misshapen_array_naming_it():
     ck, rows, ws, dense, trees = _component()
     del ws['vm']
     with pytest.raises(ValueError, match=r"missing \['vm'\]"):
-        ck.pack(rows, ws, dense, trees)
+        ck.pack(rows, ws, dense, *trees)
     ck, rows, ws, dense, trees = _component()
     ws['minv'] = ws['minv'].ravel()
     with pytest.raises(ValueError, match=r'component\.minv: expected 2 dimensions'):
-        ck.pack(rows, ws, dense, trees)
+        ck.pack(rows, ws, dense, *trees)
     ck, rows, ws, dense, trees = _component()
     ws['watch'] = ws['watch'].astype(float)
     with pytest.raises(ValueError, match=r'component\.watch: expected int64'):
-        ck.pack(rows, ws, dense, trees)
+        ck.pack(rows, ws, dense, *trees)
 
 
 def test_a_layout_refuses_a_name_declared_twice_and_a_table_an_unknown_slot():
