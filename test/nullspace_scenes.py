@@ -76,21 +76,25 @@ def joint_rows(kind, a, b, pos, R, anchor, axis):
 
 class Mechanism:
     """
-    A random tree of bodies joined by built-in joints, the root joined to the world.
+    A random forest of bodies joined by built-in joints, each root joined to the world or free.
 
     Parameters
     ----------
     rng : numpy.random.Generator
     parents : sequence of int
-        Parent body of each body (``-1``: the world; only body 0).
+        Parent body of each body (``-1``: the world, or none for a body in ``free``).
     kinds : sequence of str
-        Joint type of each body's joint to its parent (``TYPES``).
+        Joint type of each body's joint to its parent (``TYPES``; ignored for a free root).
     straight : float
         0: random link directions (random joint angles); small: a nearly straight chain.
     mass_ratio : float or None
         Masses alternate 1 and ``mass_ratio`` (kg) instead of random 0.1..10.
     off : float
         Size of the displacement off the joints (m and rad) before the blocks are taken.
+    massless_tip : bool
+        The last body of 1e-6 kg.
+    free : collection of int
+        Roots (``parents[i] == -1``) without a joint: free-floating trees.
 
     Attributes
     ----------
@@ -110,7 +114,7 @@ class Mechanism:
     """
 
     def __init__(self, rng, parents, kinds, straight=0.0, mass_ratio=None, off=1e-2,
-                 massless_tip=False):
+                 massless_tip=False, free=()):
         n = len(parents)
         self.n = n
         pos = np.zeros((n, 3))
@@ -139,6 +143,8 @@ class Mechanism:
         self.minv6 = np.hstack([np.repeat(1.0 / mass[:, None], 3, axis=1), 1.0 / inertia])
         rows = []
         for i, (p, kind) in enumerate(zip(parents, kinds)):
+            if i in free:
+                continue   # a free-floating root: no joint
             other = n if p < 0 else p
             a, b = (i, other) if (p < 0 or rng.random() < 0.5) else (other, i)
             axis = unit(rng.normal(size=3)) if not straight \

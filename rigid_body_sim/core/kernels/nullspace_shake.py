@@ -39,6 +39,11 @@ q`` and ``y = X_E a_p``; ``S_Sᵀ W_S,c = 0`` gives ``D q = −S_Sᵀ (I^A_c y +
 * down: ``q = q₀ − D⁻¹ U_Sᵀ y``, ``a_c = y + g_E + S_E q``, ``F = I^A_c a_c + p_c``,
   ``λ`` from ``F`` with the start rows' dual bases (as in :mod:`.nullspace_solve`).
 
+A free-floating tree's root (a ``FREE`` entry, :mod:`.nullspace_solve`) has a general
+``I^A_root`` (not symmetric): the factor overwrites it with its LU factors, with
+partial pivoting (the pivot rows in ``JD`` of the entry), and the down pass starts from
+``a_root = −(I^A_root)⁻¹ p_root``.
+
 ``D`` (d x d, unsymmetric) is factored as ``L diag(δ) U`` (L unit lower, U unit
 upper) without pivoting: it is ``S_Sᵀ I^A S_E`` with ``S_S ≈ S_E`` and ``I^A``
 near symmetric positive definite for a drift's small rotations, and the returned
@@ -77,7 +82,7 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
-from .nullspace_solve import (_DOF, _world_torque, BALL, HINGE, N_VECS, SLIDER, SLOT_DOT,
+from .nullspace_solve import (_DOF, _world_torque, BALL, FREE, HINGE, N_VECS, SLIDER, SLOT_DOT,
                               SLOT_LINE, V_D, V_DUAL, V_LDUAL, V_RHO, V_RHOP, V_SIGN, V_TAU)
 
 # The two configurations' vectors in ``JV``: the end rows' at ``E + V_*``, the start's at
@@ -354,7 +359,8 @@ def shake_factor(j_child, j_parent, j_type, j_rows, j_cside, GaE, GbE, GaS, GbS,
     RS, RE : ndarray of float64, shape (n + 1, 3, 3)
         Principal-to-world rotations at the start and at the end (:func:`.rows.frames`).
     IA, JS, JU, JD, JV, work : ndarray
-        From :func:`shake_arrays` (overwritten: the factors).
+        From :func:`shake_arrays` (overwritten: the factors; a free root's ``IA`` by its
+        LU factors, ``JD`` by its pivot rows).
 
     Returns
     -------
@@ -408,6 +414,11 @@ def shake_factor(j_child, j_parent, j_type, j_rows, j_cside, GaE, GbE, GaS, GbS,
         c = j_child[j]
         p = j_parent[j]
         typ = j_type[j]
+        if typ == FREE:
+            ratio = _free_factor(IA, c, JD, j)
+            if not ratio >= smallest:
+                smallest = ratio
+            continue
         _read_joint(j, typ, c, p, j_rows, j_cside, GaE, GbE, RE, JV, JS, E, E_COL, work)
         _read_joint(j, typ, c, p, j_rows, j_cside, GaS, GbS, RS, JV, JS, S, S_COL, work)
         dof = _DOF[typ]
@@ -460,6 +471,59 @@ def shake_factor(j_child, j_parent, j_type, j_rows, j_cside, GaE, GbE, GaS, GbS,
             _add_shifted(work, IA, p, JV[j, E + V_D, 0], JV[j, E + V_D, 1], JV[j, E + V_D, 2],
                          JV[j, S + V_D, 0], JV[j, S + V_D, 1], JV[j, S + V_D, 2])
     return smallest
+
+
+@njit(cache=True)
+def _free_factor(IA, c, JD, j):
+    """
+    Factorize a free root's ``I^A_c = Pᵀ L U`` in place (partial pivoting; allocation-free).
+
+    ``IA[c]`` receives ``L`` (unit lower, below the diagonal) and ``U``; ``JD[j]`` the
+    pivot row of each step k at ``JD[j].flat[k]`` (as a float). Returns the smallest
+    ``|U_kk|`` over ``I^A_kk`` before the factorization (0 where ``I^A_c`` is singular).
+    """
+    smallest = 1.0
+    for k in range(6):
+        scale = abs(IA[c, k, k])
+        piv = k
+        best = abs(IA[c, k, k])
+        for i in range(k + 1, 6):
+            v = abs(IA[c, i, k])
+            if v > best:
+                piv, best = i, v
+        JD[j, k // 3, k % 3] = piv
+        if piv != k:
+            for t in range(6):
+                IA[c, k, t], IA[c, piv, t] = IA[c, piv, t], IA[c, k, t]
+        if not best >= smallest * scale:
+            smallest = best / scale
+        inv = 1.0 / IA[c, k, k]
+        for i in range(k + 1, 6):
+            v = IA[c, i, k] * inv
+            IA[c, i, k] = v
+            for t in range(k + 1, 6):
+                IA[c, i, t] -= v * IA[c, k, t]
+    return smallest
+
+
+@njit(cache=True)
+def _free_solve(IA, c, JD, j, P, Acc):
+    """Set a free root's acceleration ``a_c = −(I^A_c)⁻¹ p_c`` with :func:`_free_factor`'s LU."""
+    for k in range(6):
+        Acc[c, k] = -P[c, k]
+    for k in range(6):   # the row exchanges, in order (whole rows of L were exchanged too)
+        piv = int(JD[j, k // 3, k % 3])
+        if piv != k:
+            Acc[c, k], Acc[c, piv] = Acc[c, piv], Acc[c, k]
+    for k in range(6):
+        v = Acc[c, k]
+        for i in range(k + 1, 6):
+            Acc[c, i] -= IA[c, i, k] * v
+    for k in range(5, -1, -1):
+        v = Acc[c, k]
+        for t in range(k + 1, 6):
+            v -= IA[c, k, t] * Acc[c, t]
+        Acc[c, k] = v / IA[c, k, k]
 
 
 @njit(cache=True, inline='always')
@@ -642,6 +706,8 @@ def shake_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Acc, J
         if typ == BALL:
             _ball_up(j, c, p, j_rows, IA, JD, JU, JV, P, JG, JQ, rhs)
             continue
+        if typ == FREE:   # a free root's bias p_c is complete: nothing to pass on
+            continue
         c1, c2 = rhs[j_rows[j, SLOT_DOT]], rhs[j_rows[j, SLOT_DOT + 1]]
         if typ == HINGE:
             w0 = c1 * JV[j, E + V_DUAL, 0] + c2 * JV[j, E + V_DUAL + 1, 0]
@@ -711,6 +777,9 @@ def shake_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Acc, J
         typ = j_type[j]
         if typ == BALL:
             _ball_down(j, c, p, j_rows, JU, JV, Acc, JG, JQ, out)
+            continue
+        if typ == FREE:
+            _free_solve(IA, c, JD, j, P, Acc)
             continue
         y0 = y1 = y2 = y3 = y4 = y5 = 0.0
         if p >= 0:
