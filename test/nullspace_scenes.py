@@ -14,8 +14,8 @@ take minutes to compile, and only the rows' blocks are needed).
 from __future__ import annotations
 
 import numpy as np
-from rigid_body_sim.core.kernels.rows import (frames, KIND_DOT, KIND_LINE, KIND_POINT,
-                                              pack_rows, rows_geometry)
+from rigid_body_sim.core.kernels.rows import (frames, KIND_DISTANCE, KIND_DOT, KIND_LINE,
+                                              KIND_POINT, pack_rows, rows_geometry)
 import scipy.linalg
 
 TYPES = ('fixed', 'hinge', 'ball', 'slider')
@@ -71,6 +71,11 @@ def joint_rows(kind, a, b, pos, R, anchor, axis):
     if kind == 'slider':
         rows += [(KIND_LINE, 0, a, b, r_a, r_b, None, fb[1], None, 0.0),
                  (KIND_LINE, 0, a, b, r_a, r_b, None, fb[2], None, 0.0)]
+    if kind == 'distance':
+        # The anchor on a; on b a point a link's length along the axis (as a rope).
+        p_b = anchor + LINK * unit(axis)
+        rows.append((KIND_DISTANCE, 0, a, b, r_a, local(b, p_b), None, None, None,
+                     float(np.linalg.norm(p_b - anchor))))
     return rows
 
 
@@ -84,7 +89,8 @@ class Mechanism:
     parents : sequence of int
         Parent body of each body (``-1``: the world, or none for a body in ``free``).
     kinds : sequence of str
-        Joint type of each body's joint to its parent (``TYPES``; ignored for a free root).
+        Joint type of each body's joint to its parent (``TYPES`` or ``'distance'``;
+        ignored for a free root).
     straight : float
         0: random link directions (random joint angles); small: a nearly straight chain.
     mass_ratio : float or None
@@ -363,6 +369,7 @@ def tree_parents(rng, n):
     return [-1] + [int(rng.integers(i)) for i in range(1, n)]
 
 
-def mixed_kinds(rng, n):
-    """Joint types drawn from all four."""
-    return [TYPES[int(rng.integers(4))] for _ in range(n)]
+def mixed_kinds(rng, n, distance=False):
+    """Joint types drawn from all four (and ``'distance'``, a rope's one row, if asked)."""
+    kinds = TYPES + ('distance',) if distance else TYPES
+    return [kinds[int(rng.integers(len(kinds)))] for _ in range(n)]

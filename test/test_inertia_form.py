@@ -121,6 +121,16 @@ def relative(x, ref):
     return float(np.max(np.abs(x - ref)) / np.max(np.abs(ref)))
 
 
+def with_rope(build, tip):
+    """Return ``build`` with the tip's joint replaced by a distance row (a rope)."""
+    def rebuilt(method='lie_poisson2'):
+        sim = build(method)
+        sim.remove_constraint(f'j{tip}')
+        sim.add_constraint(Constraint('rope', 'distance', f'b{tip}', f'b{tip - 1}'))
+        return sim
+    return rebuilt
+
+
 CASES = {
     'hinge chain 10': lambda: mechanism(1, ['hinge'] * 10, chain(10)),
     'mixed chain 12': lambda: mechanism(
@@ -132,6 +142,8 @@ CASES = {
     'free mixed tree 16': lambda: mechanism(
         5, ['hinge', 'ball', 'slider', 'fixed'] * 4,
         [-2] + tree(np.random.default_rng(5), 16)[1:]),
+    'mixed chain 12, a rope at the tip': lambda: with_rope(mechanism(
+        6, ['hinge', 'ball', 'slider', 'fixed'] * 3, chain(12)), 11),
 }
 
 
@@ -200,9 +212,9 @@ def test_the_rule_names_what_takes_the_row_space_solve():
         return comp
 
     assert setup().views['nullspace_child'].size == 8
-    # A distance row (the tip on a rope): not a recognized joint.
+    # A distance row (the tip on a rope): in inertia form (the range-space step).
     comp = setup(lambda sim: Constraint('rope', 'distance', 'b7', 'b6'))
-    assert comp.solve == Solve.TREE and comp.views['nullspace_child'].size == 0
+    assert comp.solve == Solve.TREE and comp.views['nullspace_child'].size == 8
     # A generic row (the same rope as a user's function): neither.
 
     def rope(sim):
