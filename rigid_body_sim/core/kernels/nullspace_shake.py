@@ -427,7 +427,7 @@ def shake_factor(j_child, j_parent, j_type, j_rows, j_cside, GaE, GbE, GaS, GbS,
         typ = j_type[j]
         if typ == FREE or typ == DISTANCE:
             ratio = _free_factor(IA, c, JD, j, work)
-            if not ratio >= smallest:
+            if ratio < smallest or ratio != ratio:   # (NaN: kept, the caller falls back)
                 smallest = ratio
             if typ == DISTANCE:
                 _distance_factor(j, c, p, j_rows, j_cside, GaE, GbE, GaS, GbS, RE, RS, IA,
@@ -513,7 +513,7 @@ def _free_factor(IA, c, JD, j, work):
             for t in range(6):
                 IA[c, k, t], IA[c, piv, t] = IA[c, piv, t], IA[c, k, t]
         scale = work[0, k]
-        if not best >= smallest * scale:
+        if best < smallest * scale or best != best:   # (NaN: kept)
             smallest = best / scale
         inv = 1.0 / IA[c, k, k]
         for i in range(k + 1, 6):

@@ -439,7 +439,7 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
         typ = j_type[j]
         if typ == FREE or typ == DISTANCE:
             ratio = _free_factor(IA, c)
-            if not ratio >= smallest:
+            if ratio < smallest or ratio != ratio:   # (NaN: kept, the caller falls back)
                 smallest = ratio
             if typ == DISTANCE:
                 _distance_factor(j, c, p, j_rows, j_cside, Ga, Gb, R, IA, JS, JU, JD)
@@ -751,7 +751,7 @@ def _free_factor(IA, c):
         scale = s
         for t in range(k):
             s -= IA[c, k, t] * IA[c, k, t]
-        if not s >= smallest * scale:
+        if s < smallest * scale or s != s:   # (NaN: kept)
             smallest = s / scale
         inv = 1.0 / np.sqrt(s)
         IA[c, k, k] = inv
