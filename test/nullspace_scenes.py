@@ -14,8 +14,8 @@ take minutes to compile, and only the rows' blocks are needed).
 from __future__ import annotations
 
 import numpy as np
-from rigid_body_sim.core.kernels.rows import (frames, KIND_DOT, KIND_LINE, KIND_POINT,
-                                              pack_rows, rows_geometry)
+from rigid_body_sim.core.kernels.rows import (frames, KIND_DISTANCE, KIND_DOT, KIND_LINE,
+                                              KIND_POINT, pack_rows, rows_geometry)
 import scipy.linalg
 
 TYPES = ('fixed', 'hinge', 'ball', 'slider')
@@ -71,26 +71,36 @@ def joint_rows(kind, a, b, pos, R, anchor, axis):
     if kind == 'slider':
         rows += [(KIND_LINE, 0, a, b, r_a, r_b, None, fb[1], None, 0.0),
                  (KIND_LINE, 0, a, b, r_a, r_b, None, fb[2], None, 0.0)]
+    if kind == 'distance':
+        # The anchor on a; on b a point a link's length along the axis (as a rope).
+        p_b = anchor + LINK * unit(axis)
+        rows.append((KIND_DISTANCE, 0, a, b, r_a, local(b, p_b), None, None, None,
+                     float(np.linalg.norm(p_b - anchor))))
     return rows
 
 
 class Mechanism:
     """
-    A random tree of bodies joined by built-in joints, the root joined to the world.
+    A random forest of bodies joined by built-in joints, each root joined to the world or free.
 
     Parameters
     ----------
     rng : numpy.random.Generator
     parents : sequence of int
-        Parent body of each body (``-1``: the world; only body 0).
+        Parent body of each body (``-1``: the world, or none for a body in ``free``).
     kinds : sequence of str
-        Joint type of each body's joint to its parent (``TYPES``).
+        Joint type of each body's joint to its parent (``TYPES`` or ``'distance'``;
+        ignored for a free root).
     straight : float
         0: random link directions (random joint angles); small: a nearly straight chain.
     mass_ratio : float or None
         Masses alternate 1 and ``mass_ratio`` (kg) instead of random 0.1..10.
     off : float
         Size of the displacement off the joints (m and rad) before the blocks are taken.
+    massless_tip : bool
+        The last body of 1e-6 kg.
+    free : collection of int
+        Roots (``parents[i] == -1``) without a joint: free-floating trees.
 
     Attributes
     ----------
@@ -110,7 +120,7 @@ class Mechanism:
     """
 
     def __init__(self, rng, parents, kinds, straight=0.0, mass_ratio=None, off=1e-2,
-                 massless_tip=False):
+                 massless_tip=False, free=()):
         n = len(parents)
         self.n = n
         pos = np.zeros((n, 3))
@@ -139,6 +149,8 @@ class Mechanism:
         self.minv6 = np.hstack([np.repeat(1.0 / mass[:, None], 3, axis=1), 1.0 / inertia])
         rows = []
         for i, (p, kind) in enumerate(zip(parents, kinds)):
+            if i in free:
+                continue   # a free-floating root: no joint
             other = n if p < 0 else p
             a, b = (i, other) if (p < 0 or rng.random() < 0.5) else (other, i)
             axis = unit(rng.normal(size=3)) if not straight \
@@ -357,6 +369,7 @@ def tree_parents(rng, n):
     return [-1] + [int(rng.integers(i)) for i in range(1, n)]
 
 
-def mixed_kinds(rng, n):
-    """Joint types drawn from all four."""
-    return [TYPES[int(rng.integers(4))] for _ in range(n)]
+def mixed_kinds(rng, n, distance=False):
+    """Joint types drawn from all four (and ``'distance'``, a rope's one row, if asked)."""
+    kinds = TYPES + ('distance',) if distance else TYPES
+    return [kinds[int(rng.integers(len(kinds)))] for _ in range(n)]

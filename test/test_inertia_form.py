@@ -2,8 +2,9 @@
 The tree solve in inertia form inside the step (issue 19): the rule, the multipliers, the fallback.
 
 A tree-solved component whose joints are all built-in fixed, hinge, ball or slider
-joints, each tree hanging from the world, factorizes its symmetric systems by
-eliminating each joint's freedoms (:mod:`rigid_body_sim.core.kernels.nullspace_solve`,
+joints, each tree hanging from the world by one joint or free-floating, factorizes
+its symmetric systems by eliminating each joint's freedoms
+(:mod:`rigid_body_sim.core.kernels.nullspace_solve`,
 whose premise tests are ``test_nullspace_premise.py``). Here the step's own use of
 it is checked: which components take it, that the multipliers a step uses (read with
 ``ConstraintSolver.multipliers``, the step's own kernels) match an extended-precision
@@ -120,6 +121,16 @@ def relative(x, ref):
     return float(np.max(np.abs(x - ref)) / np.max(np.abs(ref)))
 
 
+def with_rope(build, tip):
+    """Return ``build`` with the tip's joint replaced by a distance row (a rope)."""
+    def rebuilt(method='lie_poisson2'):
+        sim = build(method)
+        sim.remove_constraint(f'j{tip}')
+        sim.add_constraint(Constraint('rope', 'distance', f'b{tip}', f'b{tip - 1}'))
+        return sim
+    return rebuilt
+
+
 CASES = {
     'hinge chain 10': lambda: mechanism(1, ['hinge'] * 10, chain(10)),
     'mixed chain 12': lambda: mechanism(
@@ -128,6 +139,11 @@ CASES = {
     'mixed tree 20': lambda: mechanism(
         4, ['fixed', 'hinge', 'ball', 'slider', 'hinge'] * 4,
         tree(np.random.default_rng(4), 20)),
+    'free mixed tree 16': lambda: mechanism(
+        5, ['hinge', 'ball', 'slider', 'fixed'] * 4,
+        [-2] + tree(np.random.default_rng(5), 16)[1:]),
+    'mixed chain 12, a rope at the tip': lambda: with_rope(mechanism(
+        6, ['hinge', 'ball', 'slider', 'fixed'] * 3, chain(12)), 11),
 }
 
 
@@ -196,9 +212,9 @@ def test_the_rule_names_what_takes_the_row_space_solve():
         return comp
 
     assert setup().views['nullspace_child'].size == 8
-    # A distance row (the tip on a rope): not a recognized joint.
+    # A distance row (the tip on a rope): in inertia form (the range-space step).
     comp = setup(lambda sim: Constraint('rope', 'distance', 'b7', 'b6'))
-    assert comp.solve == Solve.TREE and comp.views['nullspace_child'].size == 0
+    assert comp.solve == Solve.TREE and comp.views['nullspace_child'].size == 8
     # A generic row (the same rope as a user's function): neither.
 
     def rope(sim):
@@ -209,9 +225,10 @@ def test_the_rule_names_what_takes_the_row_space_solve():
 
     comp = setup(rope)
     assert comp.solve == Solve.TREE and comp.views['nullspace_child'].size == 0
-    # A free-floating tree (its root joined to nothing): not in the inertia form's scope.
+    # A free-floating tree (its root joined to nothing): in inertia form, the root a
+    # joint-less entry (8 entries for 7 joints).
     comp = setup(parents=[-2] + list(range(7)))
-    assert comp.solve == Solve.TREE and comp.views['nullspace_child'].size == 0
+    assert comp.solve == Solve.TREE and comp.views['nullspace_child'].size == 8
 
 
 def kept_condition(system):

@@ -161,13 +161,14 @@ def test_scope_is_recognized():
     n = mech.n
     a, b, kind, comp = mech.a, mech.b, mech.kind, mech.comp
     assert nullspace_structure(a, b, kind, comp, n) is not None
-    # A second joint to the world (a loop through it), a missing row, a free tree.
+    # A second joint to the world (a loop through it), a missing row.
     world = np.flatnonzero(b == n)
     assert nullspace_structure(np.r_[a, 3], np.r_[b, n], np.r_[kind, 0], np.r_[comp, 0],
                                n) is None
     assert nullspace_structure(a[1:], b[1:], kind[1:], comp[1:], n) is None
+    # A free-floating tree is in scope (test_nullspace_scope): its root has no joint.
     keep = np.setdiff1d(np.arange(a.size), world)
-    assert nullspace_structure(a[keep], b[keep], kind[keep], comp[keep], n) is None
+    assert nullspace_structure(a[keep], b[keep], kind[keep], comp[keep], n) is not None
 
 
 @pytest.mark.parametrize('seed', range(6))

@@ -278,14 +278,15 @@ class ConstraintSolver:
         Whether forests of recognized joints solve their symmetric systems in inertia form.
 
         True (the default): a tree-solved component whose joints are all built-in
-        ``fixed``, ``hinge``, ``ball`` or ``slider`` joints, each tree hanging from
-        the world by one joint (:func:`.kernels.nullspace_solve.nullspace_structure`
+        ``fixed``, ``hinge``, ``ball`` or ``slider`` joints or ``distance`` rows, each
+        tree hanging from the world by one joint or free-floating
+        (:func:`.kernels.nullspace_solve.nullspace_structure`
         recognizes them), factorizes ``G M⁻¹ Gᵀ`` by eliminating each joint's
         freedoms (:mod:`.kernels.nullspace_solve`), and falls back to the
         row-space tree solve at a state where a joint's freedom has next to no
         inertia (a pivot at most ``rank_rtol`` of its scale). Every other
-        component (generic, distance or drive rows, redundant rows, a free-floating
-        tree) always takes the row-space tree solve. False: every component does
+        component (generic or drive rows, redundant rows) always takes the
+        row-space tree solve. False: every component does
         (a comparison: the two agree to rounding).
         """
         return self._inertia_form

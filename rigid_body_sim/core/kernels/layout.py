@@ -339,8 +339,9 @@ TREE = Layout('tree storage', (
 #: The null-space (inertia-form) storage (constrained_step.nullspace_storage) of a forest
 #: whose joints are all recognized (:func:`.nullspace_solve.nullspace_structure`): per
 #: joint, leaves first, its child and parent body, type and rows by slot and which block
-#: is the child's; the symmetric factors (articulated inertias, S, U, D, the joint
-#: vectors) and the solve's workspace (:mod:`.nullspace_solve`); SHAKE's unsymmetric ones
+#: is the child's (a free-floating tree's root: an entry of type FREE, without rows);
+#: the symmetric factors (articulated inertias, S, U, D, the joint vectors) and the
+#: solve's workspace (:mod:`.nullspace_solve`); SHAKE's unsymmetric ones
 #: (``shake_*``, :mod:`.nullspace_shake`) and the start configuration's rotations. Empty
 #: (no joints) when the component takes the row-space tree solve.
 _FACTORS = (('ia', 'f', 3), ('js', 'f', 3), ('ju', 'f', 3), ('jd', 'f', 3), ('jv', 'f', 3),

@@ -39,6 +39,21 @@ q`` and ``y = X_E a_p``; ``S_Sᵀ W_S,c = 0`` gives ``D q = −S_Sᵀ (I^A_c y +
 * down: ``q = q₀ − D⁻¹ U_Sᵀ y``, ``a_c = y + g_E + S_E q``, ``F = I^A_c a_c + p_c``,
   ``λ`` from ``F`` with the start rows' dual bases (as in :mod:`.nullspace_solve`).
 
+A free-floating tree's root (a ``FREE`` entry, :mod:`.nullspace_solve`) has a general
+``I^A_root`` (not symmetric): the factor overwrites it with its LU factors, with
+partial pivoting (the pivot rows in ``JD`` of the entry), and the down pass starts from
+``a_root = −(I^A_root)⁻¹ p_root``.
+
+A distance row (a ``DISTANCE`` entry) is eliminated by the range-space step of
+:mod:`.nullspace_solve` with the sides kept apart: the row's force on the child is
+``w_S,c λ`` and the child obeys the end row, so block elimination of ``[[I^A_c,
+−w_S,c], [w_E,cᵀ, 0]]`` gives ``a_c = a₀ + h λ``, ``a₀ = −(I^A_c)⁻¹ p_c``, ``h =
+(I^A_c)⁻¹ w_S,c``, ``s = w_E,cᵀ h``, ``τ = c − w_E,cᵀ a₀``, ``λ = (τ − w_E,pᵀ a_p) / s``;
+the parent receives ``I^A_p += w_S,p w_E,pᵀ / s`` and ``p_p −= w_S,p τ / s``. ``I^A_c``
+is factored as a free root's (LU with partial pivoting, in place); ``JS[j, :, 0:2]``
+hold the end blocks ``w_E,p``, ``w_E,c``, ``JS[j, :, 3:5]`` the start blocks ``w_S,p``,
+``w_S,c``, ``JU[j, :, 0]`` ``h``, ``JD[j, 2, 2]`` ``1 / s``.
+
 ``D`` (d x d, unsymmetric) is factored as ``L diag(δ) U`` (L unit lower, U unit
 upper) without pivoting: it is ``S_Sᵀ I^A S_E`` with ``S_S ≈ S_E`` and ``I^A``
 near symmetric positive definite for a drift's small rotations, and the returned
@@ -77,8 +92,9 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
-from .nullspace_solve import (_DOF, _world_torque, BALL, HINGE, N_VECS, SLIDER, SLOT_DOT,
-                              SLOT_LINE, V_D, V_DUAL, V_LDUAL, V_RHO, V_RHOP, V_SIGN, V_TAU)
+from .nullspace_solve import (_DOF, _world_block, _world_torque, BALL, DISTANCE, FREE, HINGE,
+                              N_VECS, SLIDER, SLOT_DOT, SLOT_LINE, V_D, V_DUAL, V_LDUAL, V_RHO,
+                              V_RHOP, V_SIGN, V_TAU)
 
 # The two configurations' vectors in ``JV``: the end rows' at ``E + V_*``, the start's at
 # ``S + V_*``; their motion subspaces in ``JS[:, :, E_COL:E_COL + 3]`` and
@@ -354,7 +370,8 @@ def shake_factor(j_child, j_parent, j_type, j_rows, j_cside, GaE, GbE, GaS, GbS,
     RS, RE : ndarray of float64, shape (n + 1, 3, 3)
         Principal-to-world rotations at the start and at the end (:func:`.rows.frames`).
     IA, JS, JU, JD, JV, work : ndarray
-        From :func:`shake_arrays` (overwritten: the factors).
+        From :func:`shake_arrays` (overwritten: the factors; the ``IA`` of a free root
+        and of a distance row's child by its LU factors, ``JD`` by its pivot rows).
 
     Returns
     -------
@@ -408,6 +425,14 @@ def shake_factor(j_child, j_parent, j_type, j_rows, j_cside, GaE, GbE, GaS, GbS,
         c = j_child[j]
         p = j_parent[j]
         typ = j_type[j]
+        if typ == FREE or typ == DISTANCE:
+            ratio = _free_factor(IA, c, JD, j, work)
+            if ratio < smallest or ratio != ratio:   # (NaN: kept, the caller falls back)
+                smallest = ratio
+            if typ == DISTANCE:
+                _distance_factor(j, c, p, j_rows, j_cside, GaE, GbE, GaS, GbS, RE, RS, IA,
+                                 JS, JU, JD)
+            continue
         _read_joint(j, typ, c, p, j_rows, j_cside, GaE, GbE, RE, JV, JS, E, E_COL, work)
         _read_joint(j, typ, c, p, j_rows, j_cside, GaS, GbS, RS, JV, JS, S, S_COL, work)
         dof = _DOF[typ]
@@ -460,6 +485,148 @@ def shake_factor(j_child, j_parent, j_type, j_rows, j_cside, GaE, GbE, GaS, GbS,
             _add_shifted(work, IA, p, JV[j, E + V_D, 0], JV[j, E + V_D, 1], JV[j, E + V_D, 2],
                          JV[j, S + V_D, 0], JV[j, S + V_D, 1], JV[j, S + V_D, 2])
     return smallest
+
+
+@njit(cache=True)
+def _free_factor(IA, c, JD, j, work):
+    """
+    Factorize ``I^A_c = Pᵀ L U`` in place (partial pivoting; allocation-free).
+
+    A free root's or a distance row's child. ``IA[c]`` receives ``L`` (unit lower, below
+    the diagonal) and ``U``; ``JD[j]`` the
+    pivot row of each step k at ``JD[j].flat[k]`` (as a float). Returns the smallest
+    ``|U_kk| / |I^A_kk|`` (``work[0]``: the diagonal before the factorization; 0 where
+    ``I^A_c`` is singular).
+    """
+    smallest = 1.0
+    for k in range(6):
+        work[0, k] = abs(IA[c, k, k])
+    for k in range(6):
+        piv = k
+        best = abs(IA[c, k, k])
+        for i in range(k + 1, 6):
+            v = abs(IA[c, i, k])
+            if v > best:
+                piv, best = i, v
+        JD[j, k // 3, k % 3] = piv
+        if piv != k:
+            for t in range(6):
+                IA[c, k, t], IA[c, piv, t] = IA[c, piv, t], IA[c, k, t]
+        scale = work[0, k]
+        if best < smallest * scale or best != best:   # (NaN: kept)
+            smallest = best / scale
+        inv = 1.0 / IA[c, k, k]
+        for i in range(k + 1, 6):
+            v = IA[c, i, k] * inv
+            IA[c, i, k] = v
+            for t in range(k + 1, 6):
+                IA[c, i, t] -= v * IA[c, k, t]
+    return smallest
+
+
+@njit(cache=True)
+def _free_solve(IA, c, JD, j, P, Acc):
+    """Set a free root's acceleration ``a_c = −(I^A_c)⁻¹ p_c`` with :func:`_free_factor`'s LU."""
+    for k in range(6):
+        Acc[c, k] = -P[c, k]
+    for k in range(6):   # the row exchanges, in order (whole rows of L were exchanged too)
+        piv = int(JD[j, k // 3, k % 3])
+        if piv != k:
+            Acc[c, k], Acc[c, piv] = Acc[c, piv], Acc[c, k]
+    for k in range(6):
+        v = Acc[c, k]
+        for i in range(k + 1, 6):
+            Acc[c, i] -= IA[c, i, k] * v
+    for k in range(5, -1, -1):
+        v = Acc[c, k]
+        for t in range(k + 1, 6):
+            v -= IA[c, k, t] * Acc[c, t]
+        Acc[c, k] = v / IA[c, k, k]
+
+
+@njit(cache=True)
+def _distance_factor(j, c, p, j_rows, j_cside, GaE, GbE, GaS, GbS, RE, RS, IA, JS, JU, JD):
+    """
+    Eliminate a distance row's child (``IA[c]`` already its LU factors, in place).
+
+    ``JS[j, :, 0]``, ``JS[j, :, 1]``: the end blocks ``w_E,p`` (0 at the world), ``w_E,c``;
+    ``JS[j, :, 3]``, ``JS[j, :, 4]`` the start blocks ``w_S,p``, ``w_S,c``; ``JU[j, :, 0]``
+    ``h = (I^A_c)⁻¹ w_S,c``; ``JD[j, 2, 2]`` ``1 / s``, ``s = w_E,cᵀ h``. The parent
+    receives ``w_S,p w_E,pᵀ / s``.
+    """
+    r = j_rows[j, 0]
+    if j_cside[j, 0] == 0:
+        _world_block(GaE, r, RE, c, JS, j, 1)
+        _world_block(GaS, r, RS, c, JS, j, 4)
+        if p >= 0:
+            _world_block(GbE, r, RE, p, JS, j, 0)
+            _world_block(GbS, r, RS, p, JS, j, 3)
+    else:
+        _world_block(GbE, r, RE, c, JS, j, 1)
+        _world_block(GbS, r, RS, c, JS, j, 4)
+        if p >= 0:
+            _world_block(GaE, r, RE, p, JS, j, 0)
+            _world_block(GaS, r, RS, p, JS, j, 3)
+    if p < 0:
+        for i in range(6):
+            JS[j, i, 0] = 0.0
+            JS[j, i, 3] = 0.0
+    for k in range(6):
+        JU[j, k, 0] = JS[j, k, 4]
+    for k in range(6):   # the row exchanges, then L and U
+        piv = int(JD[j, k // 3, k % 3])
+        if piv != k:
+            JU[j, k, 0], JU[j, piv, 0] = JU[j, piv, 0], JU[j, k, 0]
+    for k in range(6):
+        v = JU[j, k, 0]
+        for i in range(k + 1, 6):
+            JU[j, i, 0] -= IA[c, i, k] * v
+    for k in range(5, -1, -1):
+        v = JU[j, k, 0]
+        for t in range(k + 1, 6):
+            v -= IA[c, k, t] * JU[j, t, 0]
+        JU[j, k, 0] = v / IA[c, k, k]
+    ss = 0.0
+    for k in range(6):
+        ss += JS[j, k, 1] * JU[j, k, 0]
+    sinv = 1.0 / ss
+    JD[j, 2, 2] = sinv
+    if p >= 0:
+        for i in range(6):
+            wi = JS[j, i, 3] * sinv
+            for t in range(6):
+                IA[p, i, t] += wi * JS[j, t, 0]
+
+
+@njit(cache=True)
+def _distance_up(j, c, p, j_rows, IA, JS, JD, P, Acc, JQ, rhs):
+    """
+    Take a distance row's up step: ``a₀ = −(I^A_c)⁻¹ p_c`` (kept in ``Acc[c]``) and ``τ``.
+
+    ``τ = rhs − w_E,cᵀ a₀`` (into ``JQ[j, 0]``); the parent's bias gets ``−w_S,p τ / s``.
+    """
+    _free_solve(IA, c, JD, j, P, Acc)
+    t = rhs[j_rows[j, 0]]
+    for i in range(6):
+        t -= JS[j, i, 1] * Acc[c, i]
+    JQ[j, 0] = t
+    if p >= 0:
+        ts = t * JD[j, 2, 2]
+        for i in range(6):
+            P[p, i] -= JS[j, i, 3] * ts
+
+
+@njit(cache=True)
+def _distance_down(j, c, p, j_rows, JS, JU, JD, Acc, JQ, out):
+    """Take a distance row's down step: ``λ = (τ − w_E,pᵀ a_p) / s``, ``a_c = a₀ + h λ``."""
+    t = JQ[j, 0]
+    if p >= 0:
+        for i in range(6):
+            t -= JS[j, i, 0] * Acc[p, i]
+    lam = t * JD[j, 2, 2]
+    out[j_rows[j, 0]] = lam
+    for i in range(6):
+        Acc[c, i] += JU[j, i, 0] * lam
 
 
 @njit(cache=True, inline='always')
@@ -642,6 +809,11 @@ def shake_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Acc, J
         if typ == BALL:
             _ball_up(j, c, p, j_rows, IA, JD, JU, JV, P, JG, JQ, rhs)
             continue
+        if typ == FREE:   # a free root's bias p_c is complete: nothing to pass on
+            continue
+        if typ == DISTANCE:
+            _distance_up(j, c, p, j_rows, IA, JS, JD, P, Acc, JQ, rhs)
+            continue
         c1, c2 = rhs[j_rows[j, SLOT_DOT]], rhs[j_rows[j, SLOT_DOT + 1]]
         if typ == HINGE:
             w0 = c1 * JV[j, E + V_DUAL, 0] + c2 * JV[j, E + V_DUAL + 1, 0]
@@ -711,6 +883,12 @@ def shake_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Acc, J
         typ = j_type[j]
         if typ == BALL:
             _ball_down(j, c, p, j_rows, JU, JV, Acc, JG, JQ, out)
+            continue
+        if typ == FREE:
+            _free_solve(IA, c, JD, j, P, Acc)
+            continue
+        if typ == DISTANCE:
+            _distance_down(j, c, p, j_rows, JS, JU, JD, Acc, JQ, out)
             continue
         y0 = y1 = y2 = y3 = y4 = y5 = 0.0
         if p >= 0:

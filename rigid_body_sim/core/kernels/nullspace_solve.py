@@ -72,10 +72,38 @@ worst case over all joint types is 5.5e-14, ``test/test_nullspace_premise.py``).
 ``q₀ = −D⁻¹ Sᵀ z`` with an explicit ``D⁻¹`` alone makes λ's error about 10
 times larger.
 
-Scope of the prototype: each tree hangs from one body joined to the world
-(no free-floating root, no second joint to the world, no rows on one body,
-no immovable body, no redundant rows); :func:`nullspace_structure` returns
-None otherwise. The unsymmetric SHAKE matrix ``G_E D M⁻¹ G_Sᵀ`` is not built
+Free-floating trees. A tree without a joint to the world (a floating-base robot,
+two bodies hinged together in space) is rooted at its lowest-numbered body, entered
+as a joint-less entry of type ``FREE`` (no rows, ``j_parent = -1``, after its
+subtree as every joint is). Its articulated inertia ``I^A_root`` (symmetric positive
+definite) is complete when the entry is reached; the factor overwrites it with its
+Cholesky factor ``L`` (below the diagonal, ``1 / L_kk`` on it), the up pass leaves its
+bias ``p_root`` as the children passed it, and the down pass starts from ``a_root =
+−(I^A_root)⁻¹ p_root`` (the joint wrench on a root without a joint is 0). A
+component may hold several trees, hung and free, in any mix.
+
+Distance rows. A ``distance`` constraint (one row ``|P_a − P_b| − L``, ``k = 1``, five
+freedoms) is eliminated by the range-space step instead, so that its tree stays in
+inertia form: the child's whole acceleration, then the row's multiplier. With the
+row's child and parent blocks ``w_c``, ``w_p`` (world axes at each centre of mass;
+``w_p = 0`` at the world), block elimination of ``[[I^A_c, −w_c], [w_cᵀ, 0]]`` (the
+child's block first) gives ``a_c = a₀ + h λ`` with ``a₀ = −(I^A_c)⁻¹ p_c`` and ``h =
+(I^A_c)⁻¹ w_c``, and from the row ``w_cᵀ a_c + w_pᵀ a_p = c``: ``s λ = τ − w_pᵀ a_p``,
+``s = w_cᵀ h``, ``τ = c − w_cᵀ a₀``. The row's force on the parent, ``w_p λ``, is then
+``I^A_p += w_p w_pᵀ / s`` and ``p_p −= w_p τ / s``. The factor takes ``I^A_c = L Lᵀ``
+in place (as a free root's) and ``s = |L⁻¹ w_c|²``; up, ``a₀`` is kept in ``Acc[c]``
+until the down pass adds ``h λ``. Storage of a ``DISTANCE`` entry: the row in slot 0,
+``w_p``, ``w_c`` in ``JS[j, :, 0]``, ``JS[j, :, 1]``, ``h`` in ``JU[j, :, 0]``, ``1 / s``
+in ``JD[j, 2, 2]``, ``τ`` in ``JQ[j, 0]``.
+
+Scope: each tree hangs from one body joined to the world, or floats free; within it
+each pair of bodies shares one built-in fixed, hinge, ball or slider joint or one
+distance row. Outside it :func:`nullspace_structure` returns None (the caller falls
+back to the row-space tree solve): angle (drive) and generic rows, several joints
+(or a joint and a distance row, or a partial joint) between one pair of bodies, a
+second joint to the world or any other closed loop, rows on one body, immovable
+bodies, redundant rows. A free body alone has no rows and never reaches these
+kernels. The unsymmetric SHAKE matrix ``G_E D M⁻¹ G_Sᵀ`` is not built
 here (it extends: ``K = M diag(I, J_r⁻¹)``, ``S_E, X_E`` from the end rows,
 ``S_S, X_S`` from the start rows, Appendix A).
 
@@ -90,16 +118,16 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
-FIXED, HINGE, BALL, SLIDER = 0, 1, 2, 3
+FIXED, HINGE, BALL, SLIDER, FREE, DISTANCE = 0, 1, 2, 3, 4, 5
 # Slots of a joint's rows in ``j_rows``: the point rows by component, the dots, the lines.
 SLOT_POINT, SLOT_DOT, SLOT_LINE, N_SLOTS = 0, 3, 6, 8
 # Vectors of a joint in ``JV``: lever, shift, point-row signs, dual bases, line torques.
 V_RHO, V_D, V_SIGN, V_DUAL, V_LDUAL, V_TAU, N_VECS = 0, 1, 2, 3, 6, 8, 10
 # A ball's (it has no line rows): the parent's lever ρ_p.
 V_RHOP = V_LDUAL
-_DOF = np.array([0, 1, 3, 1], dtype=np.int64)
+_DOF = np.array([0, 1, 3, 1, 6, 5], dtype=np.int64)
 
-_KIND_POINT, _KIND_DOT, _KIND_LINE = 0, 1, 2   # as in .rows
+_KIND_POINT, _KIND_DOT, _KIND_LINE, _KIND_DISTANCE = 0, 1, 2, 3   # as in .rows
 
 
 def nullspace_structure(a, b, kind, comp, n_bodies: int, only=None):
@@ -123,8 +151,11 @@ def nullspace_structure(a, b, kind, comp, n_bodies: int, only=None):
     tuple or None
         ``(j_child, j_parent, j_type, j_rows, j_cside)``: per joint, leaves first, its
         child body, parent body (``-1``: the world), type code, rows by slot (``-1``:
-        none) and whether each slot's child block is in ``Gb`` (1) or ``Ga`` (0). None
-        when the rows are outside the prototype's scope (see the module docstring).
+        none) and whether each slot's child block is in ``Gb`` (1) or ``Ga`` (0). A
+        free-floating tree's root is an entry of type ``FREE`` (parent ``-1``, no rows)
+        after its subtree; a distance row an entry of type ``DISTANCE`` (its row in slot
+        0). None when the rows are outside the scope (see the module
+        docstring).
 
     """
     a = np.asarray(a, dtype=np.int64)
@@ -165,8 +196,24 @@ def nullspace_structure(a, b, kind, comp, n_bodies: int, only=None):
                 parent[other] = body
                 up_rows[other] = rows
                 order.append(other)
-    if any(adjacent[i] and parent[i] == -2 for i in range(n)):
-        return None   # a free-floating tree: not in the prototype
+    # Free-floating trees: each from its lowest-numbered body, a root without a joint.
+    for root in range(n):
+        if not adjacent[root] or parent[root] != -2:
+            continue
+        parent[root] = -1
+        order.append(root)
+        head = len(order) - 1
+        while head < len(order):
+            body = order[head]
+            head += 1
+            for other, rows in adjacent[body]:
+                if other == parent[body]:
+                    continue
+                if parent[other] != -2:
+                    return None   # a closed loop
+                parent[other] = body
+                up_rows[other] = rows
+                order.append(other)
     nj = len(order)
     j_child = np.array(order[::-1], dtype=np.int64)
     j_parent = parent[j_child]
@@ -177,10 +224,18 @@ def nullspace_structure(a, b, kind, comp, n_bodies: int, only=None):
     comp = np.asarray(comp)
     for j, c in enumerate(j_child.tolist()):
         rows = up_rows[c]
+        if rows is None:
+            j_type[j] = FREE   # a free root: no rows
+            continue
         pts = [r for r in rows if kind[r] == _KIND_POINT]
         dots = [r for r in rows if kind[r] == _KIND_DOT]
         lines = [r for r in rows if kind[r] == _KIND_LINE]
         counts = (len(pts), len(dots), len(lines), len(rows))
+        if len(rows) == 1 and kind[rows[0]] == _KIND_DISTANCE:
+            j_type[j] = DISTANCE
+            j_rows[j, 0] = rows[0]
+            j_cside[j, 0] = 0 if a[rows[0]] == c else 1
+            continue
         types = {(3, 3, 0, 6): FIXED, (3, 2, 0, 5): HINGE, (3, 0, 0, 3): BALL,
                  (0, 3, 2, 5): SLIDER}
         if counts not in types or sorted(int(comp[r]) for r in pts) != [0, 1, 2][:len(pts)]:
@@ -351,7 +406,8 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
     R : ndarray of float64, shape (n + 1, 3, 3)
         Principal-to-world rotations (:func:`.rows.frames`).
     IA, JS, JU, JD, JV, work : ndarray
-        From :func:`nullspace_arrays` (overwritten: the factors).
+        From :func:`nullspace_arrays` (overwritten: the factors; the ``IA`` of a free
+        root and of a distance row's child by its Cholesky factor).
 
     Returns
     -------
@@ -381,6 +437,13 @@ def nullspace_factor(j_child, j_parent, j_type, j_rows, j_cside, Ga, Gb, minv6, 
         c = j_child[j]
         p = j_parent[j]
         typ = j_type[j]
+        if typ == FREE or typ == DISTANCE:
+            ratio = _free_factor(IA, c)
+            if ratio < smallest or ratio != ratio:   # (NaN: kept, the caller falls back)
+                smallest = ratio
+            if typ == DISTANCE:
+                _distance_factor(j, c, p, j_rows, j_cside, Ga, Gb, R, IA, JS, JU, JD)
+            continue
         # Child torques of the rows in world axes: points 0, 1 (lever), dots, lines.
         rho0 = rho1 = rho2 = 0.0
         rp0 = rp1 = rp2 = 0.0
@@ -672,6 +735,132 @@ def _ball_down(j, c, p, j_rows, JD, JU, JV, Acc, JG, JQ, out):
     out[j_rows[j, 2]] = JV[j, V_SIGN, 2] * f2
 
 
+@njit(cache=True)
+def _free_factor(IA, c):
+    """
+    Factorize ``I^A_c = L Lᵀ`` in place (Cholesky; allocation-free).
+
+    A free root's or a distance row's child. ``L`` goes below the diagonal of ``IA[c]``
+    and ``1 / L_kk`` on it (the upper triangle keeps ``I^A_c``). Returns the smallest
+    ``L_kk² / I^A_kk`` (its pivots over their scale; not positive, or NaN, where
+    ``I^A_c`` is not positive definite).
+    """
+    smallest = 1.0
+    for k in range(6):
+        s = IA[c, k, k]
+        scale = s
+        for t in range(k):
+            s -= IA[c, k, t] * IA[c, k, t]
+        if s < smallest * scale or s != s:   # (NaN: kept)
+            smallest = s / scale
+        inv = 1.0 / np.sqrt(s)
+        IA[c, k, k] = inv
+        for i in range(k + 1, 6):
+            v = IA[c, i, k]
+            for t in range(k):
+                v -= IA[c, i, t] * IA[c, k, t]
+            IA[c, i, k] = v * inv
+    return smallest
+
+
+@njit(cache=True)
+def _free_solve(IA, c, P, Acc):
+    """Set a free root's acceleration ``a_c = −(I^A_c)⁻¹ p_c`` (:func:`_free_factor`'s ``L``)."""
+    for k in range(6):
+        v = -P[c, k]
+        for t in range(k):
+            v -= IA[c, k, t] * Acc[c, t]
+        Acc[c, k] = v * IA[c, k, k]
+    for k in range(5, -1, -1):
+        v = Acc[c, k]
+        for t in range(k + 1, 6):
+            v -= IA[c, t, k] * Acc[c, t]
+        Acc[c, k] = v * IA[c, k, k]
+
+
+@njit(cache=True)
+def _world_block(G, r, R, body, JS, j, col):
+    """``JS[j, :, col] = (G[r, 0:3], R[body] G[r, 3:6])``: a row's block in world axes."""
+    t = _world_torque(G, r, R, body)
+    JS[j, 0, col], JS[j, 1, col], JS[j, 2, col] = G[r, 0], G[r, 1], G[r, 2]
+    JS[j, 3, col], JS[j, 4, col], JS[j, 5, col] = t[0], t[1], t[2]
+
+
+@njit(cache=True)
+def _distance_factor(j, c, p, j_rows, j_cside, Ga, Gb, R, IA, JS, JU, JD):
+    """
+    Eliminate a distance row's child (``IA[c]`` already its Cholesky factor, in place).
+
+    ``JS[j, :, 0]`` the parent block ``w_p`` (0 at the world), ``JS[j, :, 1]`` the
+    child's ``w_c``, ``JU[j, :, 0]`` ``h = (I^A_c)⁻¹ w_c``, ``JD[j, 2, 2]`` ``1 / s``
+    with ``s = w_cᵀ h``; the parent receives ``w_p w_pᵀ / s``.
+    """
+    r = j_rows[j, 0]
+    if j_cside[j, 0] == 0:
+        _world_block(Ga, r, R, c, JS, j, 1)
+        if p >= 0:
+            _world_block(Gb, r, R, p, JS, j, 0)
+    else:
+        _world_block(Gb, r, R, c, JS, j, 1)
+        if p >= 0:
+            _world_block(Ga, r, R, p, JS, j, 0)
+    if p < 0:
+        for i in range(6):
+            JS[j, i, 0] = 0.0
+    # h = L⁻ᵀ L⁻¹ w_c, s = |L⁻¹ w_c|².
+    ss = 0.0
+    for k in range(6):
+        v = JS[j, k, 1]
+        for t in range(k):
+            v -= IA[c, k, t] * JU[j, t, 0]
+        v *= IA[c, k, k]
+        JU[j, k, 0] = v
+        ss += v * v
+    for k in range(5, -1, -1):
+        v = JU[j, k, 0]
+        for t in range(k + 1, 6):
+            v -= IA[c, t, k] * JU[j, t, 0]
+        JU[j, k, 0] = v * IA[c, k, k]
+    sinv = 1.0 / ss
+    JD[j, 2, 2] = sinv
+    if p >= 0:
+        for i in range(6):
+            wi = JS[j, i, 0] * sinv
+            for t in range(6):
+                IA[p, i, t] += wi * JS[j, t, 0]
+
+
+@njit(cache=True)
+def _distance_up(j, c, p, j_rows, IA, JS, JD, P, Acc, JQ, rhs):
+    """
+    Take a distance row's up step: ``a₀ = −(I^A_c)⁻¹ p_c`` (kept in ``Acc[c]``) and ``τ``.
+
+    ``τ = rhs − w_cᵀ a₀`` (into ``JQ[j, 0]``); the parent's bias gets ``−w_p τ / s``.
+    """
+    _free_solve(IA, c, P, Acc)
+    t = rhs[j_rows[j, 0]]
+    for i in range(6):
+        t -= JS[j, i, 1] * Acc[c, i]
+    JQ[j, 0] = t
+    if p >= 0:
+        ts = t * JD[j, 2, 2]
+        for i in range(6):
+            P[p, i] -= JS[j, i, 0] * ts
+
+
+@njit(cache=True)
+def _distance_down(j, c, p, j_rows, JS, JU, JD, Acc, JQ, out):
+    """Take a distance row's down step: ``λ = (τ − w_pᵀ a_p) / s``, ``a_c = a₀ + h λ``."""
+    t = JQ[j, 0]
+    if p >= 0:
+        for i in range(6):
+            t -= JS[j, i, 0] * Acc[p, i]
+    lam = t * JD[j, 2, 2]
+    out[j_rows[j, 0]] = lam
+    for i in range(6):
+        Acc[c, i] += JU[j, i, 0] * lam
+
+
 @njit(cache=True, inline='always')
 def _ldl_solve(JD, j, b0, b1, b2):
     """``D⁻¹ b`` with joint j's ``D = L diag(δ) Lᵀ`` (``JD[j]``: L below the diagonal, 1 / δ)."""
@@ -704,6 +893,11 @@ def nullspace_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Ac
         typ = j_type[j]
         if typ == BALL:
             _ball_up(j, c, p, j_rows, IA, JD, JU, JV, P, JG, JQ, rhs)
+            continue
+        if typ == FREE:   # a free root's bias p_c is complete: nothing to pass on
+            continue
+        if typ == DISTANCE:
+            _distance_up(j, c, p, j_rows, IA, JS, JD, P, Acc, JQ, rhs)
             continue
         w0 = w1 = w2 = 0.0
         if typ == HINGE:
@@ -778,6 +972,12 @@ def nullspace_solve(j_child, j_parent, j_type, j_rows, IA, JS, JU, JD, JV, P, Ac
         typ = j_type[j]
         if typ == BALL:
             _ball_down(j, c, p, j_rows, JD, JU, JV, Acc, JG, JQ, out)
+            continue
+        if typ == FREE:
+            _free_solve(IA, c, P, Acc)
+            continue
+        if typ == DISTANCE:
+            _distance_down(j, c, p, j_rows, JS, JU, JD, Acc, JQ, out)
             continue
         dof = _DOF[typ]
         y0 = y1 = y2 = y3 = y4 = y5 = 0.0
