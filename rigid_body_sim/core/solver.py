@@ -21,10 +21,11 @@ ill-conditioned the mass ratios make it (a point mass on a rod: 1e9).
 The matrix ``G M⁻¹ Gᵀ`` couples only constraints that share a body: block
 tridiagonal for chains, tree-shaped for trees. Chains and trees are eliminated
 in tree order by :mod:`.kernels.tree_solve` (Baraff 1996; linear in the number
-of links); where every joint of the forest is a built-in fixed, hinge, ball or
-slider joint hanging from the world, the symmetric systems are eliminated in
-inertia form instead (:mod:`.kernels.nullspace_solve`: each joint's freedoms,
-not its rows; the same multipliers, at a fifth of the work per hinge; see
+of links); where every joint of the forest is a built-in fixed, hinge, ball,
+slider or distance joint, each tree hanging from the world or floating free,
+the systems are eliminated in inertia form instead (:mod:`.kernels.nullspace_solve`,
+:mod:`.kernels.nullspace_shake`: each joint's freedoms, not its rows; the same
+multipliers, at less work; see
 :attr:`ConstraintSolver.inertia_form`); components of at most
 :data:`KERNEL_DENSE_ROWS` rows are factorized densely, which is faster at that
 size; a closed loop, among bodies or through the world, is solved by the tree
@@ -275,14 +276,15 @@ class ConstraintSolver:
     @property
     def inertia_form(self) -> bool:
         """
-        Whether forests of recognized joints solve their symmetric systems in inertia form.
+        Whether forests of recognized joints solve their systems in inertia form.
 
         True (the default): a tree-solved component whose joints are all built-in
         ``fixed``, ``hinge``, ``ball`` or ``slider`` joints or ``distance`` rows, each
         tree hanging from the world by one joint or free-floating
         (:func:`.kernels.nullspace_solve.nullspace_structure`
-        recognizes them), factorizes ``G M⁻¹ Gᵀ`` by eliminating each joint's
-        freedoms (:mod:`.kernels.nullspace_solve`), and falls back to the
+        recognizes them), factorizes ``G M⁻¹ Gᵀ`` and SHAKE's Newton matrix by
+        eliminating each joint's freedoms (:mod:`.kernels.nullspace_solve`,
+        :mod:`.kernels.nullspace_shake`), and falls back to the
         row-space tree solve at a state where a joint's freedom has next to no
         inertia (a pivot at most ``rank_rtol`` of its scale). Every other
         component (generic or drive rows, redundant rows) always takes the
