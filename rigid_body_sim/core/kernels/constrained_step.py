@@ -12,6 +12,11 @@ for redundant rows) for small components and by the tree solve of
 solved by the tree solve of a spanning forest and a dense system of the rows
 that close the loops (their Schur complement, :mod:`.loop_solve`). The solver
 chooses (:data:`..solver.KERNEL_DENSE_ROWS`, :data:`..solver.LOOP_DENSE_ROWS`).
+Where the forest's joints are all recognized (the null-space storage,
+:func:`nullspace_storage`), the symmetric systems and SHAKE's are factorized in
+inertia form instead (:mod:`.nullspace_solve`, :mod:`.nullspace_shake`; see
+:func:`_sym_factor` and :func:`_shake_inertia`), falling back to the tree solve,
+counted, where a joint's pivot is too small.
 This is the one implementation of the constraint solve: besides the step,
 :class:`..solver.ConstraintSolver` calls it for the multipliers at a state
 (:func:`component_multipliers`: the reactions a user reads), the velocity
