@@ -24,7 +24,9 @@ simulator supplies:
 3. planar hinge chain (50 links of 0.1 m and 1 kg, released horizontal, 5 s; dt 1e-3):
    the worst energy error over the run, ``max |E(t) - E(0)| / (m g l N² / 2)``; MuJoCo
    in joint coordinates (nested bodies with hinge joints), ours as 50 bodies with
-   ``hinge`` constraints.
+   ``hinge`` constraints;
+4. the same chain at 7, 10, 25 and 50 links (issue 19): cost per step of ours
+   (``lie_poisson2``, ``rkmk4``) against MuJoCo RK4 over 1 s (``--quick``: 0.2 s).
 
 Run: ``python bench/mujoco_peer.py [--quick]`` in the environment of ``./dev.sh``, with
 ``pip install -r bench/requirements.txt`` (about 40 s; ``--quick``, about 10 s: free
@@ -78,6 +80,8 @@ PEND_LENGTH, PEND_MASS, PEND_DT = 1.0, 1.0, 1e-3
 
 # Chain: N links in the x-z plane, hinges about y, the first to the world at the origin.
 CHAIN_LINKS, CHAIN_LENGTH, CHAIN_MASS, CHAIN_DT = 50, 0.1, 1.0, 1e-3
+#: Issue 19's chain sizes (chain_sizes): per step against MuJoCo RK4.
+CHAIN_SIZES = (7, 10, 25, 50)
 
 # MuJoCo's soft constraints: its defaults, and the stiffest settings it accepts. solref
 # (timeconst, dampratio) has its timeconst raised to 2 dt at run time unless the
@@ -618,6 +622,38 @@ def chain(duration: float, reps: int, integrators: list, n_links: int = CHAIN_LI
             'read_us': read_cost(lambda: chain_sim(n_links, integrators[0], dt))}
 
 
+def chain_sizes(sizes: list, duration: float, reps: int) -> list:
+    """
+    Cost per step of planar hinge chains of each size: ours and MuJoCo RK4, interleaved.
+
+    Issue 19's targets: ``lie_poisson2`` at or below MuJoCo RK4 per step, ``rkmk4``
+    within 1.5 times. The chains of :func:`chain`, ``duration`` simulated seconds each.
+    """
+    n = int(round(duration / CHAIN_DT))
+    rows = []
+    for links in sizes:
+        variants = [Variant('ours', name, run_ours(
+            lambda name=name, links=links: chain_sim(links, name, CHAIN_DT)))
+            for name in ('lie_poisson2', 'rkmk4')]
+        variants.append(Variant('MuJoCo', 'RK4', run_mujoco(chain_xml(links, CHAIN_DT, 'RK4'))))
+        print(f'\n== chain sizes: {links} links, {n * CHAIN_DT:g} s, dt {CHAIN_DT:g} ==',
+              flush=True)
+        per_step, _ = measure(variants, n, reps)
+        lp2, rk, mj = (1e6 * t for t in per_step)
+        rows.append({'links': links, 'lp2': lp2, 'rkmk4': rk, 'mj': mj})
+    return rows
+
+
+def chain_sizes_table(rows: list) -> str:
+    """Markdown table of :func:`chain_sizes`, with issue 19's targets."""
+    return _table(['links', 'ours `lie_poisson2` us / step', 'ours `rkmk4` us / step',
+                   'MuJoCo RK4 us / step', '`lie_poisson2` / RK4 (target ≤ 1)',
+                   '`rkmk4` / RK4 (target ≤ 1.5)'],
+                  [[str(r['links']), f'{r["lp2"]:.1f}', f'{r["rkmk4"]:.1f}', f'{r["mj"]:.1f}',
+                    f'{r["lp2"] / r["mj"]:.2f}', f'{r["rkmk4"] / r["mj"]:.2f}']
+                   for r in rows])
+
+
 # -- output ------------------------------------------------------------------------------------
 
 
@@ -791,8 +827,9 @@ def main(argv=None) -> int:
     p.add_argument('--reps', type=int, default=5, help='repetitions per variant (median)')
     p.add_argument('--chain-duration', type=float, default=None,
                    help='simulated seconds of the chain (default 5, --quick 0.2)')
-    p.add_argument('--scenes', nargs='+', default=['free_body', 'pendulum', 'chain'],
-                   choices=['free_body', 'pendulum', 'chain'])
+    p.add_argument('--scenes', nargs='+',
+                   default=['free_body', 'pendulum', 'chain', 'chain_sizes'],
+                   choices=['free_body', 'pendulum', 'chain', 'chain_sizes'])
     args = p.parse_args(argv)
     if args.reps < 1:
         p.error('--reps must be >= 1')
@@ -826,6 +863,9 @@ def main(argv=None) -> int:
         sweep = solref_sweep(pend_s, args.reps)
     if 'chain' in args.scenes:
         chn = chain(chain_s, args.reps, ['lie_poisson2'])
+    sizes = []
+    if 'chain_sizes' in args.scenes:
+        sizes = chain_sizes(CHAIN_SIZES, 0.2 if args.quick else 1.0, args.reps)
     sections = []
     if free:
         sections.append(
@@ -874,6 +914,13 @@ def main(argv=None) -> int:
             f"check: the chain's tip at t = {at:g} s is {diff:.1e} m apart in ours "
             f'(`{who}`) and MuJoCo RK4. Of our cost per step, `pose()` and `twist()` of '
             f'all links take {chn["read_us"]:.0f} us.\n\n' + chain_table(chn))
+    if sizes:
+        sections.append(
+            f'### Chains of {CHAIN_SIZES[0]} to {CHAIN_SIZES[-1]} links\n\nThe chain above '
+            f'at each size, {0.2 if args.quick else 1.0:g} s from the horizontal release '
+            "(the whip's sub-steps come later), ours with `lie_poisson2` and `rkmk4` "
+            "against MuJoCo RK4, interleaved; issue 19's targets in the last columns.\n\n"
+            + chain_sizes_table(sizes))
     targets = targets_table(free, pend, chn)
     wall = time.perf_counter() - started
     cmd = 'python bench/mujoco_peer.py' + (' ' + ' '.join(argv if argv is not None
