@@ -940,6 +940,13 @@ def _rotation_jacobian(q_s, q_e, out):
 
 
 @njit(cache=True, inline='always')
+def _right_jacobians(quat_s, quat_e, Jr):
+    """``J_r(u)`` (n, 3, 3) of each body's rotation ``u = log(q_s⁻¹ ⊗ q_e)``."""
+    for i in range(quat_s.shape[0]):
+        _rotation_jacobian(quat_s[i], quat_e[i], Jr[i])
+
+
+@njit(cache=True, inline='always')
 def _top_jacobian(mom_s, moments, axis, h, out):
     """
     ``(∂Θ_end/∂L_start) J / h`` (3, 3) of a symmetric top's exact drift into ``out``.
