@@ -66,11 +66,12 @@ Constraints (see :mod:`.solver`)
 
 SHAKE's Newton matrix carries how each body's end orientation responds to its
 start momentum through the drift (the right Jacobian of exp, that of a
-symmetric top's exact flow, or the derivative through the rotor flows), so its first iteration is Newton's; the later ones
-reuse that factorization while each cuts the residual a hundredfold (their
-matrices differ from it by the size of the corrections) and refactor otherwise:
-1 to 2 iterations a (sub)step up to 0.25 rad a step, 2.5 at 1 rad, and one
-factorization (``bench/shake_convergence.py``).
+symmetric top's exact flow, or the derivative through the rotor flows), so its
+first iteration is Newton's; the later ones reuse that factorization while each
+cuts the residual a hundredfold (their matrices differ from it by the size of
+the corrections) and refactor otherwise: 1 to 2 iterations a (sub)step up to
+0.25 rad a step, 2.4 at 1 rad, and one factorization
+(``bench/shake_convergence.py``).
 
 Sub-steps
 ---------
