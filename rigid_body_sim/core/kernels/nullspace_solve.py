@@ -178,42 +178,35 @@ def nullspace_structure(a, b, kind, comp, n_bodies: int, only=None):
     parent = np.full(n, -2, dtype=np.int64)
     up_rows = [None] * n
     order = []
+
+    def grow(root, rows):
+        """Add the tree of ``root`` (joined to the world by ``rows``, or None) root first."""
+        parent[root] = -1
+        up_rows[root] = rows
+        order.append(root)
+        head = len(order) - 1
+        while head < len(order):
+            body = order[head]
+            head += 1
+            for other, joint in adjacent[body]:
+                if other == parent[body]:
+                    continue
+                if parent[other] != -2:
+                    return False   # a closed loop
+                parent[other] = body
+                up_rows[other] = joint
+                order.append(other)
+        return True
+
     for root in sorted(world):
         if parent[root] != -2:
             return None   # a second joint to the world: a loop through it
-        parent[root] = -1
-        up_rows[root] = world[root]
-        order.append(root)
-        head = len(order) - 1
-        while head < len(order):
-            body = order[head]
-            head += 1
-            for other, rows in adjacent[body]:
-                if other == parent[body]:
-                    continue
-                if parent[other] != -2:
-                    return None   # a closed loop
-                parent[other] = body
-                up_rows[other] = rows
-                order.append(other)
+        if not grow(root, world[root]):
+            return None
     # Free-floating trees: each from its lowest-numbered body, a root without a joint.
     for root in range(n):
-        if not adjacent[root] or parent[root] != -2:
-            continue
-        parent[root] = -1
-        order.append(root)
-        head = len(order) - 1
-        while head < len(order):
-            body = order[head]
-            head += 1
-            for other, rows in adjacent[body]:
-                if other == parent[body]:
-                    continue
-                if parent[other] != -2:
-                    return None   # a closed loop
-                parent[other] = body
-                up_rows[other] = rows
-                order.append(other)
+        if adjacent[root] and parent[root] == -2 and not grow(root, None):
+            return None
     nj = len(order)
     j_child = np.array(order[::-1], dtype=np.int64)
     j_parent = parent[j_child]
