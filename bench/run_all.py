@@ -10,8 +10,9 @@ Benchmarks: what accuracy costs in time (not tests; timings are for reading, not
 
 Then ``bench/constraints.py`` (chains, trees, rings, joints), ``bench/knob_estimators.py``
 (the accuracy knob's estimators), ``bench/tree_solve.py`` (the tree solve against SuperLU),
+``bench/inertia_form.py`` (the tree solve in inertia form against the row-space one),
 ``bench/shake_convergence.py`` (SHAKE's iterations) and ``bench/reactions.py`` (reading
-the reactions after a step; ``--skip-constraints`` skips these five),
+the reactions after a step; ``--skip-constraints`` skips these six),
 ``bench/mujoco_peer.py``, ``bench/robot_panda.py`` (the Franka Panda's URDF) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
@@ -264,6 +265,12 @@ def sections(quick: bool, node_args: list) -> list:
         ('skip_constraints', 'tree_solve', ['--quick'] if quick else [], report.Section(
             'The tree solve against SuperLU', f'./dev.sh python bench/tree_solve.py{q}',
             [T('tree_solve.md')])),
+        ('skip_constraints', 'inertia_form', ['--quick'] if quick else [], report.Section(
+            'The tree solve in inertia form', f'./dev.sh python bench/inertia_form.py{q}',
+            [T('inertia_form.md')],
+            about='Each scene with `ConstraintSolver.inertia_form` off (the row-space tree '
+                  'solve) and on, interleaved; the states of the two after 1,000 steps, and '
+                  'the row-space run against itself from positions one ulp apart.')),
         ('skip_constraints', 'shake_convergence', [], report.Section(
             'SHAKE iterations', './dev.sh python bench/shake_convergence.py',
             [T('shake_convergence.md')],
