@@ -51,7 +51,7 @@ from . import drives
 from .free_step import (all_finite, damping_flow, drift, finish_accelerations, HAS_DAMPING,
                         HAS_DRIVE_DAMPING, HAS_DRIVES,
                         outputs, position_wrench, rkmk4_embedded_error, rkmk4_finish,
-                        rkmk4_slopes, rkmk4_stage, state_parts)
+                        rkmk4_slopes, rkmk4_stage, state_parts, top_angle, TOP_SHAKE_ANGLE)
 from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS, COMP, COMPONENT,
                      COMPONENT_TABLE, Count, CT_BODY, CT_COUNTS, CT_FLAGS, CT_FLOATS, CT_FRAMES,
                      CT_GENERIC, CT_GFORCE, CT_INTS, CT_LAM, CT_LAYOUT, CT_METHOD, CT_N_COUNTS,
@@ -979,14 +979,17 @@ def _top_jacobian(mom_s, moments, axis, h, out):
 
 
 @njit(cache=True, inline='always')
-def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
+def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch,
+                     max_top_angle=math.inf):
     """
     Per body, how the end orientation of a drift responds to its start momentum.
 
     ``Jr[i] = (∂Θ_end/∂L_start) J_i / h`` (3, 3), ``δΘ`` the body-frame rotation at
     the end: for an isotropic body ``J_r(u)`` of its rotation over the drift
     (:func:`_rotation_jacobian`); for a symmetric top, that of its exact flow
-    (:func:`_top_jacobian`); for an asymmetric one, the derivative carried
+    (:func:`_top_jacobian`) where ``drift`` with the same ``max_top_angle`` takes
+    it (``free_step.top_angle``), else as for an asymmetric body; for an
+    asymmetric one, the derivative carried
     through the drift's rotor flows about the principal axes, each a rotation by
     ``φ = τ L_k / J_k`` that also turns ``L`` (see ``free_step.axis_flow``).
     ``scratch`` (6, 3) is overwritten.
@@ -1001,7 +1004,8 @@ def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
         if code == 0.0:
             _rotation_jacobian(quat_s[i], quat_e[i], Jr[i])
             continue
-        if code >= ROTOR_TOP:
+        if code >= ROTOR_TOP and top_angle(mom_s[i], body[i, B_MOMENTS:B_MOMENTS + 3],
+                                           int(code - ROTOR_TOP), h) <= max_top_angle:
             _top_jacobian(mom_s[i], body[i, B_MOMENTS:B_MOMENTS + 3], int(code - ROTOR_TOP), h,
                           Jr[i])
             continue
@@ -1105,7 +1109,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
             _copy(pos_s, pos)
             _copy(quat_s, quat)
             _copy(mom_s, mom)
-        drift(pos, quat, vel, mom, body, h, symmetric, counts)
+        drift(pos, quat, vel, mom, body, h, symmetric, counts, TOP_SHAKE_ANGLE)
         _geometry(pos, quat, cx, CURRENT, counts)
         phiE, GaE, GbE = phi3[CURRENT], G[CURRENT, 0], G[CURRENT, 1]
         norm = 0.0
@@ -1139,7 +1143,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
         # matrices differ from it by as much as the configuration moved since (the
         # size of the corrections), and the iteration stays Newton's to that order.
         if refactor:
-            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, _f2(cx, ROTOR))
+            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, _f2(cx, ROTOR),
+                             TOP_SHAKE_ANGLE)
             mode = -1
             if _nullspace(cx)[NS_CHILD].shape[0] > 0:   # the forest in inertia form
                 mode = _shake_inertia(quat_s, GaE, GbE, GaS, GbS, a, b, Jr, minv6, par, cx,

@@ -346,17 +346,50 @@ def top_flow(q: np.ndarray, mom: np.ndarray, moments: np.ndarray, axis: int,
     axis_rotation(q, mom, axis, dt * mom[axis] * ((js - ja) / (ja * js)))
 
 
+#: SHAKE's bound on a symmetric top's cone angle ``θ`` per drift (:func:`top_angle`).
+#: The top's flow answers a change ``δL`` of its start momentum by a world-frame
+#: turn ``(h/J_s) R J_l(u) δL`` (plus ``δφ e_a``), and across ``u = h L/J_s``
+#: ``J_l(u) = (2 sin(θ/2)/θ) Rot(û, θ/2)``: a gain ``2 sin(θ/2)/θ`` turned by ``θ/2``,
+#: whose symmetric part has the smallest eigenvalue ``sin θ/θ``. SHAKE's Newton
+#: matrix ``G_E D M⁻¹ G_Sᵀ`` is ``G M⁻¹ Gᵀ`` (positive definite) at ``θ → 0`` and keeps
+#: a positive definite symmetric part while every body's does: below ``θ = π``,
+#: with the margin ``sin θ/θ ≥ 2/π`` (a response at most 1.6 times softer, turned
+#: by at most 45°) up to ``π/2``. Beyond, the exact flow's derivative degenerates
+#: (``sin θ/θ`` is 0 at ``π``: a rod turned by π ends along the same line whatever
+#: the tilt of its turn; the gain is 0 at ``2π``: a full cone), and SHAKE's
+#: Newton steps overshoot without bound. The default step control keeps ``θ ≤
+#: 0.25 √6 = 0.61`` (``h max|Ω_k| ≤ 0.25`` and ``J_a ≤ 2 J_s``); larger ``θ`` come
+#: with it off or capped, or from a diverging iterate.
+TOP_SHAKE_ANGLE = 0.5 * math.pi
+
+
+@njit(cache=True, inline='always')
+def top_angle(mom: np.ndarray, moments: np.ndarray, axis: int, tau: float) -> float:
+    """
+    Return ``θ = |tau| |L| / J_s``, the angle a top's flow over ``tau`` turns it about ``L``.
+
+    ``|L|`` is conserved by the flow (and by the 1-2-3-2-1 splitting), so ``θ`` is
+    the same at a drift's start and end: a choice made by it is time-reversible.
+    """
+    j, k = (axis + 1) % 3, (axis + 2) % 3
+    norm = math.sqrt(mom[0] * mom[0] + mom[1] * mom[1] + mom[2] * mom[2])
+    return abs(tau) * norm / (0.5 * (moments[j] + moments[k]))
+
+
 @njit(cache=True)
 def drift(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, mom: np.ndarray,
-          body: np.ndarray, tau: float, symmetric: bool, counts: np.ndarray) -> None:
+          body: np.ndarray, tau: float, symmetric: bool, counts: np.ndarray,
+          max_top_angle: float = math.inf) -> None:
     """
     Free flight ``x += tau v`` and the free rotor of every body, in place.
 
     The rotor by the column ``anisotropic`` of ``body`` (:data:`.layout.ROTOR_TOP`):
     an isotropic body (0) turns by ``exp(tau Ω)``, exact; a symmetric top (its
     distinct axis ``a`` coded ``ROTOR_TOP + a``) by its exact flow
-    (:func:`top_flow`, whatever ``symmetric``); an asymmetric body (1) by the
-    exact flows about its principal axes, 1-2-3-2-1 with half steps on the
+    (:func:`top_flow`, whatever ``symmetric``) while its cone angle
+    (:func:`top_angle`) is at most ``max_top_angle`` (SHAKE passes
+    :data:`TOP_SHAKE_ANGLE`), else as an asymmetric body; an asymmetric body (1) by
+    the exact flows about its principal axes, 1-2-3-2-1 with half steps on the
     outer ones if ``symmetric`` (Strang, order 2), 1-2-3 otherwise (order 1).
     """
     n = pos.shape[0]
@@ -364,9 +397,10 @@ def drift(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, mom: np.ndarray,
         for c in range(3):
             pos[i, c] += tau * vel[i, c]
         code = body[i, B_ANISOTROPIC]
-        if code >= ROTOR_TOP:
-            top_flow(quat[i], mom[i], body[i, B_MOMENTS:B_MOMENTS + 3], int(code - ROTOR_TOP),
-                     tau)
+        moments = body[i, B_MOMENTS:B_MOMENTS + 3]
+        if code >= ROTOR_TOP and top_angle(mom[i], moments, int(code - ROTOR_TOP),
+                                           tau) <= max_top_angle:
+            top_flow(quat[i], mom[i], moments, int(code - ROTOR_TOP), tau)
             counts[Count.GYRO] += 1
             counts[Count.ROT] += 2
         elif code != 0.0:
