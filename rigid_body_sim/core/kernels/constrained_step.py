@@ -1097,6 +1097,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
     # The start of the drift (the body vectors' slots 0 and 1 are the caller's).
     body_vectors = _f3(cx, BODY_VECTORS)
     pos_s, mom_s, quat_s = body_vectors[2], body_vectors[3], _f2(cx, QUATS)
+    vel_b, mom_b = body_vectors[4], body_vectors[5]   # the last iterate that cut the residual
     _copy(pos, pos_s)
     _copy(quat, quat_s)
     _copy(mom, mom_s)
@@ -1128,6 +1129,19 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
             if not closing and not last_resort:
                 return False
             counts[Count.FALLBACKS] += 1
+            # Project from the last iterate that cut the residual, not from this one: a
+            # Newton step taken near a singular matrix (σ_min of G_E D M⁻¹ G_Sᵀ falling
+            # from 3 to 5e-3 within three iterations, a chain folded to reach its target)
+            # turns bodies by radians within a sub-step (12 rad in 3e-4 s measured),
+            # from where the projection need not converge, and its impulse stays in the
+            # momenta (the next drifts turn them by many turns, then overflow).
+            _copy(vel_b, vel)
+            _copy(mom_b, mom_s)
+            _copy(pos_s, pos)
+            _copy(quat_s, quat)
+            _copy(mom_s, mom)
+            drift(pos, quat, vel, mom, body, h, symmetric, counts, TOP_SHAKE_ANGLE)
+            _geometry(pos, quat, cx, CURRENT, counts)
             _project_positions(pos, quat, target, cx, par, counts)
             break
         # Refactor unless the last iteration cut the residual a hundredfold.
@@ -1155,6 +1169,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
                             GENERAL, counts)
         _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, GENERAL)
         _gt_lambda(GaS, GbS, a, b, _own(cx), vm[V_SOLUTION], g6)
+        _copy(vel, vel_b)
+        _copy(mom_s, mom_b)
         for i in range(n):
             for c in range(3):
                 vel[i, c] += -minv6[i, c] * g6[i, c] / h
@@ -1444,13 +1460,13 @@ def scratch(n: int, m: int, parts: int) -> dict:
 
     ``frames`` (n + 1, 3, 3) rotations, ``omega_world`` (n + 1, 3), ``jr`` (n, 3, 3)
     J_r, ``g2`` (2, parts, 6) G diag(I, J_r) (every part), ``vectors`` (2, m), ``body_vectors``
-    (4, n, 3), ``quats`` (n, 4), ``stages`` (4, 5, n, 3) RKMK4 stages, ``rotor``
+    (6, n, 3), ``quats`` (n, 4), ``stages`` (4, 5, n, 3) RKMK4 stages, ``rotor``
     (6, 3) rotor flow; they spare the step its allocations.
     """
     return {'frames': np.zeros((n + 1, 3, 3)), 'omega_world': np.zeros((n + 1, 3)),
             'jr': np.zeros((n, 3, 3)), 'g2': np.zeros((2, parts, 6)),
             'vectors': np.zeros((2, m)),
-            'body_vectors': np.zeros((4, n, 3)), 'quats': np.zeros((n, 4)),
+            'body_vectors': np.zeros((6, n, 3)), 'quats': np.zeros((n, 4)),
             'stages': np.zeros((4, 5, n, 3)), 'rotor': np.zeros((6, 3))}
 
 
