@@ -130,6 +130,42 @@ def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return moments, axes
 
 
+def top_axes(moments: np.ndarray) -> np.ndarray:
+    """
+    Return the distinct principal axis of each symmetric top, −1 for the other bodies.
+
+    A body is a symmetric top (a rod, a disc, a cylinder) when it is not isotropic
+    and two of its principal moments agree to ``ISOTROPY_RTOL`` of the largest, the
+    tolerance that already makes three equal moments isotropic: an inertia given
+    with two equal moments comes out of :func:`principal_axes` equal to about
+    1e-16 (the eigensolver's rounding), and the drift's exact top flow then uses
+    their mean, the exact flow of a body whose moments differ from the given ones
+    by less than 1e-12 relative (the isotropic path's approximation too).
+
+    Parameters
+    ----------
+    moments : ndarray, shape (n, 3)
+        Principal moments.
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        The axis (0, 1, 2) whose moment differs from the other two's, or −1.
+
+    """
+    moments = np.asarray(moments, dtype=float)
+    out = np.full(len(moments), -1)
+    for i, m in enumerate(moments):
+        tol = ISOTROPY_RTOL * m.max()
+        if m.max() - m.min() <= tol:
+            continue   # isotropic
+        gaps = [abs(m[(a + 1) % 3] - m[(a + 2) % 3]) for a in range(3)]
+        a = int(np.argmin(gaps))
+        if gaps[a] <= tol:
+            out[i] = a
+    return out
+
+
 @dataclass(frozen=True)
 class RigidBody:
     """

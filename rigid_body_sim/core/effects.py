@@ -27,11 +27,12 @@ from typing import Any, ClassVar, Optional, Sequence
 import numpy as np
 
 from . import rotation as so3
-from .bodies import BodySet
+from .bodies import BodySet, top_axes
 from .errors import SpecError
 from .kernels.free_step import HAS_DAMPING, HAS_POSITION_FORCES
 from .kernels.layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MASS, B_MOMENTS,
-                             B_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_POINT, W_TORQUE, W_WIDTH)
+                             B_WIDTH, ROTOR_TOP, W_BODY, W_FORCE, W_IN_BODY, W_POINT, W_TORQUE,
+                             W_WIDTH)
 from .validate import finite_array, finite_scalar, nonnegative_scalar
 
 
@@ -113,7 +114,9 @@ class KernelModel:
     Attributes
     ----------
     body : ndarray, shape (n, B_WIDTH)
-        ``mass, 1/mass, J1, J2, J3, c_lin, c_ang, anisotropic`` per body.
+        ``mass, 1/mass, J1, J2, J3, c_lin, c_ang, anisotropic`` per body
+        (``anisotropic``: 0.0 isotropic, 1.0 asymmetric, ``ROTOR_TOP + a`` a
+        symmetric top with distinct axis ``a``, see :data:`.kernels.layout.BODY`).
     gforce : ndarray, shape (n, 3)
         N, world: constant forces at the centres of mass (gravity).
     wrench_rows : list of ndarray, shape (k, W_WIDTH)
@@ -134,6 +137,8 @@ class KernelModel:
         self.body[:, B_MASS], self.body[:, B_INV_MASS] = bodies.mass, bodies.inv_mass
         self.body[:, B_MOMENTS:B_MOMENTS + 3] = bodies.moments
         self.body[bodies.anisotropic, B_ANISOTROPIC] = 1.0
+        top = top_axes(bodies.moments)
+        self.body[top >= 0, B_ANISOTROPIC] = ROTOR_TOP + top[top >= 0]
         self.gforce = np.zeros((n, 3))
         self.wrench_rows: list = []
         self.n_wrench_rows = 0

@@ -32,6 +32,12 @@ Methods
     Order 4. The same, composed by Yoshida's triple jump (Phys. Lett. A 150,
     262 (1990)); the same invariants, three times the work of lie_poisson2.
 
+The splittings' drift turns a symmetric top (two principal moments equal to
+``ISOTROPY_RTOL``) by the exact flow of its free rotor instead of the split one:
+its energy is the sum of ``|L|²/2J_s`` and ``L_a² (1/J_a − 1/J_s)/2``, whose flows
+commute (``kernels.free_step.top_flow``), so the drift conserves the energy and
+``|L|`` to rounding and costs four sines and cosines instead of twenty.
+
 Damping, where the scene has it, is advanced by its exact exponential flow
 inside the splitting methods (first half-step and last half-step), so they keep
 their order; other velocity-dependent effects are evaluated in the kick.
@@ -59,13 +65,14 @@ Constraints (see :mod:`.solver`)
     at dt = 0.2 s, where the capped ω still halves it every step).
 
 SHAKE's Newton matrix carries how each body's end orientation responds to its
-start momentum through the drift (the right Jacobian of exp, or the derivative
-through the rotor flows), so its first iteration is Newton's; the later ones
-reuse that factorization while each cuts the residual a hundredfold (their
-matrices differ from it by the size of the corrections) and refactor otherwise:
-1 to 2 iterations a (sub)step up to 0.25 rad a step, 2.5 at 1 rad, and one
-factorization (``bench/shake_convergence.py``). The first drift starts from the
-linear extrapolation of the last two (sub)steps' Newton corrections (see
+start momentum through the drift (the right Jacobian of exp, that of a
+symmetric top's exact flow, or the derivative through the rotor flows), so its
+first iteration is Newton's; the later ones reuse that factorization while each
+cuts the residual a hundredfold (their matrices differ from it by the size of
+the corrections) and refactor otherwise: 1 to 2 iterations a (sub)step up to
+0.25 rad a step, 2.4 at 1 rad, and one factorization
+(``bench/shake_convergence.py``). The first drift starts from the linear
+extrapolation of the last two (sub)steps' Newton corrections (see
 ``constrained_step._shake``): on chains, 1.0–1.1 iterations a step instead of
 1.3–1.5.
 

@@ -51,7 +51,7 @@ from . import drives
 from .free_step import (all_finite, damping_flow, drift, finish_accelerations, HAS_DAMPING,
                         HAS_DRIVE_DAMPING, HAS_DRIVES,
                         outputs, position_wrench, rkmk4_embedded_error, rkmk4_finish,
-                        rkmk4_slopes, rkmk4_stage, state_parts)
+                        rkmk4_slopes, rkmk4_stage, state_parts, top_angle, TOP_SHAKE_ANGLE)
 from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS, COMP, COMPONENT,
                      COMPONENT_TABLE, Count, CT_BODY, CT_COUNTS, CT_FLAGS, CT_FLOATS, CT_FRAMES,
                      CT_GENERIC, CT_GFORCE, CT_INTS, CT_LAM, CT_LAYOUT, CT_METHOD, CT_N_COUNTS,
@@ -61,9 +61,9 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      FR_WIDTH, FRAMES, FREE_ACC, FS_MODE, FS_VALID, G2, GENERAL, GT_LAMBDA, JAC,
                      JR, KIND, L_OFFSET, L_SHAPE, L_WIDTH, MINV, O_WIDTH, OMEGA_WORLD, P_CLOSING,
                      P_MAX_IT, P_MAX_ROT, P_MAX_SUB, P_OMEGA, P_POS_TOL, P_RANK_RTOL, P_REG, P_TAU,
-                     PHI, QUATS, ROTOR, ROW_A, ROW_B, ROW_OWNER, ROW_PAR, SHAKE_HISTORY,
-                     SHAKE_SLOTS, Solve, STAGES, STORAGES,
-                     SYMMETRIC, T_B, T_CLOSURE, T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT,
+                     PHI, QUATS, ROTOR, ROTOR_TOP, ROW_A, ROW_B, ROW_OWNER, ROW_PAR,
+                     SHAKE_HISTORY, SHAKE_SLOTS, Solve, STAGES, STORAGES, SYMMETRIC, T_B,
+                     T_CLOSURE, T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT,
                      T_GROUP_PTR, T_GROUP_ROWS, T_P, T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W,
                      T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT,
                      V_RHS, V_SOLUTION, VECTORS, VM, W_WIDTH, WATCH, X_COMP, X_KIND, X_PAR,
@@ -910,56 +910,105 @@ def _project_positions(pos, quat, target, cx, par, counts):
 
 
 @njit(cache=True, inline='always')
-def _right_jacobians(quat_s, quat_e, Jr):
+def _right_jacobian(u0, u1, u2, out):
     """
-    ``J_r(u)`` (n, 3, 3) of each body's rotation ``u = log(q_s⁻¹ ⊗ q_e)``.
+    ``J_r(u)`` (3, 3) of the rotation vector ``u`` into ``out``.
 
     ``exp(u + δu) = exp(u) exp(J_r(u) δu)`` with ``J_r(u) = I − (1 − cos θ)/θ²
-    hat(u) + (θ − sin θ)/θ³ hat(u)²``, ``θ = |u|``.
+    hat(u) + (θ − sin θ)/θ³ hat(u)²``, ``θ = |u|`` (any θ).
     """
-    for i in range(quat_s.shape[0]):
-        # q = conj(q_s) ⊗ q_e
-        x, y, z, w = positive_product(-quat_s[i, 0], -quat_s[i, 1], -quat_s[i, 2], quat_s[i, 3],
-                                      quat_e[i, 0], quat_e[i, 1], quat_e[i, 2], quat_e[i, 3])
-        s = math.sqrt(x * x + y * y + z * z)
-        theta = 2.0 * math.atan2(s, w)
-        k = theta / s if s > 0.0 else 2.0 / w
-        u0, u1, u2 = k * x, k * y, k * z
-        t2 = theta * theta
-        if theta < 1e-4:
-            ca, cb = 0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0
-        else:
-            ca = (1.0 - math.cos(theta)) / t2
-            cb = (theta - math.sin(theta)) / (t2 * theta)
-        # hat(u) and hat(u)² = u uᵀ − θ² I.
-        H = ((0.0, -u2, u1), (u2, 0.0, -u0), (-u1, u0, 0.0))
-        uu = (u0, u1, u2)
-        for r in range(3):
-            for c in range(3):
-                h2 = uu[r] * uu[c] - (t2 if r == c else 0.0)
-                Jr[i, r, c] = (1.0 if r == c else 0.0) - ca * H[r][c] + cb * h2
+    t2 = u0 * u0 + u1 * u1 + u2 * u2
+    theta = math.sqrt(t2)
+    if theta < 1e-4:
+        ca, cb = 0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0
+    else:
+        ca = (1.0 - math.cos(theta)) / t2
+        cb = (theta - math.sin(theta)) / (t2 * theta)
+    # hat(u) and hat(u)² = u uᵀ − θ² I.
+    H = ((0.0, -u2, u1), (u2, 0.0, -u0), (-u1, u0, 0.0))
+    uu = (u0, u1, u2)
+    for r in range(3):
+        for c in range(3):
+            h2 = uu[r] * uu[c] - (t2 if r == c else 0.0)
+            out[r, c] = (1.0 if r == c else 0.0) - ca * H[r][c] + cb * h2
 
 
 @njit(cache=True, inline='always')
-def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch):
+def _rotation_jacobian(q_s, q_e, out):
+    """``J_r(u)`` (3, 3) of one body's rotation ``u = log(q_s⁻¹ ⊗ q_e)`` into ``out``."""
+    # q = conj(q_s) ⊗ q_e
+    x, y, z, w = positive_product(-q_s[0], -q_s[1], -q_s[2], q_s[3], q_e[0], q_e[1], q_e[2],
+                                  q_e[3])
+    s = math.sqrt(x * x + y * y + z * z)
+    theta = 2.0 * math.atan2(s, w)
+    k = theta / s if s > 0.0 else 2.0 / w
+    _right_jacobian(k * x, k * y, k * z, out)
+
+
+@njit(cache=True, inline='always')
+def _right_jacobians(quat_s, quat_e, Jr):
+    """``J_r(u)`` (n, 3, 3) of each body's rotation ``u = log(q_s⁻¹ ⊗ q_e)``."""
+    for i in range(quat_s.shape[0]):
+        _rotation_jacobian(quat_s[i], quat_e[i], Jr[i])
+
+
+@njit(cache=True, inline='always')
+def _top_jacobian(mom_s, moments, axis, h, out):
+    """
+    ``(∂Θ_end/∂L_start) J / h`` (3, 3) of a symmetric top's exact drift into ``out``.
+
+    The drift ends at ``q ⊗ exp(u) ⊗ exp(φ e_a)`` (``free_step.top_flow``) with
+    ``u = h L/J_s`` and ``φ = h L_a c``, ``c = 1/J_a − 1/J_s``. Perturbing ``L``:
+    ``exp(u + δu) exp((φ + δφ) e_a) = exp(u) exp(φ e_a) exp(R_a(φ)ᵀ J_r(u) δu + δφ e_a)``
+    to first order, so ``∂Θ/∂L = R_a(φ)ᵀ J_r(u) h/J_s + h c e_a e_aᵀ``, and times
+    ``J/h``: ``R_a(φ)ᵀ J_r(u) J/J_s`` plus ``c J_a = 1 − J_a/J_s`` at ``(a, a)``.
+    """
+    a = axis
+    j, k = (a + 1) % 3, (a + 2) % 3
+    ja, js = moments[a], 0.5 * (moments[j] + moments[k])
+    g = h / js
+    _right_jacobian(g * mom_s[0], g * mom_s[1], g * mom_s[2], out)
+    phi = h * mom_s[a] * ((js - ja) / (ja * js))
+    cs, sn = math.cos(phi), math.sin(phi)
+    for c in range(3):
+        scale = moments[c] / js
+        tj, tk = out[j, c], out[k, c]
+        out[j, c] = (cs * tj + sn * tk) * scale
+        out[k, c] = (cs * tk - sn * tj) * scale
+        out[a, c] *= scale
+    out[a, a] += (js - ja) / js
+
+
+@njit(cache=True, inline='always')
+def _rotor_jacobians(quat_s, quat_e, mom_s, body, h, symmetric, Jr, scratch,
+                     max_top_angle=math.inf):
     """
     Per body, how the end orientation of a drift responds to its start momentum.
 
     ``Jr[i] = (∂Θ_end/∂L_start) J_i / h`` (3, 3), ``δΘ`` the body-frame rotation at
-    the end: for an isotropic body ``J_r(u)`` (see :func:`_right_jacobians`, which
-    fills every body first); for an anisotropic one, the derivative carried
+    the end: for an isotropic body ``J_r(u)`` of its rotation over the drift
+    (:func:`_rotation_jacobian`); for a symmetric top, that of its exact flow
+    (:func:`_top_jacobian`) where ``drift`` with the same ``max_top_angle`` takes
+    it (``free_step.top_angle``), else as for an asymmetric body; for an
+    asymmetric one, the derivative carried
     through the drift's rotor flows about the principal axes, each a rotation by
     ``φ = τ L_k / J_k`` that also turns ``L`` (see ``free_step.axis_flow``).
     ``scratch`` (6, 3) is overwritten.
     """
-    _right_jacobians(quat_s, quat_e, Jr)
     dL, L, row, ex = scratch[0:3], scratch[3], scratch[4], scratch[5]
     if symmetric:
         axes, weights = (0, 1, 2, 1, 0), (0.5, 0.5, 1.0, 0.5, 0.5)
     else:
         axes, weights = (0, 1, 2, 0, 0), (1.0, 1.0, 1.0, 0.0, 0.0)
     for i in range(quat_s.shape[0]):
-        if body[i, B_ANISOTROPIC] == 0.0:
+        code = body[i, B_ANISOTROPIC]
+        if code == 0.0:
+            _rotation_jacobian(quat_s[i], quat_e[i], Jr[i])
+            continue
+        if code >= ROTOR_TOP and top_angle(mom_s[i], body[i, B_MOMENTS:B_MOMENTS + 3],
+                                           int(code - ROTOR_TOP), h) <= max_top_angle:
+            _top_jacobian(mom_s[i], body[i, B_MOMENTS:B_MOMENTS + 3], int(code - ROTOR_TOP), h,
+                          Jr[i])
             continue
         dT = Jr[i]   # the derivative of the end rotation, scaled into J_r at the end
         for r in range(3):
@@ -1061,6 +1110,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
     # The start of the drift (the body vectors' slots 0 and 1 are the caller's).
     body_vectors = _f3(cx, BODY_VECTORS)
     pos_s, mom_s, quat_s = body_vectors[2], body_vectors[3], _f2(cx, QUATS)
+    vel_b, mom_b = body_vectors[4], body_vectors[5]   # the last iterate that cut the residual
     _copy(pos, pos_s)
     _copy(quat, quat_s)
     _copy(mom, mom_s)
@@ -1083,7 +1133,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
             _copy(pos_s, pos)
             _copy(quat_s, quat)
             _copy(mom_s, mom)
-        drift(pos, quat, vel, mom, body, h, symmetric, counts)
+        drift(pos, quat, vel, mom, body, h, symmetric, counts, TOP_SHAKE_ANGLE)
         _geometry(pos, quat, cx, CURRENT, counts)
         phiE, GaE, GbE = phi3[CURRENT], G[CURRENT, 0], G[CURRENT, 1]
         norm = 0.0
@@ -1102,6 +1152,19 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
             if not closing and not last_resort:
                 return False
             counts[Count.FALLBACKS] += 1
+            # Project from the last iterate that cut the residual, not from this one: a
+            # Newton step taken near a singular matrix (σ_min of G_E D M⁻¹ G_Sᵀ falling
+            # from 3 to 5e-3 within three iterations, a chain folded to reach its target)
+            # turns bodies by radians within a sub-step (12 rad in 3e-4 s measured),
+            # from where the projection need not converge, and its impulse stays in the
+            # momenta (the next drifts turn them by many turns, then overflow).
+            _copy(vel_b, vel)
+            _copy(mom_b, mom_s)
+            _copy(pos_s, pos)
+            _copy(quat_s, quat)
+            _copy(mom_s, mom)
+            drift(pos, quat, vel, mom, body, h, symmetric, counts, TOP_SHAKE_ANGLE)
+            _geometry(pos, quat, cx, CURRENT, counts)
             _project_positions(pos, quat, target, cx, par, counts)
             slots[1] = 0.0   # a projection's corrections do not predict the next step's
             return True
@@ -1118,7 +1181,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
         # matrices differ from it by as much as the configuration moved since (the
         # size of the corrections), and the iteration stays Newton's to that order.
         if refactor:
-            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, _f2(cx, ROTOR))
+            _rotor_jacobians(quat_s, quat, mom_s, body, h, symmetric, Jr, _f2(cx, ROTOR),
+                             TOP_SHAKE_ANGLE)
             mode = -1
             if _nullspace(cx)[NS_CHILD].shape[0] > 0:   # the forest in inertia form
                 mode = _shake_inertia(quat_s, GaE, GbE, GaS, GbS, a, b, Jr, minv6, par, cx,
@@ -1128,6 +1192,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
                 mode = _fac(Ga2, Gb2, GaS, GbS, a, b, _own(cx), minv6, False, par, cx,
                             GENERAL, counts)
         _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, GENERAL)
+        _copy(vel, vel_b)
+        _copy(mom_s, mom_b)
         _impulse(vm[V_SOLUTION], GaS, GbS, a, b, minv6, g6, h, body, vel, mom_s, cx)
         for r in range(m):
             total[r] += vm[V_SOLUTION, r]
@@ -1439,13 +1505,13 @@ def scratch(n: int, m: int, parts: int) -> dict:
 
     ``frames`` (n + 1, 3, 3) rotations, ``omega_world`` (n + 1, 3), ``jr`` (n, 3, 3)
     J_r, ``g2`` (2, parts, 6) G diag(I, J_r) (every part), ``vectors`` (2, m), ``body_vectors``
-    (4, n, 3), ``quats`` (n, 4), ``stages`` (4, 5, n, 3) RKMK4 stages, ``rotor``
+    (6, n, 3), ``quats`` (n, 4), ``stages`` (4, 5, n, 3) RKMK4 stages, ``rotor``
     (6, 3) rotor flow; they spare the step its allocations.
     """
     return {'frames': np.zeros((n + 1, 3, 3)), 'omega_world': np.zeros((n + 1, 3)),
             'jr': np.zeros((n, 3, 3)), 'g2': np.zeros((2, parts, 6)),
             'vectors': np.zeros((2, m)),
-            'body_vectors': np.zeros((4, n, 3)), 'quats': np.zeros((n, 4)),
+            'body_vectors': np.zeros((6, n, 3)), 'quats': np.zeros((n, 4)),
             'stages': np.zeros((4, 5, n, 3)), 'rotor': np.zeros((6, 3))}
 
 

@@ -14,7 +14,9 @@ changes, never per step)
 ``body`` : (n, 8)
     ``mass, 1/mass, J1, J2, J3, c_lin, c_ang, anisotropic`` per body (principal
     moments J; damping coefficients summed over the scene's damping effects;
-    ``anisotropic`` 1.0 if the gyroscopic term is non-zero).
+    ``anisotropic`` non-zero if the gyroscopic term is: 1.0 for an asymmetric
+    body, ``ROTOR_TOP + a`` for a symmetric top whose distinct axis is ``a``,
+    see :data:`.layout.ROTOR_TOP` and :func:`drift`).
 ``gforce`` : (n, 3)
     N, world: the gravity force ``m g`` of each body (zeros without gravity).
 ``wrench`` : (k, W_WIDTH)
@@ -33,7 +35,8 @@ Work counts (``counts``: the simulation's int64 tally, :class:`.layout.Count`)
 ---------------------------------------------------------------------------
 ``RHS`` full right-hand sides, ``KICK`` kick evaluations (position-dependent
 wrenches), ``GYRO`` bodies whose gyroscopic term or free-rotor sub-flow was
-computed, ``ROT`` orientations updated by an exponential map, ``FLOW`` exact
+computed (a symmetric top's exact rotor flow counts one), ``ROT`` orientations
+updated by an exponential map (or a rotation about a principal axis), ``FLOW`` exact
 damping flows.
 
 The columns of ``body`` and ``wrench`` and the slots of the tables are named in
@@ -52,8 +55,8 @@ from .layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MOMENTS, B_W
                      FT_FLAGS, FT_FRAMES, FT_GFORCE, FT_KICK, FT_METHOD, FT_N_COUNTS, FT_N_WRENCH,
                      FT_N_WS, FT_OUT, FT_WRENCH, FT_WS, O_ANG_VEL_BODY, O_ANG_VEL_WORLD,
                      O_ORIGIN_VEL_BODY, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD, O_QUAT_BODY_WORLD,
-                     O_WIDTH, S_OM, S_POS, S_QUAT, S_VEL, S_WIDTH, W_BODY, W_FORCE, W_IN_BODY,
-                     W_KIND, W_POINT, W_TORQUE, W_WIDTH, WRENCH_APPLIED)
+                     O_WIDTH, ROTOR_TOP, S_OM, S_POS, S_QUAT, S_VEL, S_WIDTH, W_BODY, W_FORCE,
+                     W_IN_BODY, W_KIND, W_POINT, W_TORQUE, W_WIDTH, WRENCH_APPLIED)
 from .methods import (Method, ONE_STEP, RK4_A, RK4_B_DENOMINATOR, RK4_B_HAT_NUMERATORS,
                       RK4_B_NUMERATORS, TRIPLE_JUMP)
 from .so3 import (_matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply,
@@ -278,32 +281,129 @@ def rkmk4_step(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarra
 
 
 @njit(cache=True)
-def axis_flow(q: np.ndarray, mom: np.ndarray, moment: float, axis: int, dt: float) -> None:
-    """Exact flow of ``L_axis² / (2 J_axis)`` over ``dt`` for one body, in place."""
-    phi = dt * mom[axis] / moment
-    c, s = math.cos(phi), math.sin(phi)
+def axis_rotation(q: np.ndarray, mom: np.ndarray, axis: int, phi: float) -> None:
+    """
+    Turn one body by ``phi`` about its principal axis ``axis``, in place.
+
+    ``q ← q ⊗ exp(φ e_axis)`` and the principal-frame momentum turned by ``−φ``
+    about the axis (the world momentum is unchanged). Half-angle form: ``cos``
+    and ``sin`` of ``φ/2`` once, ``cos φ = 1 − 2 sin²(φ/2)`` and ``sin φ =
+    2 sin(φ/2) cos(φ/2)``: two transcendental calls, not four, for the same
+    rotation to rounding (a few ulp of each entry, for any φ:
+    ``test_rotor_flows.py``).
+    """
+    half = 0.5 * phi
+    ch, sh = math.cos(half), math.sin(half)
+    c, s = 1.0 - 2.0 * sh * sh, 2.0 * sh * ch
     j, k = (axis + 1) % 3, (axis + 2) % 3
     lj, lk = mom[j], mom[k]
     mom[j] = c * lj + s * lk
     mom[k] = c * lk - s * lj
-    half = 0.5 * phi
-    c, s = math.cos(half), math.sin(half)
     qi, qj, qk, qw = q[axis], q[j], q[k], q[3]
-    q[axis] = c * qi + s * qw
-    q[j] = c * qj + s * qk
-    q[k] = c * qk - s * qj
-    q[3] = c * qw - s * qi
+    q[axis] = ch * qi + sh * qw
+    q[j] = ch * qj + sh * qk
+    q[k] = ch * qk - sh * qj
+    q[3] = ch * qw - sh * qi
+
+
+@njit(cache=True)
+def axis_flow(q: np.ndarray, mom: np.ndarray, moment: float, axis: int, dt: float) -> None:
+    """
+    Exact flow of ``L_axis² / (2 J_axis)`` over ``dt`` for one body, in place.
+
+    A rotation by ``φ = dt L_axis / J_axis`` about the principal axis
+    (:func:`axis_rotation`), ``L_axis`` constant.
+    """
+    axis_rotation(q, mom, axis, dt * mom[axis] / moment)
+
+
+@njit(cache=True)
+def top_flow(q: np.ndarray, mom: np.ndarray, moments: np.ndarray, axis: int,
+             dt: float) -> None:
+    """
+    Exact flow of a symmetric top's free rotor over ``dt`` for one body, in place.
+
+    With ``a = axis`` the distinct principal axis and ``J_s`` the shared moment
+    (the mean of the other two, equal to :data:`..bodies.ISOTROPY_RTOL`), the
+    rotor's energy ``T = |L|²/(2 J_s) + L_a² (1/J_a − 1/J_s)/2`` is a sum of two
+    parts whose flows commute (``|L|²`` is a Casimir of the rotor's Lie–Poisson
+    bracket), so the flow of ``T`` is the composition of theirs, exact:
+
+    * ``|L|²/(2 J_s)``: the isotropic rotor, ``q ← q ⊗ exp(dt L/J_s)`` with the
+      principal-frame ``L`` constant (a rotation about ``L`` by ``dt |L|/J_s``);
+    * ``L_a² (1/J_a − 1/J_s)/2``: a rotation by ``φ = dt L_a (1/J_a − 1/J_s)``
+      about ``e_a`` (:func:`axis_rotation`), which also turns ``L`` by ``−φ``.
+
+    The end is ``q ⊗ exp(dt L₀/J_s) ⊗ exp(φ e_a)``, ``L = Rot(e_a, −φ) L₀``:
+    ``T``, ``L_a`` and ``|L|`` are conserved to rounding, and the flow is
+    symplectic. One ``sqrt`` and four transcendental calls, against twenty for
+    the five flows of the 1-2-3-2-1 splitting.
+    """
+    j, k = (axis + 1) % 3, (axis + 2) % 3
+    ja, js = moments[axis], 0.5 * (moments[j] + moments[k])
+    g = dt / js
+    quat_exp_multiply(q, g * mom[0], g * mom[1], g * mom[2], q)
+    axis_rotation(q, mom, axis, dt * mom[axis] * ((js - ja) / (ja * js)))
+
+
+#: SHAKE's bound on a symmetric top's cone angle ``θ`` per drift (:func:`top_angle`).
+#: The top's flow answers a change ``δL`` of its start momentum by a world-frame
+#: turn ``(h/J_s) R J_l(u) δL`` (plus ``δφ e_a``), and across ``u = h L/J_s``
+#: ``J_l(u) = (2 sin(θ/2)/θ) Rot(û, θ/2)``: a gain ``2 sin(θ/2)/θ`` turned by ``θ/2``,
+#: whose symmetric part has the smallest eigenvalue ``sin θ/θ``. SHAKE's Newton
+#: matrix ``G_E D M⁻¹ G_Sᵀ`` is ``G M⁻¹ Gᵀ`` (positive definite) at ``θ → 0`` and keeps
+#: a positive definite symmetric part while every body's does: below ``θ = π``,
+#: with the margin ``sin θ/θ ≥ 2/π`` (a response at most 1.6 times softer, turned
+#: by at most 45°) up to ``π/2``. Beyond, the exact flow's derivative degenerates
+#: (``sin θ/θ`` is 0 at ``π``: a rod turned by π ends along the same line whatever
+#: the tilt of its turn; the gain is 0 at ``2π``: a full cone), and SHAKE's
+#: Newton steps overshoot without bound. The default step control keeps ``θ ≤
+#: 0.25 √6 = 0.61`` (``h max|Ω_k| ≤ 0.25`` and ``J_a ≤ 2 J_s``); larger ``θ`` come
+#: with it off or capped, or from a diverging iterate.
+TOP_SHAKE_ANGLE = 0.5 * math.pi
+
+
+@njit(cache=True, inline='always')
+def top_angle(mom: np.ndarray, moments: np.ndarray, axis: int, tau: float) -> float:
+    """
+    Return ``θ = |tau| |L| / J_s``, the angle a top's flow over ``tau`` turns it about ``L``.
+
+    ``|L|`` is conserved by the flow (and by the 1-2-3-2-1 splitting), so ``θ`` is
+    the same at a drift's start and end: a choice made by it is time-reversible.
+    """
+    j, k = (axis + 1) % 3, (axis + 2) % 3
+    norm = math.sqrt(mom[0] * mom[0] + mom[1] * mom[1] + mom[2] * mom[2])
+    return abs(tau) * norm / (0.5 * (moments[j] + moments[k]))
 
 
 @njit(cache=True)
 def drift(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, mom: np.ndarray,
-          body: np.ndarray, tau: float, symmetric: bool, counts: np.ndarray) -> None:
-    """Free flight ``x += tau v`` and the free rotor of every body, in place."""
+          body: np.ndarray, tau: float, symmetric: bool, counts: np.ndarray,
+          max_top_angle: float = math.inf) -> None:
+    """
+    Free flight ``x += tau v`` and the free rotor of every body, in place.
+
+    The rotor by the column ``anisotropic`` of ``body`` (:data:`.layout.ROTOR_TOP`):
+    an isotropic body (0) turns by ``exp(tau Ω)``, exact; a symmetric top (its
+    distinct axis ``a`` coded ``ROTOR_TOP + a``) by its exact flow
+    (:func:`top_flow`, whatever ``symmetric``) while its cone angle
+    (:func:`top_angle`) is at most ``max_top_angle`` (SHAKE passes
+    :data:`TOP_SHAKE_ANGLE`), else as an asymmetric body; an asymmetric body (1) by
+    the exact flows about its principal axes, 1-2-3-2-1 with half steps on the
+    outer ones if ``symmetric`` (Strang, order 2), 1-2-3 otherwise (order 1).
+    """
     n = pos.shape[0]
     for i in range(n):
         for c in range(3):
             pos[i, c] += tau * vel[i, c]
-        if body[i, B_ANISOTROPIC] != 0.0:
+        code = body[i, B_ANISOTROPIC]
+        moments = body[i, B_MOMENTS:B_MOMENTS + 3]
+        if code >= ROTOR_TOP and top_angle(mom[i], moments, int(code - ROTOR_TOP),
+                                           tau) <= max_top_angle:
+            top_flow(quat[i], mom[i], moments, int(code - ROTOR_TOP), tau)
+            counts[Count.GYRO] += 1
+            counts[Count.ROT] += 2
+        elif code != 0.0:
             if symmetric:
                 axis_flow(quat[i], mom[i], body[i, B_MOMENTS], 0, 0.5 * tau)
                 axis_flow(quat[i], mom[i], body[i, B_MOMENTS + 1], 1, 0.5 * tau)

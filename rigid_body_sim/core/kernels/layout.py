@@ -244,9 +244,13 @@ class Solve(IntEnum):
 # -- model arrays (built by Dynamics.kernel_model) -----------------------------------------
 
 #: ``body`` (n, B_WIDTH): mass, 1/mass, principal moments J (3), damping coefficients,
-#: and 1.0 if the gyroscopic term is non-zero.
+#: and the rotor's kind: 0.0 isotropic (no gyroscopic term), 1.0 asymmetric, or
+#: ``ROTOR_TOP + a`` for a symmetric top whose distinct principal axis is ``a`` (the
+#: other two moments equal, see bodies.top_axes): its drift is one exact flow.
 BODY = Columns('body', [('mass', 1), ('inv_mass', 1), ('moments', 3), ('c_lin', 1),
                         ('c_ang', 1), ('anisotropic', 1)])
+#: The ``anisotropic`` code of a symmetric top whose distinct axis is 0 (1, 2: + 1, + 2).
+ROTOR_TOP = 2.0
 #: ``wrench`` (k, W_WIDTH), one row per force element acting in the step. ``kind``
 #: WRENCH_APPLIED: body index, 1.0 if force and torque are in the principal frame,
 #: force (3), torque (3), point of application (3, principal, from the centre).
@@ -415,5 +419,5 @@ globals().update(_CONSTANTS)
 __all__ = ['BODY', 'COMPONENT', 'COMPONENT_TABLE', 'CONTEXT', 'Columns', 'Count', 'DENSE',
            'Field', 'FRAME', 'FREE_TABLE', 'JOINT', 'Layout', 'LAYOUT_TABLE', 'N_COUNTS',
            'NULLSPACE', 'OUTPUT', 'PAR',
-           'ROW_PARAMETERS', 'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH',
+           'ROTOR_TOP', 'ROW_PARAMETERS', 'Solve', 'STATE', 'STORAGES', 'Table', 'TREE', 'WRENCH',
            'WRENCH_APPLIED', 'WRENCH_DRIVE', *_CONSTANTS]
