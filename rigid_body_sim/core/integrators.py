@@ -71,10 +71,7 @@ first iteration is Newton's; the later ones reuse that factorization while each
 cuts the residual a hundredfold (their matrices differ from it by the size of
 the corrections) and refactor otherwise: 1 to 2 iterations a (sub)step up to
 0.25 rad a step, 2.4 at 1 rad, and one factorization
-(``bench/shake_convergence.py``). The first drift starts from the linear
-extrapolation of the last two (sub)steps' Newton corrections (see
-``constrained_step._shake``): on chains, 1.0–1.1 iterations a step instead of
-1.3–1.5.
+(``bench/shake_convergence.py``).
 
 Sub-steps
 ---------

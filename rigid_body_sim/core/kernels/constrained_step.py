@@ -61,9 +61,8 @@ from .layout import (B_ANISOTROPIC, B_INV_MASS, B_MOMENTS, B_WIDTH, BODY_VECTORS
                      FR_WIDTH, FRAMES, FREE_ACC, FS_MODE, FS_VALID, G2, GENERAL, GT_LAMBDA, JAC,
                      JR, KIND, L_OFFSET, L_SHAPE, L_WIDTH, MINV, O_WIDTH, OMEGA_WORLD, P_CLOSING,
                      P_MAX_IT, P_MAX_ROT, P_MAX_SUB, P_OMEGA, P_POS_TOL, P_RANK_RTOL, P_REG, P_TAU,
-                     PHI, QUATS, ROTOR, ROTOR_TOP, ROW_A, ROW_B, ROW_OWNER, ROW_PAR,
-                     SHAKE_HISTORY, SHAKE_SLOTS, Solve, STAGES, STORAGES, SYMMETRIC, T_B,
-                     T_CLOSURE, T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT,
+                     PHI, QUATS, ROTOR, ROTOR_TOP, ROW_A, ROW_B, ROW_OWNER, ROW_PAR, Solve, STAGES,
+                     STORAGES, SYMMETRIC, T_B, T_CLOSURE, T_E, T_G, T_GROUP_CHILD, T_GROUP_PARENT,
                      T_GROUP_PTR, T_GROUP_ROWS, T_P, T_PIV, T_Q, T_ROW_SIDE, T_S, T_TMP, T_W,
                      T_WORK, T_X, T_XC, T_Y, T_Z, TORQUE, TREE0, TREE_SLOTS, V_GAMMA, V_PHI_DOT,
                      V_RHS, V_SOLUTION, VECTORS, VM, W_WIDTH, WATCH, X_COMP, X_KIND, X_PAR,
@@ -1072,7 +1071,7 @@ def _apply_jacobians(Ga, Gb, a, b, Jr, Ga2, Gb2):
 
 
 @njit(cache=True)
-def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts, sub):
+def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts):
     """
     Drift with the start impulse that lands on ``Φ = exp(−h/τ) Φ_start``, in place.
 
@@ -1080,20 +1079,8 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
     hold (the step is then redone finer), True otherwise; on True the current
     geometry is that of the new configuration. Factorizes into the storages
     ``GENERAL``.
-
-    The predictor. The kick leaves the start impulse off the solution by the sum ``K``
-    of the Newton corrections, a smooth function of time: over a (sub)step of the same
-    size ``h`` it changes by ``O(h)`` of itself. The first drift starts from the linear
-    extrapolation ``2 K_{n−1} − K_{n−2}`` of the last two (sub)steps' sums at the same
-    place ``sub`` of a step (the triple jump's three sub-steps each keep their own;
-    workspace ``SHAKE_HISTORY``, ``SHAKE_SLOTS``), or ``K_{n−1}`` alone after one: the
-    first residual is then of order ``(h/T)²`` of the unpredicted one (``T`` the
-    motion's time scale), often already within the tolerance. The converged step is
-    the same to the tolerance: the prediction only moves the Newton iteration's start.
-    A history of another ``h`` (sub-steps, a new step size), a step redone, a state
-    set from outside (see :func:`constrained_step`) or a last-resort projection
-    starts it afresh.
     """
+    n = pos.shape[0]
     phi3, G = _f2(cx, PHI), _f4(cx, JAC)
     phiS, GaS, GbS = phi3[START], G[START, 0], G[START, 1]
     vm, g6, minv6 = _f2(cx, VM), _f2(cx, GT_LAMBDA), _f2(cx, MINV)
@@ -1116,16 +1103,6 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
     _copy(mom, mom_s)
     g2 = _f3(cx, G2)
     Jr, Ga2, Gb2 = _f3(cx, JR), g2[0], g2[1]
-    # The predicted start impulse; ``total`` then sums the corrections on top of the kick.
-    history, slots, total = _f3(cx, SHAKE_HISTORY)[sub], _f2(cx, SHAKE_SLOTS)[sub], \
-        _f2(cx, VECTORS)[1]
-    known = int(slots[1]) if slots[0] == h else 0
-    for r in range(m):
-        total[r] = 0.0 if known == 0 else (
-            history[0, r] if known == 1 else 2.0 * history[0, r] - history[1, r])
-    if known:
-        _impulse(total, GaS, GbS, a, b, minv6, g6, h, body, vel, mom_s, cx)
-        _copy(mom_s, mom)
     previous = np.inf
     mode = -1
     for it in range(max_it + 1):
@@ -1166,8 +1143,7 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
             drift(pos, quat, vel, mom, body, h, symmetric, counts, TOP_SHAKE_ANGLE)
             _geometry(pos, quat, cx, CURRENT, counts)
             _project_positions(pos, quat, target, cx, par, counts)
-            slots[1] = 0.0   # a projection's corrections do not predict the next step's
-            return True
+            break
         # Refactor unless the last iteration cut the residual a hundredfold.
         refactor = mode < 0 or norm > 1e-2 * previous
         previous = norm
@@ -1192,28 +1168,14 @@ def _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts
                 mode = _fac(Ga2, Gb2, GaS, GbS, a, b, _own(cx), minv6, False, par, cx,
                             GENERAL, counts)
         _sol(mode, vm[V_RHS], vm[V_SOLUTION], cx, GENERAL)
+        _gt_lambda(GaS, GbS, a, b, _own(cx), vm[V_SOLUTION], g6)
         _copy(vel, vel_b)
         _copy(mom_s, mom_b)
-        _impulse(vm[V_SOLUTION], GaS, GbS, a, b, minv6, g6, h, body, vel, mom_s, cx)
-        for r in range(m):
-            total[r] += vm[V_SOLUTION, r]
-    # The history for the next (sub)step at this place.
-    for r in range(m):
-        history[1, r] = history[0, r]
-        history[0, r] = total[r]
-    slots[0] = h
-    slots[1] = min(known + 1, 2)
+        for i in range(n):
+            for c in range(3):
+                vel[i, c] += -minv6[i, c] * g6[i, c] / h
+                mom_s[i, c] += (-minv6[i, 3 + c] * g6[i, 3 + c] / h) * body[i, B_MOMENTS + c]
     return True
-
-
-@njit(cache=True, inline='always')
-def _impulse(kappa, GaS, GbS, a, b, minv6, g6, h, body, vel, mom_s, cx):
-    """Add the start impulse ``−Gᵀ_start κ / h`` of SHAKE to ``vel`` and ``mom_s``, in place."""
-    _gt_lambda(GaS, GbS, a, b, _own(cx), kappa, g6)
-    for i in range(vel.shape[0]):
-        for c in range(3):
-            vel[i, c] += -minv6[i, c] * g6[i, c] / h
-            mom_s[i, c] += (-minv6[i, 3 + c] * g6[i, 3 + c] / h) * body[i, B_MOMENTS + c]
 
 
 @njit(cache=True)
@@ -1284,8 +1246,7 @@ def _splitting(method, pos, quat, vel, om, dt, body, gforce, wrench, flags, cx, 
         _kick(pos, quat, vel, mom, first, body, gforce, wrench, flags, cx, par, lam, c_valid,
               counts)
         _targets_at(cx, end)   # SHAKE's end lands on the targets of its time
-        if not _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts,
-                      sub):
+        if not _shake(pos, quat, vel, mom, h, symmetric, body, cx, par, last_resort, counts):
             return False, False
         if symmetric and (damping or joint_damping):
             # The damping flow between kick and projection is not along M⁻¹ Gᵀ: the
@@ -1434,8 +1395,6 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         counts[Count.CAPPED] += 1   # the work of one step stays bounded; the caller reports it
         k = max_sub
     valid0 = c_valid
-    if not c_valid:
-        _f2(cx, SHAKE_SLOTS)[:, 1] = 0.0   # a state set from outside: SHAKE predicts afresh
     moving = _moving(cx)
     t_start, t_end = par[P_T_START], par[P_T_END]
     while True:
@@ -1468,7 +1427,6 @@ def constrained_step(method, pos0, quat0, vel0, om0, dt, body, gforce, wrench, f
         if ok:
             break
         counts[Count.RETRIES] += 1
-        _f2(cx, SHAKE_SLOTS)[:, 1] = 0.0   # the failed attempt's corrections predict nothing
         k = min(2 * k, max_sub)
         valid0 = False   # the failed attempt overwrote the workspace's geometry
     normalize_quaternions(quat)
@@ -1484,16 +1442,13 @@ def workspace(n: int, m: int, body: np.ndarray, e: int = 0) -> dict:
     vectors; ``xvec`` (3, e) the coupling parts' Φ, Φ̇, γ; ``gt_lambda`` (n, 6) Gᵀλ;
     ``free_acc`` (n, 6) free accelerations; ``force``, ``torque`` (n, 3);
     ``minv`` (n, 6) M⁻¹; ``factor_state`` (2,): [the symmetric factor is of the
-    current geometry, its mode]; ``watch`` (n,): every body of the component;
-    ``shake_history`` (3, 2, m) and ``shake_slots`` (3, 2): SHAKE's predictor
-    (see :func:`_shake`).
+    current geometry, its mode]; ``watch`` (n,): every body of the component.
     """
     minv6 = np.empty((n, 6))
     minv6[:, :3] = body[:, B_INV_MASS:B_INV_MASS + 1]
     minv6[:, 3:] = 1.0 / body[:, B_MOMENTS:B_MOMENTS + 3]
     return {'phi': np.zeros((3, m)), 'jac': np.zeros((3, 2, m + e, 6)), 'vm': np.zeros((4, m)),
-            'xvec': np.zeros((3, e)), 'shake_history': np.zeros((3, 2, m)),
-            'shake_slots': np.zeros((3, 2)),
+            'xvec': np.zeros((3, e)),
             'gt_lambda': np.zeros((n, 6)), 'free_acc': np.zeros((n, 6)),
             'force': np.zeros((n, 3)), 'torque': np.zeros((n, 3)), 'minv': minv6,
             'factor_state': np.zeros(2, dtype=np.int64), 'watch': np.ones(n, dtype=np.int64)}

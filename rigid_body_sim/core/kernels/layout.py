@@ -317,16 +317,11 @@ ROWS = (('kind', 'i', 1), ('comp', 'i', 1), ('row_a', 'i', 1), ('row_b', 'i', 1)
 #: The workspace (constrained_step.workspace).
 WORKSPACE = (('phi', 'f', 2), ('jac', 'f', 4), ('vm', 'f', 2), ('gt_lambda', 'f', 2),
              ('free_acc', 'f', 2), ('force', 'f', 2), ('torque', 'f', 2), ('minv', 'f', 2),
-             ('factor_state', 'i', 1), ('watch', 'i', 1), ('xvec', 'f', 2),
-             ('shake_history', 'f', 3), ('shake_slots', 'f', 2))
+             ('factor_state', 'i', 1), ('watch', 'i', 1), ('xvec', 'f', 2))
 #: The rows of the workspace's ``vm`` (4, m): Φ̇ and γ of the rows, a right-hand side,
 #: and a solution; the rows of its ``xvec`` (3, e): Φ, Φ̇ and γ of the coupling parts
 #: (unweighted); and the entries of its ``factor_state`` (2,): whether the symmetric
 #: factor is of the current geometry, and its mode.
-#: SHAKE's predictor (constrained_step._shake) keeps, per sub-step of a step (the triple
-#: jump's three), the Newton corrections of its last two (sub)steps in ``shake_history``
-#: (3, 2, m), newest first, and in ``shake_slots`` (3, 2) the (sub)step size they were
-#: taken with and how many of them are valid (0, 1 or 2).
 VM_ROWS = ('phi_dot', 'gamma', 'rhs', 'solution')
 XVEC_ROWS = ('x_phi', 'x_phi_dot', 'x_gamma')
 FACTOR_STATE_ENTRIES = ('valid', 'mode')
