@@ -324,7 +324,7 @@ def top_flow(q: np.ndarray, mom: np.ndarray, moments: np.ndarray, axis: int,
     Exact flow of a symmetric top's free rotor over ``dt`` for one body, in place.
 
     With ``a = axis`` the distinct principal axis and ``J_s`` the shared moment
-    (the mean of the other two, equal to :data:`..bodies.ISOTROPY_RTOL`), the
+    (the mean of the other two, which agree to :data:`..bodies.ISOTROPY_RTOL`), the
     rotor's energy ``T = |L|²/(2 J_s) + L_a² (1/J_a − 1/J_s)/2`` is a sum of two
     parts whose flows commute (``|L|²`` is a Casimir of the rotor's Lie–Poisson
     bracket), so the flow of ``T`` is the composition of theirs, exact:
