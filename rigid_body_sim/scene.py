@@ -41,6 +41,8 @@ A scene file::
         initial_positions: {joint1: 0.5}    # rad or m; others 0
         initial_velocities: {joint1: 0.0}   # rad/s or m/s
         keep_fixed: [ft_sensor_joint]       # fixed joints kept as welds (reaction published)
+        limits: true                        # hold joints within their URDF <limit lower upper>
+        limit_restitution: 0.0              # Newton's e at the bounds, or {joint: e}
     command_groups:                 # joints commanded together (others take efforts)
       - {name: arm_controller, joints: [joint1, joint2], interface: position,
          mode: servo, kp: 100.0, kd: 5.0}   # effort | position | velocity; N m/rad, N m s/rad
@@ -78,7 +80,8 @@ TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constr
             'constraint_time_constant', 'tolerance', 'robots', 'command_groups')
 GROUP_KEYS = ('name', 'joints', 'interface', 'mode', 'kp', 'kd')
 ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
-              'initial_positions', 'initial_velocities', 'keep_fixed')
+              'initial_positions', 'initial_velocities', 'keep_fixed', 'limits',
+              'limit_restitution')
 ROBOT_SUFFIXES = ('.urdf', '.xacro')
 CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
                    'anchor_b_body', 'axis_world', 'length')
@@ -299,6 +302,9 @@ def _robots(data: Any, source: str) -> list:
         if not isinstance(keep, list) or not all(isinstance(k, str) for k in keep):
             raise SpecError(f'{field}.keep_fixed', f'expected a list of joint names, '
                                                    f'got {keep!r}')
+        limits = entry.get('limits', True)
+        if not isinstance(limits, bool):
+            raise SpecError(f'{field}.limits', f'expected true or false, got {limits!r}')
         name = entry.get('name', parsed.name)
         if not isinstance(name, str) or not name:
             raise SpecError(f'{field}.name', f'expected a non-empty string, got {name!r}')
@@ -306,7 +312,9 @@ def _robots(data: Any, source: str) -> list:
                          base_quat_xyzw=quat, fixed_base=fixed,
                          initial_positions=entry.get('initial_positions') or {},
                          initial_velocities=entry.get('initial_velocities') or {},
-                         keep_fixed=tuple(keep), prefix=prefix, source=str(path))
+                         keep_fixed=tuple(keep), prefix=prefix, source=str(path),
+                         enforce_limits=limits,
+                         limit_restitution=entry.get('limit_restitution', 0.0))
         out.append((spec, parsed))
     return out
 

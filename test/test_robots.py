@@ -365,7 +365,7 @@ def test_efforts_drive_the_equations_of_motion(tmp_path, rng):
 def test_effort_limits_clamp_and_count(tmp_path):
     text = robot('r', link('world'), link('a', inertial(1.0)),
                  joint('j', 'revolute', 'world', 'a', axis=(0, 0, 1),
-                       extra='<limit effort="2" velocity="1" lower="-1" upper="1"/>'))
+                       extra='<limit effort="2" velocity="1" lower="-100" upper="100"/>'))
     sim = robot_scene(tmp_path, text).simulation
     sim.set_joint_efforts({'j': 5.0})
     sim.step()

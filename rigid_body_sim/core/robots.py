@@ -160,7 +160,8 @@ class JointSpec:
     axis : array_like, shape (3,)
         In the joint frame; normalized here (URDF's default is 1 0 0).
     lower, upper : float, optional
-        rad or m: position limits (kept, not enforced yet).
+        rad or m: position limits (enforced by :mod:`.limits` unless the robot's
+        ``enforce_limits`` is false).
     effort : float, optional
         N m or N: the largest effort; commands beyond it are clamped (counted).
         0 (a common placeholder) means no limit, as for ``velocity``, and is
@@ -275,6 +276,11 @@ class RobotSpec:
         robots of the same URDF in one scene).
     source : str
         Where the robot came from (a file), for messages.
+    enforce_limits : bool
+        Hold the joints within their URDF ``<limit lower upper>`` (:mod:`.limits`).
+    limit_restitution : float or dict
+        Newton's restitution ``e`` in [0, 1] at the joints' bounds: one for all, or
+        ``{joint: e}`` by URDF joint name (others 0).
 
     """
 
@@ -289,6 +295,8 @@ class RobotSpec:
     keep_fixed: Sequence[str] = ()
     prefix: str = ''
     source: str = ''
+    enforce_limits: bool = True
+    limit_restitution: Any = 0.0
 
 
 @dataclass
@@ -777,6 +785,16 @@ class JointSpace:
         over = joint_coordinates(out, self.table, self.tracked, self.positions, self._rates)
         self.tracked = True
         self.counters['velocity_limit_excursions'] += over
+
+    def coordinates(self, out: np.ndarray, previous: np.ndarray) -> tuple:
+        """
+        Coordinates (k,) and rates (k,) at the outputs ``out``, angles unwrapped near ``previous``.
+
+        Reads only: neither the tracked coordinates nor the counters change.
+        """
+        positions, rates = np.array(previous, dtype=float), np.empty(len(self.joints))
+        joint_coordinates(out, self.table, True, positions, rates)
+        return positions, rates
 
     def state(self, out: np.ndarray, time_mid: float, names: Optional[Sequence] = None
               ) -> JointState:

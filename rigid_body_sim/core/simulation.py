@@ -28,13 +28,15 @@ import numpy as np
 from . import rotation as so3
 from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
-from .constraints import Constraint, ConstraintSet
+from .constraints import Constraint, ConstraintSet, JointType
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
 from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .kernels import free_step
+from .limits import (Impact, JointLimits, LOCATION_TOLERANCE, MAX_BOUNCES, MAX_EVENTS,
+                     MAX_LOCATION_ITERATIONS, restitution_of)
 from .robots import (build_robot, CommandGroup, drive_name, Interface, JointDrives, JointSpace,
                      JointState, mimic_name, RobotSpec)
 from .solver import ConstraintSolver
@@ -182,8 +184,37 @@ class Simulation:
                 raise SpecError(f'command_groups.{self.drives.group_of[self.joints.names[i]]}',
                                 f'the exact drive of joint {self.joints.names[i]!r} is the '
                                 f'constraint {name!r}, but a constraint of that name exists')
+        self.limits: Optional[JointLimits] = None
+        if len(self.joints):
+            self.limits = self._joint_limits(names)
         self._tracking = len(self.joints) > 0
         self.reset()
+
+    def _joint_limits(self, taken: set) -> Optional[JointLimits]:
+        """Build the enforced joint limits of the robots (None: none); validate restitutions."""
+        js = self.joints
+        limited = np.zeros(len(js), dtype=bool)
+        restitution = np.zeros(len(js))
+        for r, model in enumerate(self.robots):
+            own = [j for j in model.joints if j.name in js.index]
+            urdf_names = [j.spec.name for j in own]
+            values = restitution_of(model.spec.limit_restitution, urdf_names,
+                                    f'robots[{r}].limit_restitution')
+            for j, e in zip(own, values):
+                i = js.index[j.name]
+                limited[i] = model.spec.enforce_limits
+                restitution[i] = e
+        if self.drives is not None:
+            limited &= ~self.drives.exact
+        for f, _, _, _ in js.mimics:
+            limited[f] = False
+        limits = JointLimits(js, limited, restitution)
+        for i in limits.joints:
+            if limits.names[i] in taken:
+                raise SpecError('constraints', f'the limit of joint {js.names[i]!r} is the '
+                                               f'constraint {limits.names[i]!r}, but a '
+                                               f'constraint of that name exists')
+        return limits if len(limits) else None
 
     # -- time stepping --------------------------------------------------------------------
 
@@ -211,7 +242,7 @@ class Simulation:
             cached = self._switching = (effects, len(effects), [
                 e for e in effects if type(e).begin_step is not Effect.begin_step])
         switching = cached[2]
-        integrator, control = self.integrator, self._control
+        limited = self.limits is not None
         for _ in range(n):
             steps = self._steps
             if switching:
@@ -222,22 +253,10 @@ class Simulation:
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
             t_end = self._time_base + (steps + 1) * dt
-            try:
-                if control is None:
-                    new = integrator.step(self.state, dt, t_end)
-                    # A plain step's kernels tell whether the new state is finite.
-                    finite = integrator.finite
-                    if finite is None:
-                        finite = _finite(new)
-                else:
-                    new = control.step(integrator, self.state, dt, t_end)
-                    finite = _finite(new)
-            except np.linalg.LinAlgError:
-                # A factorization met non-finite numbers: the step diverged on the way.
-                raise DivergenceError(self.time, self._moving_fastest()) from None
-            if not finite:
-                bad = _non_finite_bodies(new)
-                raise DivergenceError(self.time, [self.bodies.names[i] for i in bad])
+            if limited:
+                new = self._limited_step(self.state, t_end)
+            else:
+                new = self._advance(self.state, dt, t_end)
             self.state = new
             self._steps = steps + 1
             if self._tracking:
@@ -249,6 +268,202 @@ class Simulation:
                 if self._wrenches.remove_expired(new.time):
                     # What reads the model between steps (reactions) must not see them.
                     self.dynamics.changed()
+
+    def _advance(self, state: State, dt: float, t_end: float) -> State:
+        """One step of the integrator (under the knob, if on) from ``state``; checked finite."""
+        integrator, control = self.integrator, self._control
+        try:
+            if control is None:
+                new = integrator.step(state, dt, t_end)
+                # A plain step's kernels tell whether the new state is finite.
+                finite = integrator.finite
+                if finite is None:
+                    finite = _finite(new)
+            else:
+                new = control.step(integrator, state, dt, t_end)
+                finite = _finite(new)
+        except np.linalg.LinAlgError:
+            # A factorization met non-finite numbers: the step diverged on the way.
+            raise DivergenceError(state.time, self._moving_fastest()) from None
+        if not finite:
+            bad = _non_finite_bodies(new)
+            raise DivergenceError(state.time, [self.bodies.names[i] for i in bad])
+        return new
+
+    # -- joint limits (see .limits) -------------------------------------------------------
+
+    def _limited_step(self, start: State, t_end: float) -> State:
+        """
+        Take a step with joint limits: release pulling bounds, locate and resolve impacts.
+
+        See :mod:`.limits`; the step ends at ``t_end`` whatever the impacts inside it.
+        """
+        lim = self.limits
+        state, previous = start, self.joints.positions
+        events = 0
+        while True:
+            self._release_pulling(state)
+            h = t_end - state.time
+            if h <= 4.0 * np.finfo(float).eps * abs(t_end):   # an impact at the step's end
+                return State(t_end, *state.parts)
+            new = self._advance(state, h, t_end)
+            q, _ = self._coordinates(new, previous)
+            crossed = lim.crossed(q)
+            if not len(crossed):
+                return new
+            if events >= MAX_EVENTS:
+                lim.counters.events_capped += 1
+                gap = -lim.worst_gap(q, crossed)
+                lim.counters.max_violation = max(lim.counters.max_violation, gap)
+                return new
+            lim.counters.located_steps += 1
+            state, previous, rates = self._locate(state, previous, h, t_end, new, q, crossed)
+            state = self._impact(state, previous, rates, crossed, events)
+            events += 1
+
+    def _coordinates(self, state: State, previous: np.ndarray) -> tuple:
+        """Joint coordinates and rates at ``state``, angles unwrapped near ``previous``."""
+        self.bodies.outputs(state)
+        return self.joints.coordinates(self.bodies.outputs_cache.out, previous)
+
+    def _locate(self, state: State, previous: np.ndarray, h: float, t_end: float,
+                end: State, q_end: np.ndarray, crossed: np.ndarray) -> tuple:
+        """
+        Find where the first of ``crossed`` reaches its bound: regula falsi (Illinois).
+
+        The event function is the smallest gap of the ``crossed`` joints after a
+        partial step of length ``s`` from ``state`` (coordinates ``previous``); it
+        is at least ``-LOCATION_TOLERANCE`` there and below it at ``h`` (``end``).
+        Returns the state, its coordinates and rates; the located state's gap is
+        within the tolerance, or it is the feasible end of a bracket narrowed to
+        rounding.
+        """
+        lim = self.limits
+        q0, r0 = self._coordinates(state, previous)
+        a, ga, at = 0.0, lim.worst_gap(q0, crossed), (state, q0, r0)
+        b, gb = h, lim.worst_gap(q_end, crossed)
+        if ga <= LOCATION_TOLERANCE:
+            return at
+        stuck = 0
+        for _ in range(MAX_LOCATION_ITERATIONS):
+            s = (a * gb - b * ga) / (gb - ga)
+            if not a < s < b:
+                s = 0.5 * (a + b)
+            trial = self._advance(state, s, state.time + s)
+            q, r = self._coordinates(trial, previous)
+            g = lim.worst_gap(q, crossed)
+            if abs(g) <= LOCATION_TOLERANCE:
+                return trial, q, r
+            if g > 0.0:
+                a, ga, at = s, g, (trial, q, r)
+                if stuck == 1:
+                    gb *= 0.5
+                stuck = 1
+            else:
+                b, gb = s, g
+                if stuck == -1:
+                    ga *= 0.5
+                stuck = -1
+            if b - a <= 4.0 * np.finfo(float).eps * max(h, abs(state.time)):
+                break
+        return at
+
+    def _impact(self, state: State, q: np.ndarray, rates: np.ndarray, crossed: np.ndarray,
+                events: int) -> State:
+        """
+        Make the bounds touched at ``state`` active and apply Newton's restitution.
+
+        The joints at a bound moving into it (or, if none, the ``crossed`` ones at
+        theirs) get their rows; one velocity projection with each row's rate set
+        to ``−e`` times its approach rate resolves the impact (rows of ``e > 0``
+        then leave the active set: they separate).
+        """
+        lim = self.limits
+        hits = lim.touching(q, rates)
+        if not hits:
+            gap, side = lim.gaps(q)
+            hits = [(int(i), int(sd), 0.0) for i, g, sd in zip(lim.joints, gap, side)
+                    if i in crossed and g <= LOCATION_TOLERANCE]
+        names, bounds, rebound, bouncing = [], [], [], []
+        for i, side, approach in hits:
+            e = lim.restitution[i] if events < MAX_BOUNCES else 0.0
+            self._activate(i, side, state)
+            names.append(lim.names[i])
+            bounds.append(lim.bound(i, side))
+            rebound.append(-side * e * approach)   # approach < 0: away from the bound
+            if e * approach != 0.0:
+                bouncing.append(i)
+            lim.impacts.append(Impact(state.time, self.joints.names[i], side, approach,
+                                      -e * approach))
+        lim.counters.impacts += len(hits)
+        solver = self.dynamics.solver
+        solver.set_drive_targets(names, np.array(bounds), state.time, np.array(rebound))
+        vel, om = solver.project_velocities(state)
+        state = State(state.time, state.pos_com_world, state.quat_principal_world, vel, om)
+        for i in bouncing:
+            self._deactivate(i)
+        if len(bouncing) < len(names):
+            held = [n for n, (i, _, _) in zip(names, hits) if i not in bouncing]
+            solver.set_drive_targets(held, np.array([b for b, (i, _, _) in zip(bounds, hits)
+                                                     if i not in bouncing]), state.time)
+        return state
+
+    def _activate(self, i: int, side: int, state: State) -> None:
+        """Add the row that holds joint ``i`` on its bound ``side`` (+1 lower, −1 upper)."""
+        lim, js = self.limits, self.joints
+        j = js.joints[i]
+        spec = Constraint(lim.names[i], JointType.DRIVE, j.child_body, j.parent_body,
+                          drive=js.drive_geometry(i, lim.bound(i, side)))
+        self.dynamics.solver.constraints.add(spec, state)
+        lim.active[i] = side
+        lim.counters.activations += 1
+        self.dynamics.changed()
+
+    def _deactivate(self, i: int) -> None:
+        lim = self.limits
+        self.dynamics.solver.constraints.remove(lim.names[i])
+        lim.active[i] = 0
+        self.dynamics.changed()
+
+    def _limit_forces(self, state: State) -> np.ndarray:
+        """Generalized force (k,) each active bound applies along its joint at ``state``."""
+        lim, solver = self.limits, self.dynamics.solver
+        lam = solver.multipliers(self.dynamics, state)
+        forces = np.zeros(len(self.joints))
+        for i in np.flatnonzero(lim.active):
+            forces[i] = -lam[solver.constraints.rows_of(lim.names[i])[0]]
+        return forces
+
+    def _release_pulling(self, state: State) -> None:
+        """Drop active bounds that pull at ``state``, the most pulling first, one at a time."""
+        lim = self.limits
+        while lim.active.any():
+            bad = lim.pulling(self._limit_forces(state))
+            if not len(bad):
+                return
+            self._deactivate(int(bad[0]))
+            lim.counters.releases += 1
+
+    def _limits_from_state(self) -> None:
+        """
+        Rebuild the active set at the current state (after a reset or a state set by hand).
+
+        Every bound the joints exceed becomes active (it then converges back as a
+        violated constraint does, and the first step releases it if it pulls); a
+        joint that only touches its bound gets its row when a step moves it into
+        the bound (an impact at the step's start).
+        """
+        lim = self.limits
+        for i in np.flatnonzero(lim.active):
+            self._deactivate(int(i))
+        if not self.joints.tracked:
+            self.joints.track(self._outputs_now())
+        gap, side = lim.gaps(self.joints.positions)
+        beyond = gap < -LOCATION_TOLERANCE
+        for i, sd in zip(lim.joints[beyond], side[beyond]):
+            self._activate(int(i), int(sd), self.state)
+        if beyond.any():
+            self._reconcile_velocities()
 
     def _moving_fastest(self) -> list:
         """Name the body turning fastest (where a divergence most likely began)."""
@@ -364,6 +579,9 @@ class Simulation:
                 solver.constraints.add(spec, self.state)
             self.dynamics.changed()
             self._reconcile_velocities()
+        if self.limits is not None:
+            self.limits.reset()
+            self._limits_from_state()
 
     def _inconsistent(self, name: str, field: str, outcome: str,
                       residual: float) -> InconsistentConstraintError:
@@ -433,17 +651,23 @@ class Simulation:
         Positions are 0 in the URDF's zero configuration; angles count turns.
         Efforts: the effort command that acted over the last step, plus the joint's
         servo and damping at the current state (what a joint torque sensor reads),
-        an exact drive's multiplier, and a mimic row's (on the follower and, times
-        ``k``, on the leader).
+        an exact drive's multiplier, a bound's while the joint touches it
+        (:mod:`.limits`), and a mimic row's (on the follower and, times ``k``, on the
+        leader).
         """
         js = self.joints.state(self._outputs_now(), self.time - 0.5 * self.dt)
         efforts = js.efforts
         if self.drives is not None and len(self.drives.rows_of):
             efforts = efforts + self.drives.efforts(js.positions, js.velocities)
-        if len(self._exact) or self._mimic_names:
+        limits = self.limits is not None and bool(self.limits.active.any())
+        if len(self._exact) or self._mimic_names or limits:
             solver = self.dynamics.solver
             lam = solver.multipliers(self.dynamics, self.state)
             efforts = efforts.copy()
+        if limits:
+            # A bound's row Φ = q − bound applies −λ along q, as an exact drive's.
+            for i in np.flatnonzero(self.limits.active):
+                efforts[i] -= lam[solver.constraints.rows_of(self.limits.names[i])[0]]
         if len(self._exact):
             # An exact drive's effort is its row's multiplier: Φ = q − q*, so the
             # generalized force its reaction −Gᵀλ applies along q is −λ.
@@ -515,6 +739,8 @@ class Simulation:
                     self._drive_names, self.joints.positions[self._exact], self.time,
                     self._drive_rates(self._exact))
             self.dynamics.changed()
+        if self.limits is not None:
+            self._limits_from_state()
         # (after the drives' targets: the projection onto Φ̇ = −ωΦ must see them)
         self._reconcile_velocities()
 
@@ -630,6 +856,10 @@ class Simulation:
             joint = self.joints.names[self._exact[self._drive_names.index(name)]]
             raise SpecError('name', f'{name!r} is the exact drive of joint {joint!r} (a '
                                     f'command group of mode exact): it cannot be removed')
+        if self.limits is not None and name in self.limits.names:
+            raise SpecError('name', f'{name!r} holds joint '
+                                    f'{self.joints.names[self.limits.names.index(name)]!r} on '
+                                    f'its limit while it touches it: it cannot be removed')
         if name in self._mimic_names:
             joint = self.joints.names[self.joints.mimics[self._mimic_names.index(name)][0]]
             raise SpecError('name', f'{name!r} makes joint {joint!r} follow its leader (a URDF '

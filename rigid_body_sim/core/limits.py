@@ -1,0 +1,236 @@
+"""
+Joint position limits: unilateral rows held by an active set, impacts located inside a step.
+
+A robot joint with a URDF ``<limit lower upper>`` (revolute, prismatic) may not leave
+``[lower, upper]``. Each bound is a unilateral row on the joint coordinate ``q``: with
+the gap ``g = s (q − bound)`` (``s = +1`` at the lower bound, ``−1`` at the upper)
+and the generalized force ``f`` the row applies along ``q``,
+
+    g ≥ 0,   s f ≥ 0,   g · f = 0
+
+(the row pushes, and only while the joint touches its bound). An *active* bound is an
+equality row ``Φ = q − bound`` of the constraint solve (a ``drive`` constraint named
+:func:`limit_name`, ``f = −λ``), held by the same projections as every joint, so that
+while a joint rests on its bound it drifts from it no more than a joint's drift. The
+active set changes only between (partial) steps, by two rules that are the pivots of
+a direct method on the complementarity conditions:
+
+* **release**: before each (partial) step, an active bound whose multiplier at the
+  acceleration level pulls (``s f < 0``: the joint would accelerate away) is dropped,
+  the most pulling first, the multipliers solved again after each drop;
+* **impact**: a step after which an inactive bound is crossed (``g < −tol``) is taken
+  again up to the moment ``t*`` of the crossing, located by regula falsi (Illinois) on
+  partial steps from the step's start until ``|g| ≤`` :data:`LOCATION_TOLERANCE`; there
+  the bound becomes active and Newton's law of restitution sets the joint's rate to
+  ``−e`` times its approach rate, with every other joint's constraint kept (the
+  mass-weighted velocity projection of the solve: momentum and the joints' reactions
+  are those of an impulsive contact), then the rest of the step is taken. ``e = 0``
+  leaves the bound active, ``e > 0`` releases it. After :data:`MAX_BOUNCES` impacts in
+  one step the next ones are inelastic (a bouncing joint's impacts accumulate in finite
+  time, Zeno's series; this cuts it).
+
+So the bound is exceeded by at most :data:`LOCATION_TOLERANCE` at an impact, and an
+impact happens at its located time, with fixed steps as with the accuracy knob (where
+the located time holds to the tolerance, not the knob's error per unit time; the step
+after an impact restarts the method). A crossing that begins and ends inside one step
+(a joint that overshoots its bound and comes back within ``dt``) is not seen.
+Kinetic energy is never gained at an impact for ``e ≤ 1``.
+
+Joints held by an exact drive (the drive is the motion: a target beyond a limit is the
+commander's to avoid) and followers of mimic joints (their leader's limits hold them)
+have no limit rows.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .errors import SpecError
+from .validate import finite_scalar
+
+#: rad or m: how far past its bound a joint may be where an impact is located (the
+#: stated bound of the violation at impacts; while a bound is active the joint's
+#: drift is that of every constraint).
+LOCATION_TOLERANCE = 1e-10
+#: Most regula-falsi iterations to locate one impact (each a partial step).
+MAX_LOCATION_ITERATIONS = 40
+#: Impacts in one step after which the next ones are inelastic (Zeno's cut).
+MAX_BOUNCES = 8
+#: Most impacts in one step: beyond them the step is accepted as it is and the
+#: excess counted in ``limit_residual`` (never silently).
+MAX_EVENTS = 32
+
+
+#: How many of the latest impacts :attr:`JointLimits.impacts` keeps.
+IMPACT_LOG = 256
+
+
+class Impact(NamedTuple):
+    """One located impact of a joint on a bound."""
+
+    time: float          #: s, simulation time
+    joint: str
+    side: int            #: +1 the lower bound, −1 the upper
+    approach: float      #: rad/s or m/s, the joint's rate into the bound (< 0)
+    rebound: float       #: rad/s or m/s, its rate away from it after (−e approach)
+
+
+def limit_name(joint: str) -> str:
+    """Name of the constraint that holds ``joint`` on its bound while the bound is active."""
+    return f'{joint}_limit'
+
+
+@dataclass
+class LimitCounters:
+    """What the limits did since the last reset."""
+
+    impacts: int = 0
+    located_steps: int = 0
+    releases: int = 0
+    activations: int = 0
+    #: Largest complementarity residual seen after a step: a bound exceeded (rad or m)
+    #: beyond LOCATION_TOLERANCE, or 0.
+    max_violation: float = 0.0
+    events_capped: int = 0
+
+    def as_dict(self) -> dict:
+        """Return the counters as a dict."""
+        return {'impacts': self.impacts, 'located_steps': self.located_steps,
+                'releases': self.releases, 'activations': self.activations,
+                'max_violation': self.max_violation, 'events_capped': self.events_capped}
+
+
+class JointLimits:
+    """
+    The position limits of the robots' one-coordinate joints, and their active set.
+
+    Parameters
+    ----------
+    space : JointSpace
+    limited : ndarray of bool, shape (k,)
+        Joints whose limits are enforced (the robot asks for it, the joint has a
+        bound, no exact drive holds it, it follows no mimic leader).
+    restitution : ndarray, shape (k,)
+        Newton's coefficient ``e`` in [0, 1] of each joint's bounds.
+
+    """
+
+    def __init__(self, space: Any, limited: np.ndarray, restitution: np.ndarray) -> None:
+        self.space = space
+        k = len(space)
+        self.lower = np.array([-np.inf if j.spec.lower is None else j.spec.lower
+                               for j in space.joints]).reshape(k)
+        self.upper = np.array([np.inf if j.spec.upper is None else j.spec.upper
+                               for j in space.joints]).reshape(k)
+        limited = np.asarray(limited, dtype=bool) & (np.isfinite(self.lower)
+                                                     | np.isfinite(self.upper))
+        #: Indices of the joints with enforced limits.
+        self.joints = np.flatnonzero(limited)
+        self.restitution = np.asarray(restitution, dtype=float).reshape(k)
+        self.names = [limit_name(space.names[i]) for i in range(k)]
+        #: Per joint: 0 free, +1 on its lower bound, −1 on its upper bound.
+        self.active = np.zeros(k, dtype=int)
+        self.counters = LimitCounters()
+        #: The latest impacts (at most IMPACT_LOG), oldest first.
+        self.impacts: deque = deque(maxlen=IMPACT_LOG)
+
+    def __len__(self) -> int:
+        """Return the number of joints with enforced limits."""
+        return len(self.joints)
+
+    def reset(self) -> None:
+        """Forget the active set and the counters."""
+        self.active[:] = 0
+        self.counters = LimitCounters()
+        self.impacts.clear()
+
+    def bound(self, i: int, side: int) -> float:
+        """Return the bound of joint ``i`` on ``side`` (+1 lower, −1 upper)."""
+        return float(self.lower[i] if side > 0 else self.upper[i])
+
+    def gaps(self, q: np.ndarray) -> tuple:
+        """
+        Signed gaps of the limited joints at coordinates ``q`` (k,).
+
+        Returns ``(gap, side)`` over :attr:`joints`: the smaller of ``q − lower`` and
+        ``upper − q`` (negative: beyond a bound) and the side it is on (+1 lower, −1
+        upper).
+        """
+        q = q[self.joints]
+        lo, hi = q - self.lower[self.joints], self.upper[self.joints] - q
+        side = np.where(lo <= hi, 1, -1)
+        return np.minimum(lo, hi), side
+
+    def crossed(self, q: np.ndarray) -> np.ndarray:
+        """Return the free joints beyond a bound by more than the tolerance (indices)."""
+        gap, _ = self.gaps(q)
+        free = self.active[self.joints] == 0
+        return self.joints[free & (gap < -LOCATION_TOLERANCE)]
+
+    def worst_gap(self, q: np.ndarray, which: np.ndarray) -> float:
+        """Return the smallest gap of joints ``which`` at ``q`` (the event function)."""
+        lo, hi = q[which] - self.lower[which], self.upper[which] - q[which]
+        return float(np.min(np.minimum(lo, hi)))
+
+    def touching(self, q: np.ndarray, rates: np.ndarray) -> list:
+        """
+        Free joints at a bound (within the tolerance) moving into it: ``(i, side, rate)``.
+
+        ``rate`` is the approach rate ``s q̇ < 0`` (rad/s or m/s).
+        """
+        out = []
+        for i in self.joints:
+            if self.active[i]:
+                continue
+            for side, b in ((1, self.lower[i]), (-1, self.upper[i])):
+                gap = side * (q[i] - b)
+                if gap <= LOCATION_TOLERANCE and side * rates[i] < 0.0:
+                    out.append((int(i), side, float(side * rates[i])))
+        return out
+
+    def pulling(self, forces: np.ndarray) -> np.ndarray:
+        """
+        Active joints whose bound pulls, most pulling first.
+
+        ``forces`` (k,): the generalized force each active bound applies along its
+        joint (``−λ``); a bound pulls when ``s f < 0`` beyond rounding (64 ulps of
+        the largest such force).
+        """
+        act = np.flatnonzero(self.active)
+        if not len(act):
+            return act
+        push = self.active[act] * forces[act]
+        scale = float(np.max(np.abs(forces[act])))
+        bad = push < -64.0 * np.finfo(float).eps * scale
+        return act[bad][np.argsort(push[bad])]
+
+
+def restitution_of(value: Any, names: list, field_name: str) -> np.ndarray:
+    """
+    Validate a restitution (a number, or ``{joint: number}``) into an array over ``names``.
+
+    Each value must be in [0, 1] (more than 1 would gain energy at an impact).
+    """
+    out = np.zeros(len(names))
+    if isinstance(value, dict):
+        index = {name: i for i, name in enumerate(names)}
+        for joint, e in value.items():
+            if joint not in index:
+                raise SpecError(f'{field_name}.{joint}', f'unknown joint {joint!r}; joints: '
+                                                         f'{names}')
+            out[index[joint]] = _coefficient(e, f'{field_name}.{joint}')
+        return out
+    out[:] = _coefficient(value, field_name)
+    return out
+
+
+def _coefficient(value: Any, field_name: str) -> float:
+    e = finite_scalar(value, field_name)
+    if not 0.0 <= e <= 1.0:
+        raise SpecError(field_name, f'must be in [0, 1] (Newton restitution; above 1 an '
+                                    f'impact would gain energy), got {value!r}')
+    return e

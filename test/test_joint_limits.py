@@ -1,0 +1,253 @@
+"""
+Joint position limits (issue 20, first part): rests, impacts, restitution, releases.
+
+References are closed forms (statics, free fall) and the same scenes without limits
+(the integrator's own energy error); the impact time of a swing converges at the
+integrator's order to a DOP853 event time.
+"""
+
+import re
+
+import numpy as np
+import pytest
+from rigid_body_sim.core.limits import LOCATION_TOLERANCE
+from rigid_body_sim.scene import SceneError
+from robot_helpers import inertial, joint, link, robot, robot_scene
+from scipy.integrate import solve_ivp
+
+G = 9.81
+M, L, I_AXIS = 1.0, 0.5, 1e-3           # kg, m (pivot to centre of mass), kg m² (own)
+UPPER = 0.8                             # rad
+INTEGRATORS = ['symplectic_euler', 'lie_poisson2', 'lie_poisson4', 'rkmk4']
+
+
+def pendulum(tmp_path, integrator='lie_poisson2', dt=1e-3, lower=-0.5, upper=UPPER, **entry):
+    """Build a rod on a hinge about y at the world origin, horizontal at q = 0 (falls to +q)."""
+    text = robot('pend', link('world'),
+                 link('rod', inertial(M, xyz=(L, 0, 0), ixx=I_AXIS, iyy=I_AXIS, izz=I_AXIS)),
+                 joint('j', 'revolute', 'world', 'rod', axis=(0, 1, 0),
+                       extra=f'<limit lower="{lower!r}" upper="{upper!r}" effort="100" '
+                             f'velocity="100"/>'))
+    return robot_scene(tmp_path, text, gravity=(0.0, 0.0, -G), dt=dt, integrator=integrator,
+                       **entry).simulation
+
+
+def pendulum_energy(sim):
+    """½ I q̇² − m g L sin q (J): the centre of mass is at height −L sin q."""
+    js = sim.joint_state()
+    q, qd = js.positions[0], js.velocities[0]
+    return 0.5 * (I_AXIS + M * L * L) * qd * qd - M * G * L * np.sin(q)
+
+
+def slider(tmp_path, integrator='lie_poisson2', dt=1e-3, lower=-0.5, mass=2.0, **entry):
+    """Build a block on a vertical prismatic joint at q = 0, falling onto ``lower``."""
+    text = robot('drop', link('world'), link('block', inertial(mass)),
+                 joint('z', 'prismatic', 'world', 'block', axis=(0, 0, 1),
+                       extra=f'<limit lower="{lower!r}" upper="1.0" effort="100" '
+                             f'velocity="100"/>'))
+    return robot_scene(tmp_path, text, gravity=(0.0, 0.0, -G), dt=dt, integrator=integrator,
+                       **entry).simulation
+
+
+@pytest.mark.parametrize('integrator', INTEGRATORS)
+def test_pendulum_comes_to_rest_on_its_limit_with_the_static_torque(integrator, tmp_path):
+    sim = pendulum(tmp_path, integrator)
+    sim.step(2000)
+    js = sim.joint_state()
+    [impact] = sim.limits.impacts          # one inelastic impact, then rest
+    assert impact.side == -1 and impact.approach < -1.0 and impact.rebound == 0.0
+    # bound: while its bound is active the joint is an equality row, held to the
+    # projection's tolerance (1e-13) plus rounding of the angle (1e-15): 1e-10 is the
+    # stated bound with room.
+    assert abs(js.positions[0] - UPPER) <= 1e-10
+    assert abs(js.velocities[0]) <= 1e-9
+    # The bound's torque holds gravity's: −m g L cos q_lim (it pushes towards −q). bound:
+    # one acceleration-level solve of a 6-row system in double precision: 1e-12 relative.
+    np.testing.assert_allclose(js.efforts[0], -M * G * L * np.cos(UPPER), rtol=1e-9)
+    assert sim.limits.counters.releases == 0
+
+
+def _swing_impact_time():
+    """Time (s) at which the released rod reaches UPPER: DOP853 with an event, rtol 1e-13."""
+    inertia = I_AXIS + M * L * L
+
+    def rhs(t, y):
+        return [y[1], M * G * L * np.cos(y[0]) / inertia]
+
+    def hit(t, y):
+        return y[0] - UPPER
+    hit.terminal = True
+    sol = solve_ivp(rhs, (0.0, 2.0), [0.0, 0.0], method='DOP853', rtol=1e-13, atol=1e-14,
+                    events=hit)
+    return float(sol.t_events[0][0])
+
+
+@pytest.mark.parametrize('integrator, order', [('lie_poisson2', 2), ('rkmk4', 4)])
+def test_impact_time_converges_at_the_integrators_order(integrator, order, tmp_path):
+    # The impact is located inside the step, so its time carries the method's own
+    # error, O(dt^p), not the step's O(dt) of an event seen at the step's end.
+    reference = _swing_impact_time()
+    errors = []
+    for dt in (4e-3, 2e-3):
+        sim = pendulum(tmp_path, integrator, dt)
+        sim.step(int(round(0.6 / dt)))
+        [impact] = sim.limits.impacts
+        errors.append(abs(impact.time - reference))
+    # bound: halving dt divides an order-p error by 2^p up to the next term: within a
+    # factor 1.5 here (an event time's error also has the location's 1e-10 / |q̇| =
+    # 3e-11 s, far below these).
+    assert 2 ** order / 1.5 < errors[0] / errors[1] < 2 ** order * 1.5
+    assert errors[0] < 1e-4
+
+
+@pytest.mark.parametrize('integrator', ['lie_poisson2', 'lie_poisson4'])
+def test_elastic_limit_keeps_the_energy_to_the_integrators_own_error(integrator, tmp_path):
+    limited = pendulum(tmp_path, integrator, limit_restitution=1.0)
+    free = pendulum(tmp_path, integrator, lower=-10.0, upper=10.0)
+    e0 = pendulum_energy(limited)
+    worst_free, worst = 0.0, 0.0
+    for _ in range(3000):
+        limited.step()
+        free.step()
+        worst = max(worst, abs(pendulum_energy(limited) - e0))
+        worst_free = max(worst_free, abs(pendulum_energy(free) - e0))
+    impacts = limited.limits.impacts
+    assert len(impacts) >= 4
+    for impact in impacts:        # Newton's law with e = 1: the speed is returned
+        assert impact.rebound == pytest.approx(-impact.approach, rel=1e-15)
+    # bound: each impact is located to 1e-10 rad (an energy error of m g L 1e-10 = 5e-10
+    # J) and reverses the rate exactly; the rest is the method's own energy error,
+    # measured here on the same swing without limits (twice it, for the swing's
+    # other phases).
+    assert worst <= 2.0 * worst_free + 1e-8
+    assert limited.joint_state().positions.max() <= UPPER + LOCATION_TOLERANCE
+
+
+@pytest.mark.parametrize('integrator', ['lie_poisson2', 'lie_poisson4', 'rkmk4'])
+def test_block_falls_onto_its_limit_at_the_free_fall_time(integrator, tmp_path):
+    h, mass = 0.5, 2.0
+    sim = slider(tmp_path, integrator, lower=-h, mass=mass)
+    sim.step(1000)
+    [impact] = sim.limits.impacts
+    # These methods are exact for a constant force, so the fall is the closed form:
+    # t* = sqrt(2 h / g), arriving at v = sqrt(2 g h). bound: the location's 1e-10 m at
+    # 3 m/s is 3e-11 s; rounding of the partial steps, 1e-13.
+    assert impact.time == pytest.approx(np.sqrt(2.0 * h / G), abs=1e-10)
+    # The impulse is m v: the joint's rate goes from −sqrt(2 g h) to 0.
+    assert impact.approach == pytest.approx(-np.sqrt(2.0 * G * h), rel=1e-9)
+    js = sim.joint_state()
+    assert abs(js.positions[0] + h) <= 1e-10 and abs(js.velocities[0]) <= 1e-9
+    np.testing.assert_allclose(js.efforts[0], mass * G, rtol=1e-9)   # rest: the weight
+
+
+def test_bouncing_block_rises_to_e_squared_of_its_drop(tmp_path):
+    h, e = 0.5, 0.5
+    sim = slider(tmp_path, 'lie_poisson2', lower=-h, limit_restitution=e)
+    apex = -np.inf
+    sim.step(400)                       # past the first impact (0.32 s)
+    assert len(sim.limits.impacts) == 1
+    for _ in range(400):                # up and down again (0.32 s of flight)
+        sim.step()
+        apex = max(apex, sim.joint_state().positions[0])
+    first, second = list(sim.limits.impacts)[:2]
+    assert first.rebound == pytest.approx(e * np.sqrt(2.0 * G * h), rel=1e-9)
+    # The apex of the bounce, sampled at the steps: e² h above the bound, to the
+    # sampling (v = g dt / 2 near the apex: g dt² / 8 = 1.2e-6 m at dt = 1e-3).
+    assert apex + h == pytest.approx(e * e * h, abs=2e-6)
+    assert second.approach == pytest.approx(-first.rebound, rel=1e-9)
+
+
+def test_a_push_away_releases_the_limit_and_a_weaker_one_does_not(tmp_path):
+    static = M * G * L * np.cos(UPPER)
+    for push, leaves in ((0.9 * static, False), (1.1 * static, True)):
+        sim = pendulum(tmp_path)
+        sim.step(1000)                                 # at rest on the upper bound
+        sim.set_joint_efforts({'j': -push})            # towards −q
+        sim.step(200)
+        q = sim.joint_state().positions[0]
+        if leaves:
+            assert sim.limits.counters.releases == 1
+            # (τ − m g L cos q) / I pulls it off: 0.1 static / I over 0.2 s.
+            assert q < UPPER - 1e-3
+        else:
+            assert sim.limits.counters.releases == 0
+            assert abs(q - UPPER) <= 1e-10
+
+
+def test_two_bounds_active_at_once_carry_the_statics(tmp_path):
+    # Two links on hinges about y, both falling into their upper bounds.
+    m1, m2, l1, c1, c2 = 1.0, 0.5, 0.4, 0.2, 0.15
+    up1, up2 = 0.3, 0.5
+    lim = 'effort="100" velocity="100"'
+    text = robot('arm2', link('world'),
+                 link('a', inertial(m1, xyz=(c1, 0, 0), ixx=1e-3, iyy=1e-3, izz=1e-3)),
+                 link('b', inertial(m2, xyz=(c2, 0, 0), ixx=1e-3, iyy=1e-3, izz=1e-3)),
+                 joint('j1', 'revolute', 'world', 'a', axis=(0, 1, 0),
+                       extra=f'<limit lower="-1" upper="{up1}" {lim}/>'),
+                 joint('j2', 'revolute', 'a', 'b', xyz=(l1, 0, 0), axis=(0, 1, 0),
+                       extra=f'<limit lower="-1" upper="{up2}" {lim}/>'))
+    sim = robot_scene(tmp_path, text, gravity=(0.0, 0.0, -G)).simulation
+    sim.step(3000)
+    js = sim.joint_state()
+    assert list(sim.limits.active) == [-1, -1]
+    np.testing.assert_allclose(js.positions, [up1, up2], atol=1e-10)
+    # Gravity's torques about each joint; each bound pushes back with their negative.
+    tau2 = m2 * G * c2 * np.cos(up1 + up2)
+    tau1 = m1 * G * c1 * np.cos(up1) + m2 * G * (l1 * np.cos(up1) + c2 * np.cos(up1 + up2))
+    np.testing.assert_allclose(js.efforts, [-tau1, -tau2], rtol=1e-9)
+
+
+def test_a_start_beyond_a_limit_converges_to_it(tmp_path):
+    sim = pendulum(tmp_path, initial_positions={'j': UPPER + 0.2})
+    assert list(sim.limits.active) == [-1]
+    sim.step(500)
+    # A violated row decays along exp(−t/τ) (τ = 0.05 s): 0.2 e^−10 = 9e-6 rad at 0.5 s;
+    # bound twice that for the discrete decay.
+    assert 0.0 <= sim.joint_state().positions[0] - UPPER <= 2.0 * 0.2 * np.exp(-10.0)
+
+
+def test_arm_under_random_efforts_never_passes_a_limit(tmp_path):
+    from joint_space_reference import urdf_path
+    from rigid_body_sim.scene import scene_from_dict
+    rng = np.random.default_rng(7)
+    sim = scene_from_dict({'dt': 1e-3, 'effects': {'gravity': {'g_world': [0, 0, -G]}},
+                           'robots': [{'urdf': urdf_path('arm7.urdf')}]},
+                          urdf_path('scene.yaml')).simulation
+    names = sim.joint_names()
+    specs = {j.name: j.spec for j in sim.joints.joints}
+    lower = np.array([specs[n].lower for n in names])
+    upper = np.array([specs[n].upper for n in names])
+    effort = np.array([specs[n].effort for n in names])
+    worst = 0.0
+    for k in range(40):                         # a new random effort every 50 ms, 2 s
+        sim.set_joint_efforts({n: float(rng.uniform(-0.6, 0.6) * effort[i])
+                               for i, n in enumerate(names) if n != 'finger_joint2'})
+        for _ in range(50):
+            sim.step()
+            q = sim.joint_state().positions
+            worst = max(worst, float(np.max(np.maximum(lower - q, q - upper))))
+    assert sim.limits.counters.impacts > 0
+    # bound: the location's 1e-10 at impacts, the rows' drift while active.
+    assert worst <= 1e-9
+
+
+@pytest.mark.parametrize('value, field, message', [
+    (1.5, 'robots[0].limit_restitution', 'in \\[0, 1\\]'),
+    ({'nope': 0.5}, 'robots[0].limit_restitution.nope', 'unknown joint'),
+    (float('nan'), 'robots[0].limit_restitution', 'finite'),
+])
+def test_bad_restitution_is_refused_naming_the_field(value, field, message, tmp_path):
+    with pytest.raises(SceneError, match=f'{re.escape(field)}: .*{message}'):
+        pendulum(tmp_path, limit_restitution=value)
+
+
+def test_limits_off_lets_the_joint_pass(tmp_path):
+    sim = pendulum(tmp_path, limits=False)
+    assert sim.limits is None
+    sim.step(600)
+    assert sim.joint_state().positions[0] > UPPER
+
+
+def test_limits_must_be_true_or_false(tmp_path):
+    with pytest.raises(SceneError, match='robots\\[0\\].limits: expected true or false'):
+        pendulum(tmp_path, limits='yes')
