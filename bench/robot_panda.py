@@ -10,20 +10,20 @@ the same URDF text, changed in two ways so that both simulate the same mechanism
 
 * the two finger joints (prismatic; ``panda_finger_joint2`` has a ``<mimic>`` of
   ``panda_finger_joint1``) become fixed at q = 0 and the ``<mimic>`` goes. Left
-  prismatic, ours enforces the mimic exactly (one row) but not yet the fingers'
-  position limits, so the fingers would slide out of their range as the arm
-  swings, while MuJoCo 4.0.0's URDF import turns the mimic into a soft joint
-  equality (``mjEQ_JOINT``, default solref/solimp) and enforces the URDF's finger
-  limits. Fixed, the fingers are lumped into link 7 in both: the arm's 7 revolute
-  joints are the only coordinates;
+  prismatic, ours enforces the mimic exactly (one row), while MuJoCo 4.0.0's URDF
+  import turns it into a soft joint equality (``mjEQ_JOINT``, default
+  solref/solimp). Fixed, the fingers are lumped into link 7 in both: the arm's 7
+  revolute joints are the only coordinates;
 * ``<dynamics>`` goes (damping 0.003 N m s/rad on the arm joints, 0.3 N s/m on the
   fingers; friction 0): MuJoCo's URDF import applies it as joint damping (and
   ``friction`` as ``frictionloss``); ours would damp by an exact flow, and does not
   simulate friction yet: without it, both simulate the same undamped mechanism.
 
-The position limits stay in the URDF: ours reads them and does not enforce them yet;
-MuJoCo's are switched off after loading (``jnt_limited = 0``), because the swing
-leaves the ranges (the table says when). For MuJoCo the URDF also loses its
+The position limits stay in the URDF, and both simulators are told not to enforce
+them (ours: the robot's ``limits: false``; MuJoCo: ``jnt_limited = 0`` after
+loading), because the swing leaves the ranges (the table says when) and the
+reference (Pinocchio) has none; ``bench/joint_limits.py`` swings the same Panda into
+its limits. For MuJoCo the URDF also loses its
 ``<visual>`` and ``<collision>`` elements (their ``package://`` meshes cannot be
 resolved, and neither simulator needs them here: ours ignores collision) and gains
 ``<mujoco><compiler discardvisual="true" fusestatic="true" balanceinertia="false"
@@ -166,22 +166,23 @@ def mujoco_urdf(xml: str, integrator: str) -> str:
 
 
 def our_scene(path: Path, integrator: str, tolerance: Optional[float] = None,
-              dt: float = DT):
+              dt: float = DT, limits: bool = False):
     """Our scene of the benchmark URDF at ``path``: fixed base, ready pose, gravity."""
     data = {'dt': dt, 'integrator': integrator,
             'effects': {'gravity': {'g_world': [0.0, 0.0, -G]}},
-            'robots': [{'urdf': str(path), 'fixed_base': True,
+            'robots': [{'urdf': str(path), 'fixed_base': True, 'limits': limits,
                         'initial_positions': dict(zip(ARM, READY))}]}
     if tolerance is not None:
         data['tolerance'] = tolerance
     return scene_from_dict(data, str(path))
 
 
-def mujoco_model(xml: str, integrator: str, dt: float = DT):
-    """Return MuJoCo's model of the benchmark URDF (joint limits off), the arm's qpos indices."""
+def mujoco_model(xml: str, integrator: str, dt: float = DT, limits: bool = False):
+    """Return MuJoCo's model of the benchmark URDF (limits off unless asked), qpos indices."""
     model = mujoco.MjModel.from_xml_string(mujoco_urdf(xml, integrator))
     model.opt.timestep = dt
-    model.jnt_limited[:] = 0
+    if not limits:
+        model.jnt_limited[:] = 0
     model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     idx = np.array([model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j)]
                     for j in ARM])

@@ -13,7 +13,8 @@ Then ``bench/constraints.py`` (chains, trees, rings, joints), ``bench/knob_estim
 ``bench/inertia_form.py`` (the tree solve in inertia form against the row-space one),
 ``bench/shake_convergence.py`` (SHAKE's iterations) and ``bench/reactions.py`` (reading
 the reactions after a step; ``--skip-constraints`` skips these six),
-``bench/mujoco_peer.py``, ``bench/robot_panda.py`` (the Franka Panda's URDF) and
+``bench/mujoco_peer.py``, ``bench/robot_panda.py`` (the Franka Panda's URDF),
+``bench/joint_limits.py`` (the Panda into its limits) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
 latency; with the Panda, joint_states and /tf at 1 kHz; ``--skip-node``).
@@ -287,6 +288,9 @@ def sections(quick: bool, node_args: list) -> list:
         ('skip_mujoco', 'robot_panda', ['--quick'] if quick else [], report.Section(
             'The Franka Panda, beside MuJoCo', f'./dev.sh python bench/robot_panda.py{q}',
             [T('robot_panda.md')])),
+        ('skip_mujoco', 'joint_limits', ['--quick'] if quick else [], report.Section(
+            'Joint limits: the Panda swinging into its bounds',
+            f'./dev.sh python bench/joint_limits.py{q}', [T('joint_limits.md')])),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],

@@ -10,6 +10,7 @@ import re
 
 import numpy as np
 import pytest
+from rigid_body_sim.core.errors import SpecError
 from rigid_body_sim.core.limits import LOCATION_TOLERANCE
 from rigid_body_sim.scene import SceneError
 from robot_helpers import inertial, joint, link, robot, robot_scene
@@ -65,6 +66,22 @@ def test_pendulum_comes_to_rest_on_its_limit_with_the_static_torque(integrator, 
     # one acceleration-level solve of a 6-row system in double precision: 1e-12 relative.
     np.testing.assert_allclose(js.efforts[0], -M * G * L * np.cos(UPPER), rtol=1e-9)
     assert sim.limits.counters.releases == 0
+
+
+def test_the_bounds_reaction_is_the_joints_and_its_row_is_not_a_constraint(tmp_path):
+    sim = pendulum(tmp_path)
+    sim.step(1500)
+    assert sim.joint_limits()['active'] == {'j': 'upper'}
+    assert sim.constraint_names == ['j']            # the bound's row counts as the joint's
+    [joint] = sim.reactions()['j'].values()        # on the rod (the world is not listed)
+    weight = np.array([0.0, 0.0, -M * G])
+    com = L * np.array([np.cos(UPPER), 0.0, -np.sin(UPPER)])   # from the pivot (anchor)
+    # At rest the hinge and its bound hold the rod's weight and its moment. bound: one
+    # solve in double precision, 1e-12 of |m g| and |m g L|.
+    np.testing.assert_allclose(joint.force_world, -weight, atol=1e-11)
+    np.testing.assert_allclose(joint.torque_anchor_world, -np.cross(com, weight), atol=1e-11)
+    with pytest.raises(SpecError, match='j_limit.*holds'):
+        sim.remove_constraint('j_limit')
 
 
 def _swing_impact_time():

@@ -618,9 +618,9 @@ def build_robot(spec: RobotSpec) -> RobotModel:
                                       axis_world=axis if j.kind is not JointKind.FIXED
                                       else None))
         if j.kind in ONE_DOF and (j.lower is not None or j.upper is not None) \
-                and j.kind is not JointKind.CONTINUOUS:
+                and j.kind is not JointKind.CONTINUOUS and not spec.enforce_limits:
             notes.append(f'joint {pre + j.name!r}: position limits [{j.lower}, {j.upper}] are '
-                         f'read but not enforced yet')
+                         f'read but not enforced (the robot has limits: false)')
         if j.kind in ONE_DOF and j.effort == 0.0:
             notes.append(f'joint {pre + j.name!r}: <limit effort="0"> is read as no effort '
                          f'limit (commands are not clamped)')

@@ -830,6 +830,10 @@ class Simulation:
         """
         solver = self.dynamics.solver
         constraints = solver.constraints
+        if self.limits is not None and isinstance(constraint, Constraint) \
+                and constraint.name in [self.limits.names[i] for i in self.limits.joints]:
+            raise SpecError('name', f'{constraint.name!r} is the name of the row that holds '
+                                    f'a joint on its limit: choose another')
         constraints.add(constraint, self.state)
         try:
             residual = solver.reach(self.state)
@@ -870,8 +874,32 @@ class Simulation:
 
     @property
     def constraint_names(self) -> list:
-        """Names of the constraints, in the order they were added."""
-        return self.dynamics.solver.constraints.names
+        """
+        Names of the constraints, in the order they were added.
+
+        Not the rows that hold joints on their bounds (:mod:`.limits`): they come and
+        go with the motion, and count as their joints' (reactions, violations).
+        """
+        names = self.dynamics.solver.constraints.names
+        if self.limits is None or not self.limits.active.any():
+            return names
+        rows = {self.limits.names[i] for i in np.flatnonzero(self.limits.active)}
+        return [name for name in names if name not in rows]
+
+    def joint_limits(self) -> dict:
+        """
+        Return what the joint limits do now: active bounds, counters, latest impacts.
+
+        ``{'active': {joint: 'lower' | 'upper'}, 'counters': {...}, 'impacts':
+        [Impact, ...]}`` (see :mod:`.limits`); empty when no joint has an enforced
+        limit.
+        """
+        lim = self.limits
+        if lim is None:
+            return {}
+        return {'active': {self.joints.names[i]: 'lower' if lim.active[i] > 0 else 'upper'
+                           for i in np.flatnonzero(lim.active)},
+                'counters': lim.counters.as_dict(), 'impacts': list(lim.impacts)}
 
     # -- outputs --------------------------------------------------------------------------
 
@@ -921,8 +949,13 @@ class Simulation:
         if not self.dynamics.constrained:
             return {}
         phi = solver.violation(self.state)
-        return {name: float(np.max(np.abs(phi[solver.constraints.rows_of(name)])))
-                for name in solver.constraints.names}
+        out = {name: float(np.max(np.abs(phi[solver.constraints.rows_of(name)])))
+               for name in solver.constraints.names}
+        if self.limits is not None:   # a bound's row counts as its joint's
+            for i in np.flatnonzero(self.limits.active):
+                joint, bound = self.joints.names[i], out.pop(self.limits.names[i])
+                out[joint] = max(out.get(joint, 0.0), bound)
+        return out
 
     def reactions(self) -> dict:
         """
@@ -941,8 +974,29 @@ class Simulation:
         if not self.dynamics.constrained:
             return {}
         fields = self.dynamics.solver.reactions(self.dynamics, self.state)
+        if self.limits is not None and self.limits.active.any():
+            self._merge_limit_reactions(fields)
         return {name: {body: Reaction(**f) for body, f in per_body.items()}
                 for name, per_body in fields.items()}
+
+    def _merge_limit_reactions(self, fields: dict) -> None:
+        """Add each active bound's reaction into its joint's (about the joint's anchor)."""
+        com = self.state.pos_com_world
+        for i in np.flatnonzero(self.limits.active):
+            extra = fields.pop(self.limits.names[i], {})
+            own = fields.get(self.joints.names[i])
+            if own is None:
+                continue
+            for body, f in extra.items():
+                mine = own.get(body)
+                if mine is None:
+                    continue
+                force = mine['force_world'] + f['force_world']
+                torque = mine['torque_com_world'] + f['torque_com_world']
+                lever = mine['anchor_world'] - com[self.bodies.lookup(body)]
+                own[body] = {'force_world': force, 'torque_com_world': torque,
+                             'torque_anchor_world': torque - so3.cross(lever, force),
+                             'anchor_world': mine['anchor_world']}
 
     def joint_anchors(self) -> dict:
         """

@@ -682,6 +682,15 @@ class SimNode(Node):
             values['joint_efforts_superseded'] = str(session.efforts_superseded)
             values['joint_targets_superseded'] = str(session.targets_superseded)
             values['group_commands_all_nan'] = str(session.group_noops)
+            limits = sim.joint_limits()
+            if limits:
+                # Joints on a bound now, and what the limits did since the reset.
+                values['joint_limits_active'] = ' '.join(
+                    f'{joint}:{side}' for joint, side in limits['active'].items()) or 'none'
+                c = limits['counters']
+                values['joint_limit_impacts_total'] = str(c['impacts'])
+                values['joint_limit_releases_total'] = str(c['releases'])
+                values['joint_limit_excess_max'] = f'{c["max_violation"]:.3g}'
         rejected = session.totals.rejected
         for cause in Rejection:
             values[f'rejected_{cause.value}'] = str(rejected.get(cause.value, 0))
