@@ -45,21 +45,38 @@ DT = panda.DT
 
 
 def run_ours(sim, lower: np.ndarray, upper: np.ndarray):
-    """Run ``sim`` from its initial state n steps, reading the joint state after each."""
+    """
+    Run ``sim`` from its initial state n steps, reading the joint state after each.
+
+    Besides the total, each step's own wall time and what the limits did in it: an
+    impact or a release (the active set changed), a bound active throughout, or
+    none active (``kinds``: 'event', 'resting', 'free').
+    """
     def run(n: int) -> tuple:
         sim.reset()
         q = np.empty((n + 1, len(lower)))
         q[0] = sim.joint_state().positions
+        lim = sim.limits
+        each = np.empty(n)
+        kinds = []
         gc.collect()
-        t0 = time.perf_counter()
+        clock = time.perf_counter
+        t0 = clock()
         for k in range(1, n + 1):
+            t = clock()
+            before = None if lim is None else (lim.counters.activations + lim.counters.releases,
+                                               bool(lim.active.any()))
             sim.step()
             q[k] = sim.joint_state().positions
-        wall = time.perf_counter() - t0
-        lim = sim.limits
+            each[k - 1] = clock() - t
+            if lim is not None:
+                changed = lim.counters.activations + lim.counters.releases != before[0]
+                kinds.append('event' if changed else 'resting' if before[1] else 'free')
+        wall = clock() - t0
         counts = ({} if lim is None else
                   dict(lim.counters.as_dict(), first=min((i.time for i in lim.impacts),
-                                                         default=None)))
+                                                         default=None),
+                       each=each, kinds=np.array(kinds)))
         return wall, q, counts
     return run
 
@@ -93,7 +110,7 @@ def measure(variants: list, n: int, reps: int) -> dict:
     walls = {name: [] for name, _ in variants}
     records = {}
     for name, run in variants:
-        run(20)   # untimed: first calls, caches
+        run(n)   # untimed: first calls and the kernels an impact loads on first use
     for rep in range(reps):
         shift = rep % len(variants)
         for name, run in variants[shift:] + variants[:shift]:
@@ -126,11 +143,7 @@ def joint_limits(quick: bool, reps: int) -> dict:
             variants.append((f'MuJoCo {integrator}, limits {"on" if limits else "off"}',
                              run_mujoco(model, idx)))
     res = measure(variants, n, reps)
-    # The first part: steps before our first impact, timed again over that span alone.
-    first = res['records']['ours lie_poisson2, limits on'][1].get('first')
-    n_free = int(first / DT) - 1 if first is not None else n
-    res['before'] = measure(variants[:2], max(n_free, 1), reps)['walls']
-    res.update(lower=lower, upper=upper, names=names, n=n, n_free=n_free, first=first)
+    res.update(lower=lower, upper=upper, names=names, n=n)
     return res
 
 
@@ -156,15 +169,26 @@ def table(res: dict) -> str:
                   f'{counts["impacts"]}, {counts["releases"]}, {counts["located_steps"]}')
         rows.append(f'| {name} | {med * 1e6:.1f} | {med / base[key]:.2f} | {ex.max():.2e} | '
                     f'{", ".join(touched) or "none"} | {events} |')
-    before = res['before']
-    off, on = (statistics.median(before[k]) for k in ('ours lie_poisson2, limits off',
-                                                      'ours lie_poisson2, limits on'))
-    first = res['first']
+    counts = records['ours lie_poisson2, limits on'][1]
+    each, kinds = counts['each'], counts['kinds']
+    off_each = statistics.median(walls['ours lie_poisson2, limits off'])
+    parts = []
+    for kind, what in (('free', 'no bound active (checked only)'),
+                       ('resting', 'a bound active throughout (its multiplier checked)'),
+                       ('event', 'an impact or a release (rows added or removed, the impact '
+                                 'located)')):
+        sel = each[kinds == kind]
+        if len(sel):
+            parts.append(f'| {what} | {len(sel)} | {np.median(sel) * 1e6:.1f} | '
+                         f'{np.median(sel) / off_each:.2f} |')
+    first = counts.get('first')
     lines = ['\n'.join(rows), '',
-             f'Before the first impact (the first {res["n_free"]} steps, '
-             f'{"no impact" if first is None else f"first impact at {first:.4f} s"}): ours '
-             f'{off * 1e6:.1f} us/step with the limits off, {on * 1e6:.1f} with them on '
-             f'(checked, none active): {on / off:.2f} times.']
+             'Ours with the limits on, step by step (each step timed alone, in the first '
+             f'timed run; first impact at {first:.4f} s), against the median step of the '
+             'run with the limits off:' if first is not None else
+             'Ours with the limits on, step by step (no impact in this run):', '',
+             '| steps with | steps | median us / step | / limits off |', '|---|---|---|---|',
+             *parts]
     return '\n'.join(lines)
 
 

@@ -15,9 +15,14 @@ while a joint rests on its bound it drifts from it no more than a joint's drift.
 active set changes only between (partial) steps, by two rules that are the pivots of
 a direct method on the complementarity conditions:
 
-* **release**: before each (partial) step, an active bound whose multiplier at the
-  acceleration level pulls (``s f < 0``: the joint would accelerate away) is dropped,
-  the most pulling first, the multipliers solved again after each drop;
+* **release**: after a step whose own acceleration-level solve found an active bound
+  pulling (``s f < 0``: the joint would accelerate away), the bound leaves the active
+  set, the most pulling first, one per step. The step's multipliers are those of its
+  last kick or stage (the splittings' first kick when they have no damping: at the
+  step's start), so a bound leaves at most one step late, first order in the release
+  time; resting on a bound costs no solve beyond the step's own. A joint released
+  while its acceleration still points into its bound meets it again at once (an
+  inelastic contact at the next step's start);
 * **impact**: a step after which an inactive bound is crossed (``g < −tol``) is taken
   again up to the moment ``t*`` of the crossing, located by regula falsi (Illinois) on
   partial steps from the step's start until ``|g| ≤`` :data:`LOCATION_TOLERANCE`; there
@@ -50,16 +55,21 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .errors import SpecError
+from .kernels.joints import any_beyond
 from .validate import finite_scalar
 
 #: rad or m: how far past its bound a joint may be where an impact is located (the
 #: stated bound of the violation at impacts; while a bound is active the joint's
 #: drift is that of every constraint).
 LOCATION_TOLERANCE = 1e-10
+#: rad/s or m/s: a joint on its bound moving into it more slowly than this is at rest
+#: there, not hitting it (rounding leaves rates of 1e-16 after an inelastic impact).
+RATE_TOLERANCE = 1e-9
 #: Most regula-falsi iterations to locate one impact (each a partial step).
 MAX_LOCATION_ITERATIONS = 40
 #: Impacts in one step after which the next ones are inelastic (Zeno's cut).
 MAX_BOUNCES = 8
+EPS = float(np.finfo(float).eps)
 #: Most impacts in one step: beyond them the step is accepted as it is and the
 #: excess counted in ``limit_residual`` (never silently).
 MAX_EVENTS = 32
@@ -130,10 +140,16 @@ class JointLimits:
                                                      | np.isfinite(self.upper))
         #: Indices of the joints with enforced limits.
         self.joints = np.flatnonzero(limited)
+        # The bounds of the limited joints, each widened by the tolerance: what a step's
+        # end is checked against (one comparison each, nothing else, while all are free).
+        self._low = self.lower[self.joints] - LOCATION_TOLERANCE
+        self._high = self.upper[self.joints] + LOCATION_TOLERANCE
         self.restitution = np.asarray(restitution, dtype=float).reshape(k)
         self.names = [limit_name(space.names[i]) for i in range(k)]
         #: Per joint: 0 free, +1 on its lower bound, −1 on its upper bound.
         self.active = np.zeros(k, dtype=int)
+        #: The row in Φ and λ of each active bound (joint -> row), kept by the caller.
+        self.rows: dict = {}
         self.counters = LimitCounters()
         #: The latest impacts (at most IMPACT_LOG), oldest first.
         self.impacts: deque = deque(maxlen=IMPACT_LOG)
@@ -145,6 +161,7 @@ class JointLimits:
     def reset(self) -> None:
         """Forget the active set and the counters."""
         self.active[:] = 0
+        self.rows = {}
         self.counters = LimitCounters()
         self.impacts.clear()
 
@@ -167,6 +184,8 @@ class JointLimits:
 
     def crossed(self, q: np.ndarray) -> np.ndarray:
         """Return the free joints beyond a bound by more than the tolerance (indices)."""
+        if not any_beyond(q, self.joints, self._low, self._high):
+            return self.joints[:0]
         gap, _ = self.gaps(q)
         free = self.active[self.joints] == 0
         return self.joints[free & (gap < -LOCATION_TOLERANCE)]
@@ -175,6 +194,20 @@ class JointLimits:
         """Return the smallest gap of joints ``which`` at ``q`` (the event function)."""
         lo, hi = q[which] - self.lower[which], self.upper[which] - q[which]
         return float(np.min(np.minimum(lo, hi)))
+
+    def event(self, q: np.ndarray, rates: np.ndarray, which: np.ndarray) -> tuple:
+        """
+        Return the event function of joints ``which``: (smallest gap, whether moving in).
+
+        The second is whether the joint of the smallest gap moves into its bound
+        faster than :data:`RATE_TOLERANCE` (an impact, when the gap is within the
+        tolerance; a joint on its bound and leaving it, or at rest there, is none).
+        """
+        lo, hi = q[which] - self.lower[which], self.upper[which] - q[which]
+        gaps = np.minimum(lo, hi)
+        k = int(np.argmin(gaps))
+        side = 1.0 if lo[k] <= hi[k] else -1.0
+        return float(gaps[k]), side * rates[which[k]] < -RATE_TOLERANCE
 
     def touching(self, q: np.ndarray, rates: np.ndarray) -> list:
         """
@@ -188,25 +221,25 @@ class JointLimits:
                 continue
             for side, b in ((1, self.lower[i]), (-1, self.upper[i])):
                 gap = side * (q[i] - b)
-                if gap <= LOCATION_TOLERANCE and side * rates[i] < 0.0:
+                if gap <= LOCATION_TOLERANCE and side * rates[i] < -RATE_TOLERANCE:
                     out.append((int(i), side, float(side * rates[i])))
         return out
 
-    def pulling(self, forces: np.ndarray) -> np.ndarray:
+    def most_pulling(self, lam: np.ndarray) -> int:
         """
-        Active joints whose bound pulls, most pulling first.
+        Return the active joint whose bound pulls most in the multipliers ``lam``, or −1.
 
-        ``forces`` (k,): the generalized force each active bound applies along its
-        joint (``−λ``); a bound pulls when ``s f < 0`` beyond rounding (64 ulps of
-        the largest such force).
+        A bound's row ``Φ = q − bound`` applies ``f = −λ`` along its joint (row
+        :attr:`rows`); it pulls when ``s f < 0`` beyond rounding (64 ulps of the
+        largest such force). A loop over the few active bounds, not arrays.
         """
-        act = np.flatnonzero(self.active)
-        if not len(act):
-            return act
-        push = self.active[act] * forces[act]
-        scale = float(np.max(np.abs(forces[act])))
-        bad = push < -64.0 * np.finfo(float).eps * scale
-        return act[bad][np.argsort(push[bad])]
+        worst, which, scale = 0.0, -1, 0.0
+        for i, row in self.rows.items():
+            push = -self.active[i] * float(lam[row])
+            scale = max(scale, abs(push))
+            if push < worst:
+                worst, which = push, i
+        return which if worst < -64.0 * EPS * scale else -1
 
 
 def restitution_of(value: Any, names: list, field_name: str) -> np.ndarray:

@@ -790,11 +790,18 @@ class JointSpace:
         """
         Coordinates (k,) and rates (k,) at the outputs ``out``, angles unwrapped near ``previous``.
 
-        Reads only: neither the tracked coordinates nor the counters change.
+        Reads only: neither the tracked coordinates nor the counters change. Returns
+        ``(positions, rates, over)``, ``over`` the rates beyond their limits.
         """
         positions, rates = np.array(previous, dtype=float), np.empty(len(self.joints))
-        joint_coordinates(out, self.table, True, positions, rates)
-        return positions, rates
+        over = joint_coordinates(out, self.table, True, positions, rates)
+        return positions, rates, over
+
+    def adopt(self, positions: np.ndarray, over: int) -> None:
+        """Take ``positions`` from :meth:`coordinates` of a step's end as :meth:`track` would."""
+        self.positions = positions
+        self.tracked = True
+        self.counters['velocity_limit_excursions'] += over
 
     def state(self, out: np.ndarray, time_mid: float, names: Optional[Sequence] = None
               ) -> JointState:

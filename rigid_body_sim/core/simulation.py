@@ -253,15 +253,19 @@ class Simulation:
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
             t_end = self._time_base + (steps + 1) * dt
+            seen = None
             if limited:
-                new = self._limited_step(self.state, t_end)
+                new, seen = self._limited_step(self.state, t_end)
             else:
                 new = self._advance(self.state, dt, t_end)
             self.state = new
             self._steps = steps + 1
             if self._tracking:
                 self.bodies.outputs(new)
-                self.joints.track(self.bodies.outputs_cache.out)
+                if seen is not None:   # the limits' check read the coordinates at new
+                    self.joints.adopt(*seen)
+                else:
+                    self.joints.track(self.bodies.outputs_cache.out)
                 if self.drives is not None and self.drives.recenter(self.joints.positions):
                     dyn.changed()
             if self._wrenches is not None and len(self._wrenches):
@@ -292,37 +296,45 @@ class Simulation:
 
     # -- joint limits (see .limits) -------------------------------------------------------
 
-    def _limited_step(self, start: State, t_end: float) -> State:
+    def _limited_step(self, start: State, t_end: float) -> tuple:
         """
         Take a step with joint limits: release pulling bounds, locate and resolve impacts.
 
         See :mod:`.limits`; the step ends at ``t_end`` whatever the impacts inside it.
+        Returns the new state and ``(coordinates, rates over their limits)`` there (or
+        None), which the tracking of the joints takes instead of reading them again.
         """
         lim = self.limits
         state, previous = start, self.joints.positions
         events = 0
         while True:
-            self._release_pulling(state)
             h = t_end - state.time
             if h <= 4.0 * np.finfo(float).eps * abs(t_end):   # an impact at the step's end
-                return State(t_end, *state.parts)
+                return State(t_end, *state.parts), None
             new = self._advance(state, h, t_end)
-            q, _ = self._coordinates(new, previous)
+            q, _, over = self._coordinates(new, previous)
             crossed = lim.crossed(q)
             if not len(crossed):
-                return new
+                if lim.rows:
+                    # A bound that pulled in this step's own solve leaves the active set
+                    # for the next step (a pivot; the most pulling first, one per step).
+                    i = lim.most_pulling(self.dynamics.last_multipliers)
+                    if i >= 0:
+                        self._deactivate(i)
+                        lim.counters.releases += 1
+                return new, (q, over)
             if events >= MAX_EVENTS:
                 lim.counters.events_capped += 1
                 gap = -lim.worst_gap(q, crossed)
                 lim.counters.max_violation = max(lim.counters.max_violation, gap)
-                return new
+                return new, (q, over)
             lim.counters.located_steps += 1
             state, previous, rates = self._locate(state, previous, h, t_end, new, q, crossed)
             state = self._impact(state, previous, rates, crossed, events)
             events += 1
 
     def _coordinates(self, state: State, previous: np.ndarray) -> tuple:
-        """Joint coordinates and rates at ``state``, angles unwrapped near ``previous``."""
+        """Joint coordinates, rates, rates over their limits at ``state`` (near ``previous``)."""
         self.bodies.outputs(state)
         return self.joints.coordinates(self.bodies.outputs_cache.out, previous)
 
@@ -339,23 +351,28 @@ class Simulation:
         rounding.
         """
         lim = self.limits
-        q0, r0 = self._coordinates(state, previous)
-        a, ga, at = 0.0, lim.worst_gap(q0, crossed), (state, q0, r0)
-        b, gb = h, lim.worst_gap(q_end, crossed)
+        q0, r0, _ = self._coordinates(state, previous)
+        a, b, gb = 0.0, h, lim.worst_gap(q_end, crossed)
+        ga, approaching = lim.event(q0, r0, crossed)
+        at = (state, q0, r0)
         if ga <= LOCATION_TOLERANCE:
-            return at
+            if approaching:
+                return at             # an impact right at the start
+            # A joint on its bound that leaves it (or rests there) crosses later, if at all:
+            # the crossing sought is the first one after the start.
+            ga = LOCATION_TOLERANCE
         stuck = 0
         for _ in range(MAX_LOCATION_ITERATIONS):
             s = (a * gb - b * ga) / (gb - ga)
             if not a < s < b:
                 s = 0.5 * (a + b)
             trial = self._advance(state, s, state.time + s)
-            q, r = self._coordinates(trial, previous)
-            g = lim.worst_gap(q, crossed)
-            if abs(g) <= LOCATION_TOLERANCE:
+            q, r, _ = self._coordinates(trial, previous)
+            g, approaching = lim.event(q, r, crossed)
+            if abs(g) <= LOCATION_TOLERANCE and approaching:
                 return trial, q, r
-            if g > 0.0:
-                a, ga, at = s, g, (trial, q, r)
+            if g > -LOCATION_TOLERANCE:   # before the crossing (or on a bound, leaving it)
+                a, ga, at = s, max(g, LOCATION_TOLERANCE), (trial, q, r)
                 if stuck == 1:
                     gb *= 0.5
                 stuck = 1
@@ -417,32 +434,20 @@ class Simulation:
         self.dynamics.solver.constraints.add(spec, state)
         lim.active[i] = side
         lim.counters.activations += 1
+        self._limit_rows()
         self.dynamics.changed()
 
     def _deactivate(self, i: int) -> None:
         lim = self.limits
         self.dynamics.solver.constraints.remove(lim.names[i])
         lim.active[i] = 0
+        self._limit_rows()
         self.dynamics.changed()
 
-    def _limit_forces(self, state: State) -> np.ndarray:
-        """Generalized force (k,) each active bound applies along its joint at ``state``."""
-        lim, solver = self.limits, self.dynamics.solver
-        lam = solver.multipliers(self.dynamics, state)
-        forces = np.zeros(len(self.joints))
-        for i in np.flatnonzero(lim.active):
-            forces[i] = -lam[solver.constraints.rows_of(lim.names[i])[0]]
-        return forces
-
-    def _release_pulling(self, state: State) -> None:
-        """Drop active bounds that pull at ``state``, the most pulling first, one at a time."""
-        lim = self.limits
-        while lim.active.any():
-            bad = lim.pulling(self._limit_forces(state))
-            if not len(bad):
-                return
-            self._deactivate(int(bad[0]))
-            lim.counters.releases += 1
+    def _limit_rows(self) -> None:
+        """Record each active bound's row (rows shift as constraints come and go)."""
+        lim, rows_of = self.limits, self.dynamics.solver.constraints.rows_of
+        lim.rows = {int(i): int(rows_of(lim.names[i])[0]) for i in np.flatnonzero(lim.active)}
 
     def _limits_from_state(self) -> None:
         """

@@ -106,3 +106,13 @@ def joint_coordinates(out: np.ndarray, joint: np.ndarray, unwrap: bool,
         if abs(rate) > row[J_VELOCITY_LIMIT]:
             over += 1
     return over
+
+
+@njit(cache=True)
+def any_beyond(q: np.ndarray, idx: np.ndarray, low: np.ndarray, high: np.ndarray) -> bool:
+    """Tell whether some ``q[idx[j]]`` lies below ``low[j]`` or above ``high[j]``."""
+    for j in range(idx.shape[0]):
+        x = q[idx[j]]
+        if x < low[j] or x > high[j]:
+            return True
+    return False
