@@ -43,6 +43,7 @@ A scene file::
         keep_fixed: [ft_sensor_joint]       # fixed joints kept as welds (reaction published)
         limits: true                        # hold joints within their URDF <limit lower upper>
         limit_restitution: 0.0              # Newton's e at the bounds, or {joint: e}
+        friction: true                      # Coulomb friction of <dynamics friction>
     command_groups:                 # joints commanded together (others take efforts)
       - {name: arm_controller, joints: [joint1, joint2], interface: position,
          mode: servo, kp: 100.0, kd: 5.0}   # effort | position | velocity; N m/rad, N m s/rad
@@ -81,7 +82,7 @@ TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constr
 GROUP_KEYS = ('name', 'joints', 'interface', 'mode', 'kp', 'kd')
 ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
               'initial_positions', 'initial_velocities', 'keep_fixed', 'limits',
-              'limit_restitution')
+              'limit_restitution', 'friction')
 ROBOT_SUFFIXES = ('.urdf', '.xacro')
 CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
                    'anchor_b_body', 'axis_world', 'length')
@@ -305,6 +306,9 @@ def _robots(data: Any, source: str) -> list:
         limits = entry.get('limits', True)
         if not isinstance(limits, bool):
             raise SpecError(f'{field}.limits', f'expected true or false, got {limits!r}')
+        friction = entry.get('friction', True)
+        if not isinstance(friction, bool):
+            raise SpecError(f'{field}.friction', f'expected true or false, got {friction!r}')
         name = entry.get('name', parsed.name)
         if not isinstance(name, str) or not name:
             raise SpecError(f'{field}.name', f'expected a non-empty string, got {name!r}')
@@ -314,7 +318,8 @@ def _robots(data: Any, source: str) -> list:
                          initial_velocities=entry.get('initial_velocities') or {},
                          keep_fixed=tuple(keep), prefix=prefix, source=str(path),
                          enforce_limits=limits,
-                         limit_restitution=entry.get('limit_restitution', 0.0))
+                         limit_restitution=entry.get('limit_restitution', 0.0),
+                         enforce_friction=friction)
         out.append((spec, parsed))
     return out
 

@@ -157,8 +157,10 @@ def test_exact_efforts_are_the_inverse_dynamics(seed, tmp_path):
     rng = np.random.default_rng(seed)
     reference = JointSpaceModel.from_urdf(open(urdf_path('arm7.urdf')).read())
     driven = ['joint2', 'joint4', 'joint6']
-    # (the fingers apart: without their mimic, which test_mimic_joints.py covers)
-    data = {'dt': 1e-3, 'robots': [{'urdf': arm7_free_fingers(tmp_path)}],
+    # (the fingers apart: without their mimic, which test_mimic_joints.py covers; limits
+    # and friction off: the reference has neither)
+    data = {'dt': 1e-3, 'robots': [{'urdf': arm7_free_fingers(tmp_path), 'limits': False,
+                                    'friction': False}],
             'effects': {'gravity': {'g_world': [0.0, 0.0, -G]}},
             'command_groups': [{'name': 'exact', 'joints': driven, 'interface': 'position',
                                 'mode': 'exact'}]}
@@ -252,8 +254,9 @@ def test_drives_keep_their_joints_rows_independent_and_tree_solved():
     # the linear-time tree solve (its fingers' mimic row, over three bodies, is the loop
     # solve's one closure row), and no factorization meets a redundant row.
     from rigid_body_sim.core.kernels.layout import Solve
+    # (friction off: its sticking rows would be rows of the component too)
     data = {'dt': 1e-3, 'effects': {'gravity': {'g_world': [0.0, 0.0, -G]}},
-            'robots': [{'urdf': urdf_path('arm7.urdf')}],
+            'robots': [{'urdf': urdf_path('arm7.urdf'), 'friction': False}],
             'command_groups': [{'name': 'exact', 'joints': ['joint2', 'joint4', 'joint6'],
                                 'interface': 'position', 'mode': 'exact'}]}
     sim = scene_from_dict(data, urdf_path('scene.yaml')).simulation

@@ -93,9 +93,11 @@ def test_damped_arm_accelerations_are_the_joint_space_dynamics(seed, tmp_path):
     # (the fingers apart: without their mimic, which test_mimic_joints.py covers).
     rng = np.random.default_rng(seed)
     reference = JointSpaceModel.from_urdf(open(urdf_path('arm7.urdf')).read())
-    # (limits off: the random states may lie beyond them, and the reference has none)
+    # (limits and friction off: the random states may lie beyond the limits, and the
+    # reference has neither)
     sim = scene_from_dict({'dt': 1e-3, 'effects': {'gravity': {}},
-                           'robots': [{'urdf': arm7_free_fingers(tmp_path), 'limits': False}]},
+                           'robots': [{'urdf': arm7_free_fingers(tmp_path), 'limits': False,
+                                       'friction': False}]},
                           urdf_path('s.yaml')).simulation
     names = sim.joint_names()
     q = np.concatenate([rng.uniform(-2.5, 2.5, 7), rng.uniform(0.0, 0.04, 2)])
@@ -177,8 +179,9 @@ def test_servo_holds_a_robot_against_gravity():
                'kd': 20.0},
               {'name': 'hand', 'joints': ['finger_joint1', 'finger_joint2'],
                'interface': 'position', 'kp': 100.0, 'kd': 5.0}]
+    # (friction off: it would hold the arm anywhere within ±F of that balance)
     sim = scene_from_dict({'dt': 1e-3, 'effects': {'gravity': {}}, 'command_groups': groups,
-                           'robots': [{'urdf': urdf_path('arm7.urdf')}]},
+                           'robots': [{'urdf': urdf_path('arm7.urdf'), 'friction': False}]},
                           urdf_path('s.yaml')).simulation
     target = np.array([0.3, -0.5, 0.2, -1.5, 0.1, 1.2, 0.4])
     sim.command_joints(dict(zip(names + ['finger_joint1', 'finger_joint2'],

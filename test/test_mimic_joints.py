@@ -84,8 +84,9 @@ def test_arm7_gripper_follows_its_leader_as_the_reduced_dynamics(seed):
     # a closure row of the loop solve (the arm has 48 rows).
     rng = np.random.default_rng(seed)
     ref = JointSpaceModel.from_urdf(open(urdf_path('arm7.urdf')).read())
-    # (limits off: the random states may lie beyond them, and the reference has none)
-    sim = load('arm7.urdf', limits=False)
+    # (limits and friction off: the random states may lie beyond the limits, and the
+    # reference has neither)
+    sim = load('arm7.urdf', limits=False, friction=False)
     assert [c.solve for c in sim.dynamics.solver.kernel_setup().components] == [Solve.LOOP]
     names = sim.joint_names()
     q = np.concatenate([rng.uniform(-2.5, 2.5, 7), rng.uniform(0.0, 0.04, 1)])

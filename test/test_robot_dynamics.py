@@ -87,9 +87,9 @@ def test_arm7_accelerations_are_the_joint_space_dynamics(seed, tmp_path):
     # is test_mimic_joints.py's).
     rng = np.random.default_rng(seed)
     reference = JointSpaceModel.from_urdf(open(urdf_path('arm7.urdf')).read())
-    # The random states may lie beyond the URDF's limits, which the reference does not
-    # have: the robot's limits are off (test_joint_limits.py has them).
-    sim = robot_sim(arm7_free_fingers(tmp_path), limits=False)
+    # The random states may lie beyond the URDF's limits, and the reference has neither
+    # limits nor friction: both are off here (test_joint_limits.py has them).
+    sim = robot_sim(arm7_free_fingers(tmp_path), limits=False, friction=False)
     names = sim.joint_names()
     assert names == reference.joint_names
     q = np.concatenate([rng.uniform(-2.5, 2.5, 7), rng.uniform(0.0, 0.04, 2)])

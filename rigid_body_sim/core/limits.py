@@ -1,5 +1,7 @@
 """
-Joint position limits: unilateral rows held by an active set, impacts located inside a step.
+Joint limits and joint Coulomb friction: rows with bounds, an active set, located events.
+
+(The steps with their events: :mod:`.joint_events`; friction: :class:`JointFriction`.)
 
 A robot joint with a URDF ``<limit lower upper>`` (revolute, prismatic) may not leave
 ``[lower, upper]``. Each bound is a unilateral row on the joint coordinate ``q``: with
@@ -240,6 +242,91 @@ class JointLimits:
             if push < worst:
                 worst, which = push, i
         return which if worst < -64.0 * EPS * scale else -1
+
+
+#: Friction modes of a joint (:attr:`JointFriction.mode`); ±1: slipping towards ±q.
+OFF, STICK = 0, 2
+
+
+def stick_name(joint: str) -> str:
+    """Name of the constraint that holds ``joint`` still while its friction sticks."""
+    return f'{joint}_stick'
+
+
+class JointFriction:
+    """
+    Coulomb friction of the robots' one-coordinate joints (URDF ``<dynamics friction>``).
+
+    A joint's friction force ``F`` bounds a row on its rate: while it **sticks**, an
+    equality row (a ``drive`` constraint :func:`stick_name` holding the coordinate
+    where it stopped) carries whatever force ``f`` keeps it still, as long as ``|f| ≤
+    F``; while it **slips** towards ``d = ±1``, a constant generalized force ``−F d``
+    acts along it (a pair of equal and opposite wrenches on its two bodies). Static
+    and kinetic friction are the same ``F`` (Coulomb). Transitions, with the limits'
+    machinery (:mod:`.limits`): a step whose solve finds ``|f| > F`` makes the joint
+    slip, from the next step, towards ``−sign f`` (at most one step late: first order
+    in the breakaway time); a slipping joint whose rate reaches zero inside a step is
+    stopped there, the moment located by regula falsi on partial steps to
+    :data:`RATE_TOLERANCE`, and sticks (then slips again, the other way, if its row
+    needs more than ``F``). A joint on an active bound has neither: the bound holds
+    it; it sticks when the bound lets go.
+
+    Parameters
+    ----------
+    space : JointSpace
+    force : ndarray, shape (k,)
+        N m or N: ``F`` per joint (0: frictionless, no rows).
+
+    """
+
+    def __init__(self, space: Any, force: np.ndarray) -> None:
+        k = len(space)
+        self.force = np.asarray(force, dtype=float).reshape(k)
+        #: Indices of the joints with friction.
+        self.joints = np.flatnonzero(self.force > 0.0)
+        self.names = [stick_name(space.names[i]) for i in range(k)]
+        #: Per joint: OFF, STICK, or ±1 (slipping towards ±q).
+        self.mode = np.zeros(k, dtype=int)
+        #: The row in Φ and λ of each sticking joint (joint -> row), kept by the caller.
+        self.rows: dict = {}
+        self.counters = {'sticks': 0, 'slips': 0}
+
+    def __len__(self) -> int:
+        """Return the number of joints with friction."""
+        return len(self.joints)
+
+    def reset(self) -> None:
+        """Forget the modes and the counters."""
+        self.mode[:] = OFF
+        self.rows = {}
+        self.counters = {'sticks': 0, 'slips': 0}
+
+    def slipping(self) -> np.ndarray:
+        """Return the slipping joints (indices)."""
+        return self.joints[np.abs(self.mode[self.joints]) == 1]
+
+    def stopped(self, rates: np.ndarray) -> np.ndarray:
+        """Return the slipping joints whose rate has reached zero or turned (indices)."""
+        slip = self.slipping()
+        return slip[self.mode[slip] * rates[slip] <= RATE_TOLERANCE]
+
+    def event(self, rates: np.ndarray, which: np.ndarray) -> float:
+        """Return the event function of slipping joints ``which``: the smallest ``d q̇``."""
+        return float(np.min(self.mode[which] * rates[which]))
+
+    def breaking(self, lam: np.ndarray) -> tuple:
+        """
+        Return the sticking joint whose row needs most beyond ``F``, and its force (−1, 0: none).
+
+        A sticking row ``Φ = q − q_stop`` applies ``f = −λ`` along its joint.
+        """
+        worst, which, f_which = 0.0, -1, 0.0
+        for i, row in self.rows.items():
+            f = -float(lam[row])
+            excess = abs(f) - self.force[i] * (1.0 + 64.0 * EPS)
+            if excess > worst:
+                worst, which, f_which = excess, i, f
+        return which, f_which
 
 
 def restitution_of(value: Any, names: list, field_name: str) -> np.ndarray:

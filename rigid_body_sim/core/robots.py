@@ -281,6 +281,8 @@ class RobotSpec:
     limit_restitution : float or dict
         Newton's restitution ``e`` in [0, 1] at the joints' bounds: one for all, or
         ``{joint: e}`` by URDF joint name (others 0).
+    enforce_friction : bool
+        Simulate the joints' URDF ``<dynamics friction>`` (Coulomb, :mod:`.limits`).
 
     """
 
@@ -297,6 +299,7 @@ class RobotSpec:
     source: str = ''
     enforce_limits: bool = True
     limit_restitution: Any = 0.0
+    enforce_friction: bool = True
 
 
 @dataclass
@@ -624,9 +627,9 @@ def build_robot(spec: RobotSpec) -> RobotModel:
         if j.kind in ONE_DOF and j.effort == 0.0:
             notes.append(f'joint {pre + j.name!r}: <limit effort="0"> is read as no effort '
                          f'limit (commands are not clamped)')
-        if j.friction > 0.0:
+        if j.friction > 0.0 and not spec.enforce_friction:
             notes.append(f'joint {pre + j.name!r}: Coulomb friction {j.friction} is read but '
-                         f'not simulated yet')
+                         f'not simulated (the robot has friction: false)')
     index = {j.spec.name: i for i, j in enumerate(joints)}
     order = [index[tree.parent_joint[n].name] for n in tree.order[1:]
              if tree.parent_joint[n].name in index]

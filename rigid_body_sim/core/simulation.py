@@ -28,15 +28,15 @@ import numpy as np
 from . import rotation as so3
 from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
-from .constraints import Constraint, ConstraintSet, JointType
+from .constraints import Constraint, ConstraintSet
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
 from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
+from .joint_events import JointEvents
 from .kernels import free_step
-from .limits import (Impact, JointLimits, LOCATION_TOLERANCE, MAX_BOUNCES, MAX_EVENTS,
-                     MAX_LOCATION_ITERATIONS, restitution_of)
+from .limits import JointFriction, JointLimits, restitution_of
 from .robots import (build_robot, CommandGroup, drive_name, Interface, JointDrives, JointSpace,
                      JointState, mimic_name, RobotSpec)
 from .solver import ConstraintSolver
@@ -185,12 +185,36 @@ class Simulation:
                                 f'the exact drive of joint {self.joints.names[i]!r} is the '
                                 f'constraint {name!r}, but a constraint of that name exists')
         self.limits: Optional[JointLimits] = None
+        self.friction: Optional[JointFriction] = None
         if len(self.joints):
-            self.limits = self._joint_limits(names)
+            self.limits = self._joint_limits()
+            self.friction = self._joint_friction()
+        #: The joints' limits and friction and their events (None: neither).
+        self.events: Optional[JointEvents] = None
+        if self.limits is not None or self.friction is not None:
+            self.events = JointEvents(self, self.limits, self.friction)
+            for name in sorted(self.events.reserved() & names):
+                raise SpecError('constraints', f'{name!r} is the name of a row that holds a '
+                                               f'joint on its limit or its friction: rename '
+                                               f'the constraint')
         self._tracking = len(self.joints) > 0
         self.reset()
 
-    def _joint_limits(self, taken: set) -> Optional[JointLimits]:
+    def _joint_friction(self) -> Optional[JointFriction]:
+        """Build the robots' joint Coulomb friction (None: none)."""
+        js = self.joints
+        force = np.array([j.spec.friction for j in js.joints]).reshape(len(js))
+        for r, model in enumerate(self.robots):
+            if not model.spec.enforce_friction:
+                force[[js.index[j.name] for j in model.joints if j.name in js.index]] = 0.0
+        if self.drives is not None:
+            force[self.drives.exact] = 0.0
+        for f, _, _, _ in js.mimics:
+            force[f] = 0.0
+        friction = JointFriction(js, force)
+        return friction if len(friction) else None
+
+    def _joint_limits(self) -> Optional[JointLimits]:
         """Build the enforced joint limits of the robots (None: none); validate restitutions."""
         js = self.joints
         limited = np.zeros(len(js), dtype=bool)
@@ -209,11 +233,6 @@ class Simulation:
         for f, _, _, _ in js.mimics:
             limited[f] = False
         limits = JointLimits(js, limited, restitution)
-        for i in limits.joints:
-            if limits.names[i] in taken:
-                raise SpecError('constraints', f'the limit of joint {js.names[i]!r} is the '
-                                               f'constraint {limits.names[i]!r}, but a '
-                                               f'constraint of that name exists')
         return limits if len(limits) else None
 
     # -- time stepping --------------------------------------------------------------------
@@ -242,7 +261,7 @@ class Simulation:
             cached = self._switching = (effects, len(effects), [
                 e for e in effects if type(e).begin_step is not Effect.begin_step])
         switching = cached[2]
-        limited = self.limits is not None
+        events = self.events
         for _ in range(n):
             steps = self._steps
             if switching:
@@ -254,15 +273,15 @@ class Simulation:
             # Time as base + steps * dt, not a running sum: no rounding drift.
             t_end = self._time_base + (steps + 1) * dt
             seen = None
-            if limited:
-                new, seen = self._limited_step(self.state, t_end)
+            if events is not None:
+                new, seen = events.step(self.state, t_end)
             else:
                 new = self._advance(self.state, dt, t_end)
             self.state = new
             self._steps = steps + 1
             if self._tracking:
                 self.bodies.outputs(new)
-                if seen is not None:   # the limits' check read the coordinates at new
+                if seen is not None:   # the events' check read the coordinates at new
                     self.joints.adopt(*seen)
                 else:
                     self.joints.track(self.bodies.outputs_cache.out)
@@ -293,182 +312,6 @@ class Simulation:
             bad = _non_finite_bodies(new)
             raise DivergenceError(state.time, [self.bodies.names[i] for i in bad])
         return new
-
-    # -- joint limits (see .limits) -------------------------------------------------------
-
-    def _limited_step(self, start: State, t_end: float) -> tuple:
-        """
-        Take a step with joint limits: release pulling bounds, locate and resolve impacts.
-
-        See :mod:`.limits`; the step ends at ``t_end`` whatever the impacts inside it.
-        Returns the new state and ``(coordinates, rates over their limits)`` there (or
-        None), which the tracking of the joints takes instead of reading them again.
-        """
-        lim = self.limits
-        state, previous = start, self.joints.positions
-        events = 0
-        while True:
-            h = t_end - state.time
-            if h <= 4.0 * np.finfo(float).eps * abs(t_end):   # an impact at the step's end
-                return State(t_end, *state.parts), None
-            new = self._advance(state, h, t_end)
-            q, _, over = self._coordinates(new, previous)
-            crossed = lim.crossed(q)
-            if not len(crossed):
-                if lim.rows:
-                    # A bound that pulled in this step's own solve leaves the active set
-                    # for the next step (a pivot; the most pulling first, one per step).
-                    i = lim.most_pulling(self.dynamics.last_multipliers)
-                    if i >= 0:
-                        self._deactivate(i)
-                        lim.counters.releases += 1
-                return new, (q, over)
-            if events >= MAX_EVENTS:
-                lim.counters.events_capped += 1
-                gap = -lim.worst_gap(q, crossed)
-                lim.counters.max_violation = max(lim.counters.max_violation, gap)
-                return new, (q, over)
-            lim.counters.located_steps += 1
-            state, previous, rates = self._locate(state, previous, h, t_end, new, q, crossed)
-            state = self._impact(state, previous, rates, crossed, events)
-            events += 1
-
-    def _coordinates(self, state: State, previous: np.ndarray) -> tuple:
-        """Joint coordinates, rates, rates over their limits at ``state`` (near ``previous``)."""
-        self.bodies.outputs(state)
-        return self.joints.coordinates(self.bodies.outputs_cache.out, previous)
-
-    def _locate(self, state: State, previous: np.ndarray, h: float, t_end: float,
-                end: State, q_end: np.ndarray, crossed: np.ndarray) -> tuple:
-        """
-        Find where the first of ``crossed`` reaches its bound: regula falsi (Illinois).
-
-        The event function is the smallest gap of the ``crossed`` joints after a
-        partial step of length ``s`` from ``state`` (coordinates ``previous``); it
-        is at least ``-LOCATION_TOLERANCE`` there and below it at ``h`` (``end``).
-        Returns the state, its coordinates and rates; the located state's gap is
-        within the tolerance, or it is the feasible end of a bracket narrowed to
-        rounding.
-        """
-        lim = self.limits
-        q0, r0, _ = self._coordinates(state, previous)
-        a, b, gb = 0.0, h, lim.worst_gap(q_end, crossed)
-        ga, approaching = lim.event(q0, r0, crossed)
-        at = (state, q0, r0)
-        if ga <= LOCATION_TOLERANCE:
-            if approaching:
-                return at             # an impact right at the start
-            # A joint on its bound that leaves it (or rests there) crosses later, if at all:
-            # the crossing sought is the first one after the start.
-            ga = LOCATION_TOLERANCE
-        stuck = 0
-        for _ in range(MAX_LOCATION_ITERATIONS):
-            s = (a * gb - b * ga) / (gb - ga)
-            if not a < s < b:
-                s = 0.5 * (a + b)
-            trial = self._advance(state, s, state.time + s)
-            q, r, _ = self._coordinates(trial, previous)
-            g, approaching = lim.event(q, r, crossed)
-            if abs(g) <= LOCATION_TOLERANCE and approaching:
-                return trial, q, r
-            if g > -LOCATION_TOLERANCE:   # before the crossing (or on a bound, leaving it)
-                a, ga, at = s, max(g, LOCATION_TOLERANCE), (trial, q, r)
-                if stuck == 1:
-                    gb *= 0.5
-                stuck = 1
-            else:
-                b, gb = s, g
-                if stuck == -1:
-                    ga *= 0.5
-                stuck = -1
-            if b - a <= 4.0 * np.finfo(float).eps * max(h, abs(state.time)):
-                break
-        return at
-
-    def _impact(self, state: State, q: np.ndarray, rates: np.ndarray, crossed: np.ndarray,
-                events: int) -> State:
-        """
-        Make the bounds touched at ``state`` active and apply Newton's restitution.
-
-        The joints at a bound moving into it (or, if none, the ``crossed`` ones at
-        theirs) get their rows; one velocity projection with each row's rate set
-        to ``−e`` times its approach rate resolves the impact (rows of ``e > 0``
-        then leave the active set: they separate).
-        """
-        lim = self.limits
-        hits = lim.touching(q, rates)
-        if not hits:
-            gap, side = lim.gaps(q)
-            hits = [(int(i), int(sd), 0.0) for i, g, sd in zip(lim.joints, gap, side)
-                    if i in crossed and g <= LOCATION_TOLERANCE]
-        names, bounds, rebound, bouncing = [], [], [], []
-        for i, side, approach in hits:
-            e = lim.restitution[i] if events < MAX_BOUNCES else 0.0
-            self._activate(i, side, state)
-            names.append(lim.names[i])
-            bounds.append(lim.bound(i, side))
-            rebound.append(-side * e * approach)   # approach < 0: away from the bound
-            if e * approach != 0.0:
-                bouncing.append(i)
-            lim.impacts.append(Impact(state.time, self.joints.names[i], side, approach,
-                                      -e * approach))
-        lim.counters.impacts += len(hits)
-        solver = self.dynamics.solver
-        solver.set_drive_targets(names, np.array(bounds), state.time, np.array(rebound))
-        vel, om = solver.project_velocities(state)
-        state = State(state.time, state.pos_com_world, state.quat_principal_world, vel, om)
-        for i in bouncing:
-            self._deactivate(i)
-        if len(bouncing) < len(names):
-            held = [n for n, (i, _, _) in zip(names, hits) if i not in bouncing]
-            solver.set_drive_targets(held, np.array([b for b, (i, _, _) in zip(bounds, hits)
-                                                     if i not in bouncing]), state.time)
-        return state
-
-    def _activate(self, i: int, side: int, state: State) -> None:
-        """Add the row that holds joint ``i`` on its bound ``side`` (+1 lower, −1 upper)."""
-        lim, js = self.limits, self.joints
-        j = js.joints[i]
-        spec = Constraint(lim.names[i], JointType.DRIVE, j.child_body, j.parent_body,
-                          drive=js.drive_geometry(i, lim.bound(i, side)))
-        self.dynamics.solver.constraints.add(spec, state)
-        lim.active[i] = side
-        lim.counters.activations += 1
-        self._limit_rows()
-        self.dynamics.changed()
-
-    def _deactivate(self, i: int) -> None:
-        lim = self.limits
-        self.dynamics.solver.constraints.remove(lim.names[i])
-        lim.active[i] = 0
-        self._limit_rows()
-        self.dynamics.changed()
-
-    def _limit_rows(self) -> None:
-        """Record each active bound's row (rows shift as constraints come and go)."""
-        lim, rows_of = self.limits, self.dynamics.solver.constraints.rows_of
-        lim.rows = {int(i): int(rows_of(lim.names[i])[0]) for i in np.flatnonzero(lim.active)}
-
-    def _limits_from_state(self) -> None:
-        """
-        Rebuild the active set at the current state (after a reset or a state set by hand).
-
-        Every bound the joints exceed becomes active (it then converges back as a
-        violated constraint does, and the first step releases it if it pulls); a
-        joint that only touches its bound gets its row when a step moves it into
-        the bound (an impact at the step's start).
-        """
-        lim = self.limits
-        for i in np.flatnonzero(lim.active):
-            self._deactivate(int(i))
-        if not self.joints.tracked:
-            self.joints.track(self._outputs_now())
-        gap, side = lim.gaps(self.joints.positions)
-        beyond = gap < -LOCATION_TOLERANCE
-        for i, sd in zip(lim.joints[beyond], side[beyond]):
-            self._activate(int(i), int(sd), self.state)
-        if beyond.any():
-            self._reconcile_velocities()
 
     def _moving_fastest(self) -> list:
         """Name the body turning fastest (where a divergence most likely began)."""
@@ -584,9 +427,11 @@ class Simulation:
                 solver.constraints.add(spec, self.state)
             self.dynamics.changed()
             self._reconcile_velocities()
-        if self.limits is not None:
-            self.limits.reset()
-            self._limits_from_state()
+        if self.events is not None:
+            for part in (self.limits, self.friction):
+                if part is not None:
+                    part.reset()
+            self.events.from_state()
 
     def _inconsistent(self, name: str, field: str, outcome: str,
                       residual: float) -> InconsistentConstraintError:
@@ -664,15 +509,15 @@ class Simulation:
         efforts = js.efforts
         if self.drives is not None and len(self.drives.rows_of):
             efforts = efforts + self.drives.efforts(js.positions, js.velocities)
-        limits = self.limits is not None and bool(self.limits.active.any())
-        if len(self._exact) or self._mimic_names or limits:
+        rows = self.events is not None and bool(self.events.held())
+        if len(self._exact) or self._mimic_names or rows:
             solver = self.dynamics.solver
             lam = solver.multipliers(self.dynamics, self.state)
             efforts = efforts.copy()
-        if limits:
-            # A bound's row Φ = q − bound applies −λ along q, as an exact drive's.
-            for i in np.flatnonzero(self.limits.active):
-                efforts[i] -= lam[solver.constraints.rows_of(self.limits.names[i])[0]]
+        if self.events is not None:
+            # Bounds and sticking friction: rows Φ = q − c, each −λ along q, as an exact
+            # drive's; slipping friction: −F d.
+            efforts += self.events.efforts(lam if rows else None)
         if len(self._exact):
             # An exact drive's effort is its row's multiplier: Φ = q − q*, so the
             # generalized force its reaction −Gᵀλ applies along q is −λ.
@@ -744,8 +589,8 @@ class Simulation:
                     self._drive_names, self.joints.positions[self._exact], self.time,
                     self._drive_rates(self._exact))
             self.dynamics.changed()
-        if self.limits is not None:
-            self._limits_from_state()
+        if self.events is not None:
+            self.events.from_state()
         # (after the drives' targets: the projection onto Φ̇ = −ωΦ must see them)
         self._reconcile_velocities()
 
@@ -835,10 +680,10 @@ class Simulation:
         """
         solver = self.dynamics.solver
         constraints = solver.constraints
-        if self.limits is not None and isinstance(constraint, Constraint) \
-                and constraint.name in [self.limits.names[i] for i in self.limits.joints]:
-            raise SpecError('name', f'{constraint.name!r} is the name of the row that holds '
-                                    f'a joint on its limit: choose another')
+        if self.events is not None and isinstance(constraint, Constraint) \
+                and constraint.name in self.events.reserved():
+            raise SpecError('name', f'{constraint.name!r} is the name of a row that holds a '
+                                    f'joint on its limit or its friction: choose another')
         constraints.add(constraint, self.state)
         try:
             residual = solver.reach(self.state)
@@ -865,10 +710,11 @@ class Simulation:
             joint = self.joints.names[self._exact[self._drive_names.index(name)]]
             raise SpecError('name', f'{name!r} is the exact drive of joint {joint!r} (a '
                                     f'command group of mode exact): it cannot be removed')
-        if self.limits is not None and name in self.limits.names:
-            raise SpecError('name', f'{name!r} holds joint '
-                                    f'{self.joints.names[self.limits.names.index(name)]!r} on '
-                                    f'its limit while it touches it: it cannot be removed')
+        held = {} if self.events is None else self.events.held()
+        if name in held:
+            raise SpecError('name', f'{name!r} holds joint {self.joints.names[held[name]]!r} '
+                                    f'on its limit or its friction while it lasts: it cannot '
+                                    f'be removed')
         if name in self._mimic_names:
             joint = self.joints.names[self.joints.mimics[self._mimic_names.index(name)][0]]
             raise SpecError('name', f'{name!r} makes joint {joint!r} follow its leader (a URDF '
@@ -882,14 +728,29 @@ class Simulation:
         """
         Names of the constraints, in the order they were added.
 
-        Not the rows that hold joints on their bounds (:mod:`.limits`): they come and
-        go with the motion, and count as their joints' (reactions, violations).
+        Not the rows that hold joints on their bounds or by their friction
+        (:mod:`.joint_events`): they come and go with the motion, and count as their
+        joints' (reactions, violations).
         """
         names = self.dynamics.solver.constraints.names
-        if self.limits is None or not self.limits.active.any():
-            return names
-        rows = {self.limits.names[i] for i in np.flatnonzero(self.limits.active)}
-        return [name for name in names if name not in rows]
+        held = {} if self.events is None else self.events.held()
+        return [name for name in names if name not in held] if held else names
+
+    def joint_friction(self) -> dict:
+        """
+        Return what the joints' Coulomb friction does now: who sticks, who slips, counters.
+
+        ``{'sticking': [joint, ...], 'slipping': {joint: +1 | -1}, 'counters': {'sticks':
+        n, 'slips': n}}`` (see :class:`.limits.JointFriction`); empty when no joint
+        has friction.
+        """
+        fr = self.friction
+        if fr is None:
+            return {}
+        names = self.joints.names
+        return {'sticking': [names[i] for i in sorted(fr.rows)],
+                'slipping': {names[i]: int(fr.mode[i]) for i in fr.slipping()},
+                'counters': dict(fr.counters)}
 
     def joint_limits(self) -> dict:
         """
@@ -956,10 +817,10 @@ class Simulation:
         phi = solver.violation(self.state)
         out = {name: float(np.max(np.abs(phi[solver.constraints.rows_of(name)])))
                for name in solver.constraints.names}
-        if self.limits is not None:   # a bound's row counts as its joint's
-            for i in np.flatnonzero(self.limits.active):
-                joint, bound = self.joints.names[i], out.pop(self.limits.names[i])
-                out[joint] = max(out.get(joint, 0.0), bound)
+        if self.events is not None:   # a bound's or friction's row counts as its joint's
+            for row, i in self.events.held().items():
+                joint, value = self.joints.names[i], out.pop(row)
+                out[joint] = max(out.get(joint, 0.0), value)
         return out
 
     def reactions(self) -> dict:
@@ -979,29 +840,10 @@ class Simulation:
         if not self.dynamics.constrained:
             return {}
         fields = self.dynamics.solver.reactions(self.dynamics, self.state)
-        if self.limits is not None and self.limits.active.any():
-            self._merge_limit_reactions(fields)
+        if self.events is not None and self.events.held():
+            self.events.merge_reactions(fields, self.state.pos_com_world, self.bodies.lookup)
         return {name: {body: Reaction(**f) for body, f in per_body.items()}
                 for name, per_body in fields.items()}
-
-    def _merge_limit_reactions(self, fields: dict) -> None:
-        """Add each active bound's reaction into its joint's (about the joint's anchor)."""
-        com = self.state.pos_com_world
-        for i in np.flatnonzero(self.limits.active):
-            extra = fields.pop(self.limits.names[i], {})
-            own = fields.get(self.joints.names[i])
-            if own is None:
-                continue
-            for body, f in extra.items():
-                mine = own.get(body)
-                if mine is None:
-                    continue
-                force = mine['force_world'] + f['force_world']
-                torque = mine['torque_com_world'] + f['torque_com_world']
-                lever = mine['anchor_world'] - com[self.bodies.lookup(body)]
-                own[body] = {'force_world': force, 'torque_com_world': torque,
-                             'torque_anchor_world': torque - so3.cross(lever, force),
-                             'anchor_world': mine['anchor_world']}
 
     def joint_anchors(self) -> dict:
         """

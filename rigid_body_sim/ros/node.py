@@ -691,6 +691,10 @@ class SimNode(Node):
                 values['joint_limit_impacts_total'] = str(c['impacts'])
                 values['joint_limit_releases_total'] = str(c['releases'])
                 values['joint_limit_excess_max'] = f'{c["max_violation"]:.3g}'
+            friction = sim.joint_friction()
+            if friction:
+                values['joint_friction_sticking'] = ' '.join(friction['sticking']) or 'none'
+                values['joint_friction_slips_total'] = str(friction['counters']['slips'])
         rejected = session.totals.rejected
         for cause in Rejection:
             values[f'rejected_{cause.value}'] = str(rejected.get(cause.value, 0))

@@ -1,0 +1,423 @@
+"""
+The steps of a simulation whose joints have limits or Coulomb friction: events inside a step.
+
+:mod:`.limits` holds the rows' data and rules (bounds, restitution, friction forces);
+this module takes the steps. A step is the integrator's (:meth:`.Simulation._advance`);
+after it the joint coordinates are read once. When nothing happened the step stands,
+and the step's own multipliers decide the pivots for the next one (a bound that
+pulled leaves the active set, a sticking joint whose row needs more than its friction
+slips). When a free joint passed a bound, or a slipping joint's rate reached zero,
+the step is taken again up to the first such moment, found by regula falsi
+(Illinois) on partial steps from the step's start; there the event is resolved (an
+impact with Newton's restitution, or a stop that sticks) and the rest of the step is
+taken, as often as events come, up to :data:`.limits.MAX_EVENTS`.
+
+The rows that come and go here are ``drive`` constraints of the solve, named
+:func:`.limits.limit_name` and :func:`.limits.stick_name`; they count as their joints'
+(reactions, violations, efforts) and are not among the simulation's constraint names.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import numpy as np
+
+from .bodies import State
+from .constraints import Constraint, JointType
+from .limits import (Impact, JointFriction, JointLimits, LOCATION_TOLERANCE, MAX_BOUNCES,
+                     MAX_EVENTS, MAX_LOCATION_ITERATIONS, OFF, RATE_TOLERANCE, STICK)
+from .rotation import cross
+
+_NONE = np.zeros(0, dtype=int)
+
+
+class JointEvents:
+    """
+    Limits and friction of a simulation's robot joints, stepped with their events.
+
+    Parameters
+    ----------
+    sim : Simulation
+        The simulation whose steps these are (its joints, solver, wrenches).
+    limits : JointLimits or None
+    friction : JointFriction or None
+
+    """
+
+    def __init__(self, sim: Any, limits: Optional[JointLimits],
+                 friction: Optional[JointFriction]) -> None:
+        self.sim = sim
+        self.limits = limits
+        self.friction = friction
+
+    # -- names and readings -----------------------------------------------------------------
+
+    def reserved(self) -> set:
+        """Return the constraint names these rows may take (no user constraint may)."""
+        out = set()
+        if self.limits is not None:
+            out |= {self.limits.names[i] for i in self.limits.joints}
+        if self.friction is not None:
+            out |= {self.friction.names[i] for i in self.friction.joints}
+        return out
+
+    def held(self) -> dict:
+        """Return the rows present now: ``{row name: joint index}``."""
+        out = {}
+        if self.limits is not None:
+            out.update({self.limits.names[i]: i for i in self.limits.rows})
+        if self.friction is not None:
+            out.update({self.friction.names[i]: i for i in self.friction.rows})
+        return out
+
+    def efforts(self, lam: Optional[np.ndarray]) -> np.ndarray:
+        """
+        Generalized force (k,) of the limits and friction on each joint.
+
+        A present row ``Φ = q − c`` applies ``−λ`` along its joint (``lam``: the
+        multipliers at the state, None when no row is present); a slipping joint's
+        friction is ``−F d``.
+        """
+        out = np.zeros(len(self.sim.joints))
+        rows_of = self.sim.dynamics.solver.constraints.rows_of
+        for name, i in self.held().items():
+            out[i] -= lam[rows_of(name)[0]]
+        fr = self.friction
+        if fr is not None:
+            slip = fr.slipping()
+            out[slip] -= fr.force[slip] * fr.mode[slip]
+        return out
+
+    # -- a step -----------------------------------------------------------------------------
+
+    def step(self, start: State, t_end: float) -> tuple:
+        """
+        Take a step from ``start`` to ``t_end`` with every event inside it resolved.
+
+        Returns the new state and ``(coordinates, rates over their limits)`` there
+        (None when the step ended on an event), which the joints' tracking takes
+        instead of reading them again.
+        """
+        sim, lim, fr = self.sim, self.limits, self.friction
+        state, previous = start, sim.joints.positions
+        events = 0
+        while True:
+            h = t_end - state.time
+            if h <= 4.0 * np.finfo(float).eps * abs(t_end):   # an event at the step's end
+                return State(t_end, *state.parts), None
+            new = sim._advance(state, h, t_end)
+            q, rates, over = self.coordinates(new, previous)
+            crossed = _NONE if lim is None else lim.crossed(q)
+            stopped = _NONE if fr is None else fr.stopped(rates)
+            if not len(crossed) and not len(stopped):
+                self._pivot(new, q)
+                return new, (q, over)
+            if events >= MAX_EVENTS:
+                if len(crossed):
+                    lim.counters.events_capped += 1
+                    lim.counters.max_violation = max(lim.counters.max_violation,
+                                                     -lim.worst_gap(q, crossed))
+                return new, (q, over)
+            if lim is not None:
+                lim.counters.located_steps += 1
+            state, previous, rates = self._locate(state, previous, h, new, q, rates, crossed,
+                                                  stopped)
+            state = self._resolve(state, previous, rates, crossed, stopped, events)
+            events += 1
+
+    def coordinates(self, state: State, previous: np.ndarray) -> tuple:
+        """Joint coordinates, rates and rates over their limits at ``state``, near ``previous``."""
+        sim = self.sim
+        sim.bodies.outputs(state)
+        return sim.joints.coordinates(sim.bodies.outputs_cache.out, previous)
+
+    def _pivot(self, new: State, q: np.ndarray) -> None:
+        """
+        Change the active set for the next step from this step's own multipliers.
+
+        A bound that pulled leaves (the joint then sticks, if it has friction); a
+        sticking joint whose row needed more than its friction slips, away from
+        the row's force. One of each per step, the worst first; both decided on the
+        multipliers before either changes the rows.
+        """
+        lim, fr = self.limits, self.friction
+        lam = self.sim.dynamics.last_multipliers
+        release = lim.most_pulling(lam) if lim is not None and lim.rows else -1
+        breaking, force = fr.breaking(lam) if fr is not None and fr.rows else (-1, 0.0)
+        if release >= 0:
+            self._unbound(release)
+            lim.counters.releases += 1
+            if fr is not None and fr.force[release] > 0.0:
+                self._stick(release, new, float(q[release]))
+        if breaking >= 0:
+            self._slip(breaking, -1 if force > 0.0 else 1)
+
+    def _event(self, q: np.ndarray, rates: np.ndarray, crossed: np.ndarray,
+               stopped: np.ndarray) -> tuple:
+        """
+        Return the event function in its tolerances' units, and whether it is an event.
+
+        The smaller of a crossing's gap over :data:`LOCATION_TOLERANCE` and a stop's
+        ``d q̇`` over :data:`RATE_TOLERANCE`; a gap within the tolerance is an
+        event only when its joint moves into the bound.
+        """
+        value, real = np.inf, True
+        if len(crossed):
+            gap, approaching = self.limits.event(q, rates, crossed)
+            value, real = gap / LOCATION_TOLERANCE, approaching
+        if len(stopped):
+            rate = self.friction.event(rates, stopped) / RATE_TOLERANCE
+            if rate < value:
+                value, real = rate, True
+        return value, real
+
+    def _locate(self, state: State, previous: np.ndarray, h: float, end: State,
+                q_end: np.ndarray, r_end: np.ndarray, crossed: np.ndarray,
+                stopped: np.ndarray) -> tuple:
+        """
+        Find the first event after ``state``: regula falsi (Illinois) on partial steps.
+
+        The event function (:meth:`_event`) is above its tolerance before the event
+        and not at ``h`` (the step that found it). Returns the state there, its
+        coordinates and rates; the event function is within its tolerance there,
+        or the state is the earlier end of a bracket narrowed to rounding.
+        """
+        sim = self.sim
+        q0, r0, _ = self.coordinates(state, previous)
+        a, at = 0.0, (state, q0, r0)
+        ga, real = self._event(q0, r0, crossed, stopped)
+        if ga <= 1.0:
+            if real:
+                return at             # an event right at the start
+            # A joint on its bound that leaves it (or rests there) crosses later, if at
+            # all: the event sought is the first one after the start.
+            ga = 1.0
+        b, gb = h, self._event(q_end, r_end, crossed, stopped)[0]
+        if gb >= -1.0:
+            return end, q_end, r_end   # the event is at the step's end, to the tolerance
+        stuck = 0
+        for _ in range(MAX_LOCATION_ITERATIONS):
+            s = (a * gb - b * ga) / (gb - ga)
+            if not a < s < b:
+                s = 0.5 * (a + b)
+            trial = sim._advance(state, s, state.time + s)
+            q, r, _ = self.coordinates(trial, previous)
+            g, real = self._event(q, r, crossed, stopped)
+            if abs(g) <= 1.0 and real:
+                return trial, q, r
+            if g > -1.0:   # before the event (or on a bound, leaving it)
+                a, ga, at = s, max(g, 1.0), (trial, q, r)
+                if stuck == 1:
+                    gb *= 0.5
+                stuck = 1
+            else:
+                b, gb = s, g
+                if stuck == -1:
+                    ga *= 0.5
+                stuck = -1
+            if b - a <= 4.0 * np.finfo(float).eps * max(h, abs(state.time)):
+                break
+        return at
+
+    def _resolve(self, state: State, q: np.ndarray, rates: np.ndarray, crossed: np.ndarray,
+                 stopped: np.ndarray, events: int) -> State:
+        """
+        Resolve the events at ``state``: stops stick, impacts get rows and restitution.
+
+        Joints whose slip stopped here stick (a row each); bounds that joints reach
+        here, moving in, become active, and one velocity projection of the solve,
+        with each bound's row moving at ``−e`` times its approach rate, is Newton's
+        law of restitution for all at once (rows of ``e > 0`` then leave: they
+        separate, and a joint with friction slips away).
+        """
+        sim, lim, fr = self.sim, self.limits, self.friction
+        project = False
+        if len(stopped):
+            for i in stopped:
+                if abs(rates[i]) <= RATE_TOLERANCE or fr.mode[i] * rates[i] <= 0.0:
+                    self._stick(int(i), state, float(q[i]))
+                    fr.counters['sticks'] += 1
+                    project = True
+        hits = []
+        if len(crossed):
+            hits = lim.touching(q, rates)
+            if not hits:
+                gap, side = lim.gaps(q)
+                hits = [(int(i), int(sd), 0.0) for i, g, sd in zip(lim.joints, gap, side)
+                        if i in crossed and g <= LOCATION_TOLERANCE]
+        solver = sim.dynamics.solver
+        if not hits:
+            if project:   # the stops: rates to zero, with every other joint kept
+                vel, om = solver.project_velocities(state)
+                state = State(state.time, state.pos_com_world, state.quat_principal_world,
+                              vel, om)
+            return state
+        names, bounds, rebound, bouncing = [], [], [], []
+        for i, side, approach in hits:
+            e = lim.restitution[i] if events < MAX_BOUNCES else 0.0
+            self._bound(i, side, state)
+            names.append(lim.names[i])
+            bounds.append(lim.bound(i, side))
+            rebound.append(-side * e * approach)   # approach < 0: away from the bound
+            if e * approach != 0.0:
+                bouncing.append((i, side))
+            lim.impacts.append(Impact(state.time, sim.joints.names[i], side, approach,
+                                      -e * approach))
+        lim.counters.impacts += len(hits)
+        solver.set_drive_targets(names, np.array(bounds), state.time, np.array(rebound))
+        vel, om = solver.project_velocities(state)
+        state = State(state.time, state.pos_com_world, state.quat_principal_world, vel, om)
+        for i, side in bouncing:
+            self._unbound(i)
+            if fr is not None and fr.force[i] > 0.0:
+                self._slip(i, side)   # moving away from the bound
+        held = [(n, b) for n, b, (i, _, _) in zip(names, bounds, hits)
+                if i not in {j for j, _ in bouncing}]
+        if held:
+            solver.set_drive_targets([n for n, _ in held], np.array([b for _, b in held]),
+                                     state.time)
+        return state
+
+    # -- the rows ---------------------------------------------------------------------------
+
+    def _add_row(self, name: str, i: int, target: float, state: State) -> None:
+        """Add the ``drive`` row ``name`` holding joint ``i`` at ``target``."""
+        sim = self.sim
+        js = sim.joints
+        j = js.joints[i]
+        sim.dynamics.solver.constraints.add(
+            Constraint(name, JointType.DRIVE, j.child_body, j.parent_body,
+                       drive=js.drive_geometry(i, target)), state)
+
+    def _rows_changed(self) -> None:
+        """Record each present row's index (rows shift as constraints come and go)."""
+        sim = self.sim
+        rows_of = sim.dynamics.solver.constraints.rows_of
+        if self.limits is not None:
+            lim = self.limits
+            lim.rows = {int(i): int(rows_of(lim.names[i])[0])
+                        for i in np.flatnonzero(lim.active)}
+        if self.friction is not None:
+            fr = self.friction
+            fr.rows = {int(i): int(rows_of(fr.names[i])[0])
+                       for i in np.flatnonzero(fr.mode == STICK)}
+        sim.dynamics.changed()
+
+    def _bound(self, i: int, side: int, state: State) -> None:
+        """Make joint ``i``'s bound ``side`` (+1 lower, −1 upper) active (friction off)."""
+        lim = self.limits
+        self._friction_off(i)
+        self._add_row(lim.names[i], i, lim.bound(i, side), state)
+        lim.active[i] = side
+        lim.counters.activations += 1
+        self._rows_changed()
+
+    def _unbound(self, i: int) -> None:
+        """Drop joint ``i``'s active bound."""
+        lim = self.limits
+        self.sim.dynamics.solver.constraints.remove(lim.names[i])
+        lim.active[i] = 0
+        self._rows_changed()
+
+    def _stick(self, i: int, state: State, q: float) -> None:
+        """Hold joint ``i`` still at ``q`` (its friction sticks)."""
+        fr = self.friction
+        self._friction_off(i)
+        self._add_row(fr.names[i], i, q, state)
+        fr.mode[i] = STICK
+        self._rows_changed()
+
+    def _slip(self, i: int, direction: int) -> None:
+        """Let joint ``i`` slip towards ``direction`` (±1): friction ``−F direction``."""
+        fr = self.friction
+        self._friction_off(i)
+        fr.mode[i] = direction
+        fr.counters['slips'] += 1
+        self._friction_wrench(i, -fr.force[i] * direction)
+
+    def _friction_off(self, i: int) -> None:
+        """Remove joint ``i``'s sticking row or slipping force, if any."""
+        fr = self.friction
+        if fr is None or fr.mode[i] == OFF:
+            return
+        if fr.mode[i] == STICK:
+            self.sim.dynamics.solver.constraints.remove(fr.names[i])
+            fr.mode[i] = OFF
+            self._rows_changed()
+        else:
+            fr.mode[i] = OFF
+            self._friction_wrench(i, 0.0)
+
+    def _friction_wrench(self, i: int, tau: float) -> None:
+        """Apply (``tau = 0``: remove) joint ``i``'s friction as a pair of held wrenches."""
+        sim = self.sim
+        js = sim.joints
+        j = js.joints[i]
+        k_child, k_parent = js.axis[i], js.R_jp[i] @ js.axis[i]
+        if js.rotary[i]:
+            pair = ((j.child_body, {'torque': tau * k_child}),
+                    (j.parent_body, {'torque': -tau * k_parent}))
+        else:
+            pair = ((j.child_body, {'force': tau * k_child, 'point_body': np.zeros(3)}),
+                    (j.parent_body, {'force': -tau * k_parent, 'point_body': js.p_jp[i]}))
+        for side, (body, load) in zip(('child', 'parent'), pair):
+            if body is not None:
+                sim.apply_wrench(body, frame='body', key=f'joint {j.name} friction {side}',
+                                 **load)
+
+    # -- between steps ----------------------------------------------------------------------
+
+    def from_state(self) -> None:
+        """
+        Rebuild the rows at the simulation's current state (after a reset, a state set).
+
+        Every bound the joints exceed becomes active (it then converges back as a
+        violated constraint does, and a step releases it if it pulls); a joint that
+        only touches its bound gets its row when a step moves it into the bound.
+        A joint with friction sticks where it is if it is at rest, else slips.
+        """
+        sim, lim, fr = self.sim, self.limits, self.friction
+        if lim is not None:
+            for i in np.flatnonzero(lim.active):
+                self._unbound(int(i))
+        if fr is not None:
+            for i in fr.joints:
+                self._friction_off(int(i))
+        q, rates, _ = sim.joints.coordinates(sim._outputs_now(), sim.joints.positions)
+        beyond = np.zeros(len(sim.joints), dtype=bool)
+        if lim is not None:
+            gap, side = lim.gaps(q)
+            out = gap < -LOCATION_TOLERANCE
+            for i, sd in zip(lim.joints[out], side[out]):
+                self._bound(int(i), int(sd), sim.state)
+            beyond[lim.joints[out]] = True
+        if fr is not None:
+            for i in fr.joints:
+                if beyond[i]:
+                    continue
+                if abs(rates[i]) <= RATE_TOLERANCE:
+                    self._stick(int(i), sim.state, float(q[i]))
+                else:
+                    self._slip(int(i), 1 if rates[i] > 0.0 else -1)
+        if beyond.any() or (fr is not None and fr.rows):
+            sim._reconcile_velocities()
+
+    def merge_reactions(self, fields: dict, com: np.ndarray, lookup: Any) -> None:
+        """Add each present row's reaction into its joint's (about the joint's anchor)."""
+        names = self.sim.joints.names
+        for row, i in self.held().items():
+            extra = fields.pop(row, {})
+            own = fields.get(names[i])
+            if own is None:
+                continue
+            for body, f in extra.items():
+                mine = own.get(body)
+                if mine is None:
+                    continue
+                force = mine['force_world'] + f['force_world']
+                torque = mine['torque_com_world'] + f['torque_com_world']
+                lever = mine['anchor_world'] - com[lookup(body)]
+                own[body] = {'force_world': force, 'torque_com_world': torque,
+                             'torque_anchor_world': torque - cross(lever, force),
+                             'anchor_world': mine['anchor_world']}
