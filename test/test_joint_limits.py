@@ -353,6 +353,22 @@ def test_a_rubbing_swing_stops_at_the_energy_balance_angle(integrator, order, tm
     assert errors[1] < 1e-5
 
 
+def test_clearing_the_wrenches_keeps_the_slipping_friction(tmp_path):
+    friction, tau = 0.3, 0.5
+    sim = rubbing_pendulum(tmp_path, friction, gravity=False)
+    sim.set_joint_efforts({'j': tau})
+    sim.step(100)
+    v0 = sim.joint_state().velocities[0]
+    sim.clear_wrenches()          # the effort goes; the friction decelerates the rod
+    sim.step(50)
+    inertia = I_AXIS + M * L * L
+    assert sim.joint_state().velocities[0] == pytest.approx(v0 - friction / inertia * 0.05,
+                                                            rel=1e-9)
+    sim.step(50)                  # it stops at v0 I / F = 0.067 s and sticks
+    assert sim.joint_friction()['sticking'] == ['j']
+    assert abs(sim.joint_state().velocities[0]) <= 1e-12   # (the stick's projection)
+
+
 def test_friction_false_leaves_the_joint_free(tmp_path):
     sim = rubbing_pendulum(tmp_path, 1.1 * M * G * L, friction=False)
     assert sim.friction is None

@@ -403,6 +403,13 @@ class JointEvents:
         if beyond.any() or (fr is not None and fr.rows):
             sim._reconcile_velocities()
 
+    def restore_friction(self) -> None:
+        """Apply the slipping joints' friction again (after the wrenches were cleared)."""
+        fr = self.friction
+        if fr is not None:
+            for i in fr.slipping():
+                self._friction_wrench(int(i), -fr.force[i] * fr.mode[i])
+
     def merge_reactions(self, fields: dict, com: np.ndarray, lookup: Any) -> None:
         """Add each present row's reaction into its joint's (about the joint's anchor)."""
         names = self.sim.joints.names

@@ -487,6 +487,8 @@ class Simulation:
         if self._wrenches is not None:
             self._wrenches.clear(body)
             self.dynamics.changed()
+            if self.events is not None:   # (the joints' friction is not an applied wrench)
+                self.events.restore_friction()
 
     # -- joint space (robots) -------------------------------------------------------------
 
