@@ -248,6 +248,50 @@ def test_arm_under_random_efforts_never_passes_a_limit(tmp_path):
     assert worst <= 1e-9
 
 
+def test_arm_without_actuation_never_gains_energy_at_its_limits(tmp_path):
+    # arm7 (limits, restitution 1 on every joint, no friction, no damping) falling under
+    # gravity from a pose near its bounds, with rates into them: elastic impacts keep
+    # the energy, and nothing else may add any beyond the integrator's own error,
+    # measured on the same arm without limits (its swing is as fast).
+    from joint_space_reference import urdf_path
+    from rigid_body_sim.scene import scene_from_dict
+    text = re.sub(r'<dynamics[^>]*/>', '', open(urdf_path('arm7.urdf')).read())
+    (tmp_path / 'arm.urdf').write_text(text)
+    start = {'joint2': 1.5, 'joint4': -0.2, 'joint6': 3.5}
+    rates = {'joint2': 1.0, 'joint4': 2.0, 'joint6': 2.0}
+
+    def arm(limits):
+        return scene_from_dict({'dt': 1e-3, 'effects': {'gravity': {'g_world': [0, 0, -G]}},
+                                'robots': [{'urdf': str(tmp_path / 'arm.urdf'), 'limits': limits,
+                                            'limit_restitution': 1.0,
+                                            'initial_positions': start,
+                                            'initial_velocities': rates}]},
+                               str(tmp_path / 'scene.yaml')).simulation
+    limited, free = arm(True), arm(False)
+    e0, f0 = limited.diagnostics().total_energy, free.diagnostics().total_energy
+    gain, drift = 0.0, 0.0
+    for _ in range(1500):
+        limited.step()
+        free.step()
+        gain = max(gain, limited.diagnostics().total_energy - e0)
+        drift = max(drift, abs(free.diagnostics().total_energy - f0))
+    assert limited.limits.counters.impacts >= 3
+    # bound: twice the method's own energy error on the free arm, plus the impacts'
+    # location (1e-10 rad against torques of 10 N m: 1e-9 J each).
+    assert gain <= 2.0 * drift + 1e-7
+
+
+def test_infinite_or_negative_friction_is_refused(tmp_path):
+    for value, message in ((float('inf'), 'finite'), (-1.0, '>= 0')):
+        with pytest.raises(SceneError, match=f'dynamics.friction.*{message}'):
+            rubbing_pendulum(tmp_path, value)
+
+
+def test_a_lower_bound_above_the_upper_is_refused(tmp_path):
+    with pytest.raises(SceneError, match='limit: lower 1.0 is above upper 0.5'):
+        pendulum(tmp_path, lower=1.0, upper=0.5)
+
+
 @pytest.mark.parametrize('value, field, message', [
     (1.5, 'robots[0].limit_restitution', 'in \\[0, 1\\]'),
     ({'nope': 0.5}, 'robots[0].limit_restitution.nope', 'unknown joint'),

@@ -114,10 +114,15 @@ class JointEvents:
                 self._pivot(new, q)
                 return new, (q, over)
             if events >= MAX_EVENTS:
+                # Too many events in one step: the step stands, a bound passed is counted
+                # (never silently), and stopped joints stick where they are (no slip may
+                # go on against its own friction).
                 if len(crossed):
                     lim.counters.events_capped += 1
                     lim.counters.max_violation = max(lim.counters.max_violation,
                                                      -lim.worst_gap(q, crossed))
+                if len(stopped):
+                    new = self._resolve(new, q, rates, _NONE, stopped, events)
                 return new, (q, over)
             if lim is not None:
                 lim.counters.located_steps += 1
