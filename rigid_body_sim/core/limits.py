@@ -51,7 +51,7 @@ have no limit rows.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -101,6 +101,7 @@ class LimitCounters:
     """What the limits did since the last reset."""
 
     impacts: int = 0
+    #: Steps in which an event (an impact, a friction stop) was located.
     located_steps: int = 0
     releases: int = 0
     activations: int = 0
@@ -111,9 +112,7 @@ class LimitCounters:
 
     def as_dict(self) -> dict:
         """Return the counters as a dict."""
-        return {'impacts': self.impacts, 'located_steps': self.located_steps,
-                'releases': self.releases, 'activations': self.activations,
-                'max_violation': self.max_violation, 'events_capped': self.events_capped}
+        return asdict(self)
 
 
 class JointLimits:
