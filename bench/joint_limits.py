@@ -73,7 +73,7 @@ def run_ours(sim, lower: np.ndarray, upper: np.ndarray):
                 changed = lim.counters.activations + lim.counters.releases != before[0]
                 kinds.append('event' if changed else 'resting' if before[1] else 'free')
         wall = clock() - t0
-        counts = ({} if lim is None else
+        counts = ({'each': each} if lim is None else
                   dict(lim.counters.as_dict(), first=min((i.time for i in lim.impacts),
                                                          default=None),
                        each=each, kinds=np.array(kinds)))
@@ -165,30 +165,32 @@ def table(res: dict) -> str:
         ex = excursion(q, lower, upper)
         touched = [names[j] for j in range(len(names))
                    if np.any(q[:, j] <= lower[j] + 1e-6) or np.any(q[:, j] >= upper[j] - 1e-6)]
-        events = ('-' if not counts else
+        events = ('-' if 'impacts' not in counts else
                   f'{counts["impacts"]}, {counts["releases"]}, {counts["located_steps"]}')
         rows.append(f'| {name} | {med * 1e6:.1f} | {med / base[key]:.2f} | {ex.max():.2e} | '
                     f'{", ".join(touched) or "none"} | {events} |')
     counts = records['ours lie_poisson2, limits on'][1]
     each, kinds = counts['each'], counts['kinds']
-    off_each = statistics.median(walls['ours lie_poisson2, limits off'])
+    off_each = records['ours lie_poisson2, limits off'][1]['each']
     parts = []
     for kind, what in (('free', 'no bound active (checked only)'),
-                       ('resting', 'a bound active throughout (its multiplier checked)'),
+                       ('resting', 'a bound active throughout (the row in the solve; the '
+                                   "read solves for its force)"),
                        ('event', 'an impact or a release (rows added or removed, the impact '
                                  'located)')):
-        sel = each[kinds == kind]
-        if len(sel):
-            parts.append(f'| {what} | {len(sel)} | {np.median(sel) * 1e6:.1f} | '
-                         f'{np.median(sel) / off_each:.2f} |')
+        sel = kinds == kind
+        if sel.any():
+            on, off = np.median(each[sel]), np.median(off_each[sel])
+            parts.append(f'| {what} | {int(sel.sum())} | {on * 1e6:.1f} | {off * 1e6:.1f} | '
+                         f'{on / off:.2f} |')
     first = counts.get('first')
     lines = ['\n'.join(rows), '',
-             'Ours with the limits on, step by step (each step timed alone, in the first '
-             f'timed run; first impact at {first:.4f} s), against the median step of the '
-             'run with the limits off:' if first is not None else
-             'Ours with the limits on, step by step (no impact in this run):', '',
-             '| steps with | steps | median us / step | / limits off |', '|---|---|---|---|',
-             *parts]
+             'Ours step by step, each step (and its read) timed alone in the first timed '
+             'run of each, by what the limits did in it, against the same steps of the run '
+             'with the limits off (the same motion until the first impact'
+             + (f', at {first:.4f} s):' if first is not None else '; none in this run):'),
+             '', '| steps with | steps | limits on, median us | limits off, median us | '
+             'on / off |', '|---|---|---|---|---|', *parts]
     return '\n'.join(lines)
 
 
