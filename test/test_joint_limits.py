@@ -84,6 +84,40 @@ def test_the_bounds_reaction_is_the_joints_and_its_row_is_not_a_constraint(tmp_p
         sim.remove_constraint('j_limit')
 
 
+def test_a_bound_stays_right_when_other_constraints_come_and_go(tmp_path):
+    # A pinned ball beside the pendulum: removing its pin (rows before the bound's) and
+    # adding another moves the bound's row in λ; the rod must stay on its bound, with
+    # its static torque.
+    from rigid_body_sim.core.constraints import Constraint
+    from rigid_body_sim.scene import scene_from_dict
+    text = robot('pend', link('world'),
+                 link('rod', inertial(M, xyz=(L, 0, 0), ixx=I_AXIS, iyy=I_AXIS, izz=I_AXIS)),
+                 joint('j', 'revolute', 'world', 'rod', axis=(0, 1, 0),
+                       extra=f'<limit lower="-0.5" upper="{UPPER!r}" effort="100" '
+                             f'velocity="100"/>'))
+    (tmp_path / 'pend.urdf').write_text(text)
+    sim = scene_from_dict({
+        'dt': 1e-3, 'effects': {'gravity': {'g_world': [0.0, 0.0, -G]}},
+        'bodies': [{'name': 'ball', 'mass': 1.0, 'inertia': [0.1, 0.1, 0.1],
+                    'position_world': [0.0, 2.0, 0.0]}],
+        'constraints': [{'name': 'pin', 'type': 'ball', 'body_a': 'ball', 'body_b': 'world',
+                         'anchor_world': [0.0, 2.0, 0.5]}],
+        'robots': [{'urdf': str(tmp_path / 'pend.urdf')}]},
+        str(tmp_path / 'scene.yaml')).simulation
+    sim.step(1000)
+    assert sim.joint_limits()['active'] == {'j': 'upper'}
+    sim.remove_constraint('pin')
+    sim.step(300)
+    sim.add_constraint(Constraint('pin2', 'ball', 'ball', None,
+                                  anchor_world=sim.pose('ball')[0] + [0.0, 0.0, 0.5]))
+    sim.step(300)
+    assert sim.joint_limits()['active'] == {'j': 'upper'}
+    assert sim.limits.counters.releases == 0
+    assert abs(sim.joint_state().positions[0] - UPPER) <= 1e-10
+    np.testing.assert_allclose(sim.joint_state().efforts[0], -M * G * L * np.cos(UPPER),
+                               rtol=1e-9)
+
+
 def _swing_impact_time():
     """Time (s) at which the released rod reaches UPPER: DOP853 with an event, rtol 1e-13."""
     inertia = I_AXIS + M * L * L

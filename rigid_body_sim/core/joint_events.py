@@ -295,7 +295,7 @@ class JointEvents:
             Constraint(name, JointType.DRIVE, j.child_body, j.parent_body,
                        drive=js.drive_geometry(i, target)), state)
 
-    def _rows_changed(self) -> None:
+    def rows_changed(self) -> None:
         """Record each present row's index (rows shift as constraints come and go)."""
         sim = self.sim
         rows_of = sim.dynamics.solver.constraints.rows_of
@@ -316,14 +316,14 @@ class JointEvents:
         self._add_row(lim.names[i], i, lim.bound(i, side), state)
         lim.active[i] = side
         lim.counters.activations += 1
-        self._rows_changed()
+        self.rows_changed()
 
     def _unbound(self, i: int) -> None:
         """Drop joint ``i``'s active bound."""
         lim = self.limits
         self.sim.dynamics.solver.constraints.remove(lim.names[i])
         lim.active[i] = 0
-        self._rows_changed()
+        self.rows_changed()
 
     def _stick(self, i: int, state: State, q: float) -> None:
         """Hold joint ``i`` still at ``q`` (its friction sticks)."""
@@ -331,7 +331,7 @@ class JointEvents:
         self._friction_off(i)
         self._add_row(fr.names[i], i, q, state)
         fr.mode[i] = STICK
-        self._rows_changed()
+        self.rows_changed()
 
     def _slip(self, i: int, direction: int) -> None:
         """Let joint ``i`` slip towards ``direction`` (±1): friction ``−F direction``."""
@@ -349,7 +349,7 @@ class JointEvents:
         if fr.mode[i] == STICK:
             self.sim.dynamics.solver.constraints.remove(fr.names[i])
             fr.mode[i] = OFF
-            self._rows_changed()
+            self.rows_changed()
         else:
             fr.mode[i] = OFF
             self._friction_wrench(i, 0.0)

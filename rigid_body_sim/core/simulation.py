@@ -204,7 +204,7 @@ class Simulation:
         """Build the robots' joint Coulomb friction (None: none)."""
         js = self.joints
         force = np.array([j.spec.friction for j in js.joints]).reshape(len(js))
-        for r, model in enumerate(self.robots):
+        for model in self.robots:
             if not model.spec.enforce_friction:
                 force[[js.index[j.name] for j in model.joints if j.name in js.index]] = 0.0
         if self.drives is not None:
@@ -503,8 +503,9 @@ class Simulation:
         Positions are 0 in the URDF's zero configuration; angles count turns.
         Efforts: the effort command that acted over the last step, plus the joint's
         servo and damping at the current state (what a joint torque sensor reads),
-        an exact drive's multiplier, a bound's while the joint touches it
-        (:mod:`.limits`), and a mimic row's (on the follower and, times ``k``, on the
+        an exact drive's multiplier, a bound's while the joint touches it and its
+        friction (the sticking row's multiplier, or ``−F`` along the slip; see
+        :mod:`.limits`), and a mimic row's (on the follower and, times ``k``, on the
         leader).
         """
         js = self.joints.state(self._outputs_now(), self.time - 0.5 * self.dt)
@@ -697,6 +698,8 @@ class Simulation:
             raise self._inconsistent(constraint.name, 'constraint', 'it was not added',
                                      residual)
         self.dynamics.changed()
+        if self.events is not None:   # rows may have moved
+            self.events.rows_changed()
         self._reconcile_velocities()
 
     def _reconcile_velocities(self) -> None:
@@ -723,6 +726,8 @@ class Simulation:
                                     f'mimic joint): it cannot be removed')
         spec = self.dynamics.solver.constraints.remove(name)
         self.dynamics.changed()
+        if self.events is not None:   # rows may have moved
+            self.events.rows_changed()
         return spec
 
     @property
