@@ -175,7 +175,7 @@ def table(res: dict) -> str:
     parts = []
     for kind, what in (('free', 'no bound active (checked only)'),
                        ('resting', 'a bound active throughout (the row in the solve; the '
-                                   "read solves for its force)"),
+                                   'read solves for its force)'),
                        ('event', 'an impact or a release (rows added or removed, the impact '
                                  'located)')):
         sel = kinds == kind
