@@ -449,3 +449,33 @@ def test_markers_draw_the_urdf_visuals_posed_by_their_bodies(ros):
     p = base.pose.position
     # bound: 1 - 0.05 rounds once
     np.testing.assert_allclose([p.x, p.y, p.z], [0.0, 0.0, 0.95], atol=1e-15)
+
+
+def test_a_joint_on_its_limit_shows_in_diagnostics_and_joint_states(ros, tmp_path):
+    # A rod on a hinge at the world origin, horizontal at q = 0, falls onto its upper
+    # bound 0.8 rad (0.4 s) and rests there: diagnostics name the bound and count the
+    # impact, and joint_states carry the bound's torque, as the core computes it.
+    from robot_helpers import inertial, joint, link, robot
+    path = tmp_path / 'pendulum.urdf'
+    path.write_text(robot('pend', link('world'),
+                          link('rod', inertial(1.0, xyz=(0.5, 0, 0), ixx=1e-3, iyy=1e-3,
+                                               izz=1e-3)),
+                          joint('j', 'revolute', 'world', 'rod', axis=(0, 1, 0),
+                                extra='<limit lower="-0.5" upper="0.8" effort="10" '
+                                      'velocity="100"/>')))
+    node = ros.start({'scene': str(path), 'start_paused': True})
+    states = ros.client.subscribe(JointState, '/joint_states')
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    t = _step(ros, node, 1000)
+    msg = _at(ros, node, states, t, 'joint states')
+    sim = load_scene(path).simulation
+    sim.step(1000)
+    _assert_joints_equal(msg, sim.joint_state())
+    # bound: the core's own figure (test_joint_limits.py), through the message: 1e-9.
+    assert msg.effort[0] == pytest.approx(-9.81 * 0.5 * math.cos(0.8), rel=1e-9)
+    ros.client.wait_for(lambda: diags and _values(diags[-1])['steps'] == '1000',
+                        'diagnostics after the steps', node=node)
+    values = _values(diags[-1])
+    assert values['joint_limits_active'] == 'j:upper'
+    assert values['joint_limit_impacts_total'] == '1'
+    assert values['joint_limit_excess_max'] == '0'

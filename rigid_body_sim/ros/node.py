@@ -606,7 +606,13 @@ class SimNode(Node):
         self._window = WindowStats(wall_start=now, sim_start=self.session.seconds(),
                                    lag_resets_before=self._pacer.lag_resets,
                                    accuracy_misses_before=self.sim.accuracy().misses,
-                                   capped_before=self.sim.work().get('capped_steps', 0))
+                                   capped_before=self.sim.work().get('capped_steps', 0),
+                                   impacts_before=self._limit_impacts())
+
+    def _limit_impacts(self) -> int:
+        """Return the joint-limit impacts since the last reset (0 without limits)."""
+        limits = self.sim.joint_limits()
+        return limits['counters']['impacts'] if limits else 0
 
     def _publish_diagnostics(self, now: float) -> None:
         w = self._window
@@ -689,6 +695,7 @@ class SimNode(Node):
                     f'{joint}:{side}' for joint, side in limits['active'].items()) or 'none'
                 c = limits['counters']
                 values['joint_limit_impacts_total'] = str(c['impacts'])
+                values['joint_limit_impacts_window'] = str(c['impacts'] - w.impacts_before)
                 values['joint_limit_releases_total'] = str(c['releases'])
                 values['joint_limit_excess_max'] = f'{c["max_violation"]:.3g}'
             friction = sim.joint_friction()

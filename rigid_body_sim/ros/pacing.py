@@ -89,6 +89,7 @@ class WindowStats:
     lag_resets_before: int = 0   # the pacer's lag resets when the window began
     accuracy_misses_before: int = 0   # steps that missed the tolerance, at the start
     capped_before: int = 0   # steps that hit the work bound (capped sub-steps), at the start
+    impacts_before: int = 0   # joint-limit impacts located, at the start
 
     def record_step(self, cost: float, budget: float) -> None:
         """Record one step that took ``cost`` wall seconds against ``budget``."""
