@@ -356,20 +356,8 @@ class JointEvents:
 
     def _friction_wrench(self, i: int, tau: float) -> None:
         """Apply (``tau = 0``: remove) joint ``i``'s friction as a pair of held wrenches."""
-        sim = self.sim
-        js = sim.joints
-        j = js.joints[i]
-        k_child, k_parent = js.axis[i], js.R_jp[i] @ js.axis[i]
-        if js.rotary[i]:
-            pair = ((j.child_body, {'torque': tau * k_child}),
-                    (j.parent_body, {'torque': -tau * k_parent}))
-        else:
-            pair = ((j.child_body, {'force': tau * k_child, 'point_body': np.zeros(3)}),
-                    (j.parent_body, {'force': -tau * k_parent, 'point_body': js.p_jp[i]}))
-        for side, (body, load) in zip(('child', 'parent'), pair):
-            if body is not None:
-                sim.apply_wrench(body, frame='body', key=f'joint {j.name} friction {side}',
-                                 **load)
+        for wrench in self.sim.joints.effort_pair(i, tau, 'friction'):
+            self.sim.apply_wrench(**wrench)
 
     # -- between steps ----------------------------------------------------------------------
 

@@ -852,23 +852,29 @@ class JointSpace:
                            for name, value in efforts.items()])
         limit = self.effort_limit[idx] if len(idx) else np.zeros(0)
         clamped = np.clip(values, -limit, limit)
-        wrenches = []
-        for i, tau in zip(idx, clamped):
-            j = self.joints[i]
-            k_child = self.axis[i]
-            k_parent = self.R_jp[i] @ self.axis[i]
-            if self.rotary[i]:
-                pair = ((j.child_body, {'torque': tau * k_child}),
-                        (j.parent_body, {'torque': -tau * k_parent}))
-            else:
-                pair = ((j.child_body, {'force': tau * k_child, 'point_body': np.zeros(3)}),
-                        (j.parent_body, {'force': -tau * k_parent,
-                                         'point_body': self.p_jp[i]}))
-            for side, (body, load) in zip(('child', 'parent'), pair):
-                if body is not None:
-                    wrenches.append(dict(body=body, frame='body', key=f'joint {j.name} {side}',
-                                         **load))
+        wrenches = [w for i, tau in zip(idx, clamped) for w in self.effort_pair(i, tau)]
         return idx, clamped, wrenches
+
+    def effort_pair(self, i: int, tau: float, what: str = '') -> list:
+        """
+        Return the equal and opposite wrenches that are the generalized force ``tau`` on ``i``.
+
+        Keyword arguments of :meth:`.simulation.Simulation.apply_wrench` (body frame),
+        keyed ``joint <name> [what ]child|parent`` (the world's side is left out): a
+        torque ``τ k`` about the axis (rotary), or a force ``τ k`` along it through the
+        child's origin and the parent's joint point (prismatic).
+        """
+        j = self.joints[i]
+        k_child, k_parent = self.axis[i], self.R_jp[i] @ self.axis[i]
+        if self.rotary[i]:
+            pair = ((j.child_body, {'torque': tau * k_child}),
+                    (j.parent_body, {'torque': -tau * k_parent}))
+        else:
+            pair = ((j.child_body, {'force': tau * k_child, 'point_body': np.zeros(3)}),
+                    (j.parent_body, {'force': -tau * k_parent, 'point_body': self.p_jp[i]}))
+        prefix = f'joint {j.name} ' + (f'{what} ' if what else '')
+        return [dict(body=body, frame='body', key=prefix + side, **load)
+                for side, (body, load) in zip(('child', 'parent'), pair) if body is not None]
 
     def commanded(self, idx: np.ndarray, clamped: np.ndarray, values: np.ndarray,
                   start: float, end: float) -> None:
