@@ -148,7 +148,7 @@ class JointEvents:
         """
         lim, fr = self.limits, self.friction
         lam = self.sim.dynamics.last_multipliers
-        release = lim.most_pulling(lam) if lim is not None and lim.rows else -1
+        release = lim.most_pulling(lam, q) if lim is not None and lim.rows else -1
         breaking, force = fr.breaking(lam) if fr is not None and fr.rows else (-1, 0.0)
         if release >= 0:
             self._unbound(release)

@@ -226,18 +226,22 @@ class JointLimits:
                     out.append((int(i), side, float(side * rates[i])))
         return out
 
-    def most_pulling(self, lam: np.ndarray) -> int:
+    def most_pulling(self, lam: np.ndarray, q: np.ndarray) -> int:
         """
         Return the active joint whose bound pulls most in the multipliers ``lam``, or −1.
 
         A bound's row ``Φ = q − bound`` applies ``f = −λ`` along its joint (row
         :attr:`rows`); it pulls when ``s f < 0`` beyond rounding (64 ulps of the
-        largest such force). A loop over the few active bounds, not arrays.
+        largest such force). A joint still beyond its bound at ``q`` (a start
+        beyond it, converging back) is held whatever its row's sign: the row then
+        brings it back, and may pull to do so. A loop over the few active bounds.
         """
         worst, which, scale = 0.0, -1, 0.0
         for i, row in self.rows.items():
             push = -self.active[i] * float(lam[row])
             scale = max(scale, abs(push))
+            if self.active[i] * (q[i] - self.bound(i, self.active[i])) < -LOCATION_TOLERANCE:
+                continue
             if push < worst:
                 worst, which = push, i
         return which if worst < -64.0 * EPS * scale else -1
