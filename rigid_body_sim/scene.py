@@ -44,6 +44,7 @@ A scene file::
         limits: true                        # hold joints within their URDF <limit lower upper>
         limit_restitution: 0.0              # Newton's e at the bounds, or {joint: e}
         friction: true                      # Coulomb friction of <dynamics friction>
+        effort_limits: true                 # exact drives bounded by <limit effort>
     command_groups:                 # joints commanded together (others take efforts)
       - {name: arm_controller, joints: [joint1, joint2], interface: position,
          mode: servo, kp: 100.0, kd: 5.0}   # effort | position | velocity; N m/rad, N m s/rad
@@ -82,7 +83,7 @@ TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constr
 GROUP_KEYS = ('name', 'joints', 'interface', 'mode', 'kp', 'kd')
 ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
               'initial_positions', 'initial_velocities', 'keep_fixed', 'limits',
-              'limit_restitution', 'friction')
+              'limit_restitution', 'friction', 'effort_limits')
 ROBOT_SUFFIXES = ('.urdf', '.xacro')
 CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
                    'anchor_b_body', 'axis_world', 'length')
@@ -309,6 +310,9 @@ def _robots(data: Any, source: str) -> list:
         friction = entry.get('friction', True)
         if not isinstance(friction, bool):
             raise SpecError(f'{field}.friction', f'expected true or false, got {friction!r}')
+        efforts = entry.get('effort_limits', True)
+        if not isinstance(efforts, bool):
+            raise SpecError(f'{field}.effort_limits', f'expected true or false, got {efforts!r}')
         name = entry.get('name', parsed.name)
         if not isinstance(name, str) or not name:
             raise SpecError(f'{field}.name', f'expected a non-empty string, got {name!r}')
@@ -319,7 +323,7 @@ def _robots(data: Any, source: str) -> list:
                          keep_fixed=tuple(keep), prefix=prefix, source=str(path),
                          enforce_limits=limits,
                          limit_restitution=entry.get('limit_restitution', 0.0),
-                         enforce_friction=friction)
+                         enforce_friction=friction, enforce_efforts=efforts)
         out.append((spec, parsed))
     return out
 

@@ -714,6 +714,10 @@ class ConstraintSet:
             out[i] = target + rate * (float(time) - t0)
         return out
 
+    def drive_rates(self, names: list) -> np.ndarray:
+        """Rates (k,) of ``drive`` constraints' targets, rad/s or m/s."""
+        return np.array([self._drive(name).motion[0] for name in names], dtype=float)
+
     def drive_targets_at(self, time: float) -> np.ndarray:
         """
         Put the drives' targets at ``time`` (s) into ``row_par``; returns the drives' rows.

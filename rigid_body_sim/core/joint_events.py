@@ -15,6 +15,10 @@ taken, as often as events come, up to :data:`.limits.MAX_EVENTS`.
 The rows that come and go here are ``drive`` constraints of the solve, named
 :func:`.limits.limit_name` and :func:`.limits.stick_name`; they count as their joints'
 (reactions, violations, efforts) and are not among the simulation's constraint names.
+Effort-limited exact drives (:class:`.limits.DriveEfforts`) come and go the same way:
+a saturated drive's row (``<joint>_drive``) leaves the solve while a constant effort
+acts, and comes back where the drive's law holds again (an event located as a
+friction stop is); its name stays among the constraints, its reaction being the effort.
 """
 
 from __future__ import annotations
@@ -25,9 +29,11 @@ import numpy as np
 
 from .bodies import State
 from .constraints import Constraint, JointType
-from .limits import (Impact, JointFriction, JointLimits, LOCATION_TOLERANCE, MAX_BOUNCES,
-                     MAX_EVENTS, MAX_LOCATION_ITERATIONS, OFF, RATE_TOLERANCE, STICK)
-from .rotation import cross
+from .kernels.layout import O_ORIGIN_WORLD, O_QUAT_BODY_WORLD
+from .limits import (DriveEfforts, ENGAGED, EPS, Impact, JointFriction, JointLimits,
+                     LOCATION_TOLERANCE, MAX_BOUNCES, MAX_EVENTS, MAX_LOCATION_ITERATIONS, OFF,
+                     RATE_TOLERANCE, STICK)
+from .rotation import cross, quat_to_matrix
 
 _NONE = np.zeros(0, dtype=int)
 
@@ -42,14 +48,18 @@ class JointEvents:
         The simulation whose steps these are (its joints, solver, wrenches).
     limits : JointLimits or None
     friction : JointFriction or None
+    drives : DriveEfforts or None
+        The effort limits of exact drives.
 
     """
 
     def __init__(self, sim: Any, limits: Optional[JointLimits],
-                 friction: Optional[JointFriction]) -> None:
+                 friction: Optional[JointFriction],
+                 drives: Optional[DriveEfforts] = None) -> None:
         self.sim = sim
         self.limits = limits
         self.friction = friction
+        self.drives = drives
 
     # -- names and readings -----------------------------------------------------------------
 
@@ -110,7 +120,8 @@ class JointEvents:
             q, rates, over = self.coordinates(new, previous)
             crossed = _NONE if lim is None else lim.crossed(q)
             stopped = _NONE if fr is None else fr.stopped(rates)
-            if not len(crossed) and not len(stopped):
+            reached = self._reached(q, rates, new.time)
+            if not len(crossed) and not len(stopped) and not len(reached):
                 self._pivot(new, q)
                 return new, (q, over)
             if events >= MAX_EVENTS:
@@ -121,15 +132,31 @@ class JointEvents:
                     lim.counters.events_capped += 1
                     lim.counters.max_violation = max(lim.counters.max_violation,
                                                      -lim.worst_gap(q, crossed))
-                if len(stopped):
-                    new = self._resolve(new, q, rates, _NONE, stopped, events)
+                if len(stopped) or len(reached):
+                    new = self._resolve(new, q, rates, (_NONE, stopped, reached), events)
                 return new, (q, over)
             if lim is not None:
                 lim.counters.located_steps += 1
-            state, previous, rates = self._locate(state, previous, h, new, q, rates, crossed,
-                                                  stopped)
-            state = self._resolve(state, previous, rates, crossed, stopped, events)
+            which = (crossed, stopped, reached)
+            state, previous, rates = self._locate(state, previous, h, new, q, rates, which)
+            state = self._resolve(state, previous, rates, which, events)
             events += 1
+
+    def _laws(self, q: np.ndarray, rates: np.ndarray, time: float,
+              which: np.ndarray) -> np.ndarray:
+        """Return ``r = Φ̇ + ωΦ`` of saturated drives ``which`` (:meth:`.DriveEfforts.law`)."""
+        dr, js = self.drives, self.sim.joints
+        omega = self.sim.dynamics.solver.omega
+        return np.array([dr.law(i, q[i], rates[i], time, omega, js.rotary[i]) for i in which])
+
+    def _reached(self, q: np.ndarray, rates: np.ndarray, time: float) -> np.ndarray:
+        """Return the saturated drives whose law holds or was passed (``σ r ≥ −tol``)."""
+        dr = self.drives
+        if dr is None or not dr.motion:
+            return _NONE
+        sat = dr.saturated()
+        laws = self._laws(q, rates, time, sat)
+        return sat[dr.mode[sat] * laws >= -RATE_TOLERANCE]
 
     def coordinates(self, state: State, previous: np.ndarray) -> tuple:
         """Joint coordinates, rates and rates over their limits at ``state``, near ``previous``."""
@@ -146,10 +173,11 @@ class JointEvents:
         the row's force. One of each per step, the worst first; both decided on the
         multipliers before either changes the rows.
         """
-        lim, fr = self.limits, self.friction
+        lim, fr, dr = self.limits, self.friction, self.drives
         lam = self.sim.dynamics.last_multipliers
         release = lim.most_pulling(lam, q) if lim is not None and lim.rows else -1
         breaking, force = fr.breaking(lam) if fr is not None and fr.rows else (-1, 0.0)
+        saturating, effort = dr.breaking(lam) if dr is not None and dr.rows else (-1, 0.0)
         if release >= 0:
             self._unbound(release)
             lim.counters.releases += 1
@@ -157,16 +185,19 @@ class JointEvents:
                 self._stick(release, new, float(q[release]))
         if breaking >= 0:
             self._slip(breaking, -1 if force > 0.0 else 1)
+        if saturating >= 0:
+            self._saturate(saturating, 1 if effort > 0.0 else -1, new.time)
 
-    def _event(self, q: np.ndarray, rates: np.ndarray, crossed: np.ndarray,
-               stopped: np.ndarray) -> tuple:
+    def _event(self, q: np.ndarray, rates: np.ndarray, time: float, which: tuple) -> tuple:
         """
         Return the event function in its tolerances' units, and whether it is an event.
 
-        The smaller of a crossing's gap over :data:`LOCATION_TOLERANCE` and a stop's
-        ``d q̇`` over :data:`RATE_TOLERANCE`; a gap within the tolerance is an
-        event only when its joint moves into the bound.
+        ``which``: the joints crossing a bound, stopping, and drives reaching their law.
+        The smallest of a crossing's gap over :data:`LOCATION_TOLERANCE`, a stop's
+        ``d q̇`` and a saturated drive's ``−σ r`` over :data:`RATE_TOLERANCE`; a gap
+        within the tolerance is an event only when its joint moves into the bound.
         """
+        crossed, stopped, reached = which
         value, real = np.inf, True
         if len(crossed):
             gap, approaching = self.limits.event(q, rates, crossed)
@@ -175,11 +206,14 @@ class JointEvents:
             rate = self.friction.event(rates, stopped) / RATE_TOLERANCE
             if rate < value:
                 value, real = rate, True
+        if len(reached):
+            law = self.drives.event(self._laws(q, rates, time, reached), reached)
+            if law / RATE_TOLERANCE < value:
+                value, real = law / RATE_TOLERANCE, True
         return value, real
 
     def _locate(self, state: State, previous: np.ndarray, h: float, end: State,
-                q_end: np.ndarray, r_end: np.ndarray, crossed: np.ndarray,
-                stopped: np.ndarray) -> tuple:
+                q_end: np.ndarray, r_end: np.ndarray, which: tuple) -> tuple:
         """
         Find the first event after ``state``: regula falsi (Illinois) on partial steps.
 
@@ -191,14 +225,14 @@ class JointEvents:
         sim = self.sim
         q0, r0, _ = self.coordinates(state, previous)
         a, at = 0.0, (state, q0, r0)
-        ga, real = self._event(q0, r0, crossed, stopped)
+        ga, real = self._event(q0, r0, state.time, which)
         if ga <= 1.0:
             if real:
                 return at             # an event right at the start
             # A joint on its bound that leaves it (or rests there) crosses later, if at
             # all: the event sought is the first one after the start.
             ga = 1.0
-        b, gb = h, self._event(q_end, r_end, crossed, stopped)[0]
+        b, gb = h, self._event(q_end, r_end, end.time, which)[0]
         if gb >= -1.0:
             return end, q_end, r_end   # the event is at the step's end, to the tolerance
         stuck = 0
@@ -208,7 +242,7 @@ class JointEvents:
                 s = 0.5 * (a + b)
             trial = sim._advance(state, s, state.time + s)
             q, r, _ = self.coordinates(trial, previous)
-            g, real = self._event(q, r, crossed, stopped)
+            g, real = self._event(q, r, trial.time, which)
             if abs(g) <= 1.0 and real:
                 return trial, q, r
             if g > -1.0:   # before the event (or on a bound, leaving it)
@@ -225,8 +259,8 @@ class JointEvents:
                 break
         return at
 
-    def _resolve(self, state: State, q: np.ndarray, rates: np.ndarray, crossed: np.ndarray,
-                 stopped: np.ndarray, events: int) -> State:
+    def _resolve(self, state: State, q: np.ndarray, rates: np.ndarray, which: tuple,
+                 events: int) -> State:
         """
         Resolve the events at ``state``: stops stick, impacts get rows and restitution.
 
@@ -237,7 +271,16 @@ class JointEvents:
         separate, and a joint with friction slips away).
         """
         sim, lim, fr = self.sim, self.limits, self.friction
+        crossed, stopped, reached = which
         project = False
+        engaged = []
+        if len(reached):
+            laws = self._laws(q, rates, state.time, reached)
+            for i, r in zip(reached, laws):
+                if abs(r) <= RATE_TOLERANCE or self.drives.mode[i] * r >= 0.0:
+                    self._engage(int(i), state)
+                    engaged.append(int(i))
+                    project = True
         if len(stopped):
             for i in stopped:
                 if abs(rates[i]) <= RATE_TOLERANCE or fr.mode[i] * rates[i] <= 0.0:
@@ -257,6 +300,8 @@ class JointEvents:
                 vel, om = solver.project_velocities(state)
                 state = State(state.time, state.pos_com_world, state.quat_principal_world,
                               vel, om)
+            if engaged:
+                self._recheck(engaged, state)
             return state
         names, bounds, rebound, bouncing = [], [], [], []
         for i, side, approach in hits:
@@ -282,7 +327,18 @@ class JointEvents:
         if held:
             solver.set_drive_targets([n for n, _ in held], np.array([b for _, b in held]),
                                      state.time)
+        if engaged:
+            self._recheck(engaged, state)
         return state
+
+    def _recheck(self, engaged: list, state: State) -> None:
+        """Saturate again, at once, the drives just engaged whose rows need more than ``E``."""
+        dr = self.drives
+        lam = self.sim.dynamics.solver.multipliers(self.sim.dynamics, state)
+        for i in engaged:
+            f = -float(lam[dr.rows[i]])
+            if abs(f) > dr.effort[i] * (1.0 + 64.0 * EPS):
+                self._saturate(i, 1 if f > 0.0 else -1, state.time)
 
     # -- the rows ---------------------------------------------------------------------------
 
@@ -307,6 +363,10 @@ class JointEvents:
             fr = self.friction
             fr.rows = {int(i): int(rows_of(fr.names[i])[0])
                        for i in np.flatnonzero(fr.mode == STICK)}
+        if self.drives is not None:
+            dr = self.drives
+            dr.rows = {int(i): int(rows_of(dr.names[i])[0])
+                       for i in dr.joints if dr.mode[i] == ENGAGED}
         sim.dynamics.changed()
 
     def _bound(self, i: int, side: int, state: State) -> None:
@@ -354,6 +414,135 @@ class JointEvents:
             fr.mode[i] = OFF
             self._friction_wrench(i, 0.0)
 
+    def _saturate(self, i: int, direction: int, time: float) -> None:
+        """
+        Saturate joint ``i``'s exact drive towards ``direction`` (±1): effort ``±E``, no row.
+
+        An engaged drive's motion ``(c₀, ċ, t₀)`` is kept while its row is away.
+        """
+        dr = self.drives
+        if dr.mode[i] == ENGAGED:
+            solver = self.sim.dynamics.solver
+            name = dr.names[i]
+            target = float(solver.drive_targets([name], time)[0])
+            rate = float(solver.constraints.drive_rates([name])[0])
+            dr.motion[i] = (target, rate, float(time))
+            dr.specs[i] = solver.constraints.remove(name)
+        dr.mode[i] = direction
+        dr.counters['saturations'] += 1
+        self._drive_wrench(i, direction * dr.effort[i])
+        self.rows_changed()
+
+    def _engage(self, i: int, state: State) -> None:
+        """Engage joint ``i``'s saturated drive: its row back, on its target's motion."""
+        dr = self.drives
+        target, rate = dr.target(i, state.time)
+        self._add_row(dr.names[i], i, target, state)
+        self.sim.dynamics.solver.set_drive_targets([dr.names[i]], np.array([target]),
+                                                   state.time, np.array([rate]))
+        del dr.motion[i], dr.specs[i]
+        dr.mode[i] = ENGAGED
+        dr.counters['engagements'] += 1
+        self._drive_wrench(i, 0.0)
+        self.rows_changed()
+
+    def engage_all(self) -> None:
+        """Engage every saturated drive (a state set by hand: its drives hold it)."""
+        dr = self.drives
+        if dr is not None:
+            for i in dr.saturated():
+                self._engage(int(i), self.sim.state)
+
+    def set_targets(self, idx: np.ndarray, targets: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        """
+        Keep new targets of saturated drives ``idx`` (at the simulation's time).
+
+        Returns the mask of ``idx`` whose drives are engaged (the caller sets those in
+        the solve).
+        """
+        dr, now = self.drives, self.sim.time
+        engaged = np.ones(len(idx), dtype=bool)
+        if dr is None:
+            return engaged
+        for k, i in enumerate(idx):
+            if dr.mode[i] != ENGAGED:
+                dr.motion[i] = (float(targets[k]), float(rates[k]), now)
+                engaged[k] = False
+        return engaged
+
+    def drive_target(self, i: int, time: float) -> Optional[float]:
+        """Return the target of joint ``i``'s saturated drive at ``time`` (None: engaged)."""
+        dr = self.drives
+        if dr is None or dr.mode[i] == ENGAGED:
+            return None
+        return dr.target(i, time)[0]
+
+    def commanded(self, idx: np.ndarray) -> None:
+        """
+        Decide, after new targets, which effort-limited drives of ``idx`` saturate.
+
+        The velocity projection closes a new target's law ``r = Φ̇ + ωΦ`` at the next
+        step with the impulse ``μ = W r`` (``W``: the inverse of the drives' rows'
+        ``G M⁻¹ Gᵀ`` block, the other rows held): a drive whose impulse exceeds what
+        its effort gives over a step, ``E dt``, saturates now towards ``−sign μ``; a
+        saturated one turns towards its new target (or engages, if its law holds).
+        ``W r`` comes from projections of the state: ``μ_j = Δν_jᵀ M Δν``, ``Δν`` the
+        projection's change and ``Δν_j`` its change per unit ``r_j`` (one projection
+        each). One pass: the impulses of the drives that stay engaged are those with
+        every commanded drive engaged.
+        """
+        dr, sim = self.drives, self.sim
+        if dr is None:
+            return
+        mine = [int(i) for i in idx if i in set(dr.joints.tolist())]
+        if not mine:
+            return
+        q, rates, _ = self.coordinates(sim.state, sim.joints.positions)
+        now = sim.time
+        sat = [i for i in mine if dr.mode[i] != ENGAGED]
+        if sat:
+            laws = self._laws(q, rates, now, np.array(sat))
+            for i, r in zip(sat, laws):
+                if abs(r) <= RATE_TOLERANCE:
+                    self._engage(i, sim.state)
+                    self._recheck([i], sim.state)
+                elif dr.mode[i] != (-1 if r > 0.0 else 1):
+                    self._saturate(i, -1 if r > 0.0 else 1, now)
+        eng = [i for i in mine if dr.mode[i] == ENGAGED and i not in sat]
+        if not eng:
+            return
+        impulse = self._impulses(eng, sim.state)
+        for i, mu in zip(eng, impulse):
+            if abs(mu) > dr.effort[i] * sim.dt * (1.0 + 64.0 * EPS):
+                self._saturate(i, -1 if mu > 0.0 else 1, now)
+
+    def _impulses(self, idx: list, state: State) -> np.ndarray:
+        """Return the velocity projection's impulse ``μ`` on the drives of joints ``idx``."""
+        sim, dr = self.sim, self.drives
+        solver, bodies = sim.dynamics.solver, sim.bodies
+        names = [dr.names[i] for i in idx]
+        targets = solver.drive_targets(names, state.time)
+        rates = solver.constraints.drive_rates(names)
+        vel, om = solver.project_velocities(state)
+        dv, dw = vel - state.vel_com_world, om - state.ang_vel_principal
+        out = np.empty(len(idx))
+        for k in range(len(idx)):
+            probe = rates.copy()
+            probe[k] -= 1.0      # r_k one larger
+            solver.set_drive_targets(names, targets, state.time, probe)
+            vk, wk = solver.project_velocities(state)
+            vk, wk = vk - vel, wk - om
+            out[k] = float(np.sum(bodies.mass[:, None] * vk * dv)
+                           + np.sum(bodies.moments * wk * dw))
+        solver.set_drive_targets(names, targets, state.time, rates)
+        # Δν = −M⁻¹Gᵀ W r and Δν_k = −M⁻¹Gᵀ W e_k, so Δν_kᵀ M Δν = e_kᵀ W G M⁻¹ Gᵀ W r = μ_k.
+        return out
+
+    def _drive_wrench(self, i: int, tau: float) -> None:
+        """Apply (``tau = 0``: remove) joint ``i``'s saturated drive effort (held wrenches)."""
+        for wrench in self.sim.joints.effort_pair(i, tau, 'drive'):
+            self.sim.apply_wrench(**wrench)
+
     def _friction_wrench(self, i: int, tau: float) -> None:
         """Apply (``tau = 0``: remove) joint ``i``'s friction as a pair of held wrenches."""
         for wrench in self.sim.joints.effort_pair(i, tau, 'friction'):
@@ -371,6 +560,8 @@ class JointEvents:
         A joint with friction sticks where it is if it is at rest, else slips.
         """
         sim, lim, fr = self.sim, self.limits, self.friction
+        self.engage_all()
+        self.rows_changed()   # (the drives' rows: a reset added them anew)
         if lim is not None:
             for i in np.flatnonzero(lim.active):
                 self._unbound(int(i))
@@ -398,10 +589,53 @@ class JointEvents:
 
     def restore_friction(self) -> None:
         """Apply the slipping joints' friction again (after the wrenches were cleared)."""
-        fr = self.friction
+        fr, dr = self.friction, self.drives
         if fr is not None:
             for i in fr.slipping():
                 self._friction_wrench(int(i), -fr.force[i] * fr.mode[i])
+        if dr is not None:
+            for i in dr.saturated():
+                self._drive_wrench(int(i), dr.mode[i] * dr.effort[i])
+
+    def saturated_reactions(self, out: np.ndarray) -> dict:
+        """
+        Return the saturated drives' reactions, ``{name: {body: fields}}``: their efforts.
+
+        ``out``: the bodies' outputs now (:mod:`.kernels.layout`'s ``O_`` columns). A rotary
+        drive's effort ``σE`` is a torque about the axis on the child and its opposite
+        on the parent; a prismatic one's a force along the axis at the child's origin
+        (the anchor) and its opposite at the parent's joint point.
+        """
+        sim, dr = self.sim, self.drives
+        js, bodies, com = sim.joints, sim.bodies, sim.state.pos_com_world
+        result = {}
+        for i in dr.saturated():
+            tau = dr.mode[i] * dr.effort[i]
+            j = js.joints[i]
+            c = bodies.lookup(j.child_body)
+            R_c = quat_to_matrix(out[c, O_QUAT_BODY_WORLD:O_QUAT_BODY_WORLD + 4])
+            anchor = out[c, O_ORIGIN_WORLD:O_ORIGIN_WORLD + 3].copy()
+            axis = R_c @ js.axis[i]
+            per_body = {}
+            ends = [(j.child_body, 1.0, anchor)]
+            if j.parent_body is not None:
+                p = bodies.lookup(j.parent_body)
+                point = out[p, O_ORIGIN_WORLD:O_ORIGIN_WORLD + 3] + quat_to_matrix(
+                    out[p, O_QUAT_BODY_WORLD:O_QUAT_BODY_WORLD + 4]) @ js.p_jp[i]
+                ends.append((j.parent_body, -1.0, point))
+            for body, sign, point in ends:
+                b = bodies.lookup(body)
+                if js.rotary[i]:
+                    force, torque = np.zeros(3), sign * tau * axis
+                    about_anchor = torque
+                else:
+                    force = sign * tau * axis
+                    torque = cross(point - com[b], force)
+                    about_anchor = cross(point - anchor, force)
+                per_body[body] = {'force_world': force, 'torque_com_world': torque,
+                                  'torque_anchor_world': about_anchor, 'anchor_world': anchor}
+            result[dr.names[i]] = per_body
+        return result
 
     def merge_reactions(self, fields: dict, com: np.ndarray, lookup: Any) -> None:
         """Add each present row's reaction into its joint's (about the joint's anchor)."""

@@ -332,6 +332,114 @@ class JointFriction:
         return which, f_which
 
 
+#: Modes of an effort-limited exact drive (:attr:`DriveEfforts.mode`): engaged (its row
+#: holds the motion), or ±1: saturated, pushing with ``±E``.
+ENGAGED = 0
+
+
+class DriveEfforts:
+    """
+    The effort limits of exact drives (:class:`.robots.CommandGroup` of mode ``exact``).
+
+    An exact drive is the row ``Φ = q − c(t)`` of the solve, held on the law ``Φ̇ =
+    −ωΦ`` by the step's velocity projection (``ω``: the solver's rate); its effort is
+    ``f = −λ``. With a finite URDF effort ``E`` the row is bounded, ``|f| ≤ E``, and
+    complementary to the law: the drive is **engaged** (the row holds the motion,
+    ``r = Φ̇ + ωΦ = 0``) while ``|f| ≤ E``, else **saturated** towards ``σ = ±1``:
+    no row, a constant generalized force ``σ E`` along the joint (a pair of
+    wrenches), while ``σ r < 0`` (the joint lags behind the law). Transitions, with
+    the limits' machinery:
+
+    * **saturation**: a step whose own solve finds ``|f| > E`` saturates the drive
+      towards ``sign f`` from the next step (one step late, first order, as friction's
+      breakaway); a command whose velocity projection would need an impulse larger
+      than ``E dt`` (a target jump, a new velocity) saturates it at once, towards
+      the target;
+    * **engagement**: a saturated drive whose ``r`` reaches zero inside a step is
+      engaged there, the moment located by regula falsi on partial steps to
+      :data:`RATE_TOLERANCE` (no impulse: the law already holds there); if its row
+      then needs more than ``E`` it saturates again at once, towards ``sign f``.
+
+    So the effort never exceeds ``E`` beyond one step after a breakaway, a motion
+    that needs more lags with the effort at ``E``, and the drive catches up along the
+    row's law when it can.
+
+    Parameters
+    ----------
+    names : list of str
+        The drives' constraint names, one per joint of the space (``<joint>_drive``).
+    limited : ndarray of int
+        The joints whose exact drives are effort-limited.
+    effort : ndarray, shape (k,)
+        N m or N: each joint's effort limit ``E``.
+
+    """
+
+    def __init__(self, names: list, limited: np.ndarray, effort: np.ndarray) -> None:
+        self.names = list(names)
+        self.joints = np.asarray(limited, dtype=int)
+        self.effort = np.asarray(effort, dtype=float)
+        #: Per joint: ENGAGED or ±1 (saturated, pushing with ±E).
+        self.mode = np.zeros(len(self.names), dtype=int)
+        #: The row in Φ and λ of each engaged limited drive (joint -> row), kept by the caller.
+        self.rows: dict = {}
+        #: Each saturated drive's motion ``(c₀, ċ, t₀)``, kept while its row is away.
+        self.motion: dict = {}
+        #: Each saturated drive's constraint (its description), kept while it is away.
+        self.specs: dict = {}
+        self.counters = {'saturations': 0, 'engagements': 0}
+
+    def __len__(self) -> int:
+        """Return the number of effort-limited drives."""
+        return len(self.joints)
+
+    def reset(self) -> None:
+        """Engage every drive; forget the counters."""
+        self.mode[:] = ENGAGED
+        self.rows, self.motion, self.specs = {}, {}, {}
+        self.counters = {'saturations': 0, 'engagements': 0}
+
+    def saturated(self) -> np.ndarray:
+        """Return the saturated drives' joints (indices)."""
+        return self.joints[self.mode[self.joints] != ENGAGED]
+
+    def target(self, i: int, time: float) -> tuple:
+        """Return a saturated drive's target and its rate at ``time``: ``(c, ċ)``."""
+        c0, rate, t0 = self.motion[i]
+        return c0 + rate * (time - t0), rate
+
+    def law(self, i: int, q: float, rate: float, time: float, omega: float,
+            rotary: bool) -> float:
+        """
+        Return ``r = Φ̇ + ωΦ`` of a saturated drive (0: the row's law holds).
+
+        ``Φ = q − c(t)``, an angle taken within π (the drive's row goes the shorter way).
+        """
+        c, c_rate = self.target(i, time)
+        phi = q - c
+        if rotary:
+            phi = (phi + np.pi) % (2.0 * np.pi) - np.pi
+        return rate - c_rate + omega * phi
+
+    def event(self, laws: np.ndarray, which: np.ndarray) -> float:
+        """Return the event function of saturated drives ``which``: the smallest ``−σ r``."""
+        return float(np.min(-self.mode[which] * laws))
+
+    def breaking(self, lam: np.ndarray) -> tuple:
+        """
+        Return the engaged drive whose row needs most beyond ``E``, and its force (−1, 0: none).
+
+        A drive's row applies ``f = −λ`` along its joint.
+        """
+        worst, which, f_which = 0.0, -1, 0.0
+        for i, row in self.rows.items():
+            f = -float(lam[row])
+            excess = abs(f) - self.effort[i] * (1.0 + 64.0 * EPS)
+            if excess > worst:
+                worst, which, f_which = excess, i, f
+        return which, f_which
+
+
 def restitution_of(value: Any, names: list, field_name: str) -> np.ndarray:
     """
     Validate a restitution (a number, or ``{joint: number}``) into an array over ``names``.

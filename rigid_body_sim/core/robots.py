@@ -283,6 +283,9 @@ class RobotSpec:
         ``{joint: e}`` by URDF joint name (others 0).
     enforce_friction : bool
         Simulate the joints' URDF ``<dynamics friction>`` (Coulomb, :mod:`.limits`).
+    enforce_efforts : bool
+        Bound the exact drives' efforts by the joints' URDF ``<limit effort>``
+        (:class:`.limits.DriveEfforts`; servos and effort commands are clamped either way).
 
     """
 
@@ -300,6 +303,7 @@ class RobotSpec:
     enforce_limits: bool = True
     limit_restitution: Any = 0.0
     enforce_friction: bool = True
+    enforce_efforts: bool = True
 
 
 @dataclass
@@ -977,8 +981,9 @@ class CommandGroup:
         (MuJoCo's position and velocity actuators). ``exact`` (position and
         velocity groups): the driving constraint ``q − c(t) = 0``, one more row of
         the multiplier solve, so the joint follows its target exactly and its
-        effort is the row's multiplier: the torque the motion takes, not limited
-        by the URDF effort (that needs bounded rows). A position group's target
+        effort is the row's multiplier: the torque the motion takes, bounded by
+        the URDF effort (a motion that needs more lags at the limit:
+        :class:`.limits.DriveEfforts`; the robot's ``enforce_efforts``). A position group's target
         is ``c = q*``: a jump is closed along ``exp(−t /
         constraint_time_constant)``, as any violated constraint, and a hinge goes
         the shorter way (within π). A velocity group's target moves, ``c(t) = c₀ +

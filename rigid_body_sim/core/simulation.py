@@ -36,7 +36,7 @@ from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .joint_events import JointEvents
 from .kernels import free_step
-from .limits import JointFriction, JointLimits, restitution_of
+from .limits import DriveEfforts, ENGAGED, JointFriction, JointLimits, restitution_of
 from .robots import (build_robot, CommandGroup, drive_name, Interface, JointDrives, JointSpace,
                      JointState, mimic_name, RobotSpec)
 from .solver import ConstraintSolver
@@ -186,13 +186,17 @@ class Simulation:
                                 f'constraint {name!r}, but a constraint of that name exists')
         self.limits: Optional[JointLimits] = None
         self.friction: Optional[JointFriction] = None
+        #: The effort limits of the exact drives (None: no exact drive is limited).
+        self.drive_efforts: Optional[DriveEfforts] = None
         if len(self.joints):
             self.limits = self._joint_limits()
             self.friction = self._joint_friction()
-        #: The joints' limits and friction and their events (None: neither).
+            self.drive_efforts = self._drive_efforts()
+        #: The joints' limits, friction, drives' effort limits and their events (None: none).
         self.events: Optional[JointEvents] = None
-        if self.limits is not None or self.friction is not None:
-            self.events = JointEvents(self, self.limits, self.friction)
+        if self.limits is not None or self.friction is not None \
+                or self.drive_efforts is not None:
+            self.events = JointEvents(self, self.limits, self.friction, self.drive_efforts)
             for name in sorted(self.events.reserved() & names):
                 raise SpecError('constraints', f'{name!r} is the name of a row that holds a '
                                                f'joint on its limit or its friction: rename '
@@ -213,6 +217,22 @@ class Simulation:
             force[f] = 0.0
         friction = JointFriction(js, force)
         return friction if len(friction) else None
+
+    def _drive_efforts(self) -> Optional[DriveEfforts]:
+        """Build the effort limits of the exact drives (None: none is limited)."""
+        js = self.joints
+        if not len(self._exact):
+            return None
+        enforce = np.zeros(len(js), dtype=bool)
+        for model in self.robots:
+            enforce[[js.index[j.name] for j in model.joints if j.name in js.index]] = \
+                model.spec.enforce_efforts
+        limited = [int(i) for i in self._exact
+                   if enforce[i] and np.isfinite(js.effort_limit[i])]
+        if not limited:
+            return None
+        return DriveEfforts([drive_name(n) for n in js.names], np.array(limited, dtype=int),
+                            js.effort_limit)
 
     def _joint_limits(self) -> Optional[JointLimits]:
         """Build the enforced joint limits of the robots (None: none); validate restitutions."""
@@ -428,7 +448,7 @@ class Simulation:
             self.dynamics.changed()
             self._reconcile_velocities()
         if self.events is not None:
-            for part in (self.limits, self.friction):
+            for part in (self.limits, self.friction, self.drive_efforts):
                 if part is not None:
                     part.reset()
             self.events.from_state()
@@ -523,9 +543,14 @@ class Simulation:
             efforts += self.events.efforts(lam if rows else None)
         if len(self._exact):
             # An exact drive's effort is its row's multiplier: Φ = q − q*, so the
-            # generalized force its reaction −Gᵀλ applies along q is −λ.
-            rows = [solver.constraints.rows_of(name)[0] for name in self._drive_names]
-            efforts[self._exact] -= lam[rows]
+            # generalized force its reaction −Gᵀλ applies along q is −λ; a saturated
+            # drive's is its effort limit, ±E.
+            dr = self.drive_efforts
+            for i, name in zip(self._exact, self._drive_names):
+                if dr is not None and dr.mode[i] != ENGAGED:
+                    efforts[i] += dr.mode[i] * dr.effort[i]
+                else:
+                    efforts[i] -= lam[solver.constraints.rows_of(name)[0]]
         if self._mimic_names:
             # A mimic row Φ = q_f − k q_l − c applies −λ along q_f and kλ along q_l.
             for (f, leader, k, _), name in zip(self.joints.mimics, self._mimic_names):
@@ -587,6 +612,8 @@ class Simulation:
                     (float(value) - self.joints.positions[i]) / (2.0 * np.pi))
         if self.drives is not None:
             self.drives.center[:] = self.joints.positions
+            if self.events is not None:   # a state set by hand: its drives hold it
+                self.events.engage_all()
             if len(self._exact):   # exact drives start where the joints were set
                 self.dynamics.solver.set_drive_targets(
                     self._drive_names, self.joints.positions[self._exact], self.time,
@@ -653,10 +680,24 @@ class Simulation:
                 solver = self.dynamics.solver
                 velocity = self.drives.interface_is(Interface.VELOCITY)[exact]
                 # A velocity drive's target continues from where it is now.
-                targets = np.where(velocity, solver.drive_targets(names, self.time),
-                                   values[self.drives.exact[idx]])
-                solver.set_drive_targets(names, targets, self.time, self._drive_rates(exact))
+                now = np.array([self._drive_target(i, name) for i, name in zip(exact, names)])
+                targets = np.where(velocity, now, values[self.drives.exact[idx]])
+                rates = self._drive_rates(exact)
+                engaged = (np.ones(len(exact), dtype=bool) if self.events is None
+                           else self.events.set_targets(exact, targets, rates))
+                if np.any(engaged):
+                    solver.set_drive_targets([n for n, e in zip(names, engaged) if e],
+                                             targets[engaged], self.time, rates[engaged])
+                if self.events is not None:   # effort-limited drives may saturate
+                    self.events.commanded(exact)
             self.dynamics.changed()
+
+    def _drive_target(self, i: int, name: str) -> float:
+        """Return the target of joint ``i``'s exact drive (``name``) now, saturated or not."""
+        held = None if self.events is None else self.events.drive_target(i, self.time)
+        if held is not None:
+            return held
+        return float(self.dynamics.solver.drive_targets([name], self.time)[0])
 
     def _drive_rates(self, idx: np.ndarray) -> np.ndarray:
         """Rates (k,) of the exact drives of joints ``idx``: v* for velocity drives, else 0."""
@@ -741,7 +782,27 @@ class Simulation:
         """
         names = self.dynamics.solver.constraints.names
         held = {} if self.events is None else self.events.held()
-        return [name for name in names if name not in held] if held else names
+        names = [name for name in names if name not in held] if held else names
+        dr = self.drive_efforts
+        if dr is not None and dr.motion:   # a saturated drive is still there, its row away
+            names = names + [dr.names[i] for i in dr.saturated()]
+        return names
+
+    def constraint_spec(self, name: str) -> Constraint:
+        """Return the description of constraint ``name`` (a saturated drive's too)."""
+        dr = self.drive_efforts
+        if dr is not None:
+            for i, spec in dr.specs.items():
+                if dr.names[i] == name:
+                    return spec
+        return self.dynamics.solver.constraints.spec(name)
+
+    def constraint_rows(self, name: str) -> int:
+        """Return how many rows constraint ``name`` has (a saturated drive's one, away now)."""
+        dr = self.drive_efforts
+        if dr is not None and any(dr.names[i] == name for i in dr.specs):
+            return 1
+        return len(self.dynamics.solver.constraints.rows_of(name))
 
     def joint_friction(self) -> dict:
         """
@@ -758,6 +819,21 @@ class Simulation:
         return {'sticking': [names[i] for i in sorted(fr.rows)],
                 'slipping': {names[i]: int(fr.mode[i]) for i in fr.slipping()},
                 'counters': dict(fr.counters)}
+
+    def drive_saturation(self) -> dict:
+        """
+        Return what the exact drives' effort limits do now: who is saturated, counters.
+
+        ``{'saturated': {joint: +1 | -1}, 'counters': {'saturations': n, 'engagements':
+        n}}`` (see :class:`.limits.DriveEfforts`); empty when no exact drive has an
+        effort limit.
+        """
+        dr = self.drive_efforts
+        if dr is None:
+            return {}
+        names = self.joints.names
+        return {'saturated': {names[i]: int(dr.mode[i]) for i in dr.saturated()},
+                'counters': dict(dr.counters)}
 
     def joint_limits(self) -> dict:
         """
@@ -806,8 +882,9 @@ class Simulation:
             solver = self.dynamics.solver
             phi = solver.violation(self.state)
             if self._drive_names:   # a drive's Φ is its tracking error, not a joint's drift
+                present = set(solver.constraints.names)
                 phi = np.delete(phi, [solver.constraints.rows_of(name)[0]
-                                      for name in self._drive_names])
+                                      for name in self._drive_names if name in present])
             d = replace(d, constraint_violation=float(np.max(np.abs(phi), initial=0.0)))
         return d
 
@@ -828,6 +905,13 @@ class Simulation:
             for row, i in self.events.held().items():
                 joint, value = self.joints.names[i], out.pop(row)
                 out[joint] = max(out.get(joint, 0.0), value)
+        dr = self.drive_efforts
+        if dr is not None:   # a saturated drive's tracking error, its row away
+            for i in dr.saturated():
+                phi_i = self.joints.positions[i] - dr.target(i, self.time)[0]
+                if self.joints.rotary[i]:
+                    phi_i = (phi_i + np.pi) % (2.0 * np.pi) - np.pi
+                out[dr.names[i]] = abs(float(phi_i))
         return out
 
     def reactions(self) -> dict:
@@ -844,11 +928,15 @@ class Simulation:
             ``{name: {body_name: Reaction}}`` (the world is not listed).
 
         """
-        if not self.dynamics.constrained:
+        dr = self.drive_efforts
+        if not self.dynamics.constrained and (dr is None or not dr.motion):
             return {}
-        fields = self.dynamics.solver.reactions(self.dynamics, self.state)
+        fields = {} if not self.dynamics.constrained \
+            else self.dynamics.solver.reactions(self.dynamics, self.state)
         if self.events is not None and self.events.held():
             self.events.merge_reactions(fields, self.state.pos_com_world, self.bodies.lookup)
+        if dr is not None and dr.motion:
+            fields.update(self.events.saturated_reactions(self._outputs_now()))
         return {name: {body: Reaction(**f) for body, f in per_body.items()}
                 for name, per_body in fields.items()}
 

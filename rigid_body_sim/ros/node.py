@@ -702,6 +702,13 @@ class SimNode(Node):
             if friction:
                 values['joint_friction_sticking'] = ' '.join(friction['sticking']) or 'none'
                 values['joint_friction_slips_total'] = str(friction['counters']['slips'])
+            saturation = sim.drive_saturation()
+            if saturation:
+                values['joint_drives_saturated'] = ' '.join(
+                    f'{joint}:{"+" if sign > 0 else "-"}'
+                    for joint, sign in saturation['saturated'].items()) or 'none'
+                values['joint_drive_saturations_total'] = \
+                    str(saturation['counters']['saturations'])
         rejected = session.totals.rejected
         for cause in Rejection:
             values[f'rejected_{cause.value}'] = str(rejected.get(cause.value, 0))

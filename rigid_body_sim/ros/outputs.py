@@ -181,7 +181,7 @@ class Outputs:
                                                        R.T @ torque_origin)))
                 on_world_f -= r.force_world
                 on_world_t -= r.torque_com_world + so3.cross(com[i], r.force_world)
-            spec = sim.dynamics.solver.constraints.spec(name)
+            spec = sim.constraint_spec(name)
             if spec.body_b is None or (spec.coupling is not None
                                        and spec.coupling.body_b is None):
                 out.append((topic, conv.wrench_stamped(

@@ -310,7 +310,7 @@ class Session:
                 sim.remove_constraint(spec.name)
             sim.state = before
             raise
-        return len(sim.dynamics.solver.constraints.rows_of(spec.name))
+        return sim.constraint_rows(spec.name)
 
     def add_constraint(self, request: Any) -> int:
         """Check and add a constraint from an ``AddConstraint`` request; return its rows."""
@@ -323,7 +323,7 @@ class Session:
             raise Rejected(Rejection.UNKNOWN_CONSTRAINT,
                            f'name: no constraint {shown(name)}; present: '
                            f'{self.sim.constraint_names}')
-        rows = len(self.sim.dynamics.solver.constraints.rows_of(name))
+        rows = self.sim.constraint_rows(name)
         self.sim.remove_constraint(name)
         return rows
 
