@@ -14,7 +14,8 @@ Then ``bench/constraints.py`` (chains, trees, rings, joints), ``bench/knob_estim
 ``bench/shake_convergence.py`` (SHAKE's iterations) and ``bench/reactions.py`` (reading
 the reactions after a step; ``--skip-constraints`` skips these six),
 ``bench/mujoco_peer.py``, ``bench/robot_panda.py`` (the Franka Panda's URDF),
-``bench/joint_limits.py`` (the Panda into its limits) and
+``bench/joint_limits.py`` (the Panda into its limits), ``bench/drive_efforts.py`` (its
+exact drives bounded by their efforts; the Panda's URDF from the bench requirements) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
 latency; with the Panda, joint_states and /tf at 1 kHz; ``--skip-node``).
@@ -291,6 +292,12 @@ def sections(quick: bool, node_args: list) -> list:
         ('skip_mujoco', 'joint_limits', ['--quick'] if quick else [], report.Section(
             'Joint limits: the Panda swinging into its bounds',
             f'./dev.sh python bench/joint_limits.py{q}', [T('joint_limits.md')])),
+        ('skip_mujoco', 'drive_efforts', ['--quick'] if quick else [], report.Section(
+            'Effort-limited exact drives: the Panda',
+            f'./dev.sh python bench/drive_efforts.py{q}', [T('drive_efforts.md')],
+            about="The Panda's arm on exact position drives, their URDF effort limits off "
+                  'and on: holding, a streamed trajectory, a jump (no peer: see the '
+                  'script).')),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],

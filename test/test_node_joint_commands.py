@@ -357,13 +357,15 @@ def test_a_group_name_that_cannot_be_a_topic_stops_the_node_naming_it(ros, tmp_p
     assert "command group name: 'bad__name' cannot be part of a ROS name" in node.log()
 
 
+# The unbounded drives (effort_limits: false): carrying the arm takes j1 more than its
+# URDF effort of 10 N m (bounded drives: test_drive_effort_limits.py).
 EXACT_SCENE = """
 name: exact_arm
 dt: 0.001
 effects:
   gravity: {{g_world: [0.0, 0.0, -9.81]}}
 robots:
-  - {{urdf: {arm}, initial_positions: {{j1: 0.2, j2: -0.3}}}}
+  - {{urdf: {arm}, effort_limits: false, initial_positions: {{j1: 0.2, j2: -0.3}}}}
 command_groups:
   - {{name: arm_exact, joints: [j1, j2], interface: position, mode: exact}}
 """
@@ -403,6 +405,31 @@ def test_an_exact_drive_follows_its_target_and_reports_the_torque_it_takes(ros, 
     # (1.8e-2 rad) is not counted as a violation. (/diagnostics comes once a second.)
     ros.client.wait_for(lambda: len(diags) > seen, 'diagnostics after the steps', node=node)
     assert float(_values(diags[-1])['constraint_violation']) < 1e-11
+
+
+def test_a_drive_beyond_its_effort_limit_saturates_and_diagnostics_say_so(ros, tmp_path):
+    # The same arm with its drives bounded by the URDF efforts: j1's 10 N m cannot carry
+    # the arm, so after the first step the drive saturates and j1 falls with its effort
+    # at the limit; joint_states' efforts are the core's, bit for bit, and diagnostics
+    # name the saturated drive.
+    scene = tmp_path / 'bounded_arm.yaml'
+    scene.write_text(EXACT_SCENE.replace('effort_limits: false, ', '').format(
+        arm=SCENE.parent / 'urdf' / 'node_arm.urdf'))
+    node = ros.start({'scene': str(scene), 'start_paused': True})
+    states = ros.client.subscribe(JointState, '/joint_states')
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    t = _step(ros, node, 50)
+    fallen = _at(ros, node, states, t, 'joint states')
+    sim = load_scene(scene).simulation
+    sim.step(50)
+    _assert_equal(fallen, sim.joint_state())
+    [(joint, sign)] = sim.drive_saturation()['saturated'].items()
+    assert joint == 'j1' and fallen.effort[0] == sign * 10.0
+    assert abs(fallen.position[0] - 0.2) > 1e-3      # it moved: the drive could not hold
+    ros.client.wait_for(lambda: diags and _values(diags[-1]).get(
+        'joint_drives_saturated') == f'j1:{"+" if sign > 0 else "-"}',
+        'diagnostics naming the saturated drive', node=node)
+    assert int(_values(diags[-1])['joint_drive_saturations_total']) >= 1
 
 
 SPIN_SCENE = EXACT_SCENE.replace('name: exact_arm', 'name: spin_arm').replace(
