@@ -8,6 +8,7 @@ integrator's order to a DOP853 event time.
 
 import re
 
+from joint_space_reference import JointSpaceModel
 import numpy as np
 import pytest
 from rigid_body_sim.core.errors import SpecError
@@ -471,3 +472,115 @@ def test_friction_false_leaves_the_joint_free(tmp_path):
     assert sim.friction is None
     sim.step(100)
     assert sim.joint_state().positions[0] > 1e-3
+
+
+def _turning_arm(tmp_path, theta0, omega, dt=1e-3,
+                 extra='<limit lower="0" upper="3" effort="1e6" velocity="1e6"/>'):
+    """
+    Return a 2-link arm whose j1 (axis x) turns at ``omega`` (an exact velocity drive).
+
+    j2 (axis x, at the end of link 1) has its lower bound at 0, where link 2 continues
+    link 1; gravity holds it there while link 2 points below the horizontal's far side.
+    """
+    from test_exact_drives import scene
+    text = robot('turn', link('world'),
+                 link('l1', inertial(1.0, (0, 0.25, 0), ixx=0.02, iyy=0.01, izz=0.02)),
+                 link('l2', inertial(0.5, (0, 0.2, 0), ixx=0.01, iyy=0.004, izz=0.01)),
+                 joint('j1', 'revolute', 'world', 'l1', xyz=(0, 0, 1), axis=(1, 0, 0)),
+                 joint('j2', 'revolute', 'l1', 'l2', xyz=(0, 0.5, 0), axis=(1, 0, 0),
+                       extra=extra))
+    sim = scene(tmp_path, text, [{'name': 'turn', 'joints': ['j1'], 'interface': 'velocity',
+                                  'mode': 'exact'}], integrator='lie_poisson4', dt=dt)
+    sim.command_joints({'j1': omega})
+    sim.set_joint_state({'j1': theta0, 'j2': 0.0})
+    return sim, JointSpaceModel.from_urdf(text)
+
+
+def test_a_bound_lets_go_where_its_force_reaches_zero_located_inside_the_step(tmp_path):
+    # j1 turns at ω = 1 rad/s from θ0 = 1.2; link 2 lies on j2's lower bound, collinear
+    # with link 1, so the bound carries only its weight's torque, f = m g l cos(θ1): no
+    # centrifugal torque about j2. f reaches 0 when link 2 passes the vertical, at t* =
+    # (π/2 − θ0)/ω = 0.37 s, inside a step; there the bound lets go (located to
+    # FORCE_TOLERANCE of the force's change over the step) and link 2 swings free of it,
+    # j1 still driven: q̈2 = −h2(q, q̇) / M22 with q1 = θ0 + ω t (the joint-space
+    # reference). lie_poisson4 keeps its fourth order through the release.
+    theta0, omega, m2, l2 = 1.2, 1.0, 0.5, 0.2
+    t_star = (0.5 * np.pi - theta0) / omega
+    errors = []
+    for dt in (1e-3, 5e-4):
+        sim, reference = _turning_arm(tmp_path, theta0, omega, dt)
+        worst_f = 0.0
+        while sim.time + sim.dt < t_star:
+            sim.step()
+            if sim.time > 0.01:   # (the first step seats the joint on its bound)
+                f = m2 * G * l2 * np.cos(theta0 + omega * sim.time)
+                worst_f = max(worst_f, abs(sim.joint_state().efforts[1] - f))
+        assert sim.joint_limits()['active'] == {'j2': 'lower'}
+        # bound: the solve's rounding, 1e-12 of the torques (~1 N m).
+        assert worst_f < 1e-11
+
+        def rhs(t, y):
+            q = np.array([theta0 + omega * t, y[0]])
+            qd = np.array([omega, y[1]])
+            h = reference.inverse_dynamics(q, qd, np.zeros(2))
+            return [y[1], -h[1] / reference.mass_matrix(q)[1, 1]]
+
+        ref = solve_ivp(rhs, (t_star, 0.7), [0.0, 0.0], method='DOP853', dense_output=True,
+                        rtol=1e-13, atol=1e-16)
+        worst = 0.0
+        while sim.time < 0.7 - 0.5 * dt:
+            sim.step()
+            worst = max(worst, abs(sim.joint_state().positions[1] - ref.sol(sim.time)[0]))
+        assert sim.joint_limits()['active'] == {}
+        assert sim.joint_limits()['counters']['releases'] == 1
+        assert ref.sol(0.7)[0] > 0.1      # it swung away from the bound
+        errors.append(worst)
+    # bound: the release is located to 1e-9 of the force's change over the step: in
+    # time, 1e-12 s, moving q2 (which leaves with q̈2 = 0, q⃛2 = f'/I) by far less than
+    # 1e-15 rad; what remains is lie_poisson4's error over 0.33 s of swing, measured
+    # 5.8e-11, 3.6e-12 and 3.4e-13 at dt 1e-3, 5e-4 and 2.5e-4: fourth order. A release
+    # one step late would be off by about f' dt t² / (2 I) = 1e-3 rad (first order).
+    assert errors[0] < 1e-10
+    assert errors[0] / errors[1] > 8.0    # order 3 or more through the release
+
+
+def test_a_sticking_joint_breaks_away_where_its_force_reaches_f_located_inside_the_step(
+        tmp_path):
+    # The turning arm with j2 free of bounds but with Coulomb friction F = 0.5 N m: j2
+    # sticks, collinear, while the torque that holds it, m g l cos(θ1), is within F; as
+    # link 2 passes the vertical it falls to −F at cos θ1 = −F / (m g l), at t* = 0.91 s,
+    # inside a step: there the joint breaks away (located) and slips towards +q2 under
+    # gravity and −F: q̈2 = (−h2 − F) / M22, j1 still driven.
+    theta0, omega, m2, l2, friction = 1.2, 1.0, 0.5, 0.2, 0.5
+    t_star = (np.arccos(-friction / (m2 * G * l2)) - theta0) / omega
+    extra = ('<limit lower="-3" upper="3" effort="1e6" velocity="1e6"/>'
+             f'<dynamics friction="{friction!r}"/>')
+    errors = []
+    for dt in (1e-3, 5e-4):
+        sim, reference = _turning_arm(tmp_path, theta0, omega, dt, extra)
+        while sim.time + sim.dt < t_star:
+            sim.step()
+        assert sim.joint_friction()['sticking'] == ['j2']
+        assert abs(sim.joint_state().positions[1]) < 1e-12
+
+        def rhs(t, y):
+            q = np.array([theta0 + omega * t, y[0]])
+            qd = np.array([omega, y[1]])
+            h = reference.inverse_dynamics(q, qd, np.zeros(2))
+            return [y[1], (-h[1] - friction) / reference.mass_matrix(q)[1, 1]]
+
+        end = t_star + 0.3
+        ref = solve_ivp(rhs, (t_star, end), [0.0, 0.0], method='DOP853', dense_output=True,
+                        rtol=1e-13, atol=1e-16)
+        worst = 0.0
+        while sim.time < end - 0.5 * dt:
+            sim.step()
+            worst = max(worst, abs(sim.joint_state().positions[1] - ref.sol(sim.time)[0]))
+        assert sim.joint_friction()['slipping'] == {'j2': 1}
+        assert ref.sol(end)[0] > 0.05
+        errors.append(worst)
+    # bound: as the release's (the test above): the breakaway located to 1e-12 s, and
+    # lie_poisson4's fourth-order error over 0.3 s of slip (the slip's constant −F is a
+    # held wrench: no discontinuity inside a step).
+    assert errors[0] < 1e-10
+    assert errors[0] / errors[1] > 8.0

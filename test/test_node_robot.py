@@ -479,3 +479,6 @@ def test_a_joint_on_its_limit_shows_in_diagnostics_and_joint_states(ros, tmp_pat
     assert values['joint_limits_active'] == 'j:upper'
     assert values['joint_limit_impacts_total'] == '1'
     assert values['joint_limit_excess_max'] == '0'
+    # No row pivoted past its bound (it rests; the core's complementarity()).
+    assert values['joint_complementarity_force_excess_max'] == \
+        f'{sim.complementarity()["max_force_excess"]:.3g}' == '0'

@@ -3,13 +3,15 @@ The steps of a simulation whose joints have limits or Coulomb friction: events i
 
 :mod:`.limits` holds the rows' data and rules (bounds, restitution, friction forces);
 this module takes the steps. A step is the integrator's (:meth:`.Simulation._advance`);
-after it the joint coordinates are read once. When nothing happened the step stands,
-and the step's own multipliers decide the pivots for the next one (a bound that
-pulled leaves the active set, a sticking joint whose row needs more than its friction
-slips). When a free joint passed a bound, or a slipping joint's rate reached zero,
-the step is taken again up to the first such moment, found by regula falsi
-(Illinois) on partial steps from the step's start; there the event is resolved (an
-impact with Newton's restitution, or a stop that sticks) and the rest of the step is
+after it the joint coordinates are read once, and, while a row with a force bound is
+held, the multipliers at its end. When nothing happened the step stands. When a free
+joint passed a bound, a slipping joint's rate reached zero, a saturated drive's law
+holds again, or a held row's force passed its bound (a bound pulls, a sticking
+joint needs more than its friction, a drive more than its effort), the step is taken
+again up to the first such moment, found by regula falsi (Illinois) on partial steps
+from the step's start; there the event is resolved (an impact with Newton's
+restitution, a stop that sticks, a drive that engages, a row that pivots: the
+direct method's pivots, each followed by a solve) and the rest of the step is
 taken, as often as events come, up to :data:`.limits.MAX_EVENTS`.
 
 The rows that come and go here are ``drive`` constraints of the solve, named
@@ -30,9 +32,9 @@ import numpy as np
 from .bodies import State
 from .constraints import Constraint, JointType
 from .kernels.layout import O_ORIGIN_WORLD, O_QUAT_BODY_WORLD
-from .limits import (DriveEfforts, ENGAGED, EPS, Impact, JointFriction, JointLimits,
-                     LOCATION_TOLERANCE, MAX_BOUNCES, MAX_EVENTS, MAX_LOCATION_ITERATIONS, OFF,
-                     RATE_TOLERANCE, STICK)
+from .limits import (DriveEfforts, ENGAGED, EPS, FORCE_TOLERANCE, Impact, JointFriction,
+                     JointLimits, LOCATION_TOLERANCE, MAX_BOUNCES, MAX_EVENTS,
+                     MAX_LOCATION_ITERATIONS, OFF, RATE_TOLERANCE, STICK)
 from .rotation import cross, quat_to_matrix
 
 _NONE = np.zeros(0, dtype=int)
@@ -60,6 +62,14 @@ class JointEvents:
         self.limits = limits
         self.friction = friction
         self.drives = drives
+        #: Since the last reset: steps with a located event, and the largest force past
+        #: its bound a row had where it pivoted (N m or N: within FORCE_TOLERANCE of the
+        #: scale at a located event; more only when MAX_EVENTS cut a step short).
+        self.counters = {'located_steps': 0, 'max_force_excess': 0.0}
+        # The margins at the end of the step being located, and each held row's margin
+        # change over it (the scale of its event function: a fraction of the step).
+        self._end_margins = np.zeros(0)
+        self._span: Optional[np.ndarray] = None
 
     # -- names and readings -----------------------------------------------------------------
 
@@ -121,23 +131,27 @@ class JointEvents:
             crossed = _NONE if lim is None else lim.crossed(q)
             stopped = _NONE if fr is None else fr.stopped(rates)
             reached = self._reached(q, rates, new.time)
-            if not len(crossed) and not len(stopped) and not len(reached):
-                self._pivot(new, q)
+            releasing = self._releasing(new, q)
+            if not (len(crossed) or len(stopped) or len(reached) or releasing):
+                self._note(q, rates, new.time)
                 return new, (q, over)
             if events >= MAX_EVENTS:
                 # Too many events in one step: the step stands, a bound passed is counted
-                # (never silently), and stopped joints stick where they are (no slip may
-                # go on against its own friction).
+                # (never silently), stopped joints stick where they are (no slip may go on
+                # against its own friction), and rows past their force bounds pivot here.
                 if len(crossed):
                     lim.counters.events_capped += 1
                     lim.counters.max_violation = max(lim.counters.max_violation,
                                                      -lim.worst_gap(q, crossed))
-                if len(stopped) or len(reached):
-                    new = self._resolve(new, q, rates, (_NONE, stopped, reached), events)
+                if len(stopped) or len(reached) or releasing:
+                    new = self._resolve(new, q, rates, (_NONE, stopped, reached, releasing),
+                                        events)
+                self._note(q, rates, new.time)
                 return new, (q, over)
+            self.counters['located_steps'] += 1
             if lim is not None:
                 lim.counters.located_steps += 1
-            which = (crossed, stopped, reached)
+            which = (crossed, stopped, reached, releasing)
             state, previous, rates = self._locate(state, previous, h, new, q, rates, which)
             state = self._resolve(state, previous, rates, which, events)
             events += 1
@@ -150,13 +164,126 @@ class JointEvents:
         return np.array([dr.law(i, q[i], rates[i], time, omega, js.rotary[i]) for i in which])
 
     def _reached(self, q: np.ndarray, rates: np.ndarray, time: float) -> np.ndarray:
-        """Return the saturated drives whose law holds or was passed (``σ r ≥ −tol``)."""
+        """
+        Return the saturated drives whose law holds again or was passed.
+
+        ``σ r ≥ −tol`` for a drive that lagged its law since it saturated
+        (:attr:`.DriveEfforts.away`), ``σ r > tol`` for any.
+        """
         dr = self.drives
         if dr is None or not dr.motion:
             return _NONE
         sat = dr.saturated()
-        laws = self._laws(q, rates, time, sat)
-        return sat[dr.mode[sat] * laws >= -RATE_TOLERANCE]
+        d = dr.mode[sat] * self._laws(q, rates, time, sat)
+        return sat[(dr.away[sat] & (d >= -RATE_TOLERANCE)) | (d > RATE_TOLERANCE)]
+
+    def _note(self, q: np.ndarray, rates: np.ndarray, time: float) -> None:
+        """Note, at an accepted step's end, slips that move and drives that lag their law."""
+        fr, dr = self.friction, self.drives
+        if fr is not None:
+            fr.note(rates)
+        if dr is not None and dr.motion:
+            sat = dr.saturated()
+            d = dr.mode[sat] * self._laws(q, rates, time, sat)
+            dr.away[sat[d < -RATE_TOLERANCE]] = True
+
+    # -- rows at their force bounds ---------------------------------------------------------
+
+    def _margins(self, lam: np.ndarray, q: np.ndarray) -> tuple:
+        """
+        Return how far each held row's force is from its bound, at the multipliers ``lam``.
+
+        ``(kinds, joints, margins, forces, scales)``: per row its kind (0 a bound, 1 a
+        sticking joint, 2 an engaged effort-limited drive), its joint, the margin (a
+        bound's push ``s f``; ``F − |f|``; ``E − |f|``: negative past the bound), its
+        force ``f = −λ`` along the joint, and the scale of :data:`FORCE_TOLERANCE` for
+        it (N m or N): ``F`` or ``E``, and for the bounds the largest of their forces.
+        A joint still beyond its bound (a start beyond it, converging back) is held
+        whatever its row's sign: no margin.
+        """
+        lim, fr, dr = self.limits, self.friction, self.drives
+        kinds, joints, margins, forces, scales = [], [], [], [], []
+        if lim is not None:
+            for i, row in lim.rows.items():
+                side = lim.active[i]
+                if side * (q[i] - lim.bound(i, side)) < -LOCATION_TOLERANCE:
+                    continue
+                f = -float(lam[row])
+                kinds.append(0), joints.append(i), margins.append(side * f), forces.append(f)
+            scales = [max((abs(f) for f in forces), default=0.0)] * len(forces)
+        for kind, part, bound in ((1, fr, None if fr is None else fr.force),
+                                  (2, dr, None if dr is None else dr.effort)):
+            if part is None:
+                continue
+            for i, row in part.rows.items():
+                f = -float(lam[row])
+                kinds.append(kind), joints.append(i), forces.append(f)
+                margins.append(bound[i] - abs(f))
+                scales.append(bound[i])
+        return kinds, joints, np.array(margins), forces, np.maximum(np.array(scales), 1e-300)
+
+    def _held(self) -> bool:
+        """Tell whether a row with a force bound is held (a bound, a stick, a limited drive)."""
+        return any(part is not None and part.rows
+                   for part in (self.limits, self.friction, self.drives))
+
+    def _releasing(self, state: State, q: np.ndarray) -> bool:
+        """
+        Tell whether a held row's force at ``state`` is past its bound beyond the tolerance.
+
+        The multipliers at the state (the read solve a ``joint_state`` after the step
+        reuses); records the bounds' force scale for :meth:`_event`.
+        """
+        if not self._held():
+            return False
+        lam = self.sim.dynamics.solver.multipliers(self.sim.dynamics, state)
+        _, _, margins, _, scales = self._margins(lam, q)
+        self._end_margins, self._span = margins, None
+        return bool(len(margins)) and float(np.min(margins / scales)) < -FORCE_TOLERANCE
+
+    def _release(self, state: State, q: np.ndarray, located: bool = False) -> None:
+        """
+        Pivot the held rows whose force is past its bound, at ``state``.
+
+        The direct method: the row of the smallest margin pivots (a bound leaves, and
+        its joint sticks if it has friction; a sticking joint slips away from its
+        row's force; a drive saturates towards it), the multipliers are solved anew
+        without it, and so on while a margin is past its bound by more than
+        :data:`FORCE_TOLERANCE` of its scale. Each pivot is exact: the next solve sees
+        it. ``located``: ``state`` is where a row's margin was located to reach zero
+        (within FORCE_TOLERANCE of its change over the step): that row pivots first.
+        """
+        solver, dyn = self.sim.dynamics.solver, self.sim.dynamics
+        for _ in range(2 * len(self.sim.joints) + 1):
+            if not self._held():
+                return
+            kinds, joints, margins, forces, scales = self._margins(
+                solver.multipliers(dyn, state), q)
+            if not len(margins):
+                return
+            span = self._span if located and self._span is not None \
+                and len(self._span) == len(margins) else None
+            if span is not None:
+                k = int(np.argmin(margins / span))
+                due = margins[k] <= FORCE_TOLERANCE * span[k]
+            else:
+                k = int(np.argmin(margins / scales))
+                due = margins[k] < -FORCE_TOLERANCE * scales[k]
+            if not due:
+                return
+            located = False   # (the rows change: the spans are of the rows before)
+            self.counters['max_force_excess'] = max(self.counters['max_force_excess'],
+                                                    -float(margins[k]))
+            i, f = joints[k], forces[k]
+            if kinds[k] == 0:
+                self._unbound(i)
+                self.limits.counters.releases += 1
+                if self.friction is not None and self.friction.force[i] > 0.0:
+                    self._stick(i, state, float(q[i]))
+            elif kinds[k] == 1:
+                self._slip(i, -1 if f > 0.0 else 1)
+            else:
+                self._saturate(i, 1 if f > 0.0 else -1, state.time)
 
     def coordinates(self, state: State, previous: np.ndarray) -> tuple:
         """Joint coordinates, rates and rates over their limits at ``state``, near ``previous``."""
@@ -164,40 +291,19 @@ class JointEvents:
         sim.bodies.outputs(state)
         return sim.joints.coordinates(sim.bodies.outputs_cache.out, previous)
 
-    def _pivot(self, new: State, q: np.ndarray) -> None:
-        """
-        Change the active set for the next step from this step's own multipliers.
-
-        A bound that pulled leaves (the joint then sticks, if it has friction); a
-        sticking joint whose row needed more than its friction slips, away from
-        the row's force. One of each per step, the worst first; both decided on the
-        multipliers before either changes the rows.
-        """
-        lim, fr, dr = self.limits, self.friction, self.drives
-        lam = self.sim.dynamics.last_multipliers
-        release = lim.most_pulling(lam, q) if lim is not None and lim.rows else -1
-        breaking, force = fr.breaking(lam) if fr is not None and fr.rows else (-1, 0.0)
-        saturating, effort = dr.breaking(lam) if dr is not None and dr.rows else (-1, 0.0)
-        if release >= 0:
-            self._unbound(release)
-            lim.counters.releases += 1
-            if fr is not None and fr.force[release] > 0.0:
-                self._stick(release, new, float(q[release]))
-        if breaking >= 0:
-            self._slip(breaking, -1 if force > 0.0 else 1)
-        if saturating >= 0:
-            self._saturate(saturating, 1 if effort > 0.0 else -1, new.time)
-
-    def _event(self, q: np.ndarray, rates: np.ndarray, time: float, which: tuple) -> tuple:
+    def _event(self, q: np.ndarray, rates: np.ndarray, state: State, which: tuple) -> tuple:
         """
         Return the event function in its tolerances' units, and whether it is an event.
 
-        ``which``: the joints crossing a bound, stopping, and drives reaching their law.
-        The smallest of a crossing's gap over :data:`LOCATION_TOLERANCE`, a stop's
-        ``d q̇`` and a saturated drive's ``−σ r`` over :data:`RATE_TOLERANCE`; a gap
-        within the tolerance is an event only when its joint moves into the bound.
+        ``which``: the joints crossing a bound, stopping, drives reaching their law, and
+        whether a held row's force passes its bound. The smallest of a crossing's gap
+        over :data:`LOCATION_TOLERANCE`, a stop's ``d q̇`` and a saturated drive's
+        ``−σ r`` over :data:`RATE_TOLERANCE`, and the smallest force margin over
+        :data:`FORCE_TOLERANCE` times each row's force scale (a read solve at ``state``);
+        a gap within the tolerance is an event only when its joint moves into the bound.
         """
-        crossed, stopped, reached = which
+        crossed, stopped, reached, releasing = which
+        time = state.time
         value, real = np.inf, True
         if len(crossed):
             gap, approaching = self.limits.event(q, rates, crossed)
@@ -210,6 +316,20 @@ class JointEvents:
             law = self.drives.event(self._laws(q, rates, time, reached), reached)
             if law / RATE_TOLERANCE < value:
                 value, real = law / RATE_TOLERANCE, True
+        if releasing:
+            lam = self.sim.dynamics.solver.multipliers(self.sim.dynamics, state)
+            margins = self._margins(lam, q)[2]
+            if self._span is None or len(self._span) != len(margins):
+                # The step's start: each row's margin change over the step scales its
+                # event function (a time fraction of the step, located to
+                # FORCE_TOLERANCE of it, however small the forces).
+                span = np.abs(margins - self._end_margins) \
+                    if len(margins) == len(self._end_margins) else np.abs(margins)
+                self._span = np.maximum(span, 1e-300)
+            if len(margins):
+                margin = float(np.min(margins / self._span)) / FORCE_TOLERANCE
+                if margin < value:
+                    value, real = margin, True
         return value, real
 
     def _locate(self, state: State, previous: np.ndarray, h: float, end: State,
@@ -225,14 +345,14 @@ class JointEvents:
         sim = self.sim
         q0, r0, _ = self.coordinates(state, previous)
         a, at = 0.0, (state, q0, r0)
-        ga, real = self._event(q0, r0, state.time, which)
+        ga, real = self._event(q0, r0, state, which)
         if ga <= 1.0:
             if real:
                 return at             # an event right at the start
             # A joint on its bound that leaves it (or rests there) crosses later, if at
             # all: the event sought is the first one after the start.
             ga = 1.0
-        b, gb = h, self._event(q_end, r_end, end.time, which)[0]
+        b, gb = h, self._event(q_end, r_end, end, which)[0]
         if gb >= -1.0:
             return end, q_end, r_end   # the event is at the step's end, to the tolerance
         stuck = 0
@@ -242,7 +362,7 @@ class JointEvents:
                 s = 0.5 * (a + b)
             trial = sim._advance(state, s, state.time + s)
             q, r, _ = self.coordinates(trial, previous)
-            g, real = self._event(q, r, trial.time, which)
+            g, real = self._event(q, r, trial, which)
             if abs(g) <= 1.0 and real:
                 return trial, q, r
             if g > -1.0:   # before the event (or on a bound, leaving it)
@@ -270,6 +390,15 @@ class JointEvents:
         law of restitution for all at once (rows of ``e > 0`` then leave: they
         separate, and a joint with friction slips away).
         """
+        state = self._resolve_motion(state, q, rates, which[:3], events)
+        if which[3]:
+            self._release(state, q, located=True)
+        self._span = None
+        return state
+
+    def _resolve_motion(self, state: State, q: np.ndarray, rates: np.ndarray, which: tuple,
+                        events: int) -> State:
+        """Resolve the crossings, stops and drives' engagements at ``state`` (:meth:`_resolve`)."""
         sim, lim, fr = self.sim, self.limits, self.friction
         crossed, stopped, reached = which
         project = False
@@ -300,8 +429,8 @@ class JointEvents:
                 vel, om = solver.project_velocities(state)
                 state = State(state.time, state.pos_com_world, state.quat_principal_world,
                               vel, om)
-            if engaged:
-                self._recheck(engaged, state)
+            if engaged:   # a row that needs more than E at once saturates again
+                self._release(state, q)
             return state
         names, bounds, rebound, bouncing = [], [], [], []
         for i, side, approach in hits:
@@ -327,18 +456,9 @@ class JointEvents:
         if held:
             solver.set_drive_targets([n for n, _ in held], np.array([b for _, b in held]),
                                      state.time)
-        if engaged:
-            self._recheck(engaged, state)
+        if engaged:   # a row that needs more than E at once saturates again
+            self._release(state, q)
         return state
-
-    def _recheck(self, engaged: list, state: State) -> None:
-        """Saturate again, at once, the drives just engaged whose rows need more than ``E``."""
-        dr = self.drives
-        lam = self.sim.dynamics.solver.multipliers(self.sim.dynamics, state)
-        for i in engaged:
-            f = -float(lam[dr.rows[i]])
-            if abs(f) > dr.effort[i] * (1.0 + 64.0 * EPS):
-                self._saturate(i, 1 if f > 0.0 else -1, state.time)
 
     # -- the rows ---------------------------------------------------------------------------
 
@@ -398,6 +518,7 @@ class JointEvents:
         fr = self.friction
         self._friction_off(i)
         fr.mode[i] = direction
+        fr.moving[i] = False
         fr.counters['slips'] += 1
         self._friction_wrench(i, -fr.force[i] * direction)
 
@@ -429,6 +550,7 @@ class JointEvents:
             dr.motion[i] = (target, rate, float(time))
             dr.specs[i] = solver.constraints.remove(name)
         dr.mode[i] = direction
+        dr.away[i] = False
         dr.counters['saturations'] += 1
         self._drive_wrench(i, direction * dr.effort[i])
         self.rows_changed()
@@ -505,16 +627,18 @@ class JointEvents:
             for i, r in zip(sat, laws):
                 if abs(r) <= RATE_TOLERANCE:
                     self._engage(i, sim.state)
-                    self._recheck([i], sim.state)
+                    self._release(sim.state, q)
                 elif dr.mode[i] != (-1 if r > 0.0 else 1):
                     self._saturate(i, -1 if r > 0.0 else 1, now)
         eng = [i for i in mine if dr.mode[i] == ENGAGED and i not in sat]
         if not eng:
+            self._note(q, rates, now)
             return
         impulse = self._impulses(eng, sim.state)
         for i, mu in zip(eng, impulse):
             if abs(mu) > dr.effort[i] * sim.dt * (1.0 + 64.0 * EPS):
                 self._saturate(i, -1 if mu > 0.0 else 1, now)
+        self._note(q, rates, now)   # a drive saturated behind its law lags it
 
     def _impulses(self, idx: list, state: State) -> np.ndarray:
         """Return the velocity projection's impulse ``μ`` on the drives of joints ``idx``."""
@@ -584,6 +708,7 @@ class JointEvents:
                     self._stick(int(i), sim.state, float(q[i]))
                 else:
                     self._slip(int(i), 1 if rates[i] > 0.0 else -1)
+                    fr.moving[i] = True
         if beyond.any() or (fr is not None and fr.rows):
             sim._reconcile_velocities()
 

@@ -17,14 +17,19 @@ while a joint rests on its bound it drifts from it no more than a joint's drift.
 active set changes only between (partial) steps, by two rules that are the pivots of
 a direct method on the complementarity conditions:
 
-* **release**: after a step whose own acceleration-level solve found an active bound
-  pulling (``s f < 0``: the joint would accelerate away), the bound leaves the active
-  set, the most pulling first, one per step. The step's multipliers are those of its
-  last kick or stage (the splittings' first kick when they have no damping: at the
-  step's start), so a bound leaves at most one step late, first order in the release
-  time; resting on a bound costs no solve beyond the step's own. A joint released
-  while its acceleration still points into its bound meets it again at once (an
-  inelastic contact at the next step's start);
+* **release**: after each step with a row held, the multipliers at its end are solved
+  (the read a ``joint_state`` after the step reuses); when an active bound pulls there
+  (``s f < 0``: the joint would accelerate away) beyond :data:`FORCE_TOLERANCE`, the
+  step is taken again up to the moment its force reached zero, located by regula falsi
+  on partial steps (each a solve at the partial step's end) to FORCE_TOLERANCE of the
+  force's change over the step, and there the bound leaves the active set; the
+  multipliers are solved anew without it, and any other bound then pulling leaves too
+  (the direct method's pivots, each exact); then the rest of the step is taken. So a
+  bound lets go at its located time and the integrator keeps its order through it;
+  resting on a bound costs one solve a step beyond the step's own. The same rule, and
+  the same location, serve a sticking joint whose force reaches its friction
+  (:class:`JointFriction`) and an exact drive whose force reaches its effort limit
+  (:class:`DriveEfforts`);
 * **impact**: a step after which an inactive bound is crossed (``g < −tol``) is taken
   again up to the moment ``t*`` of the crossing, located by regula falsi (Illinois) on
   partial steps from the step's start until ``|g| ≤`` :data:`LOCATION_TOLERANCE`; there
@@ -67,6 +72,11 @@ LOCATION_TOLERANCE = 1e-10
 #: rad/s or m/s: a joint on its bound moving into it more slowly than this is at rest
 #: there, not hitting it (rounding leaves rates of 1e-16 after an inelastic impact).
 RATE_TOLERANCE = 1e-9
+#: Relative: where a held row's force reaches its bound (a bound's force zero, a
+#: sticking joint's ``F``, a drive's ``E``), the moment is located until the force is
+#: within this fraction of its scale of it (``F``, ``E``; for bounds, the largest force
+#: of the active bounds).
+FORCE_TOLERANCE = 1e-9
 #: Most regula-falsi iterations to locate one impact (each a partial step).
 MAX_LOCATION_ITERATIONS = 40
 #: Impacts in one step after which the next ones are inelastic (Zeno's cut).
@@ -226,26 +236,6 @@ class JointLimits:
                     out.append((int(i), side, float(side * rates[i])))
         return out
 
-    def most_pulling(self, lam: np.ndarray, q: np.ndarray) -> int:
-        """
-        Return the active joint whose bound pulls most in the multipliers ``lam``, or −1.
-
-        A bound's row ``Φ = q − bound`` applies ``f = −λ`` along its joint (row
-        :attr:`rows`); it pulls when ``s f < 0`` beyond rounding (64 ulps of the
-        largest such force). A joint still beyond its bound at ``q`` (a start
-        beyond it, converging back) is held whatever its row's sign: the row then
-        brings it back, and may pull to do so. A loop over the few active bounds.
-        """
-        worst, which, scale = 0.0, -1, 0.0
-        for i, row in self.rows.items():
-            push = -self.active[i] * float(lam[row])
-            scale = max(scale, abs(push))
-            if self.active[i] * (q[i] - self.bound(i, self.active[i])) < -LOCATION_TOLERANCE:
-                continue
-            if push < worst:
-                worst, which = push, i
-        return which if worst < -64.0 * EPS * scale else -1
-
 
 #: Friction modes of a joint (:attr:`JointFriction.mode`); ±1: slipping towards ±q.
 OFF, STICK = 0, 2
@@ -266,10 +256,11 @@ class JointFriction:
     F``; while it **slips** towards ``d = ±1``, a constant generalized force ``−F d``
     acts along it (a pair of equal and opposite wrenches on its two bodies). Static
     and kinetic friction are the same ``F`` (Coulomb). Transitions, with the limits'
-    machinery (:mod:`.limits`): a step whose solve finds ``|f| > F`` makes the joint
-    slip, from the next step, towards ``−sign f`` (at most one step late: first order
-    in the breakaway time); a slipping joint whose rate reaches zero inside a step is
-    stopped there, the moment located by regula falsi on partial steps to
+    machinery (:mod:`.limits`): a step at whose end the row needs ``|f| > F`` is
+    taken again up to the moment ``|f|`` reached ``F`` (located as a bound's release
+    is), where the joint begins to slip towards ``−sign f``; a slipping joint whose
+    rate reaches zero inside a step (once it has moved: :attr:`moving`) is stopped
+    there, the moment located by regula falsi on partial steps to
     :data:`RATE_TOLERANCE`, and sticks (then slips again, the other way, if its row
     needs more than ``F``). A joint on an active bound has neither: the bound holds
     it; it sticks when the bound lets go.
@@ -292,6 +283,9 @@ class JointFriction:
         self.mode = np.zeros(k, dtype=int)
         #: The row in Φ and λ of each sticking joint (joint -> row), kept by the caller.
         self.rows: dict = {}
+        #: Per joint: whether it has slipped faster than RATE_TOLERANCE since it began
+        #: to slip (a slip that begins where the force just reached F starts at rest).
+        self.moving = np.zeros(k, dtype=bool)
         self.counters = {'sticks': 0, 'slips': 0}
 
     def __len__(self) -> int:
@@ -302,6 +296,7 @@ class JointFriction:
         """Forget the modes and the counters."""
         self.mode[:] = OFF
         self.rows = {}
+        self.moving[:] = False
         self.counters = {'sticks': 0, 'slips': 0}
 
     def slipping(self) -> np.ndarray:
@@ -309,27 +304,24 @@ class JointFriction:
         return self.joints[np.abs(self.mode[self.joints]) == 1]
 
     def stopped(self, rates: np.ndarray) -> np.ndarray:
-        """Return the slipping joints whose rate has reached zero or turned (indices)."""
+        """
+        Return the slipping joints whose rate has reached zero or turned (indices).
+
+        A joint that began to slip at rest counts once it has moved (:attr:`moving`),
+        or when it turns back.
+        """
         slip = self.slipping()
-        return slip[self.mode[slip] * rates[slip] <= RATE_TOLERANCE]
+        d = self.mode[slip] * rates[slip]
+        return slip[(self.moving[slip] & (d <= RATE_TOLERANCE)) | (d < -RATE_TOLERANCE)]
+
+    def note(self, rates: np.ndarray) -> None:
+        """Mark the slipping joints moving faster than RATE_TOLERANCE at an accepted state."""
+        slip = self.slipping()
+        self.moving[slip[self.mode[slip] * rates[slip] > RATE_TOLERANCE]] = True
 
     def event(self, rates: np.ndarray, which: np.ndarray) -> float:
         """Return the event function of slipping joints ``which``: the smallest ``d q̇``."""
         return float(np.min(self.mode[which] * rates[which]))
-
-    def breaking(self, lam: np.ndarray) -> tuple:
-        """
-        Return the sticking joint whose row needs most beyond ``F``, and its force (−1, 0: none).
-
-        A sticking row ``Φ = q − q_stop`` applies ``f = −λ`` along its joint.
-        """
-        worst, which, f_which = 0.0, -1, 0.0
-        for i, row in self.rows.items():
-            f = -float(lam[row])
-            excess = abs(f) - self.force[i] * (1.0 + 64.0 * EPS)
-            if excess > worst:
-                worst, which, f_which = excess, i, f
-        return which, f_which
 
 
 #: Modes of an effort-limited exact drive (:attr:`DriveEfforts.mode`): engaged (its row
@@ -350,17 +342,17 @@ class DriveEfforts:
     wrenches), while ``σ r < 0`` (the joint lags behind the law). Transitions, with
     the limits' machinery:
 
-    * **saturation**: a step whose own solve finds ``|f| > E`` saturates the drive
-      towards ``sign f`` from the next step (one step late, first order, as friction's
-      breakaway); a command whose velocity projection would need an impulse larger
-      than ``E dt`` (a target jump, a new velocity) saturates it at once, towards
-      the target;
+    * **saturation**: a step at whose end the row needs ``|f| > E`` is taken again up
+      to the moment ``|f|`` reached ``E`` (located as a bound's release is), where the
+      drive saturates towards ``sign f``; a command whose velocity projection would
+      need an impulse larger than ``E dt`` (a target jump, a new velocity) saturates
+      it at once, towards the target (the impulse over a step: first order in time);
     * **engagement**: a saturated drive whose ``r`` reaches zero inside a step is
       engaged there, the moment located by regula falsi on partial steps to
       :data:`RATE_TOLERANCE` (no impulse: the law already holds there); if its row
       then needs more than ``E`` it saturates again at once, towards ``sign f``.
 
-    So the effort never exceeds ``E`` beyond one step after a breakaway, a motion
+    So the effort never exceeds ``E`` (beyond FORCE_TOLERANCE of it), a motion
     that needs more lags with the effort at ``E``, and the drive catches up along the
     row's law when it can.
 
@@ -387,6 +379,10 @@ class DriveEfforts:
         self.motion: dict = {}
         #: Each saturated drive's constraint (its description), kept while it is away.
         self.specs: dict = {}
+        #: Per joint: whether its saturated drive has lagged its law beyond
+        #: RATE_TOLERANCE since it saturated (a saturation where the force just reached
+        #: E starts on the law).
+        self.away = np.zeros(len(self.names), dtype=bool)
         self.counters = {'saturations': 0, 'engagements': 0}
 
     def __len__(self) -> int:
@@ -397,6 +393,7 @@ class DriveEfforts:
         """Engage every drive; forget the counters."""
         self.mode[:] = ENGAGED
         self.rows, self.motion, self.specs = {}, {}, {}
+        self.away[:] = False
         self.counters = {'saturations': 0, 'engagements': 0}
 
     def saturated(self) -> np.ndarray:
@@ -424,20 +421,6 @@ class DriveEfforts:
     def event(self, laws: np.ndarray, which: np.ndarray) -> float:
         """Return the event function of saturated drives ``which``: the smallest ``−σ r``."""
         return float(np.min(-self.mode[which] * laws))
-
-    def breaking(self, lam: np.ndarray) -> tuple:
-        """
-        Return the engaged drive whose row needs most beyond ``E``, and its force (−1, 0: none).
-
-        A drive's row applies ``f = −λ`` along its joint.
-        """
-        worst, which, f_which = 0.0, -1, 0.0
-        for i, row in self.rows.items():
-            f = -float(lam[row])
-            excess = abs(f) - self.effort[i] * (1.0 + 64.0 * EPS)
-            if excess > worst:
-                worst, which, f_which = excess, i, f
-        return which, f_which
 
 
 def restitution_of(value: Any, names: list, field_name: str) -> np.ndarray:

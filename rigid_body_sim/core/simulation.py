@@ -451,6 +451,7 @@ class Simulation:
             for part in (self.limits, self.friction, self.drive_efforts):
                 if part is not None:
                     part.reset()
+            self.events.counters = {'located_steps': 0, 'max_force_excess': 0.0}
             self.events.from_state()
 
     def _inconsistent(self, name: str, field: str, outcome: str,
@@ -819,6 +820,25 @@ class Simulation:
         return {'sticking': [names[i] for i in sorted(fr.rows)],
                 'slipping': {names[i]: int(fr.mode[i]) for i in fr.slipping()},
                 'counters': dict(fr.counters)}
+
+    def complementarity(self) -> dict:
+        """
+        Return how well the rows with bounds kept their complementarity since the reset.
+
+        ``{'located_steps': n, 'max_force_excess': N m or N, 'max_position_excess': rad
+        or m}``: the steps in which an event was located; the largest force a row had
+        past its bound where it pivoted (a pulling bound, a stick past ``F``, a drive
+        past ``E``: within :data:`.limits.FORCE_TOLERANCE` of the force's change over
+        a step at a located event, more only if :data:`.limits.MAX_EVENTS` cut a step
+        short); the largest excursion past a bound a step had to accept (0: none).
+        Empty without limits, friction or effort-limited drives.
+        """
+        if self.events is None:
+            return {}
+        c = self.events.counters
+        excess = 0.0 if self.limits is None else self.limits.counters.max_violation
+        return {'located_steps': c['located_steps'], 'max_force_excess': c['max_force_excess'],
+                'max_position_excess': excess}
 
     def drive_saturation(self) -> dict:
         """

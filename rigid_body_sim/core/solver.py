@@ -264,6 +264,8 @@ class ConstraintSolver:
         self._kernel_cache: Optional[tuple] = None
         self._plan: Optional[tuple] = None
         self._par: Optional[tuple] = None
+        #: The last multipliers read (:meth:`multipliers`) and what they were read of.
+        self._read: Optional[tuple] = None
         #: s: the time the kernels' copies of the drives' targets are of (None: unknown,
         #: a step raised half-way). A step moves them from its start to its end.
         self.kernel_time: Optional[float] = None
@@ -501,11 +503,19 @@ class ConstraintSolver:
         step ended at ``state`` (:attr:`KernelSetup.geometry_of`) its geometry,
         and its factor if it left one, are reused: reading λ after a step costs
         the rates, the free accelerations and one solve. Counts no work.
-        Afterwards each component's workspace holds G and Gᵀλ of ``state``.
+        Afterwards each component's workspace holds G and Gᵀλ of ``state``. A
+        second read at the same state, with nothing changed since (the model, the
+        rows, the settings, the workspaces), returns the first one's λ.
         """
         setup = self.kernel_setup()
         self.targets_at(state.time)
         current = setup.geometry_of[0] is state.y
+        key = (state.y, dynamics, self.constraints, setup)   # (compared by identity)
+        versions = (dynamics.version, self.constraints.version, self.settings_key())
+        cached = self._read
+        if current and cached is not None and all(a is b for a, b in zip(cached[0], key)) \
+                and cached[1] == versions:
+            return cached[2].copy()
         setup.geometry_of[0] = None   # until every component is done: one may raise
         par = self._settings()
         lam = np.zeros(self.constraints.n_rows)
@@ -523,6 +533,7 @@ class ConstraintSolver:
                 int(comp.solve), *comp.packed, current, lam_c, tally)
             lam[comp.rows] = lam_c
         setup.geometry_of[0] = state.y   # every workspace now holds the geometry of state
+        self._read = (key, versions, lam.copy())
         return lam
 
     def violation(self, state: State) -> np.ndarray:

@@ -702,6 +702,10 @@ class SimNode(Node):
             if friction:
                 values['joint_friction_sticking'] = ' '.join(friction['sticking']) or 'none'
                 values['joint_friction_slips_total'] = str(friction['counters']['slips'])
+            complementarity = sim.complementarity()
+            if complementarity:
+                values['joint_complementarity_force_excess_max'] = \
+                    f'{complementarity["max_force_excess"]:.3g}'
             saturation = sim.drive_saturation()
             if saturation:
                 values['joint_drives_saturated'] = ' '.join(
