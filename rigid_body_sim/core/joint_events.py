@@ -644,21 +644,20 @@ class JointEvents:
         """Return the velocity projection's impulse ``μ`` on the drives of joints ``idx``."""
         sim, dr = self.sim, self.drives
         solver, bodies = sim.dynamics.solver, sim.bodies
-        names = [dr.names[i] for i in idx]
-        targets = solver.drive_targets(names, state.time)
-        rates = solver.constraints.drive_rates(names)
         vel, om = solver.project_velocities(state)
         dv, dw = vel - state.vel_com_world, om - state.ang_vel_principal
         out = np.empty(len(idx))
-        for k in range(len(idx)):
-            probe = rates.copy()
-            probe[k] -= 1.0      # r_k one larger
-            solver.set_drive_targets(names, targets, state.time, probe)
-            vk, wk = solver.project_velocities(state)
+        for k, i in enumerate(idx):
+            table, at = solver.drive_rate_slot(dr.names[i])
+            rate = table[at]
+            table[at] = rate - 1.0      # r_k one larger
+            try:
+                vk, wk = solver.project_velocities(state)
+            finally:
+                table[at] = rate
             vk, wk = vk - vel, wk - om
             out[k] = float(np.sum(bodies.mass[:, None] * vk * dv)
                            + np.sum(bodies.moments * wk * dw))
-        solver.set_drive_targets(names, targets, state.time, rates)
         # Δν = −M⁻¹Gᵀ W r and Δν_k = −M⁻¹Gᵀ W e_k, so Δν_kᵀ M Δν = e_kᵀ W G M⁻¹ Gᵀ W r = μ_k.
         return out
 

@@ -691,7 +691,8 @@ class Simulation:
                                              targets[engaged], self.time, rates[engaged])
                 if self.events is not None:   # effort-limited drives may saturate
                     self.events.commanded(exact)
-            self.dynamics.changed()
+            if len(exact) < len(idx):   # servos' targets are in the model; drives' are not
+                self.dynamics.changed()
 
     def _drive_target(self, i: int, name: str) -> float:
         """Return the target of joint ``i``'s exact drive (``name``) now, saturated or not."""

@@ -432,6 +432,20 @@ class ConstraintSolver:
         self.constraints.set_drive_targets(names, targets, time, rates)
         self._copy_targets(True)
 
+    def drive_rate_slot(self, name: str) -> tuple:
+        """
+        Return where the kernels keep drive ``name``'s target rate: ``(array, index)``.
+
+        For a probe of the velocity projection (:meth:`project_velocities` at a
+        state at the targets' time reads it there); the caller puts the value back.
+        """
+        row = self.constraints.rows_of(name)[0]
+        for comp in self.kernel_setup().components:
+            local = int(np.searchsorted(comp.rows, row))
+            if local < len(comp.rows) and comp.rows[local] == row:
+                return comp.views['row_par'], (local, PAR_RATE)
+        raise KeyError(name)
+
     def drive_targets(self, names: list, time: float) -> np.ndarray:
         """Targets (k,) of ``drive`` constraints at ``time`` (s), rad or m."""
         return self.constraints.drive_targets(names, time)
