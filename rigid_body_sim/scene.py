@@ -27,6 +27,9 @@ A scene file::
       - {name: pivot, type: ball, body_a: box, body_b: world, anchor_world: [0, 0, 1.2]}
       - {name: axle, type: hinge, body_a: wheel, body_b: box, anchor_world: [0, 0, 1],
          axis_world: [0, 1, 0]}
+      - {name: lid, type: hinge, body_a: lid, body_b: box, anchor_world: [0, 0.2, 1.1],
+         axis_world: [1, 0, 0], lower: -0.1, upper: 1.5,   # hinges and sliders: limits
+         restitution: 0.0, friction: 0.2}   # (rad or m from the start), e, Coulomb F
     constraint_time_constant: 0.05  # s, decay time of a violated constraint
     tolerance: 1.0e-6               # optional: local error per unit time (the accuracy
                                     # knob, see rigid_body_sim.core.accuracy)
@@ -74,6 +77,7 @@ import yaml
 from .core import Constraint, Damping, Gravity, RigidBody, Simulation, SpecError
 from .core.effects import AppliedWrenches
 from .core.integrators import INTEGRATORS
+from .core.limits import SceneJoint
 from .core.robots import CommandGroup, RobotSpec
 from .core.validate import finite_array, positive_scalar
 from .urdf import parse_urdf, read_robot_xml, UrdfError
@@ -87,6 +91,8 @@ ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
 ROBOT_SUFFIXES = ('.urdf', '.xacro')
 CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
                    'anchor_b_body', 'axis_world', 'length')
+#: A hinge's or slider's limits and friction (:class:`.core.limits.SceneJoint`).
+SCENE_JOINT_KEYS = ('lower', 'upper', 'restitution', 'friction')
 BODY_KEYS = ('name', 'mass', 'inertia', 'com_body', 'position_world', 'orientation_xyzw',
              'orientation_rpy', 'linear_velocity_world', 'angular_velocity_body')
 EFFECT_KEYS = {'gravity': ('g_world',), 'damping': ('linear', 'angular', 'bodies'),
@@ -203,14 +209,15 @@ def _build(data: Any, source: str) -> Scene:
     robots = _robots(data.get('robots') or [], source)
     bodies = [_body(b, f'bodies[{i}]') for i, b in enumerate(bodies_data)]
     effects = _effects(data.get('effects') or {})
-    constraints = _constraints(data.get('constraints') or [])
+    constraints, scene_joints = _constraints(data.get('constraints') or [])
     time_constant = positive_scalar(data.get('constraint_time_constant', 0.05),
                                     'constraint_time_constant')
     try:
         sim = Simulation(bodies, [e for _, e in effects], integrator, dt, constraints,
                          time_constant, tolerance=data.get('tolerance'),
                          robots=[spec for spec, _ in robots],
-                         command_groups=_groups(data.get('command_groups') or []))
+                         command_groups=_groups(data.get('command_groups') or []),
+                         scene_joints=scene_joints)
     except SpecError as exc:
         # Map 'effects[i]...' from the core back to the scene's effect key.
         if exc.field.startswith('effects['):
@@ -379,18 +386,36 @@ def _inertia(value: Any, mass: float) -> Any:
             [c['ixz'], c['iyz'], c['izz']]]
 
 
-def _constraints(data: Any) -> list:
-    """Constraints listed in the scene (generic ones need Python: not in files)."""
-    out = []
-    for where, c in _entries(data, 'constraints', CONSTRAINT_KEYS, ('name', 'type', 'body_a')):
+def _constraints(data: Any) -> tuple:
+    """
+    Constraints listed in the scene (generic ones need Python: not in files).
+
+    Returns the constraints and the hinges' and sliders' limits and friction
+    (:class:`.core.limits.SceneJoint`).
+    """
+    out, joints = [], []
+    for where, c in _entries(data, 'constraints', CONSTRAINT_KEYS + SCENE_JOINT_KEYS,
+                             ('name', 'type', 'body_a')):
         if c['type'] == 'generic':
             raise SpecError(f'{where}.type', 'generic constraints need a Python function: add '
                                              'them with Simulation.add_constraint')
+        c = dict(c)
+        extra = {key: c.pop(key) for key in SCENE_JOINT_KEYS if key in c}
         try:
             out.append(Constraint(**c))
         except SpecError as exc:
             raise exc.within(where) from None
-    return out
+        if extra:
+            if out[-1].type.value not in ('hinge', 'slider'):
+                key = next(iter(extra))
+                raise SpecError(f'{where}.{key}', f'limits and friction are for hinge and '
+                                                  f'slider constraints, not '
+                                                  f'{out[-1].type.value!r}')
+            try:
+                joints.append(SceneJoint(out[-1].name, **extra))
+            except SpecError as exc:
+                raise exc.within(where) from None
+    return out, joints
 
 
 def _effects(data: Any) -> list:

@@ -57,7 +57,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import asdict, dataclass
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Optional
 
 import numpy as np
 
@@ -421,6 +421,54 @@ class DriveEfforts:
     def event(self, laws: np.ndarray, which: np.ndarray) -> float:
         """Return the event function of saturated drives ``which``: the smallest ``−σ r``."""
         return float(np.min(-self.mode[which] * laws))
+
+
+@dataclass(frozen=True)
+class SceneJoint:
+    """
+    Limits and Coulomb friction on a scene's hinge or slider constraint (not a robot's).
+
+    The constraint becomes a joint of the simulation's joint space, named as the
+    constraint, whose coordinate counts from the configuration the scene starts in
+    (the child ``body_a`` relative to ``body_b`` or the world; rad about the axis, or
+    m along it): it has a joint state, takes effort commands, and its limits and
+    friction are those of :mod:`.limits`, as a URDF joint's.
+
+    Parameters
+    ----------
+    constraint : str
+        The name of a ``hinge`` or ``slider`` constraint of the scene.
+    lower, upper : float, optional
+        rad or m, each finite or absent (no bound on that side); ``lower <= upper``.
+    restitution : float
+        Newton's ``e`` in [0, 1] at the bounds.
+    friction : float
+        N m or N, finite and >= 0: Coulomb friction ``F`` (0: none).
+
+    """
+
+    constraint: str
+    lower: Optional[float] = None
+    upper: Optional[float] = None
+    restitution: float = 0.0
+    friction: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.constraint, str) or not self.constraint:
+            raise SpecError('name', f'must be a non-empty string, got {self.constraint!r}')
+        for key in ('lower', 'upper'):
+            value = getattr(self, key)
+            if value is not None:
+                object.__setattr__(self, key, finite_scalar(value, key))
+        if self.lower is not None and self.upper is not None and self.lower > self.upper:
+            raise SpecError('lower', f'lower {self.lower!r} is above upper {self.upper!r}: '
+                                     f'no position satisfies both')
+        object.__setattr__(self, 'restitution', _coefficient(self.restitution, 'restitution'))
+        friction = finite_scalar(self.friction, 'friction')
+        if friction < 0.0:
+            raise SpecError('friction', f'must be >= 0 (a Coulomb force bound), got '
+                                        f'{self.friction!r}')
+        object.__setattr__(self, 'friction', friction)
 
 
 def restitution_of(value: Any, names: list, field_name: str) -> np.ndarray:

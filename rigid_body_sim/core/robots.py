@@ -681,15 +681,21 @@ class JointSpace:
     names : list of str
         Body names of the simulation, in body order.
     models : list of RobotModel
+    extra : list of Joint
+        One-coordinate joints of no robot (a scene's hinges and sliders with limits
+        or friction: :class:`.limits.SceneJoint`), after the robots' joints.
 
     """
 
-    def __init__(self, names: list, models: list) -> None:
+    def __init__(self, names: list, models: list, extra: Sequence = ()) -> None:
         self.models = list(models)
         self.body_index = index = {name: i for i, name in enumerate(names)}
         n = len(names)
         self.n_bodies = n
         self.joints = [j for m in self.models for j in m.joints if j.spec.kind in ONE_DOF]
+        #: How many of the joints are robots' (the scene's follow them).
+        self.n_robot = len(self.joints)
+        self.joints += list(extra)
         self.names = [j.name for j in self.joints]
         self.index = {name: i for i, name in enumerate(self.names)}
         k = len(self.joints)
@@ -906,6 +912,12 @@ class JointSpace:
         """
         now = self.state(out, 0.0)
         q, qd = now.positions, now.velocities
+        for key, given in (('positions', positions), ('velocities', velocities)):
+            for name in given:
+                if self.lookup(name, f'{key}.{name}') >= self.n_robot:
+                    raise SpecError(f'{key}.{name}', f'joint {name!r} is a scene constraint '
+                                                     f'with limits or friction, not a robot '
+                                                     f"joint: set its bodies' state instead")
         for name, value in positions.items():
             q[self.lookup(name, f'positions.{name}')] = finite_scalar(value,
                                                                       f'positions.{name}')

@@ -28,7 +28,7 @@ import numpy as np
 from . import rotation as so3
 from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
-from .constraints import Constraint, ConstraintSet
+from .constraints import Constraint, ConstraintSet, JointType
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
@@ -36,9 +36,10 @@ from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .joint_events import JointEvents
 from .kernels import free_step
-from .limits import DriveEfforts, ENGAGED, JointFriction, JointLimits, restitution_of
-from .robots import (build_robot, CommandGroup, drive_name, Interface, JointDrives, JointSpace,
-                     JointState, mimic_name, RobotSpec)
+from .limits import (DriveEfforts, ENGAGED, JointFriction, JointLimits, restitution_of,
+                     SceneJoint)
+from .robots import (build_robot, CommandGroup, drive_name, Interface, Joint, JointDrives,
+                     JointSpace, JointSpec, JointState, mimic_name, RobotSpec)
 from .solver import ConstraintSolver
 from .validate import finite_scalar, positive_scalar
 
@@ -120,7 +121,8 @@ class Simulation:
                  constraint_time_constant: float = 0.05, tolerance: Optional[float] = None,
                  tolerance_budget: int = DEFAULT_BUDGET,
                  robots: Sequence[RobotSpec] = (),
-                 command_groups: Sequence[CommandGroup] = ()) -> None:
+                 command_groups: Sequence[CommandGroup] = (),
+                 scene_joints: Sequence[SceneJoint] = ()) -> None:
         self.dt = positive_scalar(dt, 'dt')
         bodies, constraints = list(bodies), list(constraints)
         self.robots = []
@@ -155,7 +157,9 @@ class Simulation:
                 effect.bind(self.bodies)
             except SpecError as exc:
                 raise exc.within(f'effects[{i}]') from None
-        self.joints = JointSpace(self.bodies.names, self.robots)
+        self._scene_joints = self._build_scene_joints(scene_joints, constraints)
+        self.joints = JointSpace(self.bodies.names, self.robots,
+                                 [joint for joint, _ in self._scene_joints])
         # Mimic joints: one row each, with the robots' joints (they must hold from the start).
         self._mimic_names = [mimic_name(self.joints.names[f]) for f, _, _, _ in self.joints.mimics]
         constraints += self.joints.mimic_constraints()
@@ -218,6 +222,50 @@ class Simulation:
         friction = JointFriction(js, force)
         return friction if len(friction) else None
 
+    def _build_scene_joints(self, specs: Sequence[SceneJoint], constraints: list) -> list:
+        """
+        Make the scene's hinges and sliders with limits or friction joints: ``[(Joint, spec)]``.
+
+        The joint frame is the child's (``body_a``) frame as the scene starts, on the
+        parent (``body_b``, or the world): the coordinate is 0 there.
+        """
+        by_name = {c.name: c for c in constraints if isinstance(c, Constraint)}
+        bodies = {b.name: b for b in self._specs if isinstance(b, RigidBody)}
+        taken = {j.name for m in self.robots for j in m.joints}
+        out = []
+        for k, spec in enumerate(specs):
+            where = f'scene_joints[{k}]'
+            if not isinstance(spec, SceneJoint):
+                raise SpecError(where, f'expected a SceneJoint, got {spec!r}')
+            c = by_name.get(spec.constraint)
+            if c is None or c.type not in (JointType.HINGE, JointType.SLIDER):
+                known = sorted(n for n, x in by_name.items()
+                               if x.type in (JointType.HINGE, JointType.SLIDER))
+                raise SpecError(f'{where}.constraint', f'no hinge or slider constraint named '
+                                                       f'{spec.constraint!r}; hinges and '
+                                                       f'sliders: {known}')
+            if spec.constraint in taken:
+                raise SpecError(f'{where}.constraint', f'{spec.constraint!r} is also the name '
+                                                       f'of a robot joint or another scene '
+                                                       f'joint')
+            taken.add(spec.constraint)
+            a, b = bodies[c.body_a], None if c.body_b is None else bodies[c.body_b]
+            R_a = so3.quat_to_matrix(np.asarray(a.orientation_xyzw))
+            p_a = np.asarray(a.position_world, dtype=float)
+            if b is None:
+                p, R = p_a.copy(), R_a
+            else:
+                R_b = so3.quat_to_matrix(np.asarray(b.orientation_xyzw))
+                p, R = R_b.T @ (p_a - np.asarray(b.position_world)), R_b.T @ R_a
+            axis = R_a.T @ np.asarray(c.axis_world)
+            kind = 'revolute' if c.type is JointType.HINGE else 'prismatic'
+            joint_spec = JointSpec(spec.constraint, kind, c.body_b or 'world', c.body_a,
+                                   axis=axis, lower=spec.lower, upper=spec.upper,
+                                   friction=spec.friction)
+            out.append((Joint(spec.constraint, joint_spec, c.body_b, c.body_a, (p, R),
+                              joint_spec.axis), spec))
+        return out
+
     def _drive_efforts(self) -> Optional[DriveEfforts]:
         """Build the effort limits of the exact drives (None: none is limited)."""
         js = self.joints
@@ -248,6 +296,9 @@ class Simulation:
                 i = js.index[j.name]
                 limited[i] = model.spec.enforce_limits
                 restitution[i] = e
+        for joint, spec in self._scene_joints:
+            i = js.index[joint.name]
+            limited[i], restitution[i] = True, spec.restitution
         if self.drives is not None:
             limited &= ~self.drives.exact
         for f, _, _, _ in js.mimics:
