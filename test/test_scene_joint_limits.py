@@ -99,11 +99,28 @@ def test_a_hinge_below_its_breakaway_torque_does_not_move_and_above_it_accelerat
     assert js.velocities[0] == pytest.approx((0.7 - 0.5) / 0.25 * 1.0, rel=1e-9)
 
 
+def test_infinite_friction_locks_a_hinge_and_zero_friction_leaves_it_free():
+    # f = inf: the sticking row never lets go, whatever the effort (1e4 N m); f = 0: no
+    # row at all (free), the wheel turns at τ / I.
+    bodies = [{'name': 'wheel', 'mass': 1.0, 'inertia': [0.15, 0.15, 0.25],
+               'position_world': [0, 0, 1]}]
+    for friction, rate in ((float('inf'), 0.0), (0.0, 1e4 / 0.25)):
+        sim = build({'name': 'axle', 'type': 'hinge', 'body_a': 'wheel', 'body_b': 'world',
+                     'anchor_world': [0, 0, 1], 'axis_world': [0, 0, 1],
+                     'friction': friction}, bodies=bodies, gravity=False)
+        sim.set_joint_efforts({'axle': 1e4})
+        sim.step(100)
+        js = sim.joint_state()
+        # bound: rounding of the held row (1e-16 rad/s) or of a constant torque (1e-12).
+        assert js.velocities[0] == pytest.approx(rate * sim.time, rel=1e-12, abs=1e-12)
+        assert sim.joint_friction().get('sticking', []) == (['axle'] if rate == 0.0 else [])
+
+
 @pytest.mark.parametrize('extra, field, problem', [
     ({'lower': 1.0, 'upper': 0.5}, 'constraints[0].lower', 'above upper'),
     ({'restitution': 1.5}, 'constraints[0].restitution', r'\[0, 1\]'),
     ({'friction': -1.0}, 'constraints[0].friction', '>= 0'),
-    ({'friction': float('inf')}, 'constraints[0].friction', 'finite'),
+    ({'friction': float('nan')}, 'constraints[0].friction', '>= 0'),
     ({'upper': float('nan')}, 'constraints[0].upper', 'finite'),
 ])
 def test_bad_limits_and_friction_are_refused_naming_the_field(extra, field, problem):

@@ -218,8 +218,8 @@ class JointEvents:
             for i, row in part.rows.items():
                 f = -float(lam[row])
                 kinds.append(kind), joints.append(i), forces.append(f)
-                margins.append(bound[i] - abs(f))
-                scales.append(bound[i])
+                margins.append(bound[i] - abs(f))   # (inf: a locked joint, never due)
+                scales.append(bound[i] if np.isfinite(bound[i]) else max(abs(f), 1.0))
         return kinds, joints, np.array(margins), forces, np.maximum(np.array(scales), 1e-300)
 
     def _held(self) -> bool:
@@ -241,7 +241,8 @@ class JointEvents:
         self._end_margins, self._span = margins, None
         return bool(len(margins)) and float(np.min(margins / scales)) < -FORCE_TOLERANCE
 
-    def _release(self, state: State, q: np.ndarray, located: bool = False) -> None:
+    def _release(self, state: State, q: np.ndarray, located: bool = False,
+                 accepted: bool = False) -> None:
         """
         Pivot the held rows whose force is past its bound, at ``state``.
 
@@ -252,6 +253,14 @@ class JointEvents:
         :data:`FORCE_TOLERANCE` of its scale. Each pivot is exact: the next solve sees
         it. ``located``: ``state`` is where a row's margin was located to reach zero
         (within FORCE_TOLERANCE of its change over the step): that row pivots first.
+        ``accepted``: ``state`` ends a step that stands (:data:`MAX_EVENTS`): its rows
+        carried their forces past their bounds over it.
+
+        Counted in ``max_force_excess``: the force past its bound a row carried over
+        an accepted (partial) step: at a located pivot, its margin there (within the
+        tolerance), at an accepted step, its excess. A force that jumped past its bound
+        at an event (an impact's impulse, a pivot, a command) pivots at once and
+        carried nothing.
         """
         solver, dyn = self.sim.dynamics.solver, self.sim.dynamics
         for _ in range(2 * len(self.sim.joints) + 1):
@@ -271,9 +280,14 @@ class JointEvents:
                 due = margins[k] < -FORCE_TOLERANCE * scales[k]
             if not due:
                 return
-            located = False   # (the rows change: the spans are of the rows before)
+            carried = 0.0
+            if accepted:
+                carried = -float(margins[k])
+            elif span is not None and margins[k] >= -FORCE_TOLERANCE * span[k]:
+                carried = max(0.0, -float(margins[k]))
             self.counters['max_force_excess'] = max(self.counters['max_force_excess'],
-                                                    -float(margins[k]))
+                                                    carried)
+            located = False   # (the rows change: the spans are of the rows before)
             i, f = joints[k], forces[k]
             if kinds[k] == 0:
                 self._unbound(i)
@@ -392,7 +406,7 @@ class JointEvents:
         """
         state = self._resolve_motion(state, q, rates, which[:3], events)
         if which[3]:
-            self._release(state, q, located=True)
+            self._release(state, q, located=True, accepted=events >= MAX_EVENTS)
         self._span = None
         return state
 

@@ -443,7 +443,8 @@ class SceneJoint:
     restitution : float
         Newton's ``e`` in [0, 1] at the bounds.
     friction : float
-        N m or N, finite and >= 0: Coulomb friction ``F`` (0: none).
+        N m or N, >= 0: Coulomb friction ``F`` (0: none; ``inf``: the joint is locked,
+        its sticking row never lets go).
 
     """
 
@@ -464,10 +465,13 @@ class SceneJoint:
             raise SpecError('lower', f'lower {self.lower!r} is above upper {self.upper!r}: '
                                      f'no position satisfies both')
         object.__setattr__(self, 'restitution', _coefficient(self.restitution, 'restitution'))
-        friction = finite_scalar(self.friction, 'friction')
-        if friction < 0.0:
-            raise SpecError('friction', f'must be >= 0 (a Coulomb force bound), got '
-                                        f'{self.friction!r}')
+        try:
+            friction = float(self.friction)
+        except (TypeError, ValueError):
+            friction = float('nan')
+        if not friction >= 0.0 or isinstance(self.friction, bool):
+            raise SpecError('friction', f'must be a number >= 0 (a Coulomb force bound; '
+                                        f'.inf locks the joint), got {self.friction!r}')
         object.__setattr__(self, 'friction', friction)
 
 

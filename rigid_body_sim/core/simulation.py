@@ -215,6 +215,8 @@ class Simulation:
         for model in self.robots:
             if not model.spec.enforce_friction:
                 force[[js.index[j.name] for j in model.joints if j.name in js.index]] = 0.0
+        for joint, spec in self._scene_joints:   # (inf: locked, which a JointSpec cannot say)
+            force[js.index[joint.name]] = spec.friction
         if self.drives is not None:
             force[self.drives.exact] = 0.0
         for f, _, _, _ in js.mimics:
@@ -260,8 +262,7 @@ class Simulation:
             axis = R_a.T @ np.asarray(c.axis_world)
             kind = 'revolute' if c.type is JointType.HINGE else 'prismatic'
             joint_spec = JointSpec(spec.constraint, kind, c.body_b or 'world', c.body_a,
-                                   axis=axis, lower=spec.lower, upper=spec.upper,
-                                   friction=spec.friction)
+                                   axis=axis, lower=spec.lower, upper=spec.upper)
             out.append((Joint(spec.constraint, joint_spec, c.body_b, c.body_a, (p, R),
                               joint_spec.axis), spec))
         return out
