@@ -197,8 +197,10 @@ class JointEvents:
         sticking joint, 2 an engaged effort-limited drive), its joint, the margin (a
         bound's push ``s f``; ``F − |f|``; ``E − |f|``: negative past the bound), its
         force ``f = −λ`` along the joint, and the scale of :data:`FORCE_TOLERANCE` for
-        it (N m or N): ``F`` or ``E``, and for the bounds the largest of their forces.
-        A joint still beyond its bound (a start beyond it, converging back) is held
+        it (N m or N): ``F`` or ``E``, and for the bounds the largest of their forces,
+        at least the rounding of the solve (64 ulps of the largest multiplier, over
+        FORCE_TOLERANCE: a bound that carries nothing does not pull by rounding). A
+        joint still beyond its bound (a start beyond it, converging back) is held
         whatever its row's sign: no margin.
         """
         lim, fr, dr = self.limits, self.friction, self.drives
@@ -210,7 +212,8 @@ class JointEvents:
                     continue
                 f = -float(lam[row])
                 kinds.append(0), joints.append(i), margins.append(side * f), forces.append(f)
-            scales = [max((abs(f) for f in forces), default=0.0)] * len(forces)
+            rounding = 64.0 * EPS * float(np.max(np.abs(lam), initial=0.0)) / FORCE_TOLERANCE
+            scales = [max(max((abs(f) for f in forces), default=0.0), rounding)] * len(forces)
         for kind, part, bound in ((1, fr, None if fr is None else fr.force),
                                   (2, dr, None if dr is None else dr.effort)):
             if part is None:
@@ -274,7 +277,8 @@ class JointEvents:
                 and len(self._span) == len(margins) else None
             if span is not None:
                 k = int(np.argmin(margins / span))
-                due = margins[k] <= FORCE_TOLERANCE * span[k]
+                due = margins[k] <= FORCE_TOLERANCE * span[k] and (
+                    margins[k] < 0.0 or self._falling(margins)[k])
             else:
                 k = int(np.argmin(margins / scales))
                 due = margins[k] < -FORCE_TOLERANCE * scales[k]
@@ -341,10 +345,18 @@ class JointEvents:
                     if len(margins) == len(self._end_margins) else np.abs(margins)
                 self._span = np.maximum(span, 1e-300)
             if len(margins):
-                margin = float(np.min(margins / self._span)) / FORCE_TOLERANCE
+                k = int(np.argmin(margins / self._span))
+                margin = float(margins[k] / self._span[k]) / FORCE_TOLERANCE
                 if margin < value:
-                    value, real = margin, True
+                    # An event only where the margin falls (towards the step's end's).
+                    value, real = margin, self._falling(margins)[k]
         return value, real
+
+    def _falling(self, margins: np.ndarray) -> np.ndarray:
+        """Tell, per held row, whether its margin falls from ``margins`` to the step's end's."""
+        if len(margins) != len(self._end_margins):
+            return np.ones(len(margins), dtype=bool)
+        return self._end_margins < margins
 
     def _locate(self, state: State, previous: np.ndarray, h: float, end: State,
                 q_end: np.ndarray, r_end: np.ndarray, which: tuple) -> tuple:

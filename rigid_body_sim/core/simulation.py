@@ -879,11 +879,13 @@ class Simulation:
         Return how well the rows with bounds kept their complementarity since the reset.
 
         ``{'located_steps': n, 'max_force_excess': N m or N, 'max_position_excess': rad
-        or m}``: the steps in which an event was located; the largest force a row had
-        past its bound where it pivoted (a pulling bound, a stick past ``F``, a drive
-        past ``E``: within :data:`.limits.FORCE_TOLERANCE` of the force's change over
-        a step at a located event, more only if :data:`.limits.MAX_EVENTS` cut a step
-        short); the largest excursion past a bound a step had to accept (0: none).
+        or m}``: the steps in which an event was located; the largest force a row
+        carried past its bound over an accepted (partial) step (a pulling bound, a
+        stick past ``F``, a drive past ``E``: within :data:`.limits.FORCE_TOLERANCE`
+        of the force's change over a step at a located event, more only if
+        :data:`.limits.MAX_EVENTS` cut a step short; a force that jumps past its bound
+        at an impact or a command pivots at once, carrying nothing); the largest
+        excursion past a bound a step had to accept (0: none).
         Empty without limits, friction or effort-limited drives.
         """
         if self.events is None:
