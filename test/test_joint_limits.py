@@ -152,6 +152,30 @@ def test_impact_time_converges_at_the_integrators_order(integrator, order, tmp_p
     assert errors[0] < 1e-4
 
 
+@pytest.mark.parametrize('integrator', ['rkmk4', 'lie_poisson4'])
+def test_with_the_knob_the_impact_time_holds_to_its_tolerance(integrator, tmp_path):
+    # The accuracy knob at 1e-10 (local error per unit time) and dt = 1e-3: the impact is
+    # located to tolerance dt = 1e-13 rad (not the default 1e-10), so the knob's promise
+    # holds across it: the impact time is the DOP853 event time to the knob's global
+    # error over the 0.35 s swing (1e-10 x 0.35 s = 3.5e-11 rad) over the rate there
+    # (3.3 rad/s): 1e-11 s, and no step misses its tolerance.
+    reference = _swing_impact_time()
+    sim = pendulum(tmp_path, integrator, 1e-3)
+    sim.set_tolerance(1e-10)
+    worst = 0.0
+    for _ in range(600):
+        sim.step()
+        worst = max(worst, sim.joint_state().positions[0] - UPPER)
+    [impact] = sim.limits.impacts
+    assert sim.events.location == pytest.approx(1e-13)
+    # bound: the 1e-11 s above, times 3 for the estimate's own error (an estimate).
+    assert abs(impact.time - reference) < 3e-11
+    # bound: the location's 1e-13 rad, then the row's drift (SHAKE's 1e-13 a step,
+    # closed along exp(-t/τ)): 3e-13.
+    assert worst < 3e-13
+    assert sim.accuracy().misses == 0
+
+
 @pytest.mark.parametrize('integrator', ['lie_poisson2', 'lie_poisson4'])
 def test_elastic_limit_keeps_the_energy_to_the_integrators_own_error(integrator, tmp_path):
     limited = pendulum(tmp_path, integrator, limit_restitution=1.0)

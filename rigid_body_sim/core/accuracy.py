@@ -225,6 +225,21 @@ class ErrorControl:
         self.worst = max(self.worst, estimate)
         return new
 
+    def charge(self, rate: float) -> None:
+        """
+        Add a one-off error, per unit time of the step just taken, to its estimate.
+
+        What a step's events leave beyond its sub-steps' own error (an event located
+        to a tolerance: :meth:`.joint_events.JointEvents.tighten`): the step's estimate
+        becomes the larger of the two, and a step it takes past the tolerance is a miss.
+        """
+        if not rate > self.estimate:
+            return
+        if rate > self.tolerance and not self.estimate > self.tolerance:
+            self.misses += 1
+        self.estimate = rate
+        self.worst = max(self.worst, rate)
+
     def _embedded(self, integrator, order: int, state: State, dt: float, t_end: float):
         """Sub-steps by the embedded pair: redo with more while the estimate misses."""
         k = max(1, min(self.k, self.budget))

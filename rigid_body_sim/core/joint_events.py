@@ -33,8 +33,8 @@ from .bodies import State
 from .constraints import Constraint, JointType
 from .kernels.layout import O_ORIGIN_WORLD, O_QUAT_BODY_WORLD
 from .limits import (DriveEfforts, ENGAGED, EPS, FORCE_TOLERANCE, Impact, JointFriction,
-                     JointLimits, LOCATION_TOLERANCE, MAX_BOUNCES, MAX_EVENTS,
-                     MAX_LOCATION_ITERATIONS, OFF, RATE_TOLERANCE, STICK)
+                     JointLimits, LOCATION_FLOOR, LOCATION_TOLERANCE, MAX_BOUNCES, MAX_EVENTS,
+                     MAX_LOCATION_ITERATIONS, OFF, RATE_FLOOR, RATE_TOLERANCE, STICK)
 from .rotation import cross, quat_to_matrix
 
 _NONE = np.zeros(0, dtype=int)
@@ -66,6 +66,10 @@ class JointEvents:
         #: its bound a row had where it pivoted (N m or N: within FORCE_TOLERANCE of the
         #: scale at a located event; more only when MAX_EVENTS cut a step short).
         self.counters = {'located_steps': 0, 'max_force_excess': 0.0}
+        #: rad or m, rad/s or m/s: the location's tolerances in use: LOCATION_TOLERANCE and
+        #: RATE_TOLERANCE, or tighter under the accuracy knob (:meth:`tighten`).
+        self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
+        self._left = 0.0   # what the step's located events may leave (:meth:`_charge`)
         # The margins at the end of the step being located, and each held row's margin
         # change over it (the scale of its event function: a fraction of the step).
         self._end_margins = np.zeros(0)
@@ -121,6 +125,7 @@ class JointEvents:
         """
         sim, lim, fr = self.sim, self.limits, self.friction
         state, previous = start, sim.joints.positions
+        self.tighten()
         events = 0
         while True:
             h = t_end - state.time
@@ -134,6 +139,8 @@ class JointEvents:
             releasing = self._releasing(new, q)
             if not (len(crossed) or len(stopped) or len(reached) or releasing):
                 self._note(q, rates, new.time)
+                if events:
+                    self._charge(t_end - start.time)
                 return new, (q, over)
             if events >= MAX_EVENTS:
                 # Too many events in one step: the step stands, a bound passed is counted
@@ -147,6 +154,7 @@ class JointEvents:
                     new = self._resolve(new, q, rates, (_NONE, stopped, reached, releasing),
                                         events)
                 self._note(q, rates, new.time)
+                self._charge(t_end - start.time)
                 return new, (q, over)
             self.counters['located_steps'] += 1
             if lim is not None:
@@ -155,6 +163,46 @@ class JointEvents:
             state, previous, rates = self._locate(state, previous, h, new, q, rates, which)
             state = self._resolve(state, previous, rates, which, events)
             events += 1
+
+    def tighten(self) -> None:
+        """
+        Set the location's tolerances for the accuracy knob (or their defaults without it).
+
+        An event located to a gap ``δ`` (rad or m) or a rate ``δ`` (rad/s or m/s) leaves
+        an error of about ``δ`` in the state, once: within the knob's budget for a step,
+        ``tolerance dt``, when ``δ`` is at most that. So under the knob both are
+        ``min(default, tolerance dt)``, but not below :data:`.limits.LOCATION_FLOOR`
+        and :data:`.limits.RATE_FLOOR` (the coordinates' rounding, with room), where a
+        step with an event is charged what its location may leave (:meth:`_charge`).
+        """
+        control, dt = self.sim._control, self.sim.dt
+        if control is None:
+            location, rate = LOCATION_TOLERANCE, RATE_TOLERANCE
+        else:
+            budget = control.tolerance * dt
+            location = min(LOCATION_TOLERANCE, max(budget, LOCATION_FLOOR))
+            rate = min(RATE_TOLERANCE, max(budget, RATE_FLOOR))
+        if (location, rate) == (self.location, self.rate):
+            return
+        self.location, self.rate = location, rate
+        if self.limits is not None:
+            self.limits.tighten(location, rate)
+        if self.friction is not None:
+            self.friction.rate = rate
+
+    def _charge(self, dt: float) -> None:
+        """
+        Charge the knob's estimate of a step with events what their location may leave.
+
+        A crossing's gap tolerance (the impact applied that far from the bound), a stop's
+        or an engagement's rate tolerance; a release's location leaves a force off by a
+        fraction FORCE_TOLERANCE of its change over the step, for that fraction of the
+        step: nothing measurable.
+        """
+        control, left = self.sim._control, self._left
+        self._left = 0.0
+        if control is not None and left > 0.0:
+            control.charge(left / dt)
 
     def _laws(self, q: np.ndarray, rates: np.ndarray, time: float,
               which: np.ndarray) -> np.ndarray:
@@ -175,7 +223,7 @@ class JointEvents:
             return _NONE
         sat = dr.saturated()
         d = dr.mode[sat] * self._laws(q, rates, time, sat)
-        return sat[(dr.away[sat] & (d >= -RATE_TOLERANCE)) | (d > RATE_TOLERANCE)]
+        return sat[(dr.away[sat] & (d >= -self.rate)) | (d > self.rate)]
 
     def _note(self, q: np.ndarray, rates: np.ndarray, time: float) -> None:
         """Note, at an accepted step's end, slips that move and drives that lag their law."""
@@ -185,7 +233,7 @@ class JointEvents:
         if dr is not None and dr.motion:
             sat = dr.saturated()
             d = dr.mode[sat] * self._laws(q, rates, time, sat)
-            dr.away[sat[d < -RATE_TOLERANCE]] = True
+            dr.away[sat[d < -self.rate]] = True
 
     # -- rows at their force bounds ---------------------------------------------------------
 
@@ -208,7 +256,7 @@ class JointEvents:
         if lim is not None:
             for i, row in lim.rows.items():
                 side = lim.active[i]
-                if side * (q[i] - lim.bound(i, side)) < -LOCATION_TOLERANCE:
+                if side * (q[i] - lim.bound(i, side)) < -self.location:
                     continue
                 f = -float(lam[row])
                 kinds.append(0), joints.append(i), margins.append(side * f), forces.append(f)
@@ -325,15 +373,15 @@ class JointEvents:
         value, real = np.inf, True
         if len(crossed):
             gap, approaching = self.limits.event(q, rates, crossed)
-            value, real = gap / LOCATION_TOLERANCE, approaching
+            value, real = gap / self.location, approaching
         if len(stopped):
-            rate = self.friction.event(rates, stopped) / RATE_TOLERANCE
+            rate = self.friction.event(rates, stopped) / self.rate
             if rate < value:
                 value, real = rate, True
         if len(reached):
             law = self.drives.event(self._laws(q, rates, time, reached), reached)
-            if law / RATE_TOLERANCE < value:
-                value, real = law / RATE_TOLERANCE, True
+            if law / self.rate < value:
+                value, real = law / self.rate, True
         if releasing:
             lam = self.sim.dynamics.solver.multipliers(self.sim.dynamics, state)
             margins = self._margins(lam, q)[2]
@@ -427,18 +475,22 @@ class JointEvents:
         """Resolve the crossings, stops and drives' engagements at ``state`` (:meth:`_resolve`)."""
         sim, lim, fr = self.sim, self.limits, self.friction
         crossed, stopped, reached = which
+        if len(crossed):
+            self._left = max(self._left, self.location)
+        if len(stopped) or len(reached):
+            self._left = max(self._left, self.rate)
         project = False
         engaged = []
         if len(reached):
             laws = self._laws(q, rates, state.time, reached)
             for i, r in zip(reached, laws):
-                if abs(r) <= RATE_TOLERANCE or self.drives.mode[i] * r >= 0.0:
+                if abs(r) <= self.rate or self.drives.mode[i] * r >= 0.0:
                     self._engage(int(i), state)
                     engaged.append(int(i))
                     project = True
         if len(stopped):
             for i in stopped:
-                if abs(rates[i]) <= RATE_TOLERANCE or fr.mode[i] * rates[i] <= 0.0:
+                if abs(rates[i]) <= self.rate or fr.mode[i] * rates[i] <= 0.0:
                     self._stick(int(i), state, float(q[i]))
                     fr.counters['sticks'] += 1
                     project = True
@@ -448,7 +500,7 @@ class JointEvents:
             if not hits:
                 gap, side = lim.gaps(q)
                 hits = [(int(i), int(sd), 0.0) for i, g, sd in zip(lim.joints, gap, side)
-                        if i in crossed and g <= LOCATION_TOLERANCE]
+                        if i in crossed and g <= self.location]
         solver = sim.dynamics.solver
         if not hits:
             if project:   # the stops: rates to zero, with every other joint kept
@@ -651,7 +703,7 @@ class JointEvents:
         if sat:
             laws = self._laws(q, rates, now, np.array(sat))
             for i, r in zip(sat, laws):
-                if abs(r) <= RATE_TOLERANCE:
+                if abs(r) <= self.rate:
                     self._engage(i, sim.state)
                     self._release(sim.state, q)
                 elif dr.mode[i] != (-1 if r > 0.0 else 1):
@@ -721,7 +773,7 @@ class JointEvents:
         beyond = np.zeros(len(sim.joints), dtype=bool)
         if lim is not None:
             gap, side = lim.gaps(q)
-            out = gap < -LOCATION_TOLERANCE
+            out = gap < -self.location
             for i, sd in zip(lim.joints[out], side[out]):
                 self._bound(int(i), int(sd), sim.state)
             beyond[lim.joints[out]] = True
@@ -729,7 +781,7 @@ class JointEvents:
             for i in fr.joints:
                 if beyond[i]:
                     continue
-                if abs(rates[i]) <= RATE_TOLERANCE:
+                if abs(rates[i]) <= self.rate:
                     self._stick(int(i), sim.state, float(q[i]))
                 else:
                     self._slip(int(i), 1 if rates[i] > 0.0 else -1)

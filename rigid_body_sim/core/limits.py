@@ -42,10 +42,13 @@ a direct method on the complementarity conditions:
   time, Zeno's series; this cuts it).
 
 So the bound is exceeded by at most :data:`LOCATION_TOLERANCE` at an impact, and an
-impact happens at its located time, with fixed steps as with the accuracy knob (where
-the located time holds to the tolerance, not the knob's error per unit time; the step
-after an impact restarts the method). A crossing that begins and ends inside one step
-(a joint that overshoots its bound and comes back within ``dt``) is not seen.
+impact happens at its located time, with fixed steps as with the accuracy knob (the
+step after an impact restarts the method). Under the knob every location tolerance
+is ``tolerance dt`` instead (not below :data:`LOCATION_FLOOR` and
+:data:`RATE_FLOOR`), and a step with events is charged what they may leave, so the
+knob's promise holds across them (:meth:`.joint_events.JointEvents.tighten`). A
+crossing that begins and ends inside one step (a joint that overshoots its bound and
+comes back within ``dt``) is not seen.
 Kinetic energy is never gained at an impact for ``e ≤ 1``.
 
 Joints held by an exact drive (the drive is the motion: a target beyond a limit is the
@@ -72,6 +75,11 @@ LOCATION_TOLERANCE = 1e-10
 #: rad/s or m/s: a joint on its bound moving into it more slowly than this is at rest
 #: there, not hitting it (rounding leaves rates of 1e-16 after an inelastic impact).
 RATE_TOLERANCE = 1e-9
+#: rad or m, rad/s or m/s: the tightest location tolerances under the accuracy knob
+#: (the coordinates' and rates' rounding, 1e-16 of some radians or radians a second,
+#: with room).
+LOCATION_FLOOR = 1e-13
+RATE_FLOOR = 1e-13
 #: Relative: where a held row's force reaches its bound (a bound's force zero, a
 #: sticking joint's ``F``, a drive's ``E``), the moment is located until the force is
 #: within this fraction of its scale of it (``F``, ``E``; for bounds, the largest force
@@ -151,10 +159,12 @@ class JointLimits:
                                                      | np.isfinite(self.upper))
         #: Indices of the joints with enforced limits.
         self.joints = np.flatnonzero(limited)
+        #: rad or m, rad/s or m/s: the location's tolerances in use (:meth:`tighten`).
+        self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
         # The bounds of the limited joints, each widened by the tolerance: what a step's
         # end is checked against (one comparison each, nothing else, while all are free).
-        self._low = self.lower[self.joints] - LOCATION_TOLERANCE
-        self._high = self.upper[self.joints] + LOCATION_TOLERANCE
+        self._low = self.lower[self.joints] - self.location
+        self._high = self.upper[self.joints] + self.location
         self.restitution = np.asarray(restitution, dtype=float).reshape(k)
         self.names = [limit_name(space.names[i]) for i in range(k)]
         #: Per joint: 0 free, +1 on its lower bound, −1 on its upper bound.
@@ -168,6 +178,12 @@ class JointLimits:
     def __len__(self) -> int:
         """Return the number of joints with enforced limits."""
         return len(self.joints)
+
+    def tighten(self, location: float, rate: float) -> None:
+        """Use these tolerances (rad or m, rad/s or m/s) for the crossings and their rates."""
+        self.location, self.rate = location, rate
+        self._low = self.lower[self.joints] - location
+        self._high = self.upper[self.joints] + location
 
     def reset(self) -> None:
         """Forget the active set and the counters."""
@@ -199,7 +215,7 @@ class JointLimits:
             return self.joints[:0]
         gap, _ = self.gaps(q)
         free = self.active[self.joints] == 0
-        return self.joints[free & (gap < -LOCATION_TOLERANCE)]
+        return self.joints[free & (gap < -self.location)]
 
     def worst_gap(self, q: np.ndarray, which: np.ndarray) -> float:
         """Return the smallest gap of joints ``which`` at ``q`` (the event function)."""
@@ -218,7 +234,7 @@ class JointLimits:
         gaps = np.minimum(lo, hi)
         k = int(np.argmin(gaps))
         side = 1.0 if lo[k] <= hi[k] else -1.0
-        return float(gaps[k]), side * rates[which[k]] < -RATE_TOLERANCE
+        return float(gaps[k]), side * rates[which[k]] < -self.rate
 
     def touching(self, q: np.ndarray, rates: np.ndarray) -> list:
         """
@@ -232,7 +248,7 @@ class JointLimits:
                 continue
             for side, b in ((1, self.lower[i]), (-1, self.upper[i])):
                 gap = side * (q[i] - b)
-                if gap <= LOCATION_TOLERANCE and side * rates[i] < -RATE_TOLERANCE:
+                if gap <= self.location and side * rates[i] < -self.rate:
                     out.append((int(i), side, float(side * rates[i])))
         return out
 
@@ -286,6 +302,8 @@ class JointFriction:
         #: Per joint: whether it has slipped faster than RATE_TOLERANCE since it began
         #: to slip (a slip that begins where the force just reached F starts at rest).
         self.moving = np.zeros(k, dtype=bool)
+        #: rad/s or m/s: the stops' tolerance in use (the events' ``tighten``).
+        self.rate = RATE_TOLERANCE
         self.counters = {'sticks': 0, 'slips': 0}
 
     def __len__(self) -> int:
@@ -312,12 +330,12 @@ class JointFriction:
         """
         slip = self.slipping()
         d = self.mode[slip] * rates[slip]
-        return slip[(self.moving[slip] & (d <= RATE_TOLERANCE)) | (d < -RATE_TOLERANCE)]
+        return slip[(self.moving[slip] & (d <= self.rate)) | (d < -self.rate)]
 
     def note(self, rates: np.ndarray) -> None:
         """Mark the slipping joints moving faster than RATE_TOLERANCE at an accepted state."""
         slip = self.slipping()
-        self.moving[slip[self.mode[slip] * rates[slip] > RATE_TOLERANCE]] = True
+        self.moving[slip[self.mode[slip] * rates[slip] > self.rate]] = True
 
     def event(self, rates: np.ndarray, which: np.ndarray) -> float:
         """Return the event function of slipping joints ``which``: the smallest ``d q̇``."""
