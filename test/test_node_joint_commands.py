@@ -409,9 +409,9 @@ def test_an_exact_drive_follows_its_target_and_reports_the_torque_it_takes(ros, 
 
 def test_a_drive_beyond_its_effort_limit_saturates_and_diagnostics_say_so(ros, tmp_path):
     # The same arm with its drives bounded by the URDF efforts: j1's 10 N m cannot carry
-    # the arm, so after the first step the drive saturates and j1 falls with its effort
-    # at the limit; joint_states' efforts are the core's, bit for bit, and diagnostics
-    # name the saturated drive.
+    # the arm, so the drive saturates at once (its force is past E at the first step's
+    # start, a located event) and j1 falls with its effort at the limit; joint_states'
+    # efforts are the core's, bit for bit, and diagnostics name the saturated drive.
     scene = tmp_path / 'bounded_arm.yaml'
     scene.write_text(EXACT_SCENE.replace('effort_limits: false, ', '').format(
         arm=SCENE.parent / 'urdf' / 'node_arm.urdf'))
