@@ -130,6 +130,7 @@ class JointEvents:
         while True:
             h = t_end - state.time
             if h <= 4.0 * np.finfo(float).eps * abs(t_end):   # an event at the step's end
+                self._charge(t_end - start.time)
                 return State(t_end, *state.parts), None
             new = sim._advance(state, h, t_end)
             q, rates, over = self.coordinates(new, previous)
@@ -202,7 +203,9 @@ class JointEvents:
         control, left = self.sim._control, self._left
         self._left = 0.0
         if control is not None and left > 0.0:
-            control.charge(left / dt)
+            # Within the budget by construction unless floored (no rounding makes a miss).
+            budget = control.tolerance * self.sim.dt
+            control.charge(control.tolerance if left <= budget else left / dt)
 
     def _laws(self, q: np.ndarray, rates: np.ndarray, time: float,
               which: np.ndarray) -> np.ndarray:

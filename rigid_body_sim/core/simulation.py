@@ -566,7 +566,12 @@ class Simulation:
     # -- joint space (robots) -------------------------------------------------------------
 
     def joint_names(self) -> list:
-        """Names of the robots' revolute, continuous and prismatic joints (URDF order)."""
+        """
+        Names of the joints: the robots' revolute, continuous and prismatic ones (URDF order).
+
+        Then the scene's hinges and sliders with limits or friction (named as their
+        constraints: :class:`.limits.SceneJoint`).
+        """
         return list(self.joints.names)
 
     def joint_state(self, names: Optional[Sequence[str]] = None) -> JointState:
