@@ -436,9 +436,9 @@ def test_above_breakaway_the_joint_accelerates_at_effort_minus_friction(integrat
     inertia = I_AXIS + M * L * L
     # Constant forces: both methods are exact for them (rounding of 300 steps: 1e-12).
     assert (v2 - v1) / (t2 - t1) == pytest.approx((tau - friction) / inertia, rel=1e-9)
-    # The breakaway comes at most one step late (first order in its time).
-    assert v1 == pytest.approx((tau - friction) / inertia * t1, abs=(tau - friction) /
-                               inertia * sim.dt * (1 + 1e-9))
+    # The breakaway is located where the force passed F: at the command (the first
+    # step's start), so the joint accelerates from then on (rounding: 1e-12).
+    assert v1 == pytest.approx((tau - friction) / inertia * t1, rel=1e-9)
     assert sim.joint_state().efforts[0] == pytest.approx(tau - friction, rel=1e-12)
 
 
@@ -468,9 +468,9 @@ def test_a_rubbing_swing_stops_at_the_energy_balance_angle(integrator, order, tm
         moved = abs(sim.joint_state().positions[0] - theta1) - errors[-1]
         assert abs(moved) <= 1e-10
     # bound: the stop is located to 1e-9 rad/s; its angle carries the method's O(dt^p)
-    # error (the breakaway, one step late, delays the swing but does not change where
-    # it stops: the energy balance does not depend on when it starts). Measured ratios
-    # 3.9 and 15.3.
+    # error (the breakaway, located at the release, does not change where it stops:
+    # the energy balance does not depend on when it starts). Measured ratios 3.9 and
+    # 15.3.
     assert 2 ** order / 1.5 < errors[0] / errors[1] < 2 ** order * 1.5
     assert errors[1] < 1e-5
 

@@ -399,8 +399,9 @@ class JointEvents:
                 k = int(np.argmin(margins / self._span))
                 margin = float(margins[k] / self._span[k]) / FORCE_TOLERANCE
                 if margin < value:
-                    # An event only where the margin falls (towards the step's end's).
-                    value, real = margin, self._falling(margins)[k]
+                    # An event where the margin is past its bound already (a force that
+                    # jumped there: a command, an impact) or falls (towards the end's).
+                    value, real = margin, bool(margins[k] < 0.0 or self._falling(margins)[k])
         return value, real
 
     def _falling(self, margins: np.ndarray) -> np.ndarray:
