@@ -163,10 +163,16 @@ def test_a_commands_impulse_is_the_joint_space_mass_times_its_rate_jump(tmp_path
     sim.command_joints(dict(zip(names, v)))   # each impulse below E dt = 1 N m s: engaged
     assert sim.drive_saturation()['saturated'] == {}
     state = sim.state
-    mu = sim.events._impulses([0, 1, 2], state)
+    mu = sim.events._impulses([0, 1, 2], state)     # from each child side's momentum
     expected = JointSpaceModel.from_urdf(text).mass_matrix(q) @ (0.0 - v)
     # bound: the projections' rounding, 1e-13 of the impulses (< 1 N m s).
     np.testing.assert_allclose(mu, expected, atol=1e-12)
+    # The probes (one projection per drive, for mechanisms that are not trees) agree.
+    solver = sim.dynamics.solver
+    vel, om = solver.project_velocities(state)
+    probed = sim.events._probe_impulses([0, 1, 2], state, vel, om, vel - state.vel_com_world,
+                                        om - state.ang_vel_principal)
+    np.testing.assert_allclose(probed, expected, atol=1e-12)
     # A larger command saturates the joints whose impulse exceeds E dt, towards it.
     sim.command_joints({'j1': 400.0})
     assert sim.drive_saturation()['saturated'] == {'j1': 1}

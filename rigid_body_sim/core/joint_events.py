@@ -70,6 +70,7 @@ class JointEvents:
         #: RATE_TOLERANCE, or tighter under the accuracy knob (:meth:`tighten`).
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
         self._left = 0.0   # what the step's located events may leave (:meth:`_charge`)
+        self._sides: dict = {}   # each limited drive's child side (:meth:`_subtree`)
         # The margins at the end of the step being located, and each held row's margin
         # change over it (the scale of its event function: a fraction of the step).
         self._end_margins = np.zeros(0)
@@ -723,11 +724,53 @@ class JointEvents:
         self._note(q, rates, now)   # a drive saturated behind its law lags it
 
     def _impulses(self, idx: list, state: State) -> np.ndarray:
-        """Return the velocity projection's impulse ``μ`` on the drives of joints ``idx``."""
-        sim, dr = self.sim, self.drives
-        solver, bodies = sim.dynamics.solver, sim.bodies
+        """
+        Return the velocity projection's impulse ``μ`` on the drives of joints ``idx``.
+
+        From one projection of the state when each drive's joint is the only tie of its
+        child's side to the rest (a tree: :meth:`_subtree`): the momentum the projection
+        gives that side about the joint's axis is the drive's impulse ``−μ`` (the joint's
+        other rows apply none about it). Otherwise one more projection per drive.
+        """
+        solver = self.sim.dynamics.solver
         vel, om = solver.project_velocities(state)
         dv, dw = vel - state.vel_com_world, om - state.ang_vel_principal
+        sides = [self._subtree(i) for i in idx]
+        if all(side is not None for side in sides):
+            return self._tree_impulses(idx, sides, state, dv, dw)
+        return self._probe_impulses(idx, state, vel, om, dv, dw)
+
+    def _tree_impulses(self, idx: list, sides: list, state: State, dv: np.ndarray,
+                       dw: np.ndarray) -> np.ndarray:
+        """``μ_j = −k_j · ΔL_j``: each child side's axial momentum change (:meth:`_impulses`)."""
+        sim = self.sim
+        js, bodies = sim.joints, sim.bodies
+        linear = bodies.mass[:, None] * dv
+        R = quat_to_matrix(state.quat_principal_world)
+        # Each body's angular momentum change about the world origin.
+        angular = np.einsum('nij,nj->ni', R, bodies.moments * dw) \
+            + cross(state.pos_com_world, linear)
+        bodies.outputs(state)
+        out_rows = bodies.outputs_cache.out
+        children = js.child[idx]
+        axes = np.einsum('kij,kj->ki', quat_to_matrix(
+            out_rows[children, O_QUAT_BODY_WORLD:O_QUAT_BODY_WORLD + 4]), js.axis[idx])
+        anchors = out_rows[children, O_ORIGIN_WORLD:O_ORIGIN_WORLD + 3]
+        out = np.empty(len(idx))
+        for k, (i, side) in enumerate(zip(idx, sides)):
+            force = np.sum(linear[side], axis=0)
+            if js.rotary[i]:   # about the joint's point: about the origin less anchor × P
+                moment = np.sum(angular[side], axis=0) - cross(anchors[k], force)
+                out[k] = -float(axes[k] @ moment)
+            else:
+                out[k] = -float(axes[k] @ force)
+        return out
+
+    def _probe_impulses(self, idx: list, state: State, vel: np.ndarray, om: np.ndarray,
+                        dv: np.ndarray, dw: np.ndarray) -> np.ndarray:
+        """``μ`` by one projection per drive, ``r_k`` one larger (:meth:`_impulses`)."""
+        sim, dr = self.sim, self.drives
+        solver, bodies = sim.dynamics.solver, sim.bodies
         out = np.empty(len(idx))
         for k, i in enumerate(idx):
             table, at = solver.drive_rate_slot(dr.names[i])
@@ -742,6 +785,46 @@ class JointEvents:
                            + np.sum(bodies.moments * wk * dw))
         # Δν = −M⁻¹Gᵀ W r and Δν_k = −M⁻¹Gᵀ W e_k, so Δν_kᵀ M Δν = e_kᵀ W G M⁻¹ Gᵀ W r = μ_k.
         return out
+
+    def _subtree(self, i: int) -> Optional[np.ndarray]:
+        """
+        Return the bodies on joint ``i``'s child side, or None if another row ties them on.
+
+        The bodies the child reaches through every constraint but the joint's own (its
+        hinge or slider and its drive): None when they reach the parent or the world
+        (a loop, a mimic across, a user's constraint), where the side's momentum would
+        take other rows' impulses too.
+        """
+        sim = self.sim
+        cs = sim.dynamics.solver.constraints
+        key = (cs, cs.version, i)
+        cached = self._sides.get(i)
+        if cached is not None and cached[0] is cs and cached[1] == key[1]:
+            return cached[2]
+        js, bodies = sim.joints, sim.bodies
+        own = {js.names[i], self.drives.names[i]}
+        n = len(bodies)
+        links: dict = {}
+        for name in cs.names:
+            if name in own:
+                continue
+            spec = cs.spec(name)
+            ends = [spec.body_a, spec.body_b]
+            if spec.coupling is not None:
+                ends += [spec.coupling.body_a, spec.coupling.body_b]
+            nodes = [n if e is None else bodies.lookup(e) for e in ends]
+            for a in nodes:
+                links.setdefault(a, set()).update(nodes)
+        child, parent = int(js.child[i]), int(js.parent[i])
+        seen, todo = {child}, [child]
+        while todo:
+            for b in links.get(todo.pop(), ()):
+                if b not in seen:
+                    seen.add(b)
+                    todo.append(b)
+        side = None if parent in seen or n in seen else np.array(sorted(seen), dtype=int)
+        self._sides[i] = (cs, key[1], side)
+        return side
 
     def _drive_wrench(self, i: int, tau: float) -> None:
         """Apply (``tau = 0``: remove) joint ``i``'s saturated drive effort (held wrenches)."""
