@@ -691,10 +691,11 @@ class JointEvents:
         ``G M⁻¹ Gᵀ`` block, the other rows held): a drive whose impulse exceeds what
         its effort gives over a step, ``E dt``, saturates now towards ``−sign μ``; a
         saturated one turns towards its new target (or engages, if its law holds).
-        ``W r`` comes from projections of the state: ``μ_j = Δν_jᵀ M Δν``, ``Δν`` the
-        projection's change and ``Δν_j`` its change per unit ``r_j`` (one projection
-        each). One pass: the impulses of the drives that stay engaged are those with
-        every commanded drive engaged.
+        ``W r`` comes from the projection of the state (:meth:`_impulses`: each child
+        side's momentum change about its joint's axis, or ``μ_j = Δν_jᵀ M Δν`` with
+        ``Δν_j`` the change per unit ``r_j``, one more projection each). One pass: the
+        impulses of the drives that stay engaged are those with every commanded drive
+        engaged.
         """
         dr, sim = self.drives, self.sim
         if dr is None:
