@@ -75,6 +75,7 @@ class JointEvents:
         # change over it (the scale of its event function: a fraction of the step).
         self._end_margins = np.zeros(0)
         self._span: Optional[np.ndarray] = None
+        self._from_start = False   # the spans are each row's change over the whole step
 
     # -- names and readings -----------------------------------------------------------------
 
@@ -339,7 +340,10 @@ class JointEvents:
             carried = 0.0
             if accepted:
                 carried = -float(margins[k])
-            elif span is not None and margins[k] >= -FORCE_TOLERANCE * span[k]:
+            elif span is not None and self._from_start \
+                    and margins[k] >= -FORCE_TOLERANCE * span[k]:
+                # (A row whose margin appeared inside the step, its joint back from
+                # beyond its bound, pulled as it came: it carried nothing past a bound.)
                 carried = max(0.0, -float(margins[k]))
             self.counters['max_force_excess'] = max(self.counters['max_force_excess'],
                                                     carried)
@@ -392,9 +396,11 @@ class JointEvents:
             if self._span is None or len(self._span) != len(margins):
                 # The step's start: each row's margin change over the step scales its
                 # event function (a time fraction of the step, located to
-                # FORCE_TOLERANCE of it, however small the forces).
-                span = np.abs(margins - self._end_margins) \
-                    if len(margins) == len(self._end_margins) else np.abs(margins)
+                # FORCE_TOLERANCE of it, however small the forces). A row that has no
+                # margin at the start (its joint was beyond its bound) gets one later.
+                aligned = len(margins) == len(self._end_margins)
+                self._from_start = aligned and self._span is None
+                span = np.abs(margins - self._end_margins) if aligned else np.abs(margins)
                 self._span = np.maximum(span, 1e-300)
             if len(margins):
                 k = int(np.argmin(margins / self._span))

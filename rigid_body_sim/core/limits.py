@@ -423,18 +423,19 @@ class DriveEfforts:
         c0, rate, t0 = self.motion[i]
         return c0 + rate * (time - t0), rate
 
+    def error(self, i: int, q: float, time: float, rotary: bool) -> float:
+        """
+        Return a saturated drive's ``Φ = q − c(t)`` (its tracking error, rad or m).
+
+        An angle is taken within π (the drive's row goes the shorter way).
+        """
+        phi = q - self.target(i, time)[0]
+        return (phi + np.pi) % (2.0 * np.pi) - np.pi if rotary else phi
+
     def law(self, i: int, q: float, rate: float, time: float, omega: float,
             rotary: bool) -> float:
-        """
-        Return ``r = Φ̇ + ωΦ`` of a saturated drive (0: the row's law holds).
-
-        ``Φ = q − c(t)``, an angle taken within π (the drive's row goes the shorter way).
-        """
-        c, c_rate = self.target(i, time)
-        phi = q - c
-        if rotary:
-            phi = (phi + np.pi) % (2.0 * np.pi) - np.pi
-        return rate - c_rate + omega * phi
+        """Return ``r = Φ̇ + ωΦ`` of a saturated drive (0: the row's law holds)."""
+        return rate - self.target(i, time)[1] + omega * self.error(i, q, time, rotary)
 
     def event(self, laws: np.ndarray, which: np.ndarray) -> float:
         """Return the event function of saturated drives ``which``: the smallest ``−σ r``."""

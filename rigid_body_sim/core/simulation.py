@@ -988,10 +988,8 @@ class Simulation:
         dr = self.drive_efforts
         if dr is not None:   # a saturated drive's tracking error, its row away
             for i in dr.saturated():
-                phi_i = self.joints.positions[i] - dr.target(i, self.time)[0]
-                if self.joints.rotary[i]:
-                    phi_i = (phi_i + np.pi) % (2.0 * np.pi) - np.pi
-                out[dr.names[i]] = abs(float(phi_i))
+                out[dr.names[i]] = abs(float(dr.error(i, self.joints.positions[i], self.time,
+                                                      self.joints.rotary[i])))
         return out
 
     def reactions(self) -> dict:
