@@ -75,7 +75,6 @@ class JointEvents:
         # change over it (the scale of its event function: a fraction of the step).
         self._end_margins = np.zeros(0)
         self._span: Optional[np.ndarray] = None
-        self._from_start = False   # the spans are each row's change over the whole step
 
     # -- names and readings -----------------------------------------------------------------
 
@@ -140,7 +139,9 @@ class JointEvents:
             stopped = _NONE if fr is None else fr.stopped(rates)
             reached = self._reached(q, rates, new.time)
             releasing = self._releasing(new, q)
-            if not (len(crossed) or len(stopped) or len(reached) or releasing):
+            returned = _NONE if lim is None else lim.returned(q)
+            if not (len(crossed) or len(stopped) or len(reached) or releasing
+                    or len(returned)):
                 self._note(q, rates, new.time)
                 if events:
                     self._charge(t_end - start.time)
@@ -153,16 +154,16 @@ class JointEvents:
                     lim.counters.events_capped += 1
                     lim.counters.max_violation = max(lim.counters.max_violation,
                                                      -lim.worst_gap(q, crossed))
-                if len(stopped) or len(reached) or releasing:
-                    new = self._resolve(new, q, rates, (_NONE, stopped, reached, releasing),
-                                        events)
+                if len(stopped) or len(reached) or releasing or len(returned):
+                    new = self._resolve(new, q, rates,
+                                        (_NONE, stopped, reached, releasing, returned), events)
                 self._note(q, rates, new.time)
                 self._charge(t_end - start.time)
                 return new, (q, over)
             self.counters['located_steps'] += 1
             if lim is not None:
                 lim.counters.located_steps += 1
-            which = (crossed, stopped, reached, releasing)
+            which = (crossed, stopped, reached, releasing, returned)
             state, previous, rates = self._locate(state, previous, h, new, q, rates, which)
             state = self._resolve(state, previous, rates, which, events)
             events += 1
@@ -253,15 +254,17 @@ class JointEvents:
         it (N m or N): ``F`` or ``E``, and for the bounds the largest of their forces,
         at least the rounding of the solve (64 ulps of the largest multiplier, over
         FORCE_TOLERANCE: a bound that carries nothing does not pull by rounding). A
-        joint still beyond its bound (a start beyond it, converging back) is held
-        whatever its row's sign: no margin.
+        joint that started beyond its bound (:attr:`.JointLimits.beyond`) and has not
+        come back within the tolerance is held whatever its row's sign: no margin (its
+        return is an event of its own, where the margin counts from). Any other gap is
+        an impact's location or the rows' drift, and the row's force counts.
         """
         lim, fr, dr = self.limits, self.friction, self.drives
         kinds, joints, margins, forces, scales = [], [], [], [], []
         if lim is not None:
             for i, row in lim.rows.items():
                 side = lim.active[i]
-                if side * (q[i] - lim.bound(i, side)) < -self.location:
+                if lim.beyond[i]:
                     continue
                 f = -float(lam[row])
                 kinds.append(0), joints.append(i), margins.append(side * f), forces.append(f)
@@ -340,10 +343,7 @@ class JointEvents:
             carried = 0.0
             if accepted:
                 carried = -float(margins[k])
-            elif span is not None and self._from_start \
-                    and margins[k] >= -FORCE_TOLERANCE * span[k]:
-                # (A row whose margin appeared inside the step, its joint back from
-                # beyond its bound, pulled as it came: it carried nothing past a bound.)
+            elif span is not None and margins[k] >= -FORCE_TOLERANCE * span[k]:
                 carried = max(0.0, -float(margins[k]))
             self.counters['max_force_excess'] = max(self.counters['max_force_excess'],
                                                     carried)
@@ -369,19 +369,24 @@ class JointEvents:
         """
         Return the event function in its tolerances' units, and whether it is an event.
 
-        ``which``: the joints crossing a bound, stopping, drives reaching their law, and
-        whether a held row's force passes its bound. The smallest of a crossing's gap
-        over :data:`LOCATION_TOLERANCE`, a stop's ``d q̇`` and a saturated drive's
+        ``which``: the joints crossing a bound, stopping, drives reaching their law,
+        whether a held row's force passes its bound, and the joints back from a start
+        beyond their bounds. The smallest of a crossing's gap or a return's distance
+        still beyond over :data:`LOCATION_TOLERANCE`, a stop's ``d q̇`` and a saturated drive's
         ``−σ r`` over :data:`RATE_TOLERANCE`, and the smallest force margin over
         :data:`FORCE_TOLERANCE` times each row's force scale (a read solve at ``state``);
         a gap within the tolerance is an event only when its joint moves into the bound.
         """
-        crossed, stopped, reached, releasing = which
+        crossed, stopped, reached, releasing, returned = which
         time = state.time
         value, real = np.inf, True
         if len(crossed):
             gap, approaching = self.limits.event(q, rates, crossed)
             value, real = gap / self.location, approaching
+        if len(returned):
+            past = float(np.min(self.limits.past(q, returned))) / self.location
+            if past < value:
+                value, real = past, True
         if len(stopped):
             rate = self.friction.event(rates, stopped) / self.rate
             if rate < value:
@@ -396,10 +401,8 @@ class JointEvents:
             if self._span is None or len(self._span) != len(margins):
                 # The step's start: each row's margin change over the step scales its
                 # event function (a time fraction of the step, located to
-                # FORCE_TOLERANCE of it, however small the forces). A row that has no
-                # margin at the start (its joint was beyond its bound) gets one later.
+                # FORCE_TOLERANCE of it, however small the forces).
                 aligned = len(margins) == len(self._end_margins)
-                self._from_start = aligned and self._span is None
                 span = np.abs(margins - self._end_margins) if aligned else np.abs(margins)
                 self._span = np.maximum(span, 1e-300)
             if len(margins):
@@ -478,6 +481,11 @@ class JointEvents:
         state = self._resolve_motion(state, q, rates, which[:3], events)
         if which[3]:
             self._release(state, q, located=True, accepted=events >= MAX_EVENTS)
+        if len(which[4]):
+            # Joints back from a start beyond their bounds: their rows' forces count from
+            # here, and a bound that pulls is released at once (it carried nothing).
+            self.limits.beyond[which[4]] = False
+            self._release(state, q)
         self._span = None
         return state
 
@@ -592,6 +600,7 @@ class JointEvents:
         lim = self.limits
         self.sim.dynamics.solver.constraints.remove(lim.names[i])
         lim.active[i] = 0
+        lim.beyond[i] = False
         self.rows_changed()
 
     def _stick(self, i: int, state: State, q: float) -> None:
@@ -871,6 +880,7 @@ class JointEvents:
             for i, sd in zip(lim.joints[out], side[out]):
                 self._bound(int(i), int(sd), sim.state)
             beyond[lim.joints[out]] = True
+            lim.beyond[:] = beyond
         if fr is not None:
             for i in fr.joints:
                 if beyond[i]:

@@ -169,6 +169,10 @@ class JointLimits:
         self.names = [limit_name(space.names[i]) for i in range(k)]
         #: Per joint: 0 free, +1 on its lower bound, −1 on its upper bound.
         self.active = np.zeros(k, dtype=int)
+        #: Per joint: its bound became active at a start beyond it (a reset, a state set)
+        #: and the joint has not yet come back within the tolerance: held whatever its
+        #: row's sign (it converges back as a violated constraint does).
+        self.beyond = np.zeros(k, dtype=bool)
         #: The row in Φ and λ of each active bound (joint -> row), kept by the caller.
         self.rows: dict = {}
         self.counters = LimitCounters()
@@ -188,6 +192,7 @@ class JointLimits:
     def reset(self) -> None:
         """Forget the active set and the counters."""
         self.active[:] = 0
+        self.beyond[:] = False
         self.rows = {}
         self.counters = LimitCounters()
         self.impacts.clear()
@@ -216,6 +221,19 @@ class JointLimits:
         gap, _ = self.gaps(q)
         free = self.active[self.joints] == 0
         return self.joints[free & (gap < -self.location)]
+
+    def returned(self, q: np.ndarray) -> np.ndarray:
+        """Return the joints held since a start beyond their bound, back within the tolerance."""
+        if not self.beyond.any():
+            return self.joints[:0]
+        idx = np.flatnonzero(self.beyond)
+        return idx[self.past(q, idx) <= self.location]
+
+    def past(self, q: np.ndarray, which: np.ndarray) -> np.ndarray:
+        """Return how far joints ``which`` are beyond their active bounds (negative: within)."""
+        side = self.active[which]
+        bound = np.where(side > 0, self.lower[which], self.upper[which])
+        return side * (bound - q[which])
 
     def worst_gap(self, q: np.ndarray, which: np.ndarray) -> float:
         """Return the smallest gap of joints ``which`` at ``q`` (the event function)."""
