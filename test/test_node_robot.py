@@ -482,3 +482,6 @@ def test_a_joint_on_its_limit_shows_in_diagnostics_and_joint_states(ros, tmp_pat
     # No row pivoted past its bound (it rests; the core's complementarity()).
     assert values['joint_complementarity_force_excess_max'] == \
         f'{sim.complementarity()["max_force_excess"]:.3g}' == '0'
+    assert values['joint_complementarity_lcp_residual_max'] == \
+        f'{sim.complementarity()["lcp_residual_max"]:.3g}'
+    assert values['joint_complementarity_lcp_failures_total'] == '0'

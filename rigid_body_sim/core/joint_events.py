@@ -30,6 +30,7 @@ from typing import Any, Optional
 import numpy as np
 
 from .bodies import State
+from .complementarity import FREE, solve
 from .constraints import Constraint, JointType
 from .kernels.layout import O_ORIGIN_WORLD, O_QUAT_BODY_WORLD
 from .limits import (DriveEfforts, ENGAGED, EPS, FORCE_TOLERANCE, Impact, JointFriction,
@@ -62,10 +63,12 @@ class JointEvents:
         self.limits = limits
         self.friction = friction
         self.drives = drives
-        #: Since the last reset: steps with a located event, and the largest force past
-        #: its bound a row had where it pivoted (N m or N: within FORCE_TOLERANCE of the
-        #: scale at a located event; more only when MAX_EVENTS cut a step short).
-        self.counters = {'located_steps': 0, 'max_force_excess': 0.0}
+        #: Since the last reset: steps with a located event; the largest force past its
+        #: bound a row had where it pivoted (N m or N: within FORCE_TOLERANCE of the
+        #: scale at a located event; more only when MAX_EVENTS cut a step short); the
+        #: held rows' LCPs solved, their largest residual, those that failed.
+        self.counters: dict = {}
+        self.reset_counters()
         #: rad or m, rad/s or m/s: the location's tolerances in use: LOCATION_TOLERANCE and
         #: RATE_TOLERANCE, or tighter under the accuracy knob (:meth:`tighten`).
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
@@ -75,6 +78,11 @@ class JointEvents:
         # change over it (the scale of its event function: a fraction of the step).
         self._end_margins = np.zeros(0)
         self._span: Optional[np.ndarray] = None
+
+    def reset_counters(self) -> None:
+        """Zero the counters (a reset)."""
+        self.counters = {'located_steps': 0, 'max_force_excess': 0.0, 'lcp_solves': 0,
+                         'lcp_residual_max': 0.0, 'lcp_failures': 0}
 
     # -- names and readings -----------------------------------------------------------------
 
@@ -305,15 +313,22 @@ class JointEvents:
         """
         Pivot the held rows whose force is past its bound, at ``state``.
 
-        The direct method: the row of the smallest margin pivots (a bound leaves, and
-        its joint sticks if it has friction; a sticking joint slips away from its
-        row's force; a drive saturates towards it), the multipliers are solved anew
-        without it, and so on while a margin is past its bound by more than
-        :data:`FORCE_TOLERANCE` of its scale. Each pivot is exact: the next solve sees
-        it. ``located``: ``state`` is where a row's margin was located to reach zero
-        (within FORCE_TOLERANCE of its change over the step): that row pivots first.
-        ``accepted``: ``state`` ends a step that stands (:data:`MAX_EVENTS`): its rows
-        carried their forces past their bounds over it.
+        When a row's force is past its bound by more than :data:`FORCE_TOLERANCE` of
+        its scale, every held row's force is found at once: the box-constrained LCP
+        of the held rows (:mod:`.complementarity`), the equality rows eliminated
+        (their Schur complement, :meth:`_schur`), warm-started from the forces with
+        every row held. A row whose force lands on the end of its box pivots: a
+        bound that pushes nothing leaves (and its joint sticks if it has friction,
+        or slides away at ``−F`` when even friction cannot hold it: one row
+        ``s f ≥ −F``), a sticking joint slips against its friction, a drive
+        saturates towards its force. The pivots are taken together, the
+        multipliers solved anew, and the check repeats (a pivot's new row, a stick
+        after a bound, has its own bound): exact, the LCP's solution being the
+        rows' forces to rounding. ``located``: ``state`` is where a row's margin
+        was located to reach zero (within FORCE_TOLERANCE of its change over the
+        step): that row's box ends at its force there, so it pivots. ``accepted``:
+        ``state`` ends a step that stands (:data:`MAX_EVENTS`): its rows carried
+        their forces past their bounds over it.
 
         Counted in ``max_force_excess``: the force past its bound a row carried over
         an accepted (partial) step: at a located pivot, its margin there (within the
@@ -347,17 +362,162 @@ class JointEvents:
                 carried = max(0.0, -float(margins[k]))
             self.counters['max_force_excess'] = max(self.counters['max_force_excess'],
                                                     carried)
+            # A row located where its margin reached zero pivots there; one whose force
+            # was already past its bound (a command, an impact) is one of the LCP's rows.
+            at_bound = span is not None and margins[k] >= -FORCE_TOLERANCE * span[k]
+            pivots = self._pivots(state, kinds, joints, forces, k if at_bound else None)
+            if not pivots:   # (the LCP could not be solved: the row past its bound alone)
+                pivots = [self._pivot_of(kinds[k], joints[k], forces[k])]
             located = False   # (the rows change: the spans are of the rows before)
-            i, f = joints[k], forces[k]
-            if kinds[k] == 0:
-                self._unbound(i)
-                self.limits.counters.releases += 1
-                if self.friction is not None and self.friction.force[i] > 0.0:
-                    self._stick(i, state, float(q[i]))
-            elif kinds[k] == 1:
-                self._slip(i, -1 if f > 0.0 else 1)
+            for what, i, direction in pivots:
+                self._apply_pivot(what, i, direction, state, q)
+
+    def _boxes(self, kinds: list, joints: list, forces: list,
+               located: Optional[int]) -> tuple:
+        """
+        Return each held row's box ``(lo, hi)`` of forces along its joint.
+
+        A bound on side ``s`` pushes (``s f ≥ 0``), or, on a joint with friction
+        ``F``, holds it by friction too (``s f ≥ −F``: it sticks there); a stick
+        ``|f| ≤ F``; a drive ``|f| ≤ E``. The ``located`` row's box ends at its force
+        on the side its margin reached.
+        """
+        lim, fr, dr = self.limits, self.friction, self.drives
+        n = len(kinds)
+        lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
+        for r, (kind, i) in enumerate(zip(kinds, joints)):
+            rub = 0.0 if fr is None else float(fr.force[i])
+            if kind == 0:
+                side = lim.active[i]
+                if r == located:
+                    rub = -float(side * forces[r])   # (the push there, within tolerance)
+                if side > 0:
+                    lo[r] = -rub
+                else:
+                    hi[r] = rub
             else:
-                self._saturate(i, 1 if f > 0.0 else -1, state.time)
+                bound = float(fr.force[i] if kind == 1 else dr.effort[i])
+                lo[r], hi[r] = -bound, bound
+                if r == located:
+                    if forces[r] > 0.0:
+                        hi[r] = forces[r]
+                    else:
+                        lo[r] = forces[r]
+        return lo, hi
+
+    def _pivots(self, state: State, kinds: list, joints: list, forces: list,
+                located: Optional[int]) -> list:
+        """
+        Return the pivots the held rows' LCP asks for: ``[(what, joint, direction)]``.
+
+        ``what``: 'release' (a bound leaves; its joint sticks if it has friction),
+        'slide' (a bound leaves and its joint slips away, ``direction`` its side),
+        'slip' (a stick slips towards ``direction``), 'saturate' (a drive, towards
+        ``direction``). Empty when the LCP cannot be solved (rows made dependent by
+        the others: counted, never silent).
+        """
+        lim, fr = self.limits, self.friction
+        names = [self._row_name(kind, i) for kind, i in zip(kinds, joints)]
+        f_star = np.array(forces, dtype=float)
+        lo, hi = self._boxes(kinds, joints, forces, located)
+        try:
+            S = self._schur(names, state)
+            sol = solve(S, -(S @ f_star), lo, hi, start=f_star)
+        except (np.linalg.LinAlgError, ValueError):
+            self.counters['lcp_failures'] += 1
+            return []
+        self.counters['lcp_solves'] += 1
+        self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
+                                                sol.residual)
+        if not sol.converged:
+            self.counters['lcp_failures'] += 1
+        pivots = []
+        for r, (kind, i) in enumerate(zip(kinds, joints)):
+            at, f = int(sol.state[r]), float(sol.f[r])
+            if kind == 0:
+                side = int(lim.active[i])
+                rub = 0.0 if fr is None else float(fr.force[i])
+                if at == -side:      # the box's end on the bound's side: it lets go
+                    if rub > 0.0 and r != located:
+                        pivots.append(('slide', i, side))
+                    else:
+                        pivots.append(('release', i, 0))
+                elif rub > 0.0 and side * f < 0.0:
+                    pivots.append(('release', i, 0))   # friction holds it, off the bound
+            elif at != FREE:
+                pivots.append(('slip' if kind == 1 else 'saturate', i, -at if kind == 1 else at))
+        return pivots
+
+    def _pivot_of(self, kind: int, i: int, f: float) -> tuple:
+        """Return the pivot of one row past its bound (force ``f``): :meth:`_pivots`' form."""
+        if kind == 0:
+            return ('release', i, 0)
+        if kind == 1:
+            return ('slip', i, -1 if f > 0.0 else 1)
+        return ('saturate', i, 1 if f > 0.0 else -1)
+
+    def _apply_pivot(self, what: str, i: int, direction: int, state: State,
+                     q: np.ndarray) -> None:
+        """Take one pivot of :meth:`_pivots` at ``state`` (joint coordinates ``q``)."""
+        if what in ('release', 'slide'):
+            self._unbound(i)
+            self.limits.counters.releases += 1
+            if self.friction is not None and self.friction.force[i] > 0.0:
+                if what == 'slide':
+                    self._slip(i, direction)
+                else:
+                    self._stick(i, state, float(q[i]))
+        elif what == 'slip':
+            self._slip(i, direction)
+        else:
+            self._saturate(i, direction, state.time)
+
+    def _row_name(self, kind: int, i: int) -> str:
+        """Return the name of joint ``i``'s held row of ``kind`` (:meth:`_margins`)."""
+        part = (self.limits, self.friction, self.drives)[kind]
+        return part.names[i]
+
+    def _probes(self, names: list, state: State, vel: np.ndarray, om: np.ndarray) -> list:
+        """
+        Return, per row of ``names``, the velocity projection's change per unit ``r_k``.
+
+        ``Δν_k = −M⁻¹Gᵀ W e_k`` (``W = (G M⁻¹ Gᵀ)⁻¹``, every row held): the projection
+        of ``state`` with the row's target rate one lower, less ``(vel, om)``, the
+        projection without.
+        """
+        solver = self.sim.dynamics.solver
+        out = []
+        for name in names:
+            table, at = solver.drive_rate_slot(name)
+            rate = table[at]
+            table[at] = rate - 1.0      # r_k one larger
+            try:
+                vk, wk = solver.project_velocities(state)
+            finally:
+                table[at] = rate
+            out.append((vk - vel, wk - om))
+        return out
+
+    def _schur(self, names: list, state: State) -> np.ndarray:
+        """
+        Return the Schur complement ``S`` of rows ``names`` (every other row held).
+
+        The inverse of the rows' block of ``W = (G M⁻¹ Gᵀ)⁻¹``, which is
+        ``W_kl = Δν_kᵀ M Δν_l`` (:meth:`_probes`: ``Δν_kᵀ M Δν_l = e_kᵀ W G M⁻¹ Gᵀ W
+        e_l``): one projection per row, through the solve's own factorizations. ``S``
+        maps the rows' forces to their accelerations with the equality rows held.
+        """
+        solver, bodies = self.sim.dynamics.solver, self.sim.bodies
+        vel, om = solver.project_velocities(state)
+        probes = self._probes(names, state, vel, om)
+        dv = np.array([p[0] for p in probes]).reshape(len(names), -1)
+        dw = np.array([p[1] for p in probes]).reshape(len(names), -1)
+        mass = np.repeat(bodies.mass, 3)
+        moments = np.asarray(bodies.moments).reshape(-1)
+        W = (dv * mass) @ dv.T + (dw * moments) @ dw.T
+        W = 0.5 * (W + W.T)
+        S = np.linalg.inv(W)
+        return 0.5 * (S + S.T)
 
     def coordinates(self, state: State, previous: np.ndarray) -> tuple:
         """Joint coordinates, rates and rates over their limits at ``state``, near ``previous``."""
@@ -785,22 +945,11 @@ class JointEvents:
     def _probe_impulses(self, idx: list, state: State, vel: np.ndarray, om: np.ndarray,
                         dv: np.ndarray, dw: np.ndarray) -> np.ndarray:
         """``μ`` by one projection per drive, ``r_k`` one larger (:meth:`_impulses`)."""
-        sim, dr = self.sim, self.drives
-        solver, bodies = sim.dynamics.solver, sim.bodies
-        out = np.empty(len(idx))
-        for k, i in enumerate(idx):
-            table, at = solver.drive_rate_slot(dr.names[i])
-            rate = table[at]
-            table[at] = rate - 1.0      # r_k one larger
-            try:
-                vk, wk = solver.project_velocities(state)
-            finally:
-                table[at] = rate
-            vk, wk = vk - vel, wk - om
-            out[k] = float(np.sum(bodies.mass[:, None] * vk * dv)
-                           + np.sum(bodies.moments * wk * dw))
+        bodies = self.sim.bodies
+        probes = self._probes([self.drives.names[i] for i in idx], state, vel, om)
         # Δν = −M⁻¹Gᵀ W r and Δν_k = −M⁻¹Gᵀ W e_k, so Δν_kᵀ M Δν = e_kᵀ W G M⁻¹ Gᵀ W r = μ_k.
-        return out
+        return np.array([float(np.sum(bodies.mass[:, None] * vk * dv)
+                               + np.sum(bodies.moments * wk * dw)) for vk, wk in probes])
 
     def _subtree(self, i: int) -> Optional[np.ndarray]:
         """

@@ -503,7 +503,7 @@ class Simulation:
             for part in (self.limits, self.friction, self.drive_efforts):
                 if part is not None:
                     part.reset()
-            self.events.counters = {'located_steps': 0, 'max_force_excess': 0.0}
+            self.events.reset_counters()
             self.events.from_state()
 
     def _inconsistent(self, name: str, field: str, outcome: str,
@@ -884,21 +884,24 @@ class Simulation:
         Return how well the rows with bounds kept their complementarity since the reset.
 
         ``{'located_steps': n, 'max_force_excess': N m or N, 'max_position_excess': rad
-        or m}``: the steps in which an event was located; the largest force a row
-        carried past its bound over an accepted (partial) step (a pulling bound, a
-        stick past ``F``, a drive past ``E``: within :data:`.limits.FORCE_TOLERANCE`
-        of the force's change over a step at a located event, more only if
-        :data:`.limits.MAX_EVENTS` cut a step short; a force that jumps past its bound
-        at an impact or a command pivots at once, carrying nothing); the largest
-        excursion past a bound a step had to accept (0: none).
+        or m, 'lcp_solves': n, 'lcp_residual_max': N m or N, 'lcp_failures': n}``: the
+        steps in which an event was located; the largest force a row carried past its
+        bound over an accepted (partial) step (a pulling bound, a stick past ``F``, a
+        drive past ``E``: within :data:`.limits.FORCE_TOLERANCE` of the force's change
+        over a step at a located event, more only if :data:`.limits.MAX_EVENTS` cut a
+        step short; a force that jumps past its bound at an impact or a command pivots
+        at once, carrying nothing); the largest excursion past a bound a step had to
+        accept (0: none); the held rows' complementarity problems solved at pivots
+        (:mod:`.complementarity`), the largest natural-map residual of their
+        solutions (rounding), and those that could not be solved or stopped at their
+        iteration cap (then the row past its bound pivoted alone).
         Empty without limits, friction or effort-limited drives.
         """
         if self.events is None:
             return {}
         c = self.events.counters
         excess = 0.0 if self.limits is None else self.limits.counters.max_violation
-        return {'located_steps': c['located_steps'], 'max_force_excess': c['max_force_excess'],
-                'max_position_excess': excess}
+        return {**c, 'max_position_excess': excess}
 
     def drive_saturation(self) -> dict:
         """

@@ -8,14 +8,18 @@ after the set-up, so neither the node's first start nor a test pays for it.
 The scenes below take every kernel path with the argument types of real runs:
 a free body with every effect, a small constrained scene (dense solves), a
 chain long enough for the tree solve and a ring (a closed loop: the tree solve
-of a spanning tree and the Schur complement of the loop-closing rows).
+of a spanning tree and the Schur complement of the loop-closing rows); the
+complementarity problems' projected Gauss–Seidel sweeps on a small problem.
 """
 
 from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from .bodies import RigidBody
+from .complementarity import solve_pgs
 from .constraints import Constraint
 from .effects import Damping, Gravity
 from .mechanisms import ring
@@ -41,6 +45,7 @@ def warm_up() -> float:
         chain.step(2)
         chain.reactions()
     ring(10, 'lie_poisson2').step(2)   # 53 rows: beyond the dense size
+    solve_pgs(np.eye(2), np.ones(2), np.zeros(2), np.full(2, np.inf))   # (large LCPs)
     return time.perf_counter() - start
 
 

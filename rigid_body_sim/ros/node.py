@@ -706,6 +706,10 @@ class SimNode(Node):
             if complementarity:
                 values['joint_complementarity_force_excess_max'] = \
                     f'{complementarity["max_force_excess"]:.3g}'
+                values['joint_complementarity_lcp_residual_max'] = \
+                    f'{complementarity["lcp_residual_max"]:.3g}'
+                values['joint_complementarity_lcp_failures_total'] = \
+                    str(complementarity['lcp_failures'])
             saturation = sim.drive_saturation()
             if saturation:
                 values['joint_drives_saturated'] = ' '.join(
