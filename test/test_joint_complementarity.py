@@ -18,16 +18,20 @@ UPPER = 0.5
 LIMIT = f'<limit lower="-0.5" upper="{UPPER}" effort="100" velocity="100"/>'
 
 
-def arm_text(friction=0.0):
+def arm_text(friction=0.0, rubbing=('j1', 'j2', 'j3')):
     """Return a three-link arm in the x–z plane, each hinge limited to [−0.5, 0.5] rad."""
-    extra = LIMIT + (f'<dynamics friction="{friction!r}"/>' if friction else '')
+    def extra(name):
+        return LIMIT + (f'<dynamics friction="{friction!r}"/>'
+                        if friction and name in rubbing else '')
     return robot('arm3', link('world'),
                  link('a', inertial(2.0, (0.25, 0, 0), ixx=0.01, iyy=0.03, izz=0.03)),
                  link('b', inertial(1.5, (0.2, 0, 0), ixx=0.01, iyy=0.02, izz=0.02)),
                  link('c', inertial(1.0, (0.15, 0, 0), ixx=0.01, iyy=0.01, izz=0.01)),
-                 joint('j1', 'revolute', 'world', 'a', axis=(0, 1, 0), extra=extra),
-                 joint('j2', 'revolute', 'a', 'b', xyz=(0.5, 0, 0), axis=(0, 1, 0), extra=extra),
-                 joint('j3', 'revolute', 'b', 'c', xyz=(0.4, 0, 0), axis=(0, 1, 0), extra=extra))
+                 joint('j1', 'revolute', 'world', 'a', axis=(0, 1, 0), extra=extra('j1')),
+                 joint('j2', 'revolute', 'a', 'b', xyz=(0.5, 0, 0), axis=(0, 1, 0),
+                       extra=extra('j2')),
+                 joint('j3', 'revolute', 'b', 'c', xyz=(0.4, 0, 0), axis=(0, 1, 0),
+                       extra=extra('j3')))
 
 
 def pressed_arm(tmp_path, friction=0.0):
@@ -124,3 +128,78 @@ def test_a_bound_pulled_past_its_friction_slides_away_at_once(tmp_path):
     v2 = sim.joint_state().velocities[2]
     # bound: q̈3 changes with q over 10 ms by |d(M33)/dq| q̇ ~ 1e-3 relative.
     assert (v2 - v[2]) / (10 * sim.dt) == pytest.approx(expected, rel=1e-2)
+
+
+# -- impacts: the rows' impulses as one LCP ---------------------------------------------------
+
+
+def impact_reference(q, v, held, hit, e=0.0):
+    """
+    Joint rates after an impact (no gravity), from the joint-space model.
+
+    ``held``: joints whose rows may take impulses (each ``(joint, side)``: a bound on
+    ``side``); ``hit``: the joint that hits. The impulses solve the box LCP with
+    ``S = (M⁻¹)_UU`` (the free joints move), targets 0 for resting rows and the
+    rebound ``−e v`` for the hit, ``s p ≥ 0``.
+    """
+    model = JointSpaceModel.from_urdf(arm_text(), gravity=(0, 0, 0))
+    Minv = np.linalg.inv(model.mass_matrix(q))
+    idx = [j for j, _ in held]
+    S = Minv[np.ix_(idx, idx)]
+    target = np.array([-e * v[j] if j == hit else 0.0 for j in idx])
+    p_star = np.linalg.solve(S, target - v[idx])
+    lo = np.array([0.0 if s > 0 else -np.inf for _, s in held])
+    hi = np.array([np.inf if s > 0 else 0.0 for _, s in held])
+    sol = solve_direct(S, -S @ p_star, lo, hi, start=p_star)
+    impulse = np.zeros(3)
+    impulse[idx] = sol.f
+    return v + Minv @ impulse, p_star
+
+
+def test_an_impact_that_would_pull_a_resting_bound_lets_it_go(tmp_path):
+    # j1 rests on its upper bound (pressed onto it by 1 N m), j2 free, j3 swings onto its
+    # upper bound at 2 rad/s: with both rows held the impact's impulse on j1 pulls it
+    # (the coupling), which no bound can: the impulse LCP lets j1 go, and it leaves
+    # with the rate the joint-space model gives with only j3's row taking an impulse.
+    sim = robot_scene(tmp_path, arm_text(), dt=1e-4,
+                      initial_positions={'j1': UPPER, 'j2': 0.0, 'j3': 0.45},
+                      initial_velocities={'j3': 2.0}).simulation
+    sim.set_joint_efforts({'j1': 1.0})
+    sim.step(5)
+    assert list(sim.limits.active) == [-1, 0, 0]
+    solves = sim.complementarity()['lcp_solves']
+    while sim.limits.counters.impacts < 2:
+        js = sim.joint_state()
+        q, v = js.positions.copy(), js.velocities.copy()
+        sim.step()
+    after = sim.joint_state().velocities
+    expected, p_star = impact_reference(q, v, [(0, -1), (2, -1)], 2)
+    assert p_star[0] > 0.0                       # held, j1's row would pull
+    assert sim.complementarity()['lcp_solves'] == solves + 1
+    assert list(sim.limits.active) == [0, 0, -1]  # j1 let go, j3 held (e = 0)
+    # bound: the reference is at the step's start, the impact inside the step (0.1 ms:
+    # the rates change by |q̈| dt < 1e-3 rad/s there: Coriolis and 1 N m, a few rad/s²).
+    np.testing.assert_allclose(after, expected, atol=2e-3)
+    assert after[0] < -0.05                       # j1 leaves its bound
+
+
+def test_an_impact_moves_a_sticking_joint_which_then_slips(tmp_path):
+    # j1 held still by friction (2 N m), j3 swings onto its upper bound: joint friction
+    # is a bounded torque, so its impulse is at most F dt (2e-4 N m s here), far below
+    # what holding j1 would take; j1 moves off with the rate the model gives with j1
+    # free in the impact (to that impulse), and slips that way.
+    sim = robot_scene(tmp_path, arm_text(2.0, ('j1',)), dt=1e-4,
+                      initial_positions={'j1': 0.0, 'j2': 0.0, 'j3': 0.45},
+                      initial_velocities={'j3': 2.0}).simulation
+    assert sim.joint_friction()['sticking'] == ['j1']
+    while sim.limits.counters.impacts < 1:
+        js = sim.joint_state()
+        q, v = js.positions.copy(), js.velocities.copy()
+        sim.step()
+    after = sim.joint_state().velocities
+    expected, _ = impact_reference(q, v, [(2, -1)], 2)
+    assert sim.joint_friction()['slipping'] == {'j1': 1 if expected[0] > 0 else -1}
+    # bound: as above, and friction's impulse F dt at the impact and F over the rest of
+    # the step on j1's inertia (about 0.5 kg m²): 8e-4 rad/s at most.
+    np.testing.assert_allclose(after, expected, atol=2e-3)
+    assert abs(expected[0]) > 0.05

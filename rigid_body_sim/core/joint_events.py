@@ -702,20 +702,125 @@ class JointEvents:
                                       -e * approach))
         lim.counters.impacts += len(hits)
         solver.set_drive_targets(names, np.array(bounds), state.time, np.array(rebound))
-        vel, om = solver.project_velocities(state)
+        vel, om, pivots = self._impact(state)
         state = State(state.time, state.pos_com_world, state.quat_principal_world, vel, om)
         for i, side in bouncing:
             self._unbound(i)
             if fr is not None and fr.force[i] > 0.0:
                 self._slip(i, side)   # moving away from the bound
-        held = [(n, b) for n, b, (i, _, _) in zip(names, bounds, hits)
-                if i not in {j for j, _ in bouncing}]
+        gone = {i for i, _ in bouncing}
+        for what, i, direction in pivots:
+            if what == 'slide':
+                if i in gone:
+                    continue
+                gone.add(i)
+            self._apply_pivot(what, i, direction, state, q)
+        held = [(n, b) for n, b, (i, _, _) in zip(names, bounds, hits) if i not in gone]
         if held:
             solver.set_drive_targets([n for n, _ in held], np.array([b for _, b in held]),
                                      state.time)
         if engaged:   # a row that needs more than E at once saturates again
             self._release(state, q)
         return state
+
+    def _impact_rows(self) -> list:
+        """Return the held rows with bounds as ``[(kind, joint)]`` (:meth:`_margins`' kinds)."""
+        rows = []
+        for kind, part in enumerate((self.limits, self.friction, self.drives)):
+            if part is not None:
+                rows += [(kind, int(i)) for i in part.rows]
+        return rows
+
+    def _impact(self, state: State) -> tuple:
+        """
+        Return the velocities after the impacts at ``state``, and the pivots they make.
+
+        Newton's law for every row at once, as a box LCP on the rows' impulses ``p``
+        (:mod:`.complementarity`; ``S`` the rows' Schur complement, :meth:`_schur`,
+        and ``w = S (p − p*)`` each row's rate after the impact less its target: the
+        rebound ``−e`` times the approach for a bound hit now, ``−ωΦ`` for one resting
+        on its bound): a bound's impulse only pushes (``s p ≥ 0``), complementary to its
+        joint leaving faster than its target; a sticking joint's friction and an
+        effort-limited drive, forces of bounded size, take at most that force times the
+        step (``|p| ≤ F dt``, ``E dt``: the bound a command's impulse has, see
+        :meth:`commanded`), beyond which the joint slips, the drive saturates. ``p*``,
+        the impulses with every row held, is what one projection gives: where it is
+        within every box (one bound hit, resting rows that push) that projection is
+        all. Returns ``(vel, om, pivots)`` in :meth:`_pivots`' form: ``'slide'`` for
+        a bound that leaves (no impulse, its joint moving away fast enough to leave the
+        location's tolerance within a step; a bound with no impulse whose joint would
+        not, a graze, is held and the problem solved again with it held), ``'slip'``
+        and ``'saturate'`` for the rows at their impulse bounds.
+        """
+        sim = self.sim
+        solver, bodies = sim.dynamics.solver, sim.bodies
+        vel, om = solver.project_velocities(state)
+        rows = self._impact_rows()
+        if len(rows) <= 1:
+            return vel, om, []
+        names = [self._row_name(kind, i) for kind, i in rows]
+        probes = self._probes(names, state, vel, om)
+        dv = np.array([p[0] for p in probes]).reshape(len(rows), -1)
+        dw = np.array([p[1] for p in probes]).reshape(len(rows), -1)
+        mass = np.repeat(bodies.mass, 3)
+        moments = np.asarray(bodies.moments).reshape(-1)
+        # Every row held: μ_k = Δν_kᵀ M Δν (:meth:`_probe_impulses`), the joint's −μ_k.
+        jump_v = (vel - state.vel_com_world).reshape(-1)
+        jump_w = (om - state.ang_vel_principal).reshape(-1)
+        p_star = -((dv * mass) @ jump_v + (dw * moments) @ jump_w)
+        lim, fr, dr = self.limits, self.friction, self.drives
+        lo, hi = np.zeros(len(rows)), np.zeros(len(rows))
+        for r, (kind, i) in enumerate(rows):
+            if kind == 0:
+                if lim.beyond[i]:     # (held whatever its sign until it is back)
+                    lo[r], hi[r] = -np.inf, np.inf
+                elif lim.active[i] > 0:
+                    hi[r] = np.inf
+                else:
+                    lo[r] = -np.inf
+            else:
+                bound = float(fr.force[i] if kind == 1 else dr.effort[i]) * sim.dt
+                lo[r], hi[r] = -bound, bound
+        if np.all(np.minimum(p_star - lo, hi - p_star) >= 0.0):
+            return vel, om, []      # every row's impulse within its box: the projection
+        W = (dv * mass) @ dv.T + (dw * moments) @ dw.T
+        held = (vel, om)
+        for _ in range(len(rows)):
+            try:
+                S = np.linalg.inv(0.5 * (W + W.T))
+                sol = solve(0.5 * (S + S.T), -(S @ p_star), lo, hi, start=p_star)
+            except (np.linalg.LinAlgError, ValueError):
+                self.counters['lcp_failures'] += 1
+                return held[0], held[1], []
+            self.counters['lcp_solves'] += 1
+            self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
+                                                    sol.residual)
+            if not sol.converged:
+                self.counters['lcp_failures'] += 1
+            # Δν_k moves row k's rate by −1 with the others held: the rates ``w`` off
+            # their targets are ``−Σ w_k Δν_k`` away from the projection's.
+            vel = held[0] - (sol.w @ dv).reshape(held[0].shape)
+            om = held[1] - (sol.w @ dw).reshape(held[1].shape)
+            after = State(state.time, state.pos_com_world, state.quat_principal_world, vel, om)
+            rates = self.coordinates(after, sim.joints.positions)[1]
+            # A bound whose impulse is zero leaves if its joint moves away fast enough to
+            # leave the location's tolerance within a step; slower (a graze), it is held,
+            # and the force-level check at the step's end releases it if it pulls (else
+            # it would come back inside the tolerance at once: impacts without end).
+            ends = [(r, i, int(lim.active[i])) for r, (kind, i) in enumerate(rows)
+                    if kind == 0 and sol.state[r] != FREE]
+            slow = max(self.rate, self.location / sim.dt)
+            grazing = [r for r, i, side in ends if side * rates[i] <= slow]
+            if not grazing:
+                pivots = [('slide', i, side) for _, i, side in ends]
+                for r, (kind, i) in enumerate(rows):
+                    at = int(sol.state[r])
+                    if kind and at != FREE:
+                        pivots.append(('slip', i, -at) if kind == 1 else ('saturate', i, at))
+                return vel, om, pivots
+            for r in grazing:
+                lo[r], hi[r] = -np.inf, np.inf
+        return held[0], held[1], []
 
     # -- the rows ---------------------------------------------------------------------------
 
