@@ -13,6 +13,7 @@ for the impulse a command's projection needs (every joint driven: ``μ = M(q) r`
 from joint_space_reference import JointSpaceModel
 import numpy as np
 import pytest
+from rigid_body_sim.core.complementarity import solve_direct
 from rigid_body_sim.core.limits import FORCE_TOLERANCE, RATE_TOLERANCE
 from rigid_body_sim.scene import scene_from_dict, SceneError
 from robot_helpers import inertial, joint, link, robot
@@ -206,3 +207,29 @@ def test_reset_and_a_state_set_engage_the_drives_and_unlimited_drives_jump(tmp_p
 def test_effort_limits_must_be_a_boolean(tmp_path):
     with pytest.raises(SceneError, match=r'robots\[0\].effort_limits.*true or false'):
         build(tmp_path, wheel_urdf(), 'position', ['axle'], effort_limits='yes')
+
+
+def test_which_drives_a_command_saturates_is_the_lcp_of_their_impulses(tmp_path):
+    # The 3-link arm from rest, every joint a velocity drive with E = 1 N m (E dt = 1e-3
+    # N m s), commanded to v: the impulses with every drive engaged are M(q) v, all three
+    # past E dt; but a saturated drive's missing impulse falls on the others: the box
+    # LCP of the impulses (S = M⁻¹, |p| ≤ E dt) saturates j1 (towards −, against its own
+    # engaged impulse's sign) and j2, and j3 stays engaged. Saturating each drive whose
+    # own impulse is past its bound would saturate all three.
+    text = ARM.replace('effort="1e6"', 'effort="1.0"')
+    sim = build(tmp_path, text, 'velocity', ['j1', 'j2', 'j3'], gravity=True)
+    names = sim.joint_names()
+    q = np.array([0.2, 0.5, -0.4])
+    sim.set_joint_state(dict(zip(names, q)))
+    v = np.array([-0.358, 2.728, -0.001])
+    M = JointSpaceModel.from_urdf(text).mass_matrix(q)
+    p_star, b = M @ v, np.full(3, 1e-3)
+    assert np.all(np.abs(p_star) > b)
+    ref = solve_direct(np.linalg.inv(M), -np.linalg.solve(M, p_star), -b, b, start=p_star)
+    assert list(ref.state) == [-1, 1, 0]
+    sim.command_joints(dict(zip(names, v)))
+    assert sim.drive_saturation()['saturated'] == {'j1': -1, 'j2': 1}
+    sim.step()
+    # j3's drive engaged: its rate is v3 after the step's projection (to the law's
+    # ω Φ, Φ of order the step's own error: far below 1e-9).
+    assert abs(sim.joint_state().velocities[2] - v[2]) <= 1e-9

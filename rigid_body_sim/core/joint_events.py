@@ -973,9 +973,9 @@ class JointEvents:
         saturated one turns towards its new target (or engages, if its law holds).
         ``W r`` comes from the projection of the state (:meth:`_impulses`: each child
         side's momentum change about its joint's axis, or ``μ_j = Δν_jᵀ M Δν`` with
-        ``Δν_j`` the change per unit ``r_j``, one more projection each). One pass: the
-        impulses of the drives that stay engaged are those with every commanded drive
-        engaged.
+        ``Δν_j`` the change per unit ``r_j``, one more projection each). When one passes
+        its bound, which drives saturate is the box LCP of their impulses
+        (:meth:`_saturations`): a saturated drive's missing impulse falls on the others.
         """
         dr, sim = self.drives, self.sim
         if dr is None:
@@ -999,10 +999,37 @@ class JointEvents:
             self._note(q, rates, now)
             return
         impulse = self._impulses(eng, sim.state)
-        for i, mu in zip(eng, impulse):
-            if abs(mu) > dr.effort[i] * sim.dt * (1.0 + 64.0 * EPS):
-                self._saturate(i, -1 if mu > 0.0 else 1, now)
+        bound = np.array([dr.effort[i] for i in eng]) * sim.dt
+        if np.any(np.abs(impulse) > bound * (1.0 + 64.0 * EPS)):
+            for i, direction in self._saturations(eng, -impulse, bound):
+                self._saturate(i, direction, now)
         self._note(q, rates, now)   # a drive saturated behind its law lags it
+
+    def _saturations(self, idx: list, p_star: np.ndarray, bound: np.ndarray) -> list:
+        """
+        Return the drives of ``idx`` that saturate at a command: ``[(joint, direction)]``.
+
+        Their impulses ``p`` (along their joints; ``p*`` with every drive engaged) solve
+        the box LCP ``|p| ≤ E dt`` with ``S`` the drives' Schur complement
+        (:meth:`_schur`): a drive at its bound saturates towards it. (Saturating each
+        drive whose own ``p*`` exceeds its bound instead would ignore that a saturated
+        drive's missing impulse changes the others'.) If the problem cannot be solved,
+        those past their bounds saturate (counted in ``lcp_failures``).
+        """
+        sim = self.sim
+        try:
+            S = self._schur([self.drives.names[i] for i in idx], sim.state)
+            sol = solve(S, -(S @ p_star), -bound, bound, start=p_star)
+        except (np.linalg.LinAlgError, ValueError):
+            self.counters['lcp_failures'] += 1
+            past = np.abs(p_star) > bound * (1.0 + 64.0 * EPS)
+            return [(i, 1 if p > 0.0 else -1) for i, p, out in zip(idx, p_star, past) if out]
+        self.counters['lcp_solves'] += 1
+        self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
+                                                sol.residual)
+        if not sol.converged:
+            self.counters['lcp_failures'] += 1
+        return [(i, int(at)) for i, at in zip(idx, sol.state) if at != FREE]
 
     def _impulses(self, idx: list, state: State) -> np.ndarray:
         """
