@@ -205,16 +205,21 @@ def solve_pgs(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
 def solve(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
           start: Optional[np.ndarray] = None, tolerance: float = 1e-9) -> BoxLCPSolution:
     """
-    Solve the BLCP: the direct method for up to :data:`DIRECT_LIMIT` rows, else PGS then it.
+    Solve the BLCP: the direct method, after PGS when large and started cold.
 
-    ``start``: a warm start (the last solution, the rows' present forces). Beyond
-    the limit, PGS to ``tolerance`` from ``start`` finds the active set and the
-    direct method from PGS's forces finishes it to rounding (counting both).
+    ``start``: a warm start (the last solution, the rows' present forces): the
+    direct method from it, whose first iteration keeps its active set (one
+    iteration when the set is unchanged: ``bench/complementarity.py`` measures 1
+    iteration on 64 rows where PGS from the same start takes about 100 sweeps).
+    Without one, up to :data:`DIRECT_LIMIT` rows the direct method from zero; beyond,
+    PGS to ``tolerance`` finds the active set and the direct method from its forces
+    finishes it to rounding (counting both: about half the direct method's time
+    from zero on 64 rows).
     """
     check_problem(S, q, lo, hi)
-    if len(q) <= DIRECT_LIMIT:
+    if start is not None or len(q) <= DIRECT_LIMIT:
         return solve_direct(S, q, lo, hi, start)
-    rough = solve_pgs(S, q, lo, hi, start, tolerance)
+    rough = solve_pgs(S, q, lo, hi, None, tolerance)
     exact = solve_direct(S, q, lo, hi, rough.f)
     return exact._replace(iterations=rough.iterations + exact.iterations,
                           method='pgs+direct')

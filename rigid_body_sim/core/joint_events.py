@@ -723,6 +723,37 @@ class JointEvents:
             self._release(state, q)
         return state
 
+    def _grazing(self, ends: list, q: np.ndarray, rates: np.ndarray, after: State,
+                 S: np.ndarray) -> list:
+        """
+        Return the rows of ``ends`` (``(row, joint, side)``: bounds with no impulse) to hold.
+
+        A bound leaves at an impact only if its joint, moving away at ``v = s q̇``,
+        leaves for good: not beyond the bound by more than the location's tolerance
+        (it would cross again at once), faster than the rate tolerance and than the
+        tolerance's width per step, and not back within the step under the force
+        pressing it there (with every row held after the impact, ``f``; free, it
+        accelerates back at ``a = S_rr s f``, back after ``2 v / a``). A bound held
+        so takes a pulling impulse of at most what its pressing force gives over a
+        step (as a bounded row's ``E dt``); the force-level check at the step's end
+        releases it if it then pulls. Without this, coupled inelastic impacts chatter
+        (each pulls another bound off, which comes straight back).
+        """
+        sim, lim = self.sim, self.limits
+        slow = max(self.rate, self.location / sim.dt)
+        lam, held = None, []
+        for r, i, side in ends:
+            v = side * rates[i]
+            if v <= slow or side * (q[i] - lim.bound(i, side)) < -self.location:
+                held.append(r)
+                continue
+            if lam is None:
+                lam = sim.dynamics.solver.multipliers(sim.dynamics, after)
+            a = S[r, r] * side * -float(lam[lim.rows[i]])
+            if a > 0.0 and 2.0 * v < a * sim.dt:
+                held.append(r)
+        return held
+
     def _impact_rows(self) -> list:
         """Return the held rows with bounds as ``[(kind, joint)]`` (:meth:`_margins`' kinds)."""
         rows = []
@@ -802,15 +833,10 @@ class JointEvents:
             vel = held[0] - (sol.w @ dv).reshape(held[0].shape)
             om = held[1] - (sol.w @ dw).reshape(held[1].shape)
             after = State(state.time, state.pos_com_world, state.quat_principal_world, vel, om)
-            rates = self.coordinates(after, sim.joints.positions)[1]
-            # A bound whose impulse is zero leaves if its joint moves away fast enough to
-            # leave the location's tolerance within a step; slower (a graze), it is held,
-            # and the force-level check at the step's end releases it if it pulls (else
-            # it would come back inside the tolerance at once: impacts without end).
+            q, rates, _ = self.coordinates(after, sim.joints.positions)
             ends = [(r, i, int(lim.active[i])) for r, (kind, i) in enumerate(rows)
                     if kind == 0 and sol.state[r] != FREE]
-            slow = max(self.rate, self.location / sim.dt)
-            grazing = [r for r, i, side in ends if side * rates[i] <= slow]
+            grazing = self._grazing(ends, q, rates, after, S)
             if not grazing:
                 pivots = [('slide', i, side) for _, i, side in ends]
                 for r, (kind, i) in enumerate(rows):
