@@ -14,7 +14,8 @@ Then ``bench/constraints.py`` (chains, trees, rings, joints), ``bench/knob_estim
 ``bench/shake_convergence.py`` (SHAKE's iterations) and ``bench/reactions.py`` (reading
 the reactions after a step; ``--skip-constraints`` skips these six),
 ``bench/mujoco_peer.py``, ``bench/robot_panda.py`` (the Franka Panda's URDF),
-``bench/joint_limits.py`` (the Panda into its limits), ``bench/drive_efforts.py`` (its
+``bench/joint_limits.py`` (the Panda into its limits), ``bench/complementarity.py``
+(the rows' LCP), ``bench/drive_efforts.py`` (its
 exact drives bounded by their efforts; the Panda's URDF from the bench requirements) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
@@ -298,6 +299,12 @@ def sections(quick: bool, node_args: list) -> list:
             about="The Panda's arm on exact position drives, their URDF effort limits off "
                   'and on: holding, a streamed trajectory, a jump (no peer: see the '
                   'script).')),
+        ('skip_mujoco', 'complementarity', ['--quick'] if quick else [], report.Section(
+            'The rows with bounds: their complementarity problem',
+            f'./dev.sh python bench/complementarity.py{q}', [T('complementarity.md')],
+            about='The box-LCP solvers on random problems by size and start, and the '
+                  "pivots of the Panda's held rows by the LCP against the sequential rule "
+                  'it replaced.')),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],

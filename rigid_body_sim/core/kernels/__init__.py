@@ -22,6 +22,9 @@ They import only one another, numba, numpy and math; never the classes of
     articulated-inertia form, each joint's freedoms eliminated instead of its rows.
 ``constrained_step``
     A whole step of one component of the constraint graph (RATTLE and SHAKE).
+``box_lcp``
+    Projected Gauss–Seidel sweeps of a box-constrained LCP (the rows with bounds,
+    :mod:`..complementarity`).
 
 :mod:`..kernel_cache` treats every module of this package as one unit.
 """
