@@ -113,9 +113,10 @@ class JointEvents:
         friction is ``−F d``.
         """
         out = np.zeros(len(self.sim.joints))
-        rows_of = self.sim.dynamics.solver.constraints.rows_of
-        for name, i in self.held().items():
-            out[i] -= lam[rows_of(name)[0]]
+        if lam is not None:
+            rows_of = self.sim.dynamics.solver.constraints.rows_of
+            for name, i in self.held().items():
+                out[i] -= lam[rows_of(name)[0]]
         fr = self.friction
         if fr is not None:
             slip = fr.slipping()
@@ -138,7 +139,7 @@ class JointEvents:
         events = 0
         while True:
             h = t_end - state.time
-            if h <= 4.0 * np.finfo(float).eps * abs(t_end):   # an event at the step's end
+            if h <= 4.0 * EPS * abs(t_end):   # an event at the step's end
                 self._charge(t_end - start.time)
                 return State(t_end, *state.parts), None
             new = sim._advance(state, h, t_end)
@@ -291,8 +292,9 @@ class JointEvents:
 
     def _held(self) -> bool:
         """Tell whether a row with a force bound is held (a bound, a stick, a limited drive)."""
-        return any(part is not None and part.rows
-                   for part in (self.limits, self.friction, self.drives))
+        lim, fr, dr = self.limits, self.friction, self.drives
+        return bool((lim is not None and lim.rows) or (fr is not None and fr.rows)
+                    or (dr is not None and dr.rows))
 
     def _releasing(self, state: State, q: np.ndarray) -> bool:
         """
@@ -623,7 +625,7 @@ class JointEvents:
                 if stuck == -1:
                     ga *= 0.5
                 stuck = -1
-            if b - a <= 4.0 * np.finfo(float).eps * max(h, abs(state.time)):
+            if b - a <= 4.0 * EPS * max(h, abs(state.time)):
                 break
         return at
 

@@ -90,6 +90,7 @@ MAX_LOCATION_ITERATIONS = 40
 #: Impacts in one step after which the next ones are inelastic (Zeno's cut).
 MAX_BOUNCES = 8
 EPS = float(np.finfo(float).eps)
+_NONE = np.zeros(0, dtype=int)
 #: Most impacts in one step: beyond them the step is accepted as it is and the
 #: excess counted in ``limit_residual`` (never silently).
 MAX_EVENTS = 32
@@ -224,8 +225,8 @@ class JointLimits:
 
     def returned(self, q: np.ndarray) -> np.ndarray:
         """Return the joints held since a start beyond their bound, back within the tolerance."""
-        if not self.beyond.any():
-            return self.joints[:0]
+        if not self.rows:
+            return _NONE   # (a joint beyond its bound is held by a row)
         idx = np.flatnonzero(self.beyond)
         return idx[self.past(q, idx) <= self.location]
 
