@@ -104,20 +104,27 @@ class JointEvents:
             out.update({self.friction.names[i]: i for i in self.friction.rows})
         return out
 
-    def efforts(self, lam: Optional[np.ndarray]) -> np.ndarray:
+    def holds(self) -> bool:
+        """Tell whether a bound's or a stick's row is present (:meth:`held` not empty)."""
+        lim, fr = self.limits, self.friction
+        return bool((lim is not None and lim.rows) or (fr is not None and fr.rows))
+
+    def efforts(self, lam: Optional[np.ndarray]) -> Optional[np.ndarray]:
         """
-        Generalized force (k,) of the limits and friction on each joint.
+        Generalized force (k,) of the limits and friction on each joint (None: none).
 
         A present row ``Φ = q − c`` applies ``−λ`` along its joint (``lam``: the
         multipliers at the state, None when no row is present); a slipping joint's
         friction is ``−F d``.
         """
+        fr = self.friction
+        if lam is None and (fr is None or not len(fr.slipping())):
+            return None
         out = np.zeros(len(self.sim.joints))
         if lam is not None:
             rows_of = self.sim.dynamics.solver.constraints.rows_of
             for name, i in self.held().items():
                 out[i] -= lam[rows_of(name)[0]]
-        fr = self.friction
         if fr is not None:
             slip = fr.slipping()
             out[slip] -= fr.force[slip] * fr.mode[slip]

@@ -590,7 +590,7 @@ class Simulation:
         efforts = js.efforts
         if self.drives is not None and len(self.drives.rows_of):
             efforts = efforts + self.drives.efforts(js.positions, js.velocities)
-        rows = self.events is not None and bool(self.events.held())
+        rows = self.events is not None and self.events.holds()
         if len(self._exact) or self._mimic_names or rows:
             solver = self.dynamics.solver
             lam = solver.multipliers(self.dynamics, self.state)
@@ -598,7 +598,9 @@ class Simulation:
         if self.events is not None:
             # Bounds and sticking friction: rows Φ = q − c, each −λ along q, as an exact
             # drive's; slipping friction: −F d.
-            efforts += self.events.efforts(lam if rows else None)
+            extra = self.events.efforts(lam if rows else None)
+            if extra is not None:
+                efforts = efforts + extra
         if len(self._exact):
             # An exact drive's effort is its row's multiplier: Φ = q − q*, so the
             # generalized force its reaction −Gᵀλ applies along q is −λ; a saturated
