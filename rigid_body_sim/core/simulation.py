@@ -893,10 +893,12 @@ class Simulation:
         over a step at a located event, more only if :data:`.limits.MAX_EVENTS` cut a
         step short; a force that jumps past its bound at an impact or a command pivots
         at once, carrying nothing); the largest excursion past a bound a step had to
-        accept (0: none); the held rows' complementarity problems solved at pivots
-        (:mod:`.complementarity`), the largest natural-map residual of their
-        solutions (rounding), and those that could not be solved or stopped at their
-        iteration cap (then the row past its bound pivoted alone).
+        accept (0: none); the held rows' complementarity problems solved at pivots,
+        impacts and bounded drives' commands (:mod:`.complementarity`), the largest
+        natural-map residual of their solutions (rounding), and those that could not
+        be solved or stopped at their iteration cap (then the rule without the
+        problem applied: the row furthest past its bound pivots, an impact keeps every
+        row, a command saturates each drive past its bound).
         Empty without limits, friction or effort-limited drives.
         """
         if self.events is None:
