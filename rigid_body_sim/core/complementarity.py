@@ -46,7 +46,7 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
-from .kernels.box_lcp import pgs_sweeps
+from .kernels.complementarity import pgs_sweeps
 
 #: Rows up to which :func:`solve` uses the direct method alone.
 DIRECT_LIMIT = 32

@@ -22,7 +22,7 @@ They import only one another, numba, numpy and math; never the classes of
     articulated-inertia form, each joint's freedoms eliminated instead of its rows.
 ``constrained_step``
     A whole step of one component of the constraint graph (RATTLE and SHAKE).
-``box_lcp``
+``complementarity``
     Projected Gauss–Seidel sweeps of a box-constrained LCP (the rows with bounds,
     :mod:`..complementarity`).
 
