@@ -181,3 +181,14 @@ def test_the_residual_is_zero_only_at_the_solution():
     moved[k] = np.clip(moved[k] + 0.1, lo[k], hi[k]) if moved[k] + 0.1 <= hi[k] \
         else moved[k] - 0.1
     assert residual(S, q, moved, lo, hi) > 1e-3
+
+
+def test_a_target_past_its_bound_by_less_than_an_ulp_still_blocks():
+    # A warm start at f = (1, 0) whose free solve gives f0 = −1e-17: the ratio of the
+    # move to the bound rounds to 1. The blocking row must still be the one that joins
+    # its bound (a search that took only ratios below 1 took none and wrote the last
+    # row's infinite bound: f = (0, inf), NaN residual; found in review).
+    sol = solve_direct(np.eye(2), np.array([1e-17, 1.0]), np.zeros(2), np.full(2, np.inf),
+                       start=np.array([1.0, 0.0]))
+    assert sol.converged and np.array_equal(sol.f, [0.0, 0.0])
+    assert list(sol.state) == [AT_LOWER, AT_LOWER] and sol.residual == 0.0

@@ -31,13 +31,14 @@ method below finds that one solution, and :func:`residual` measures how well.
 - :func:`solve_pgs`: projected Gauss–Seidel (each row's force in turn set to the
   value that zeroes its ``w``, clipped to its box): coordinate descent on the same
   convex programme, linearly convergent for ``S`` positive definite; each sweep
-  costs ``O(n²)`` dense. Its convergence test is the natural-map residual
-  (:func:`residual`) against a tolerance in force units; it stops there or at its
-  iteration cap, and says which.
-- :func:`solve`: the direct method up to :data:`DIRECT_LIMIT` rows; beyond, PGS
-  warm-started from the last solution finds the active set approximately and the
-  direct method, started from it, finishes exactly (a few iterations when PGS found
-  the set): PGS alone would leave its tolerance's error in the forces.
+  costs ``O(n²)`` dense. It stops when a sweep moves no force by more than a
+  tolerance (force units) or at its iteration cap; converged means the first and
+  the natural-map residual (:func:`residual`) within the tolerance too.
+- :func:`solve`: the direct method from a warm start (the last solution, the rows'
+  present forces: one iteration when the active set did not change); started cold,
+  the direct method up to :data:`DIRECT_LIMIT` rows and beyond it PGS, which finds
+  the active set approximately, then the direct method from PGS's forces, which
+  finishes exactly (PGS alone would leave its tolerance's error in the forces).
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ class BoxLCPSolution(NamedTuple):
     residual: float          #: :func:`residual` at ``f`` (force units)
     iterations: int          #: the direct method's iterations, or PGS sweeps plus those
     converged: bool          #: False: stopped at the iteration cap (``f`` is the last)
-    method: str              #: 'direct' or 'pgs+direct'
+    method: str              #: 'direct', 'pgs' or 'pgs+direct'
 
 
 def check_problem(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> int:
@@ -128,9 +129,10 @@ def solve_direct(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     which that row joins; else ``f`` is that solution, and the bound row whose
     ``w`` has the wrong sign by the most (beyond its rounding) is freed. It ends
     when none has: every condition holds to rounding. The objective falls at
-    every move, so no set recurs (Nocedal & Wright, *Numerical Optimization*,
-    2006, §16.5); the cap (default ``10 (n + 1)``, far above what the rows of a
-    mechanism take) only guards degenerate ties and is reported.
+    every move of positive length, so no set recurs but through zero-length
+    steps at degenerate ties (Nocedal & Wright, *Numerical Optimization*, 2006,
+    §16.5); the cap (default ``10 (n + 1)``, far above what the rows of a
+    mechanism take) guards those and is reported (``converged`` False).
     """
     S, q = np.asarray(S, dtype=float), np.asarray(q, dtype=float)
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
@@ -150,16 +152,14 @@ def solve_direct(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
         below, above = free & (target < lo), free & (target > hi)
         if below.any() or above.any():
             # Move towards the target up to the first bound met; that row joins it.
-            alpha, hit, side = 1.0, -1, FREE
-            for i in np.flatnonzero(below):
-                a = (lo[i] - f[i]) / step[i]
-                if a < alpha:
-                    alpha, hit, side = a, i, AT_LOWER
-            for i in np.flatnonzero(above):
-                a = (hi[i] - f[i]) / step[i]
-                if a < alpha:
-                    alpha, hit, side = a, i, AT_UPPER
-            alpha = max(alpha, 0.0)
+            # (The smallest ratio over the blocking rows, whatever its rounding: a
+            # target past its bound by less than an ulp of the distance gives 1.)
+            ratios = np.full(n, np.inf)
+            ratios[below] = (lo[below] - f[below]) / step[below]
+            ratios[above] = (hi[above] - f[above]) / step[above]
+            hit = int(np.argmin(ratios))
+            side = AT_LOWER if below[hit] else AT_UPPER
+            alpha = min(max(float(ratios[hit]), 0.0), 1.0)
             f[free] += alpha * step[free]
             f[hit] = lo[hit] if side == AT_LOWER else hi[hit]
             state[hit] = side
@@ -184,10 +184,11 @@ def solve_pgs(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     """
     Solve the BLCP by projected Gauss–Seidel from ``start`` (clipped to the box).
 
-    Stops when a sweep changes no force by more than ``tolerance`` (force units) and
-    the natural-map residual is within it too, or after ``max_sweeps`` (then
-    ``converged`` is False: the forces are the last sweep's, never passed off as
-    solved). Linear convergence, at a rate set by ``S``'s conditioning.
+    Stops when a sweep changes no force by more than ``tolerance`` (force units), or
+    after ``max_sweeps``; ``converged`` says whether it stopped on the first and the
+    natural-map residual is within ``tolerance`` too (else the forces are the last
+    sweep's, never passed off as solved). Linear convergence, at a rate set by
+    ``S``'s conditioning.
     """
     S, q = np.ascontiguousarray(S, dtype=float), np.ascontiguousarray(q, dtype=float)
     lo, hi = np.ascontiguousarray(lo, dtype=float), np.ascontiguousarray(hi, dtype=float)

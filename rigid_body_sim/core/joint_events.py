@@ -78,6 +78,7 @@ class JointEvents:
         # change over it (the scale of its event function: a fraction of the step).
         self._end_margins = np.zeros(0)
         self._span: Optional[np.ndarray] = None
+        self._span_keys: list = []   # the rows (kind, joint) the spans are of
 
     def reset_counters(self) -> None:
         """Zero the counters (a reset)."""
@@ -354,7 +355,7 @@ class JointEvents:
             if not len(margins):
                 return
             span = self._span if located and self._span is not None \
-                and len(self._span) == len(margins) else None
+                and self._span_keys == list(zip(kinds, joints)) else None
             if span is not None:
                 k = int(np.argmin(margins / span))
                 due = margins[k] <= FORCE_TOLERANCE * span[k] and (
@@ -423,7 +424,7 @@ class JointEvents:
         'slide' (a bound leaves and its joint slips away, ``direction`` its side),
         'slip' (a stick slips towards ``direction``), 'saturate' (a drive, towards
         ``direction``). Empty when the LCP cannot be solved (rows made dependent by
-        the others: counted, never silent).
+        the others) or stopped at its iteration cap: counted, never silent.
         """
         lim, fr = self.limits, self.friction
         names = [self._row_name(kind, i) for kind, i in zip(kinds, joints)]
@@ -433,13 +434,13 @@ class JointEvents:
             S = self._schur(names, state)
             sol = solve(S, -(S @ f_star), lo, hi, start=f_star)
         except (np.linalg.LinAlgError, ValueError):
+            sol = None
+        if sol is None or not sol.converged:
             self.counters['lcp_failures'] += 1
             return []
         self.counters['lcp_solves'] += 1
         self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
                                                 sol.residual)
-        if not sol.converged:
-            self.counters['lcp_failures'] += 1
         pivots = []
         for r, (kind, i) in enumerate(zip(kinds, joints)):
             at, f = int(sol.state[r]), float(sol.f[r])
@@ -566,14 +567,15 @@ class JointEvents:
                 value, real = law / self.rate, True
         if releasing:
             lam = self.sim.dynamics.solver.multipliers(self.sim.dynamics, state)
-            margins = self._margins(lam, q)[2]
-            if self._span is None or len(self._span) != len(margins):
+            kinds, joints, margins = self._margins(lam, q)[:3]
+            keys = list(zip(kinds, joints))
+            if self._span is None or self._span_keys != keys:
                 # The step's start: each row's margin change over the step scales its
                 # event function (a time fraction of the step, located to
                 # FORCE_TOLERANCE of it, however small the forces).
                 aligned = len(margins) == len(self._end_margins)
                 span = np.abs(margins - self._end_margins) if aligned else np.abs(margins)
-                self._span = np.maximum(span, 1e-300)
+                self._span, self._span_keys = np.maximum(span, 1e-300), keys
             if len(margins):
                 k = int(np.argmin(margins / self._span))
                 margin = float(margins[k] / self._span[k]) / FORCE_TOLERANCE
@@ -830,13 +832,13 @@ class JointEvents:
                 S = np.linalg.inv(0.5 * (W + W.T))
                 sol = solve(0.5 * (S + S.T), -(S @ p_star), lo, hi, start=p_star)
             except (np.linalg.LinAlgError, ValueError):
+                sol = None
+            if sol is None or not sol.converged:
                 self.counters['lcp_failures'] += 1
                 return held[0], held[1], []
             self.counters['lcp_solves'] += 1
             self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
                                                     sol.residual)
-            if not sol.converged:
-                self.counters['lcp_failures'] += 1
             # Δν_k moves row k's rate by −1 with the others held: the rates ``w`` off
             # their targets are ``−Σ w_k Δν_k`` away from the projection's.
             vel = held[0] - (sol.w @ dv).reshape(held[0].shape)
@@ -1056,14 +1058,14 @@ class JointEvents:
             S = self._schur([self.drives.names[i] for i in idx], sim.state)
             sol = solve(S, -(S @ p_star), -bound, bound, start=p_star)
         except (np.linalg.LinAlgError, ValueError):
+            sol = None
+        if sol is None or not sol.converged:
             self.counters['lcp_failures'] += 1
             past = np.abs(p_star) > bound * (1.0 + 64.0 * EPS)
             return [(i, 1 if p > 0.0 else -1) for i, p, out in zip(idx, p_star, past) if out]
         self.counters['lcp_solves'] += 1
         self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
                                                 sol.residual)
-        if not sol.converged:
-            self.counters['lcp_failures'] += 1
         return [(i, int(at)) for i, at in zip(idx, sol.state) if at != FREE]
 
     def _impulses(self, idx: list, state: State) -> np.ndarray:
