@@ -210,12 +210,10 @@ def solve(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
 
     ``start``: a warm start (the last solution, the rows' present forces): the
     direct method from it, whose first iteration keeps its active set (one
-    iteration when the set is unchanged: ``bench/complementarity.py`` measures 1
-    iteration on 64 rows where PGS from the same start takes about 100 sweeps).
-    Without one, up to :data:`DIRECT_LIMIT` rows the direct method from zero; beyond,
-    PGS to ``tolerance`` finds the active set and the direct method from its forces
-    finishes it to rounding (counting both: about half the direct method's time
-    from zero on 64 rows).
+    iteration when the set is unchanged). Without one, up to :data:`DIRECT_LIMIT`
+    rows the direct method from zero; beyond, PGS to ``tolerance`` finds the active
+    set and the direct method from its forces finishes it to rounding (counting
+    both). ``bench/complementarity.py`` measures these choices against the others.
     """
     check_problem(S, q, lo, hi)
     if start is not None or len(q) <= DIRECT_LIMIT:

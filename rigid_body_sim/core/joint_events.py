@@ -430,17 +430,9 @@ class JointEvents:
         names = [self._row_name(kind, i) for kind, i in zip(kinds, joints)]
         f_star = np.array(forces, dtype=float)
         lo, hi = self._boxes(kinds, joints, forces, located)
-        try:
-            S = self._schur(names, state)
-            sol = solve(S, -(S @ f_star), lo, hi, start=f_star)
-        except (np.linalg.LinAlgError, ValueError):
-            sol = None
-        if sol is None or not sol.converged:
-            self.counters['lcp_failures'] += 1
+        sol = self._solved(None, f_star, lo, hi, names, state)
+        if sol is None:
             return []
-        self.counters['lcp_solves'] += 1
-        self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
-                                                sol.residual)
         pivots = []
         for r, (kind, i) in enumerate(zip(kinds, joints)):
             at, f = int(sol.state[r]), float(sol.f[r])
@@ -482,6 +474,31 @@ class JointEvents:
         else:
             self._saturate(i, direction, state.time)
 
+    def _solved(self, S: Optional[np.ndarray], f_star: np.ndarray, lo: np.ndarray,
+                hi: np.ndarray, names: Optional[list] = None,
+                state: Optional[State] = None):
+        """
+        Return the rows' box LCP ``w = S (f − f*)`` solved from ``f*``, or None, counted.
+
+        ``S`` given, or the Schur complement of rows ``names`` at ``state``
+        (:meth:`_schur`). None when it cannot be solved (dependent rows) or stopped at
+        its iteration cap: ``lcp_failures`` counts it and the caller's rule without the
+        problem applies; else ``lcp_solves`` and ``lcp_residual_max`` count it.
+        """
+        try:
+            if S is None:
+                S = self._schur(names, state)
+            sol = solve(S, -(S @ f_star), lo, hi, start=f_star)
+        except (np.linalg.LinAlgError, ValueError):
+            sol = None
+        if sol is None or not sol.converged:
+            self.counters['lcp_failures'] += 1
+            return None
+        self.counters['lcp_solves'] += 1
+        self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
+                                                sol.residual)
+        return sol
+
     def _row_name(self, kind: int, i: int) -> str:
         """Return the name of joint ``i``'s held row of ``kind`` (:meth:`_margins`)."""
         part = (self.limits, self.friction, self.drives)[kind]
@@ -517,17 +534,32 @@ class JointEvents:
         e_l``): one projection per row, through the solve's own factorizations. ``S``
         maps the rows' forces to their accelerations with the equality rows held.
         """
-        solver, bodies = self.sim.dynamics.solver, self.sim.bodies
-        vel, om = solver.project_velocities(state)
+        vel, om = self.sim.dynamics.solver.project_velocities(state)
+        return self._compliance(names, state, vel, om)[0]
+
+    def _compliance(self, names: list, state: State, vel: np.ndarray, om: np.ndarray
+                    ) -> tuple:
+        """
+        Return ``(S, dv, dw, dot)`` for rows ``names`` from their probes (:meth:`_probes`).
+
+        ``dv``, ``dw`` (m, 3n) the probes' changes flattened; ``dot(a, b)`` the mass-weighted
+        product of a probe block with a velocity change; ``S`` the Schur complement
+        (:meth:`_schur`). Raises LinAlgError when the rows' block is singular.
+        """
+        bodies = self.sim.bodies
         probes = self._probes(names, state, vel, om)
         dv = np.array([p[0] for p in probes]).reshape(len(names), -1)
         dw = np.array([p[1] for p in probes]).reshape(len(names), -1)
         mass = np.repeat(bodies.mass, 3)
         moments = np.asarray(bodies.moments).reshape(-1)
-        W = (dv * mass) @ dv.T + (dw * moments) @ dw.T
-        W = 0.5 * (W + W.T)
-        S = np.linalg.inv(W)
-        return 0.5 * (S + S.T)
+
+        def dot(a_v: np.ndarray, a_w: np.ndarray, b_v: np.ndarray, b_w: np.ndarray
+                ) -> np.ndarray:
+            return (a_v * mass) @ b_v + (a_w * moments) @ b_w
+
+        W = dot(dv, dw, dv.T, dw.T)
+        S = np.linalg.inv(0.5 * (W + W.T))
+        return 0.5 * (S + S.T), dv, dw, dot
 
     def coordinates(self, state: State, previous: np.ndarray) -> tuple:
         """Joint coordinates, rates and rates over their limits at ``state``, near ``previous``."""
@@ -795,21 +827,19 @@ class JointEvents:
         and ``'saturate'`` for the rows at their impulse bounds.
         """
         sim = self.sim
-        solver, bodies = sim.dynamics.solver, sim.bodies
-        vel, om = solver.project_velocities(state)
+        vel, om = sim.dynamics.solver.project_velocities(state)
         rows = self._impact_rows()
         if len(rows) <= 1:
             return vel, om, []
         names = [self._row_name(kind, i) for kind, i in rows]
-        probes = self._probes(names, state, vel, om)
-        dv = np.array([p[0] for p in probes]).reshape(len(rows), -1)
-        dw = np.array([p[1] for p in probes]).reshape(len(rows), -1)
-        mass = np.repeat(bodies.mass, 3)
-        moments = np.asarray(bodies.moments).reshape(-1)
+        try:
+            S, dv, dw, dot = self._compliance(names, state, vel, om)
+        except np.linalg.LinAlgError:
+            self.counters['lcp_failures'] += 1
+            return vel, om, []
         # Every row held: μ_k = Δν_kᵀ M Δν (:meth:`_probe_impulses`), the joint's −μ_k.
-        jump_v = (vel - state.vel_com_world).reshape(-1)
-        jump_w = (om - state.ang_vel_principal).reshape(-1)
-        p_star = -((dv * mass) @ jump_v + (dw * moments) @ jump_w)
+        p_star = -dot(dv, dw, (vel - state.vel_com_world).reshape(-1),
+                      (om - state.ang_vel_principal).reshape(-1))
         lim, fr, dr = self.limits, self.friction, self.drives
         lo, hi = np.zeros(len(rows)), np.zeros(len(rows))
         for r, (kind, i) in enumerate(rows):
@@ -825,20 +855,11 @@ class JointEvents:
                 lo[r], hi[r] = -bound, bound
         if np.all(np.minimum(p_star - lo, hi - p_star) >= 0.0):
             return vel, om, []      # every row's impulse within its box: the projection
-        W = (dv * mass) @ dv.T + (dw * moments) @ dw.T
         held = (vel, om)
         for _ in range(len(rows)):
-            try:
-                S = np.linalg.inv(0.5 * (W + W.T))
-                sol = solve(0.5 * (S + S.T), -(S @ p_star), lo, hi, start=p_star)
-            except (np.linalg.LinAlgError, ValueError):
-                sol = None
-            if sol is None or not sol.converged:
-                self.counters['lcp_failures'] += 1
+            sol = self._solved(S, p_star, lo, hi)
+            if sol is None:
                 return held[0], held[1], []
-            self.counters['lcp_solves'] += 1
-            self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
-                                                    sol.residual)
             # Δν_k moves row k's rate by −1 with the others held: the rates ``w`` off
             # their targets are ``−Σ w_k Δν_k`` away from the projection's.
             vel = held[0] - (sol.w @ dv).reshape(held[0].shape)
@@ -1053,19 +1074,11 @@ class JointEvents:
         drive's missing impulse changes the others'.) If the problem cannot be solved,
         those past their bounds saturate (counted in ``lcp_failures``).
         """
-        sim = self.sim
-        try:
-            S = self._schur([self.drives.names[i] for i in idx], sim.state)
-            sol = solve(S, -(S @ p_star), -bound, bound, start=p_star)
-        except (np.linalg.LinAlgError, ValueError):
-            sol = None
-        if sol is None or not sol.converged:
-            self.counters['lcp_failures'] += 1
+        sol = self._solved(None, p_star, -bound, bound, [self.drives.names[i] for i in idx],
+                           self.sim.state)
+        if sol is None:
             past = np.abs(p_star) > bound * (1.0 + 64.0 * EPS)
             return [(i, 1 if p > 0.0 else -1) for i, p, out in zip(idx, p_star, past) if out]
-        self.counters['lcp_solves'] += 1
-        self.counters['lcp_residual_max'] = max(self.counters['lcp_residual_max'],
-                                                sol.residual)
         return [(i, int(at)) for i, at in zip(idx, sol.state) if at != FREE]
 
     def _impulses(self, idx: list, state: State) -> np.ndarray:
