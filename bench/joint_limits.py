@@ -13,9 +13,11 @@ time per step of a loop that steps once and reads the joint state, as a node doe
 * MuJoCo 4.0.0 (RK4 and implicitfast) with the limits off (``jnt_limited = 0``) and on
   (its URDF import's limits: soft constraints, default ``solref``/``solimp``).
 
-Cost is reported over the whole run and over its first part, before any joint
-reaches a bound (where ours checks the bounds after each step and nothing else:
-"only the effects a scene calls for" says these checks should cost little). Beside
+Cost is reported over the whole run and step by step, by what the limits did in
+each step; before any joint reaches a bound ours only watches the bounds, one
+comparison a joint in the kernel that reads the joint coordinates after the step,
+the events' loop entered only for a step that ends past one ("only the effects a
+scene calls for": inactive limits should cost nothing measurable). Beside
 the costs, each variant's largest excursion past a bound over the run (rad), the
 joints that touched a bound, and ours' impacts, releases and located steps.
 
@@ -62,16 +64,19 @@ def run_ours(sim, lower: np.ndarray, upper: np.ndarray):
         gc.collect()
         clock = time.perf_counter
         t0 = clock()
+        events = 0
         for k in range(1, n + 1):
-            t = clock()
             before = None if lim is None else (lim.counters.activations + lim.counters.releases,
                                                bool(lim.active.any()))
+            t = clock()   # (the step and its read only: not the bookkeeping around them)
             sim.step()
             q[k] = sim.joint_state().positions
             each[k - 1] = clock() - t
             if lim is not None:
                 changed = lim.counters.activations + lim.counters.releases != before[0]
-                kinds.append('event' if changed else 'resting' if before[1] else 'free')
+                events += changed
+                kinds.append('event' if changed else 'resting' if before[1] else
+                             'free' if not events else 'free later')
         wall = clock() - t0
         counts = ({'each': each} if lim is None else
                   dict(lim.counters.as_dict(), first=min((i.time for i in lim.impacts),
@@ -108,6 +113,7 @@ def excursion(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray
 def measure(variants: list, n: int, reps: int) -> dict:
     """Time each variant ``reps`` times (interleaved, rotating); keep the first records."""
     walls = {name: [] for name, _ in variants}
+    eaches = {name: [] for name, _ in variants}   # each step's own time, every timed run
     records = {}
     for name, run in variants:
         run(n)   # untimed: first calls and the kernels an impact loads on first use
@@ -116,9 +122,10 @@ def measure(variants: list, n: int, reps: int) -> dict:
         for name, run in variants[shift:] + variants[:shift]:
             wall, q, counts = run(n)
             walls[name].append(wall / n)
+            eaches[name].append(counts.get('each'))
             records.setdefault(name, (q, counts))
             print(f'  [{rep + 1}/{reps}] {name:28s} {wall / n * 1e6:9.1f} us/step', flush=True)
-    return {'walls': walls, 'records': records}
+    return {'walls': walls, 'records': records, 'eaches': eaches}
 
 
 def joint_limits(quick: bool, reps: int) -> dict:
@@ -170,27 +177,39 @@ def table(res: dict) -> str:
         rows.append(f'| {name} | {med * 1e6:.1f} | {med / base[key]:.2f} | {ex.max():.2e} | '
                     f'{", ".join(touched) or "none"} | {events} |')
     counts = records['ours lie_poisson2, limits on'][1]
-    each, kinds = counts['each'], counts['kinds']
-    off_each = records['ours lie_poisson2, limits off'][1]['each']
+    kinds = counts['kinds']   # the same in every run: the runs are deterministic
+    on_runs = res['eaches']['ours lie_poisson2, limits on']
+    off_runs = res['eaches']['ours lie_poisson2, limits off']
     parts = []
-    for kind, what in (('free', 'no bound active (checked only)'),
+    for kind, what in (('free', 'no bound active, before the first impact (the same motion '
+                                'as the run without limits; the bounds watched in the '
+                                "coordinates' kernel)"),
+                       ('free later', 'no bound active, after an impact (another motion than '
+                                      "the run without limits' same steps)"),
                        ('resting', 'a bound active throughout (the row in the solve; the '
                                    'read solves for its force)'),
                        ('event', 'an impact or a release (rows added or removed, the impact '
                                  'located)')):
         sel = kinds == kind
         if sel.any():
-            on, off = np.median(each[sel]), np.median(off_each[sel])
-            parts.append(f'| {what} | {int(sel.sum())} | {on * 1e6:.1f} | {off * 1e6:.1f} | '
-                         f'{on / off:.2f} |')
+            # Per timed run, the median over these steps.
+            on = np.array([np.median(e[sel]) for e in on_runs])
+            off = np.array([np.median(e[sel]) for e in off_runs])
+            ratio = on / off
+            parts.append(f'| {what} | {int(sel.sum())} | {np.median(on) * 1e6:.2f} | '
+                         f'{np.median(off) * 1e6:.2f} | {np.median(ratio):.3f} '
+                         f'({ratio.min():.3f} to {ratio.max():.3f}) |')
     first = counts.get('first')
     lines = ['\n'.join(rows), '',
-             'Ours step by step, each step (and its read) timed alone in the first timed '
-             'run of each, by what the limits did in it, against the same steps of the run '
-             'with the limits off (the same motion until the first impact'
-             + (f', at {first:.4f} s):' if first is not None else '; none in this run):'),
+             f'Ours step by step, each step (and its read) timed alone in each of the '
+             f'{len(on_runs)} timed runs, by what the limits did in it, against the same '
+             'steps of the run with the limits off (the same motion until the first impact'
+             + (f', at {first:.4f} s' if first is not None else '; none in this run')
+             + '): per run the median over those steps; the median over the runs, and '
+             "the median and range of the runs' on / off ratios (the on and off runs "
+             'alternate: each ratio is of two neighbouring runs).',
              '', '| steps with | steps | limits on, median us | limits off, median us | '
-             'on / off |', '|---|---|---|---|---|', *parts]
+             'on / off, median (range) |', '|---|---|---|---|---|', *parts]
     return '\n'.join(lines)
 
 

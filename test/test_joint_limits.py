@@ -393,6 +393,43 @@ def test_limits_off_lets_the_joint_pass(tmp_path):
     assert sim.joint_state().positions[0] > UPPER
 
 
+@pytest.mark.parametrize('integrator', INTEGRATORS)
+@pytest.mark.parametrize('tolerance', [None, 1e-6])
+def test_limits_never_reached_change_nothing_bit_for_bit(integrator, tolerance, tmp_path):
+    # Inactive limits are watched in the kernel that reads the coordinates (one
+    # comparison per joint); the step itself is the one without limits. So a swing that
+    # never reaches its bounds is the same to the last bit with limits on and off, with
+    # the knob off and on.
+    runs = []
+    for limits in (True, False):
+        sim = pendulum(tmp_path, integrator, lower=-2.0, upper=4.0, limits=limits)
+        if tolerance is not None:
+            sim.set_tolerance(tolerance)
+        assert (sim.limits is not None) == limits
+        sim.step(600)   # from horizontal through the bottom (π/2) and up the other side
+        js = sim.joint_state()
+        runs.append((js.positions[0], js.velocities[0], sim.state.parts))
+    (q_on, v_on, parts_on), (q_off, v_off, parts_off) = runs
+    assert q_on > np.pi / 2   # it did swing past the bottom, inside its bounds
+    assert (q_on, v_on) == (q_off, v_off)
+    for a, b in zip(parts_on, parts_off):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_watched_step_past_a_bound_is_taken_again_by_the_events(tmp_path):
+    # The first step whose end lies past a bound (by more than the tolerance) is the
+    # events' to take: the impact is located inside it, so the joint never shows a
+    # coordinate past its bound beyond the location tolerance.
+    sim = pendulum(tmp_path, lower=-2.0, upper=UPPER)
+    worst = 0.0
+    for _ in range(400):
+        sim.step()
+        worst = max(worst, sim.joint_state().positions[0] - UPPER)
+    assert sim.limits.counters.impacts == 1 and sim.limits.counters.located_steps >= 1
+    # bound: the location's tolerance at the impact, then the row's drift (1e-10).
+    assert worst <= LOCATION_TOLERANCE
+
+
 def test_limits_must_be_true_or_false(tmp_path):
     with pytest.raises(SceneError, match='robots\\[0\\].limits: expected true or false'):
         pendulum(tmp_path, limits='yes')

@@ -63,6 +63,7 @@ class JointEvents:
         self.limits = limits
         self.friction = friction
         self.drives = drives
+        self._bounds_only = limits is not None and friction is None and drives is None
         #: Since the last reset: steps with a located event; the largest force past its
         #: bound a row had where it pivoted (N m or N: within FORCE_TOLERANCE of the
         #: scale at a located event; more only when MAX_EVENTS cut a step short); the
@@ -133,13 +134,29 @@ class JointEvents:
 
     # -- a step -----------------------------------------------------------------------------
 
-    def step(self, start: State, t_end: float) -> tuple:
+    def quiet(self) -> bool:
+        """
+        Tell whether only the bounds need watching: no row held, no friction, no drive limit.
+
+        Then a step that ends with every coordinate within its widened bounds
+        (:attr:`.JointLimits.window`, checked in the kernel that reads the
+        coordinates: :meth:`.JointSpace.advance`) has no event and stands as it is;
+        :meth:`step` is needed only for one that does not. The tolerances are set
+        first (:meth:`tighten`), as :meth:`step` sets them.
+        """
+        if not self._bounds_only or self.limits.rows:
+            return False
+        self.tighten()
+        return True
+
+    def step(self, start: State, t_end: float, first: Optional[State] = None) -> tuple:
         """
         Take a step from ``start`` to ``t_end`` with every event inside it resolved.
 
         Returns the new state and ``(coordinates, rates over their limits)`` there
         (None when the step ended on an event), which the joints' tracking takes
-        instead of reading them again.
+        instead of reading them again. ``first``: the integrator's step from
+        ``start`` to ``t_end``, when the caller took it already.
         """
         sim, lim, fr = self.sim, self.limits, self.friction
         state, previous = start, sim.joints.positions
@@ -150,7 +167,10 @@ class JointEvents:
             if h <= 4.0 * EPS * abs(t_end):   # an event at the step's end
                 self._charge(t_end - start.time)
                 return State(t_end, *state.parts), None
-            new = sim._advance(state, h, t_end)
+            if first is not None:
+                new, first = first, None
+            else:
+                new = sim._advance(state, h, t_end)
             q, rates, over = self.coordinates(new, previous)
             crossed = _NONE if lim is None else lim.crossed(q)
             stopped = _NONE if fr is None else fr.stopped(rates)

@@ -166,6 +166,10 @@ class JointLimits:
         # end is checked against (one comparison each, nothing else, while all are free).
         self._low = self.lower[self.joints] - self.location
         self._high = self.upper[self.joints] + self.location
+        # The same per joint in the joints' table (±inf for a joint without enforced
+        # limits): checked in the kernel that reads the coordinates while no bound is
+        # active (:meth:`.JointSpace.advance`).
+        self._watch()
         self.restitution = np.asarray(restitution, dtype=float).reshape(k)
         self.names = [limit_name(space.names[i]) for i in range(k)]
         #: Per joint: 0 free, +1 on its lower bound, −1 on its upper bound.
@@ -189,6 +193,14 @@ class JointLimits:
         self.location, self.rate = location, rate
         self._low = self.lower[self.joints] - location
         self._high = self.upper[self.joints] + location
+        self._watch()
+
+    def _watch(self) -> None:
+        """Watch the widened bounds of the limited joints in the joints' table (±inf: others)."""
+        k = len(self.lower)
+        low, high = np.full(k, -np.inf), np.full(k, np.inf)
+        low[self.joints], high[self.joints] = self._low, self._high
+        self.space.watch(low, high)
 
     def reset(self) -> None:
         """Forget the active set and the counters."""

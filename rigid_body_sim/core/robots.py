@@ -65,12 +65,13 @@ from .constraints import Constraint, Coupling, DriveGeometry, JointType, perpend
 from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
 from .errors import SpecError
 from .kernels.free_step import HAS_DRIVE_DAMPING, HAS_DRIVES
-from .kernels.joints import joint_coordinates
-from .kernels.layout import (JOINT, O_ANG_VEL_WORLD, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD,
-                             O_QUAT_BODY_WORLD, W_BODY, W_CENTER, W_DAMPING, W_E1_CHILD,
-                             W_E1_PARENT, W_E2_PARENT, W_EFFORT_MAX, W_K_CHILD, W_K_PARENT,
-                             W_KD, W_KIND, W_KP, W_PARENT, W_Q_TARGET, W_R_CHILD, W_R_PARENT,
-                             W_ROTARY, W_V_TARGET, W_WIDTH, WRENCH_DRIVE)
+from .kernels.joints import joint_coordinates, joint_coordinates_within
+from .kernels.layout import (J_WATCH_HIGH, J_WATCH_LOW, JOINT, O_ANG_VEL_WORLD,
+                             O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD, O_QUAT_BODY_WORLD, W_BODY,
+                             W_CENTER, W_DAMPING, W_E1_CHILD, W_E1_PARENT, W_E2_PARENT,
+                             W_EFFORT_MAX, W_K_CHILD, W_K_PARENT, W_KD, W_KIND, W_KP, W_PARENT,
+                             W_Q_TARGET, W_R_CHILD, W_R_PARENT, W_ROTARY, W_V_TARGET, W_WIDTH,
+                             WRENCH_DRIVE)
 from .validate import finite_array, finite_scalar
 
 
@@ -715,9 +716,11 @@ class JointSpace:
                                          rotary=float(self.rotary[i]), p_jp=self.p_jp[i],
                                          R_jp=self.R_jp[i].ravel(), axis=self.axis[i],
                                          e1=self.e1[i], e2=self.e2[i],
-                                         velocity_limit=self.velocity_limit[i])
+                                         velocity_limit=self.velocity_limit[i],
+                                         watch_low=-np.inf, watch_high=np.inf)
                                for i in range(k)]).reshape(k, JOINT.width)
         self._rates = np.zeros(k)
+        self._spare = np.zeros(k)   # the next positions of :meth:`advance`
         #: Mimic joints ``(follower, leader, k, c)`` (indices), each after its leader's own.
         self.mimics = [(self.index[m.spec.prefix + f], self.index[m.spec.prefix + leader], km, c)
                        for m in self.models
@@ -798,6 +801,28 @@ class JointSpace:
         over = joint_coordinates(out, self.table, self.tracked, self.positions, self._rates)
         self.tracked = True
         self.counters['velocity_limit_excursions'] += over
+
+    def advance(self, out: np.ndarray) -> bool:
+        """
+        :meth:`track` the coordinates after a step if all lie in their windows (:meth:`watch`).
+
+        Returns whether they did; when one lies outside, nothing changes (the step is
+        the joint events' to take, :meth:`.JointEvents.step`). Only once tracked.
+        """
+        spare = self._spare
+        over = joint_coordinates_within(out, self.table, self.positions, spare, self._rates)
+        if over < 0:
+            return False
+        # The two arrays take turns (no allocation a step): positions is replaced after
+        # every step, as :meth:`adopt` replaces it; readers copy it (:meth:`state`).
+        self._spare, self.positions = self.positions, spare
+        self.counters['velocity_limit_excursions'] += over
+        return True
+
+    def watch(self, low: np.ndarray, high: np.ndarray) -> None:
+        """Set the windows (k,) :meth:`advance` checks the coordinates against."""
+        self.table[:, J_WATCH_LOW] = low
+        self.table[:, J_WATCH_HIGH] = high
 
     def coordinates(self, out: np.ndarray, previous: np.ndarray) -> tuple:
         """

@@ -344,18 +344,28 @@ class Simulation:
                     dyn.changed()
             # Time as base + steps * dt, not a running sum: no rounding drift.
             t_end = self._time_base + (steps + 1) * dt
-            seen = None
-            if events is not None:
-                new, seen = events.step(self.state, t_end)
-            else:
+            seen, tracked = None, False
+            if events is None:
                 new = self._advance(self.state, dt, t_end)
+            elif self.joints.tracked and events.quiet():
+                # Inactive limits: the step, and its coordinates checked against the
+                # bounds in the kernel that reads them; the events' loop only past one.
+                start = self.state
+                new = self._advance(start, dt, t_end)
+                self.bodies.outputs(new)
+                tracked = self.joints.advance(self.bodies.outputs_cache.out)
+                if not tracked:
+                    new, seen = events.step(start, t_end, first=new)
+            else:
+                new, seen = events.step(self.state, t_end)
             self.state = new
             self._steps = steps + 1
             if self._tracking:
-                self.bodies.outputs(new)
                 if seen is not None:   # the events' check read the coordinates at new
+                    self.bodies.outputs(new)
                     self.joints.adopt(*seen)
-                else:
+                elif not tracked:
+                    self.bodies.outputs(new)
                     self.joints.track(self.bodies.outputs_cache.out)
                 if self.drives is not None and self.drives.recenter(self.joints.positions):
                     dyn.changed()

@@ -19,8 +19,8 @@ from numba import njit
 import numpy as np
 
 from .layout import (J_AXIS, J_CHILD, J_E1, J_E2, J_P_JP, J_PARENT, J_R_JP, J_ROTARY,
-                     J_VELOCITY_LIMIT, O_ANG_VEL_WORLD, O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD,
-                     O_QUAT_BODY_WORLD)
+                     J_VELOCITY_LIMIT, J_WATCH_HIGH, J_WATCH_LOW, O_ANG_VEL_WORLD,
+                     O_ORIGIN_VEL_WORLD, O_ORIGIN_WORLD, O_QUAT_BODY_WORLD)
 from .so3 import quat_matrix
 
 TWO_PI = 2.0 * math.pi
@@ -105,6 +105,26 @@ def joint_coordinates(out: np.ndarray, joint: np.ndarray, unwrap: bool,
         rates[k] = rate
         if abs(rate) > row[J_VELOCITY_LIMIT]:
             over += 1
+    return over
+
+
+@njit(cache=True)
+def joint_coordinates_within(out: np.ndarray, joint: np.ndarray, previous: np.ndarray,
+                             positions: np.ndarray, rates: np.ndarray) -> int:
+    """
+    :func:`joint_coordinates` unwrapped near ``previous``, if all lie in their windows.
+
+    Writes ``positions`` and ``rates``; returns how many rates exceed their limit, or
+    −1 when a coordinate lies outside its joint's ``[watch_low, watch_high]``
+    (:data:`.layout.JOINT`). One comparison per joint: what a step whose limits are
+    all inactive pays for watching them.
+    """
+    positions[:] = previous
+    over = joint_coordinates(out, joint, True, positions, rates)
+    for k in range(positions.shape[0]):
+        x = positions[k]
+        if x < joint[k, J_WATCH_LOW] or x > joint[k, J_WATCH_HIGH]:
+            return -1
     return over
 
 

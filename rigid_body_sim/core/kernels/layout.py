@@ -279,10 +279,12 @@ OUTPUT = Columns('output', [('origin_world', 3), ('quat_body_world', 4),
                             ('origin_vel_body', 3), ('ang_vel_body', 3)])
 #: ``joint`` (k, J_WIDTH) of :mod:`.joints`: a one-coordinate joint's bodies (the world
 #: is index n), whether it rotates, the joint frame in the parent body's frame (position,
-#: rotation row by row), the frame (axis, e1, e2) in the joint frame, the speed limit.
+#: rotation row by row), the frame (axis, e1, e2) in the joint frame, the speed limit,
+#: and the window the coordinate is watched in (a limited joint's bounds widened by the
+#: tolerance, ±inf otherwise: :func:`.joints.joint_coordinates_within`).
 JOINT = Columns('joint', [('parent', 1), ('child', 1), ('rotary', 1), ('p_jp', 3),
                           ('R_jp', 9), ('axis', 3), ('e1', 3), ('e2', 3),
-                          ('velocity_limit', 1)])
+                          ('velocity_limit', 1), ('watch_low', 1), ('watch_high', 1)])
 #: ``row_par`` (m, PAR_WIDTH) of the constraint rows (:mod:`.rows`): the lever arms on
 #: bodies a and b (principal frames), the axes s and e, a second axis e2 of body b (angle
 #: rows), a scalar (a length, a cosine, a joint drive's target), and how that scalar
