@@ -1,0 +1,315 @@
+"""
+Collision shapes of bodies and of the world, and the contacts between them (detection).
+
+A :class:`CollisionShape` is a primitive fixed to a body (or to the world): a sphere,
+a box, a capsule, a cylinder, or, for the world only, a plane (a half-space: a
+ground). Sizes follow URDF's ``<collision>`` geometry: a sphere's ``radius``; a box's
+full ``size`` along its axes; a capsule's and a cylinder's ``radius`` and ``length``
+along the shape's z axis (a capsule's length is that of its axis, the caps beyond
+it). A plane's normal is its z axis; it is solid below.
+
+:class:`ContactDetector` finds, for the bodies' poses after a step, every pair of
+shapes within a margin of each other and their contacts (:mod:`.kernels.contact`:
+points, normals from shape ``b`` to shape ``a``, depths): a sweep-and-prune broad
+phase on the shapes' boxes (``O(m log m)`` for ``m`` shapes, plus the pairs it
+finds) and a narrow phase per pair. Pairs never tested: two shapes of one body,
+shapes whose filters exclude each other (``group`` and ``mask`` bits: a pair is
+tested when one's group meets the other's mask, MuJoCo's ``contype`` and
+``conaffinity``), shapes with ``collide: false``, and pairs of bodies the caller
+excludes (bodies joined by a joint, by default). A pair of kinds without a narrow
+phase (a cylinder on a box or on a cylinder) that could meet is refused when the
+detector is built, naming both shapes: never silently ignored.
+
+Contact forces are not here yet: this module is detection only (issue 21's rows
+build on it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, NamedTuple, Optional, Sequence
+
+import numpy as np
+
+from .errors import SpecError
+from .kernels.contact import bounds, narrow_phase, Shape, shape_frames, supported, \
+    sweep_and_prune
+from .rotation import quat_to_matrix
+from .validate import finite_array, finite_scalar, nonnegative_scalar, positive_scalar, \
+    unit_quaternion
+
+#: The kinds by name, and the sizes each takes (URDF's attribute names).
+KINDS = {'sphere': Shape.SPHERE, 'box': Shape.BOX, 'capsule': Shape.CAPSULE,
+         'cylinder': Shape.CYLINDER, 'plane': Shape.PLANE}
+SIZES = {'sphere': ('radius',), 'box': ('size',), 'capsule': ('radius', 'length'),
+         'cylinder': ('radius', 'length'), 'plane': ()}
+#: m: contacts are reported up to this gap by default (a contact about to close).
+DEFAULT_MARGIN = 1e-3
+#: Every group bit (the default group and mask: everything meets everything).
+ALL_BITS = (1 << 31) - 1
+
+
+@dataclass(frozen=True)
+class CollisionShape:
+    """
+    A collision shape fixed to a body or to the world (validated on construction).
+
+    Parameters
+    ----------
+    kind : str
+        ``'sphere'``, ``'box'``, ``'capsule'``, ``'cylinder'`` or ``'plane'``.
+    body : str or None
+        The body it is fixed to; None: the world (a plane must be the world's).
+    radius, length : float
+        m, > 0: a sphere's radius; a capsule's and a cylinder's radius and length
+        (along the shape's z axis).
+    size : array_like, shape (3,)
+        m, > 0: a box's full size along its x, y, z axes.
+    position_body : array_like, shape (3,)
+        m, the shape's centre in the body frame (a plane: a point on it).
+    orientation_xyzw : array_like, shape (4,)
+        The shape's axes in the body frame (a plane: its normal is the z axis).
+    friction : float
+        Coulomb's coefficient, ≥ 0.
+    restitution : float
+        Newton's coefficient, in [0, 1].
+    collide : bool
+        False: the shape meets nothing (drawn, never tested).
+    group, mask : int
+        Filter bits in [0, 2³¹): two shapes are tested when ``group`` of one meets
+        ``mask`` of the other.
+    name : str
+        What errors and reports call it (default: ``<body>/<kind>``).
+
+    """
+
+    kind: str
+    body: Optional[str] = None
+    radius: Any = None
+    length: Any = None
+    size: Any = None
+    position_body: Any = (0.0, 0.0, 0.0)
+    orientation_xyzw: Any = (0.0, 0.0, 0.0, 1.0)
+    friction: Any = 1.0
+    restitution: Any = 0.0
+    collide: bool = True
+    group: int = 1
+    mask: int = ALL_BITS
+    name: str = ''
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise SpecError('kind', f'unknown shape {self.kind!r}; known: {sorted(KINDS)}')
+        if self.body is not None and (not isinstance(self.body, str) or not self.body):
+            raise SpecError('body', f'must be a body name or None (the world), got '
+                                    f'{self.body!r}')
+        if self.kind == 'plane' and self.body is not None:
+            raise SpecError('kind', f"a plane is the world's (a ground), not body "
+                                    f"{self.body!r}'s: give a box instead")
+        want = SIZES[self.kind]
+        for key in ('radius', 'length', 'size'):
+            given = getattr(self, key) is not None
+            if given and key not in want:
+                raise SpecError(key, f'a {self.kind} takes {list(want) or "no size"}, '
+                                     f'not {key}')
+            if not given and key in want:
+                raise SpecError(key, f'a {self.kind} needs its {key} (m)')
+        conv = {'position_body': finite_array(self.position_body, 'position_body', (3,)),
+                'orientation_xyzw': unit_quaternion(self.orientation_xyzw,
+                                                    'orientation_xyzw'),
+                'friction': nonnegative_scalar(self.friction, 'friction'),
+                'restitution': finite_scalar(self.restitution, 'restitution')}
+        if 'radius' in want:
+            conv['radius'] = positive_scalar(self.radius, 'radius')
+        if 'length' in want:
+            conv['length'] = positive_scalar(self.length, 'length')
+        if 'size' in want:
+            size = finite_array(self.size, 'size', (3,))
+            if not np.all(size > 0.0):
+                raise SpecError('size', f'must be positive, got {self.size!r}')
+            conv['size'] = size
+        if not 0.0 <= conv['restitution'] <= 1.0:
+            raise SpecError('restitution', f'must be in [0, 1], got {self.restitution!r}')
+        if not isinstance(self.collide, (bool, np.bool_)):
+            raise SpecError('collide', f'expected true or false, got {self.collide!r}')
+        for key in ('group', 'mask'):
+            bits = getattr(self, key)
+            if isinstance(bits, bool) or not isinstance(bits, (int, np.integer)) \
+                    or not 0 <= bits <= ALL_BITS:
+                raise SpecError(key, f'must be an integer in [0, 2^31), got {bits!r}')
+        if not isinstance(self.name, str):
+            raise SpecError('name', f'must be a string, got {self.name!r}')
+        for key, value in conv.items():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, key, value)
+        if not self.name:
+            object.__setattr__(self, 'name', f'{self.body or "world"}/{self.kind}')
+
+    def dimensions(self) -> np.ndarray:
+        """Return the kernels' size (3,): radius; half extents; radius, half length; 0."""
+        if self.kind == 'sphere':
+            return np.array([self.radius, 0.0, 0.0])
+        if self.kind == 'box':
+            return 0.5 * np.asarray(self.size)
+        if self.kind in ('capsule', 'cylinder'):
+            return np.array([self.radius, 0.5 * self.length, 0.0])
+        return np.zeros(3)
+
+
+class Contacts(NamedTuple):
+    """
+    The contacts found at one state (``c`` of them).
+
+    ``shape_a``, ``shape_b`` (c,): indices into the detector's shapes; ``body_a``,
+    ``body_b`` (c,): their bodies (the world is the number of bodies); ``point`` (c,
+    3) m, midway between the surfaces; ``normal`` (c, 3), unit, from ``b`` to ``a``;
+    ``depth`` (c,) m, the overlap along the normal (negative: a gap within the
+    margin).
+    """
+
+    shape_a: np.ndarray
+    shape_b: np.ndarray
+    body_a: np.ndarray
+    body_b: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    depth: np.ndarray
+
+
+class ContactDetector:
+    """
+    The contacts of a set of shapes on bodies, at the bodies' poses.
+
+    Parameters
+    ----------
+    shapes : sequence of CollisionShape
+    body_names : sequence of str
+        The bodies, in the order of the poses :meth:`detect` is given; every
+        shape's body must be one of them.
+    excluded : iterable of (str, str)
+        Body pairs whose shapes never meet (bodies joined by a joint; None names
+        the world).
+    margin : float
+        m, ≥ 0: contacts are reported up to this gap.
+
+    Raises
+    ------
+    SpecError
+        A shape on an unknown body, two shapes of one name, or a pair of kinds
+        with no narrow phase that the filters let meet (naming both shapes).
+
+    """
+
+    def __init__(self, shapes: Sequence[CollisionShape], body_names: Sequence[str],
+                 excluded: Any = (), margin: float = DEFAULT_MARGIN) -> None:
+        self.shapes = list(shapes)
+        self.margin = nonnegative_scalar(margin, 'margin')
+        index = {name: i for i, name in enumerate(body_names)}
+        n = self.n_bodies = len(body_names)
+        names = [s.name for s in self.shapes]
+        twice = sorted({x for x in names if names.count(x) > 1})
+        if twice:
+            raise SpecError('shapes', f'shape names used twice: {twice} (name them)')
+        body = []
+        for k, s in enumerate(self.shapes):
+            if s.body is not None and s.body not in index:
+                raise SpecError(f'shapes[{k}].body', f'unknown body {s.body!r}')
+            body.append(n if s.body is None else index[s.body])
+        live = [k for k, s in enumerate(self.shapes) if s.collide]
+        m = len(live)
+        #: Indices of the shapes that collide (the kernels' rows), and per row its data.
+        self.live = np.array(live, dtype=np.int64)
+        self.body = np.array([body[k] for k in live], dtype=np.int64)
+        self.kind = np.array([int(KINDS[self.shapes[k].kind]) for k in live], dtype=np.int64)
+        self.size = np.array([self.shapes[k].dimensions() for k in live]).reshape(m, 3)
+        self.c_body = np.array([self.shapes[k].position_body for k in live]).reshape(m, 3)
+        self.R_body = np.array([quat_to_matrix(self.shapes[k].orientation_xyzw)
+                                for k in live]).reshape(m, 3, 3)
+        self.group = np.array([self.shapes[k].group for k in live], dtype=np.int64)
+        self.mask = np.array([self.shapes[k].mask for k in live], dtype=np.int64)
+        codes = set()
+        for pair in excluded:
+            a, b = (n if x is None else index[x] for x in pair)
+            codes.add(min(a, b) * (n + 1) + max(a, b))
+        self.excluded = np.array(sorted(codes), dtype=np.int64)
+        plane = self.kind == int(Shape.PLANE)
+        self._planes = np.flatnonzero(plane)
+        self._solids = np.flatnonzero(~plane)
+        self._check_pairs()
+        self._pairs = np.zeros((max(4 * m, 16), 2), dtype=np.int64)
+        cap = max(8 * m, 16)
+        self._points, self._normals = np.zeros((cap, 3)), np.zeros((cap, 3))
+        self._depths, self._owner = np.zeros(cap), np.zeros(cap, dtype=np.int64)
+        self.counters = {'detections': 0, 'pairs_tested': 0, 'contacts': 0}
+
+    def _meets(self, i: int, j: int) -> bool:
+        """Tell whether rows ``i`` and ``j`` may ever be tested (bodies, filters, exclusions)."""
+        bi, bj = self.body[i], self.body[j]
+        if bi == bj:
+            return False
+        if not (self.group[i] & self.mask[j] or self.group[j] & self.mask[i]):
+            return False
+        code = min(bi, bj) * (self.n_bodies + 1) + max(bi, bj)
+        e = np.searchsorted(self.excluded, code)
+        return not (e < len(self.excluded) and self.excluded[e] == code)
+
+    def _check_pairs(self) -> None:
+        """Refuse a pair of kinds with no narrow phase that may meet, naming both shapes."""
+        if not np.any(self.kind == int(Shape.CYLINDER)):
+            return   # (the other pair without one, two planes, are the world's: never met)
+        for i in range(len(self.live)):
+            for j in range(i + 1, len(self.live)):
+                if not supported(int(self.kind[i]), int(self.kind[j])) and self._meets(i, j):
+                    a, b = self.shapes[self.live[i]], self.shapes[self.live[j]]
+                    raise SpecError('shapes', f'{a.name!r} ({a.kind}) and {b.name!r} '
+                                              f'({b.kind}) may touch, and a {a.kind} on a '
+                                              f'{b.kind} has no narrow phase yet: use a box '
+                                              f'or a capsule, or keep them apart with '
+                                              f'group and mask')
+
+    def frames(self, out: np.ndarray) -> tuple:
+        """Return the shapes' centres (m, 3) and rotations (m, 3, 3) in the world at ``out``."""
+        m = len(self.live)
+        c, R = np.empty((m, 3)), np.empty((m, 3, 3))
+        shape_frames(out, self.body, self.c_body, self.R_body, c, R)
+        return c, R
+
+    def detect(self, out: np.ndarray) -> Contacts:
+        """
+        Return the contacts at the bodies' outputs ``out`` (n, O_WIDTH).
+
+        ``out`` holds each body frame's origin and orientation in the world
+        (:data:`.kernels.layout.OUTPUT`), as :meth:`.BodySet.outputs` makes them.
+        """
+        c, R = self.frames(out)
+        solids = self._solids
+        ms = len(solids)
+        lo, hi = np.empty((ms, 3)), np.empty((ms, 3))
+        for row, s in enumerate(solids):
+            bounds(int(self.kind[s]), c[s], R[s], self.size[s], self.margin, lo[row], hi[row])
+        while True:
+            k = sweep_and_prune(lo, hi, self.body[solids], self.group[solids],
+                                self.mask[solids], self.n_bodies, self.excluded, self._pairs)
+            if k <= len(self._pairs):
+                break
+            self._pairs = np.zeros((2 * k, 2), dtype=np.int64)
+        swept = solids[self._pairs[:k]]
+        on_planes = [(s, p) for p in self._planes for s in solids if self._meets(s, p)]
+        pairs = np.concatenate([swept.reshape(-1, 2),
+                                np.array(on_planes, dtype=np.int64).reshape(-1, 2)])
+        while True:
+            count = narrow_phase(pairs, self.kind, c, R, self.size, self.margin,
+                                 self._points, self._normals, self._depths, self._owner)
+            if count <= len(self._depths):
+                break
+            cap = 2 * count
+            self._points, self._normals = np.zeros((cap, 3)), np.zeros((cap, 3))
+            self._depths, self._owner = np.zeros(cap), np.zeros(cap, dtype=np.int64)
+        self.counters['detections'] += 1
+        self.counters['pairs_tested'] += len(pairs)
+        self.counters['contacts'] += count
+        which = pairs[self._owner[:count]] if count else np.zeros((0, 2), dtype=np.int64)
+        return Contacts(self.live[which[:, 0]], self.live[which[:, 1]], self.body[which[:, 0]],
+                        self.body[which[:, 1]], self._points[:count].copy(),
+                        self._normals[:count].copy(), self._depths[:count].copy())
