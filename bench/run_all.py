@@ -16,7 +16,8 @@ the reactions after a step; ``--skip-constraints`` skips these six),
 ``bench/mujoco_peer.py``, ``bench/robot_panda.py`` (the Franka Panda's URDF),
 ``bench/joint_limits.py`` (the Panda into its limits), ``bench/complementarity.py``
 (the rows' LCP), ``bench/drive_efforts.py`` (its
-exact drives bounded by their efforts; the Panda's URDF from the bench requirements) and
+exact drives bounded by their efforts; the Panda's URDF from the bench requirements),
+``bench/contact_detection.py`` (collision detection against the number of shapes) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
 latency; with the Panda, joint_states and /tf at 1 kHz; ``--skip-node``).
@@ -305,6 +306,12 @@ def sections(quick: bool, node_args: list) -> list:
             about='The box-LCP solvers on random problems by size and start, and the '
                   "pivots of the Panda's held rows by the LCP against the sequential rule "
                   'it replaced.')),
+        ('skip_mujoco', 'contact_detection', ['--quick'] if quick else [], report.Section(
+            'Collision detection: cost against shapes, beside MuJoCo',
+            f'./dev.sh python bench/contact_detection.py{q}', [T('contact_detection.md')],
+            about='A pile of spheres and boxes over a ground, N shapes: our detector '
+                  '(grid broad phase, narrow phases) against MuJoCo\'s kinematics and '
+                  'collision on the same bodies.')),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],

@@ -10,15 +10,15 @@ it). A plane's normal is its z axis; it is solid below.
 
 :class:`ContactDetector` finds, for the bodies' poses after a step, every pair of
 shapes within a margin of each other and their contacts (:mod:`.kernels.contact`:
-points, normals from shape ``b`` to shape ``a``, depths): a sweep-and-prune broad
-phase on the shapes' boxes (``O(m log m)`` for ``m`` shapes, plus the pairs it
-finds) and a narrow phase per pair. Pairs never tested: two shapes of one body,
-shapes whose filters exclude each other (``group`` and ``mask`` bits: a pair is
-tested when one's group meets the other's mask, MuJoCo's ``contype`` and
-``conaffinity``), shapes with ``collide: false``, and pairs of bodies the caller
-excludes (bodies joined by a joint, by default). A pair of kinds without a narrow
-phase (a cylinder on a box or on a cylinder) that could meet is refused when the
-detector is built, naming both shapes: never silently ignored.
+points, normals from shape ``b`` to shape ``a``, depths): a broad phase on the
+shapes' boxes (a hashed uniform grid: ``O(m)`` for ``m`` shapes of like sizes at a
+bounded density, plus the pairs it finds) and a narrow phase per pair. Pairs never
+tested: two shapes of one body, shapes whose filters exclude each other (``group``
+and ``mask`` bits: a pair is tested when one's group meets the other's mask,
+MuJoCo's ``contype`` and ``conaffinity``), shapes with ``collide: false``, and the
+pairs of bodies the caller excludes (bodies joined by a joint). A pair of kinds
+without a narrow phase (a cylinder on a box or on a cylinder) that could meet is
+refused when the detector is built, naming both shapes: never silently ignored.
 
 Contact forces are not here yet: this module is detection only (issue 21's rows
 build on it).
@@ -32,8 +32,8 @@ from typing import Any, NamedTuple, Optional, Sequence
 import numpy as np
 
 from .errors import SpecError
-from .kernels.contact import bounds, narrow_phase, Shape, shape_frames, supported, \
-    sweep_and_prune
+from .kernels.contact import all_bounds, broad_phase, narrow_phase, plane_pairs, Shape, \
+    shape_frames, supported
 from .rotation import quat_to_matrix
 from .validate import finite_array, finite_scalar, nonnegative_scalar, positive_scalar, \
     unit_quaternion
@@ -237,7 +237,12 @@ class ContactDetector:
         self._planes = np.flatnonzero(plane)
         self._solids = np.flatnonzero(~plane)
         self._check_pairs()
+        self._solid_body = self.body[self._solids]
+        self._solid_group = self.group[self._solids]
+        self._solid_mask = self.mask[self._solids]
         self._pairs = np.zeros((max(4 * m, 16), 2), dtype=np.int64)
+        self._plane_pairs = np.zeros((max(len(self._solids) * len(self._planes), 1), 2),
+                                     dtype=np.int64)
         cap = max(8 * m, 16)
         self._points, self._normals = np.zeros((cap, 3)), np.zeros((cap, 3))
         self._depths, self._owner = np.zeros(cap), np.zeros(cap, dtype=np.int64)
@@ -286,18 +291,21 @@ class ContactDetector:
         solids = self._solids
         ms = len(solids)
         lo, hi = np.empty((ms, 3)), np.empty((ms, 3))
-        for row, s in enumerate(solids):
-            bounds(int(self.kind[s]), c[s], R[s], self.size[s], self.margin, lo[row], hi[row])
+        all_bounds(self.kind, c, R, self.size, solids, self.margin, lo, hi)
         while True:
-            k = sweep_and_prune(lo, hi, self.body[solids], self.group[solids],
-                                self.mask[solids], self.n_bodies, self.excluded, self._pairs)
+            k = broad_phase(lo, hi, self._solid_body, self._solid_group, self._solid_mask,
+                            self.n_bodies, self.excluded, self._pairs)
             if k <= len(self._pairs):
                 break
             self._pairs = np.zeros((2 * k, 2), dtype=np.int64)
-        swept = solids[self._pairs[:k]]
-        on_planes = [(s, p) for p in self._planes for s in solids if self._meets(s, p)]
-        pairs = np.concatenate([swept.reshape(-1, 2),
-                                np.array(on_planes, dtype=np.int64).reshape(-1, 2)])
+        while True:
+            kp = plane_pairs(solids, self._planes, self.body, self.group, self.mask,
+                             self.n_bodies, self.excluded, self._plane_pairs)
+            if kp <= len(self._plane_pairs):
+                break
+            self._plane_pairs = np.zeros((2 * kp, 2), dtype=np.int64)
+        pairs = np.concatenate([solids[self._pairs[:k]].reshape(-1, 2),
+                                self._plane_pairs[:kp]])
         while True:
             count = narrow_phase(pairs, self.kind, c, R, self.size, self.margin,
                                  self._points, self._normals, self._depths, self._owner)

@@ -164,7 +164,7 @@ def segment_closest(p: np.ndarray, u: np.ndarray, q: np.ndarray, v: np.ndarray) 
 
 @njit(cache=True)
 def _nearest(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, x: np.ndarray,
-             y: np.ndarray, n: np.ndarray) -> float:
+             y: np.ndarray, n: np.ndarray, w: np.ndarray) -> float:
     """
     Signed distance from the point ``x`` to a box or a cylinder; its nearest surface point.
 
@@ -174,11 +174,13 @@ def _nearest(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, x: np.nd
     cylinder's radial and axial); inside, the nearest face (a box's six, a
     cylinder's mantle or caps): the least push that takes ``x`` out.
     """
-    xl = np.empty(3)
+    xl = w[0:3]
     for i in range(3):   # x in the shape's frame
         xl[i] = (R[0, i] * (x[0] - c[0]) + R[1, i] * (x[1] - c[1])
                  + R[2, i] * (x[2] - c[2]))
-    yl, nl = np.zeros(3), np.zeros(3)
+    yl, nl = w[3:6], w[6:9]
+    for i in range(3):
+        yl[i] = nl[i] = 0.0
     if kind == BOX:
         h = size
         outside = False
@@ -229,15 +231,15 @@ def _nearest(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, x: np.nd
 @njit(cache=True)
 def _ball_on(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, x: np.ndarray,
              r: float, flip: bool, margin: float, points: np.ndarray, normals: np.ndarray,
-             depths: np.ndarray, k: int) -> int:
+             depths: np.ndarray, k: int, w: np.ndarray) -> int:
     """
     Emit a ball (centre ``x``, radius ``r``) on a box or a cylinder: one contact, within margin.
 
     The normal is the solid's outward normal at its point nearest the centre (the
     nearest face's when the centre is inside). ``flip``: the solid is shape ``a``.
     """
-    y, n = np.empty(3), np.empty(3)
-    gap = _nearest(kind, c, R, size, x, y, n) - r
+    y, n = w[9:12], w[12:15]
+    gap = _nearest(kind, c, R, size, x, y, n, w) - r
     if gap > margin:
         return k
     s = -1.0 if flip else 1.0
@@ -248,18 +250,20 @@ def _ball_on(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, x: np.nd
 
 @njit(cache=True)
 def _axis_distance(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray,
-                   p0: np.ndarray, u: np.ndarray, s: float, x: np.ndarray) -> float:
+                   p0: np.ndarray, u: np.ndarray, s: float, x: np.ndarray,
+                   w: np.ndarray) -> float:
     """Signed distance to a box or a cylinder of the axis point ``x = p0 + s u`` (written)."""
-    y, n = np.empty(3), np.empty(3)
+    y, n = w[9:12], w[12:15]
     for i in range(3):
         x[i] = p0[i] + s * u[i]
-    return _nearest(kind, c, R, size, x, y, n)
+    return _nearest(kind, c, R, size, x, y, n, w)
 
 
 @njit(cache=True)
 def _capsule_on(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray,
                 cc: np.ndarray, Rc: np.ndarray, sc: np.ndarray, flip: bool, margin: float,
-                points: np.ndarray, normals: np.ndarray, depths: np.ndarray, k: int) -> int:
+                points: np.ndarray, normals: np.ndarray, depths: np.ndarray, k: int,
+                w: np.ndarray) -> int:
     """
     Emit a capsule on a box or a cylinder: its end balls and the ends of its deepest stretch.
 
@@ -277,42 +281,42 @@ def _capsule_on(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray,
     ``flip``: the solid is shape ``a``.
     """
     hl, r = sc[1], sc[0]
-    p0, u, x = np.empty(3), np.empty(3), np.empty(3)
+    p0, u, x = w[16:19], w[19:22], w[22:25]
     for i in range(3):
         u[i] = 2.0 * hl * Rc[i, 2]
         p0[i] = cc[i] - 0.5 * u[i]
     for e in (0.0, 1.0):
-        _axis_distance(kind, c, R, size, p0, u, e, x)
-        k = _ball_on(kind, c, R, size, x, r, flip, margin, points, normals, depths, k)
+        _axis_distance(kind, c, R, size, p0, u, e, x, w)
+        k = _ball_on(kind, c, R, size, x, r, flip, margin, points, normals, depths, k, w)
     if hl <= 0.0:
         return k
     inv = 0.5 * (math.sqrt(5.0) - 1.0)
     lo, hi = 0.0, 1.0
     s1, s2 = hi - inv * (hi - lo), lo + inv * (hi - lo)
-    f1 = _axis_distance(kind, c, R, size, p0, u, s1, x)
-    f2 = _axis_distance(kind, c, R, size, p0, u, s2, x)
+    f1 = _axis_distance(kind, c, R, size, p0, u, s1, x, w)
+    f2 = _axis_distance(kind, c, R, size, p0, u, s2, x, w)
     for _ in range(64):
         if f1 <= f2:
             hi, s2, f2 = s2, s1, f1
             s1 = hi - inv * (hi - lo)
-            f1 = _axis_distance(kind, c, R, size, p0, u, s1, x)
+            f1 = _axis_distance(kind, c, R, size, p0, u, s1, x, w)
         else:
             lo, s1, f1 = s1, s2, f2
             s2 = lo + inv * (hi - lo)
-            f2 = _axis_distance(kind, c, R, size, p0, u, s2, x)
+            f2 = _axis_distance(kind, c, R, size, p0, u, s2, x, w)
     best = 0.5 * (lo + hi)
-    least = _axis_distance(kind, c, R, size, p0, u, best, x)
+    least = _axis_distance(kind, c, R, size, p0, u, best, x, w)
     tol = 1e-12
-    found = np.empty(2)
+    found = w[25:27]
     for side in range(2):   # the interval's end towards s = 0, then towards s = 1
         end = 0.0 if side == 0 else 1.0
-        if _axis_distance(kind, c, R, size, p0, u, end, x) <= least + tol:
+        if _axis_distance(kind, c, R, size, p0, u, end, x, w) <= least + tol:
             found[side] = end
             continue
         inner, outer = best, end   # f(inner) within tol of the least, f(outer) beyond
         for _ in range(60):
             mid = 0.5 * (inner + outer)
-            if _axis_distance(kind, c, R, size, p0, u, mid, x) <= least + tol:
+            if _axis_distance(kind, c, R, size, p0, u, mid, x, w) <= least + tol:
                 inner = mid
             else:
                 outer = mid
@@ -323,39 +327,37 @@ def _capsule_on(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray,
         sv = found[side]
         if sv <= 0.0 or sv >= 1.0 or (side == 1 and found[1] == found[0]):
             continue   # an end (its ball is in already), or the same point twice
-        _axis_distance(kind, c, R, size, p0, u, sv, x)
-        k = _ball_on(kind, c, R, size, x, r, flip, margin, points, normals, depths, k)
+        _axis_distance(kind, c, R, size, p0, u, sv, x, w)
+        k = _ball_on(kind, c, R, size, x, r, flip, margin, points, normals, depths, k, w)
     return k
 
 
 @njit(cache=True)
-def _reduce(cand: np.ndarray, m: int) -> int:
+def _reduce(cand: np.ndarray, m: int, tmp: np.ndarray) -> int:
     """
     Keep at most :data:`MANIFOLD` of ``cand[:m]`` (x, y, z, gap), moved to the first rows.
 
     The deepest, the one farthest from it, and the two farthest on either side of the
-    line through those (the manifold that spans the most); returns how many.
+    line through those (the manifold that spans the most); returns how many. ``tmp``
+    (4, 4): scratch.
     """
     if m <= MANIFOLD:
         return m
-    keep = np.full(MANIFOLD, -1)
     best = 0
     for i in range(1, m):
         if cand[i, 3] < cand[best, 3]:
             best = i
-    keep[0] = best
     far, fd = -1, -1.0
     for i in range(m):
         d = ((cand[i, 0] - cand[best, 0]) ** 2 + (cand[i, 1] - cand[best, 1]) ** 2
              + (cand[i, 2] - cand[best, 2]) ** 2)
         if i != best and d > fd:
             far, fd = i, d
-    keep[1] = far
     # The sides of the line p0 p1: the signed area with p0, p1 along the normal of the
     # best plane through the points (the cross product of the line and the farthest).
     e0, e1, e2 = (cand[far, 0] - cand[best, 0], cand[far, 1] - cand[best, 1],
                   cand[far, 2] - cand[best, 2])
-    nrm = np.zeros(3)
+    n0 = n1 = n2 = 0.0
     big = -1.0
     for i in range(m):
         f0, f1, f2 = (cand[i, 0] - cand[best, 0], cand[i, 1] - cand[best, 1],
@@ -364,38 +366,40 @@ def _reduce(cand: np.ndarray, m: int) -> int:
         a = c0 * c0 + c1 * c1 + c2 * c2
         if a > big:
             big = a
-            nrm[0], nrm[1], nrm[2] = c0, c1, c2
+            n0, n1, n2 = c0, c1, c2
     lo_i, hi_i, lo_a, hi_a = -1, -1, 0.0, 0.0
     for i in range(m):
         if i == best or i == far:
             continue
         f0, f1, f2 = (cand[i, 0] - cand[best, 0], cand[i, 1] - cand[best, 1],
                       cand[i, 2] - cand[best, 2])
-        a = (nrm[0] * (e1 * f2 - e2 * f1) + nrm[1] * (e2 * f0 - e0 * f2)
-             + nrm[2] * (e0 * f1 - e1 * f0))
+        a = (n0 * (e1 * f2 - e2 * f1) + n1 * (e2 * f0 - e0 * f2)
+             + n2 * (e0 * f1 - e1 * f0))
         if a > hi_a or hi_i < 0:
             hi_i, hi_a = i, a
         if a < lo_a or lo_i < 0:
             lo_i, lo_a = i, a
-    w = 2
-    for i in (hi_i, lo_i):
-        if i >= 0 and (w == 2 or i != keep[2]):
-            keep[w] = i
-            w += 1
-    out = np.empty((w, 4))
-    for j in range(w):
+    kept = 2
+    for col in range(4):
+        tmp[0, col], tmp[1, col] = cand[best, col], cand[far, col]
+    if hi_i >= 0:
         for col in range(4):
-            out[j, col] = cand[keep[j], col]
-    for j in range(w):
+            tmp[kept, col] = cand[hi_i, col]
+        kept += 1
+    if lo_i >= 0 and lo_i != hi_i:
         for col in range(4):
-            cand[j, col] = out[j, col]
-    return w
+            tmp[kept, col] = cand[lo_i, col]
+        kept += 1
+    for j in range(kept):
+        for col in range(4):
+            cand[j, col] = tmp[j, col]
+    return kept
 
 
 @njit(cache=True)
 def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
              Rb: np.ndarray, hb: np.ndarray, margin: float, points: np.ndarray,
-             normals: np.ndarray, depths: np.ndarray, k: int) -> int:
+             normals: np.ndarray, depths: np.ndarray, k: int, w: np.ndarray) -> int:
     """
     Emit box on box: the separating axis test (15 axes), then the manifold.
 
@@ -407,18 +411,13 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
     :data:`MANIFOLD` (:func:`_reduce`). An edge pair: the closest points of the two
     edges, one contact.
     """
-    t = np.empty(3)
+    t = w[64:67]
     for i in range(3):
         t[i] = ca[i] - cb[i]   # from b to a
-    # |A_i · B_j| and A_i · B_j.
-    C = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            C[i, j] = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
     size = max(ha[0], ha[1], ha[2], hb[0], hb[1], hb[2])
-    best_face, face_sep, face_axis = -1, -math.inf, np.zeros(3)
-    best_edge, edge_sep, edge_axis = -1, -math.inf, np.zeros(3)
-    L = np.empty(3)
+    best_face, face_sep, face_axis = -1, -math.inf, w[67:70]
+    best_edge, edge_sep, edge_axis = -1, -math.inf, w[70:73]
+    L = w[73:76]
     for ax in range(15):
         if ax < 3:
             for r in range(3):
@@ -459,7 +458,7 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
         # Edge on edge: the edge of a most against b, of b most against a.
         i, j = (best_edge - 6) // 3, (best_edge - 6) % 3
         n = edge_axis
-        pa, pb = np.empty(3), np.empty(3)
+        pa, pb = w[76:79], w[79:82]
         for r in range(3):
             pa[r], pb[r] = ca[r], cb[r]
         for q in range(3):
@@ -473,14 +472,14 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
                     else -1.0
                 for r in range(3):
                     pb[r] += sb * hb[q] * Rb[r, q]
-        u, v = np.empty(3), np.empty(3)
+        u, v = w[82:85], w[85:88]
         for r in range(3):
             u[r] = 2.0 * ha[i] * Ra[r, i]
             v[r] = 2.0 * hb[j] * Rb[r, j]
             pa[r] -= 0.5 * u[r]
             pb[r] -= 0.5 * v[r]
         s, tt = segment_closest(pa, u, pb, v)
-        x, y = np.empty(3), np.empty(3)
+        x, y = w[88:91], w[91:94]
         for r in range(3):
             x[r] = pa[r] + s * u[r]
             y[r] = pb[r] + tt * v[r]
@@ -497,12 +496,12 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
     else:
         cr, Rr, hr, ci, Ri, hi = cb, Rb, hb, ca, Ra, ha
         fa, m_sign = best_face - 3, 1.0
-    m = np.empty(3)
+    m = w[94:97]
     for r in range(3):
         m[r] = m_sign * n[r]
     # The reference face: its centre, its two in-plane axes and half widths.
     sr = 1.0 if (Rr[0, fa] * m[0] + Rr[1, fa] * m[1] + Rr[2, fa] * m[2]) > 0.0 else -1.0
-    fc = np.empty(3)
+    fc = w[97:100]
     for r in range(3):
         fc[r] = cr[r] + sr * hr[fa] * Rr[r, fa]
     a1, a2 = (fa + 1) % 3, (fa + 2) % 3
@@ -514,7 +513,7 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
             if sd * d < most:
                 fi, si, most = q, sd, sd * d
     b1, b2 = (fi + 1) % 3, (fi + 2) % 3
-    poly = np.empty((16, 3))
+    poly = w[112:160].reshape((16, 3))
     npoly = 0
     for c1, c2 in ((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)):
         for r in range(3):
@@ -522,44 +521,44 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
                               + c2 * hi[b2] * Ri[r, b2])
         npoly += 1
     # Clip by the reference face's four sides: e · (p − fc) ≤ h_e for e = ±a1, ±a2.
-    clipped = np.empty((16, 3))
+    clipped = w[160:208].reshape((16, 3))
     for side in range(4):
         ax = a1 if side < 2 else a2
         sg = 1.0 if side % 2 == 0 else -1.0
         lim = hr[ax]
         nc = 0
-        for v in range(npoly):
-            w = (v + 1) % npoly
-            dv = sg * (Rr[0, ax] * (poly[v, 0] - fc[0]) + Rr[1, ax] * (poly[v, 1] - fc[1])
-                       + Rr[2, ax] * (poly[v, 2] - fc[2])) - lim
-            dw = sg * (Rr[0, ax] * (poly[w, 0] - fc[0]) + Rr[1, ax] * (poly[w, 1] - fc[1])
-                       + Rr[2, ax] * (poly[w, 2] - fc[2])) - lim
+        for p0 in range(npoly):
+            p1 = (p0 + 1) % npoly
+            dv = sg * (Rr[0, ax] * (poly[p0, 0] - fc[0]) + Rr[1, ax] * (poly[p0, 1] - fc[1])
+                       + Rr[2, ax] * (poly[p0, 2] - fc[2])) - lim
+            dw = sg * (Rr[0, ax] * (poly[p1, 0] - fc[0]) + Rr[1, ax] * (poly[p1, 1] - fc[1])
+                       + Rr[2, ax] * (poly[p1, 2] - fc[2])) - lim
             if dv <= 0.0:
                 for r in range(3):
-                    clipped[nc, r] = poly[v, r]
+                    clipped[nc, r] = poly[p0, r]
                 nc += 1
             if (dv < 0.0 < dw) or (dw < 0.0 < dv):
                 f = dv / (dv - dw)
                 for r in range(3):
-                    clipped[nc, r] = poly[v, r] + f * (poly[w, r] - poly[v, r])
+                    clipped[nc, r] = poly[p0, r] + f * (poly[p1, r] - poly[p0, r])
                 nc += 1
         npoly = nc
-        for v in range(nc):
+        for p0 in range(nc):
             for r in range(3):
-                poly[v, r] = clipped[v, r]
+                poly[p0, r] = clipped[p0, r]
         if npoly == 0:
             return k
-    cand = np.empty((16, 4))
+    cand = w[208:272].reshape((16, 4))
     nk = 0
-    for v in range(npoly):
-        gap = (m[0] * (poly[v, 0] - fc[0]) + m[1] * (poly[v, 1] - fc[1])
-               + m[2] * (poly[v, 2] - fc[2]))
+    for p0 in range(npoly):
+        gap = (m[0] * (poly[p0, 0] - fc[0]) + m[1] * (poly[p0, 1] - fc[1])
+               + m[2] * (poly[p0, 2] - fc[2]))
         if gap <= margin:
             for r in range(3):
-                cand[nk, r] = poly[v, r] - 0.5 * gap * m[r]   # midway to the reference face
+                cand[nk, r] = poly[p0, r] - 0.5 * gap * m[r]   # midway to the reference face
             cand[nk, 3] = gap
             nk += 1
-    nk = _reduce(cand, nk)
+    nk = _reduce(cand, nk, w[28:44].reshape((4, 4)))
     for v in range(nk):
         k = _emit(points, normals, depths, k, cand[v, 0], cand[v, 1], cand[v, 2],
                   n[0], n[1], n[2], -cand[v, 3])
@@ -619,12 +618,12 @@ def _surface_candidates(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarra
 @njit(cache=True)
 def _on_plane(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, cp: np.ndarray,
               Rp: np.ndarray, flip: bool, margin: float, points: np.ndarray,
-              normals: np.ndarray, depths: np.ndarray, k: int) -> int:
+              normals: np.ndarray, depths: np.ndarray, k: int, w: np.ndarray) -> int:
     """Emit a shape's contacts with the plane through ``cp`` of normal ``Rp[:, 2]``."""
-    n = np.empty(3)
+    n = w[280:283]
     for i in range(3):
         n[i] = Rp[i, 2]
-    cand = np.empty((8, 4))
+    cand = w[288:320].reshape((8, 4))
     m = _surface_candidates(kind, c, R, size, n, cand)
     return _points_on_plane(cand, m, cp, n, flip, margin, points, normals, depths, k)
 
@@ -632,20 +631,20 @@ def _on_plane(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, cp: np.
 @njit(cache=True)
 def _capsule_capsule(ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, cb: np.ndarray,
                      Rb: np.ndarray, sb: np.ndarray, margin: float, points: np.ndarray,
-                     normals: np.ndarray, depths: np.ndarray, k: int) -> int:
+                     normals: np.ndarray, depths: np.ndarray, k: int, w: np.ndarray) -> int:
     """
     Emit capsule on capsule (a sphere: a capsule of length 0): the axes' closest points.
 
     Two segments side by side (parallel within :data:`PARALLEL`) touch along a line:
     the two ends of their overlap, each as two spheres, make the manifold.
     """
-    p, u, q, v = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    p, u, q, v = w[320:323], w[323:326], w[326:329], w[329:332]
     for i in range(3):
         u[i] = 2.0 * sa[1] * Ra[i, 2]
         v[i] = 2.0 * sb[1] * Rb[i, 2]
         p[i] = ca[i] - 0.5 * u[i]
         q[i] = cb[i] - 0.5 * v[i]
-    x, y = np.empty(3), np.empty(3)
+    x, y = w[332:335], w[335:338]
     lu = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
     lv = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     if lu > 0.0 and lv > 0.0:
@@ -687,33 +686,51 @@ def collide(kind_a: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kind_b:
     Returns the new count, or −1 for a pair without a narrow phase here (the caller
     refuses such a pair when the scene is built: :func:`supported`).
     """
+    return _collide(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, margin, points, normals, depths,
+                    k, np.empty(SCRATCH))
+
+
+#: Floats of scratch a narrow phase uses (its small vectors and polygons: views into one
+#: buffer, allocated once a batch, not once a pair).
+SCRATCH = 352
+
+
+@njit(cache=True)
+def _collide(kind_a: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kind_b: int,
+             cb: np.ndarray, Rb: np.ndarray, sb: np.ndarray, margin: float,
+             points: np.ndarray, normals: np.ndarray, depths: np.ndarray, k: int,
+             w: np.ndarray) -> int:
+    """:func:`collide` with the scratch ``w`` (:data:`SCRATCH`,) given."""
     if not supported(kind_a, kind_b):
         return -1
     if kind_b == PLANE:
-        return _on_plane(kind_a, ca, Ra, sa, cb, Rb, False, margin, points, normals, depths, k)
+        return _on_plane(kind_a, ca, Ra, sa, cb, Rb, False, margin, points, normals, depths, k,
+                         w)
     if kind_a == PLANE:
-        return _on_plane(kind_b, cb, Rb, sb, ca, Ra, True, margin, points, normals, depths, k)
+        return _on_plane(kind_b, cb, Rb, sb, ca, Ra, True, margin, points, normals, depths, k,
+                         w)
     round_a = kind_a == SPHERE or kind_a == CAPSULE
     round_b = kind_b == SPHERE or kind_b == CAPSULE
     if round_a and round_b:
-        za, zb = np.zeros(3), np.zeros(3)
-        za[0], zb[0] = sa[0], sb[0]
+        za, zb = w[340:343], w[343:346]   # a sphere: a capsule of length 0
+        za[0], za[1], za[2] = sa[0], 0.0, 0.0
+        zb[0], zb[1], zb[2] = sb[0], 0.0, 0.0
         return _capsule_capsule(ca, Ra, sa if kind_a == CAPSULE else za, cb, Rb,
                                 sb if kind_b == CAPSULE else zb, margin, points, normals,
-                                depths, k)
+                                depths, k, w)
     if kind_a == SPHERE:
         return _ball_on(kind_b, cb, Rb, sb, ca, sa[0], False, margin, points, normals,
-                        depths, k)
+                        depths, k, w)
     if kind_b == SPHERE:
         return _ball_on(kind_a, ca, Ra, sa, cb, sb[0], True, margin, points, normals,
-                        depths, k)
+                        depths, k, w)
     if kind_a == CAPSULE:
         return _capsule_on(kind_b, cb, Rb, sb, ca, Ra, sa, False, margin, points, normals,
-                           depths, k)
+                           depths, k, w)
     if kind_b == CAPSULE:
         return _capsule_on(kind_a, ca, Ra, sa, cb, Rb, sb, True, margin, points, normals,
-                           depths, k)
-    return _box_box(ca, Ra, sa, cb, Rb, sb, margin, points, normals, depths, k)
+                           depths, k, w)
+    return _box_box(ca, Ra, sa, cb, Rb, sb, margin, points, normals, depths, k, w)
 
 
 @njit(cache=True)
@@ -760,56 +777,154 @@ def bounds(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, margin: fl
 
 
 @njit(cache=True)
-def sweep_and_prune(lo: np.ndarray, hi: np.ndarray, body: np.ndarray, group: np.ndarray,
-                    mask: np.ndarray, n_bodies: int, excluded: np.ndarray,
-                    pairs: np.ndarray) -> int:
-    """
-    Find the pairs of shapes whose boxes ``lo``, ``hi`` (m, 3) overlap: sweep and prune.
+def _candidate(i: int, j: int, lo: np.ndarray, hi: np.ndarray, body: np.ndarray,
+               group: np.ndarray, mask: np.ndarray, nb: int, excluded: np.ndarray) -> bool:
+    """Tell whether shapes i and j overlap in their boxes and their filters let them meet."""
+    for r in range(3):
+        if lo[j, r] > hi[i, r] or lo[i, r] > hi[j, r]:
+            return False
+    if body[i] == body[j]:
+        return False
+    if (group[i] & mask[j]) == 0 and (group[j] & mask[i]) == 0:
+        return False
+    if excluded.shape[0] == 0:
+        return True
+    code = min(body[i], body[j]) * nb + max(body[i], body[j])
+    e = np.searchsorted(excluded, code)
+    return not (e < excluded.shape[0] and excluded[e] == code)
 
-    Along the world axis where the boxes' centres spread most, the shapes sorted by
-    their boxes' lower ends (``O(m log m)``); each is paired with those that start
-    before it ends, and a pair whose boxes overlap on the other two axes too is kept
-    unless: both shapes are on one body, neither's ``group`` bits meet the other's
-    ``mask``, or their bodies' pair ``min (n + 1) + max`` (``n`` = ``n_bodies``, the
-    world being body ``n``) is in the sorted array ``excluded`` (bodies joined
-    by a joint, pairs switched off). Planes (infinite boxes) are not swept: the
-    caller pairs them with every shape. Writes ``pairs`` (cap, 2) (i < j) and returns
-    the count, which may pass ``cap`` (then the caller grows ``pairs`` and runs again).
+
+#: Most grid cells a shape's box may cover; a bigger shape is tested against every other.
+BIG_CELLS = 64
+
+
+@njit(cache=True)
+def broad_phase(lo: np.ndarray, hi: np.ndarray, body: np.ndarray, group: np.ndarray,
+                mask: np.ndarray, n_bodies: int, excluded: np.ndarray,
+                pairs: np.ndarray) -> int:
+    """
+    Find the pairs of shapes whose boxes ``lo``, ``hi`` (m, 3) overlap: a sorted uniform grid.
+
+    The cells are cubes of twice the median box's largest side. Each shape is listed in
+    every cell its box covers (at most :data:`BIG_CELLS`; a bigger one is set apart
+    and tested against every shape), hashed by cell and sorted by hash (a counting
+    sort, ``O(1)`` an entry), and the shapes of each cell paired; a pair is kept in the one cell
+    that holds the lower corner of the two boxes' overlap (never twice), when the
+    boxes overlap and the filters let it: not one body, one's ``group`` bits meeting the other's
+    ``mask``, the bodies' pair ``min (n + 1) + max`` (``n`` = ``n_bodies``, the
+    world body ``n``) not in the sorted array ``excluded`` (bodies joined by a
+    joint, pairs switched off). For shapes of like sizes at a bounded density (a
+    pile) each cell holds a bounded number, so the cost is ``O(m)`` (the median's
+    ``O(m log m)`` at most). Planes
+    (unbounded) are not here: the caller pairs them with every shape. Writes
+    ``pairs`` (cap, 2) (i < j) and returns the count, which may pass ``cap`` (then
+    the caller grows ``pairs`` and runs again).
     """
     m = lo.shape[0]
     if m < 2:
         return 0
-    axis, spread = 0, -1.0
-    for i in range(3):
-        mean, sq = 0.0, 0.0
-        for s in range(m):
-            x = 0.5 * (lo[s, i] + hi[s, i])
-            mean += x
-            sq += x * x
-        var = sq / m - (mean / m) ** 2
-        if var > spread:
-            axis, spread = i, var
-    order = np.argsort(lo[:, axis], kind='mergesort')
     nb = n_bodies + 1
+    ext = np.empty(m)
+    origin = np.full(3, np.inf)
+    for s in range(m):
+        e = 0.0
+        for r in range(3):
+            e = max(e, hi[s, r] - lo[s, r])
+            origin[r] = min(origin[r], lo[s, r])
+        ext[s] = e
+    h = 2.0 * np.median(ext)
+    if not h > 0.0:
+        h = 1.0
+    # Each shape's cell range; shapes covering too many cells are set apart.
+    cells = np.empty((m, 6), dtype=np.int64)
+    big = np.zeros(m, dtype=np.bool_)
+    total = 0
+    for s in range(m):
+        count = 1
+        for r in range(3):
+            c0 = int(math.floor((lo[s, r] - origin[r]) / h))
+            c1 = int(math.floor((hi[s, r] - origin[r]) / h))
+            cells[s, r], cells[s, 3 + r] = c0, c1
+            count *= c1 - c0 + 1
+        if count > BIG_CELLS or count < 1:
+            big[s] = True
+        else:
+            total += count
+    # Each entry (shape, cell) hashed to a bucket, then the entries sorted by bucket
+    # (counting sort: O(entries + buckets)) with their boxes copied alongside, so that
+    # each bucket's entries, and the data its pairs read, lie together in memory.
+    size = 1
+    while size < 2 * total:
+        size *= 2
+    bucket_of = np.empty(total, dtype=np.int64)
+    start = np.zeros(size + 1, dtype=np.int64)
+    w = 0
+    for s in range(m):
+        if big[s]:
+            continue
+        for x in range(cells[s, 0], cells[s, 3] + 1):
+            for y in range(cells[s, 1], cells[s, 4] + 1):
+                for z in range(cells[s, 2], cells[s, 5] + 1):
+                    bk = ((x * 73856093) ^ (y * 19349663) ^ (z * 83492791)) & (size - 1)
+                    bucket_of[w] = bk
+                    start[bk + 1] += 1
+                    w += 1
+    for bk in range(size):
+        start[bk + 1] += start[bk]
+    fill = start[:size].copy()
+    owner = np.empty(total, dtype=np.int64)
+    where = np.empty((total, 6), dtype=np.int64)   # each entry's cell, its shape's first
+    box = np.empty((total, 6))                     # each entry's shape's box
+    w = 0
+    for s in range(m):
+        if big[s]:
+            continue
+        for x in range(cells[s, 0], cells[s, 3] + 1):
+            for y in range(cells[s, 1], cells[s, 4] + 1):
+                for z in range(cells[s, 2], cells[s, 5] + 1):
+                    pos = fill[bucket_of[w]]
+                    fill[bucket_of[w]] = pos + 1
+                    owner[pos] = s
+                    where[pos, 0], where[pos, 1], where[pos, 2] = x, y, z
+                    for r in range(3):
+                        where[pos, 3 + r] = cells[s, r]
+                        box[pos, r], box[pos, 3 + r] = lo[s, r], hi[s, r]
+                    w += 1
     count = 0
-    for x in range(m):
-        i = order[x]
-        for y in range(x + 1, m):
-            j = order[y]
-            if lo[j, axis] > hi[i, axis]:
-                break
-            o1, o2 = (axis + 1) % 3, (axis + 2) % 3
-            if lo[j, o1] > hi[i, o1] or lo[i, o1] > hi[j, o1] \
-                    or lo[j, o2] > hi[i, o2] or lo[i, o2] > hi[j, o2]:
+    for bk in range(size):
+        for u in range(start[bk], start[bk + 1]):
+            for v in range(u + 1, start[bk + 1]):
+                if where[u, 0] != where[v, 0] or where[u, 1] != where[v, 1] \
+                        or where[u, 2] != where[v, 2]:
+                    continue   # another cell in the same bucket
+                # The overlap's lower corner lies in the cell of the two shapes' larger
+                # first cells (floor is monotonic): keep the pair in that cell only
+                # (both boxes cover it, and a shape has one entry in a cell).
+                if max(where[u, 3], where[v, 3]) != where[u, 0] \
+                        or max(where[u, 4], where[v, 4]) != where[u, 1] \
+                        or max(where[u, 5], where[v, 5]) != where[u, 2]:
+                    continue
+                apart = False
+                for r in range(3):
+                    if box[v, r] > box[u, 3 + r] or box[u, r] > box[v, 3 + r]:
+                        apart = True
+                if apart:
+                    continue
+                i, j = owner[u], owner[v]
+                if not _candidate(i, j, lo, hi, body, group, mask, nb, excluded):
+                    continue
+                if count < pairs.shape[0]:
+                    pairs[count, 0], pairs[count, 1] = min(i, j), max(i, j)
+                count += 1
+    # The big shapes, against every other: a big and a listed one from the big one's
+    # side, two big ones once (the first with the second).
+    for i in range(m):
+        if not big[i]:
+            continue
+        for j in range(m):
+            if j == i or (big[j] and j < i):
                 continue
-            if body[i] == body[j]:
-                continue
-            if (group[i] & mask[j]) == 0 and (group[j] & mask[i]) == 0:
-                continue
-            ba, bb = min(body[i], body[j]), max(body[i], body[j])
-            code = ba * nb + bb
-            e = np.searchsorted(excluded, code)
-            if e < excluded.shape[0] and excluded[e] == code:
+            if not _candidate(i, j, lo, hi, body, group, mask, nb, excluded):
                 continue
             if count < pairs.shape[0]:
                 pairs[count, 0], pairs[count, 1] = min(i, j), max(i, j)
@@ -857,14 +972,55 @@ def narrow_phase(pairs: np.ndarray, kind: np.ndarray, c: np.ndarray, R: np.ndarr
     count, which may pass the buffers' room (then grow them and run again).
     """
     k = 0
+    w = np.empty(SCRATCH)
     for q in range(pairs.shape[0]):
         a, b = pairs[q, 0], pairs[q, 1]
         start = k
-        k = collide(kind[a], c[a], R[a], size[a], kind[b], c[b], R[b], size[b], margin,
-                    points, normals, depths, k)
+        k = _collide(kind[a], c[a], R[a], size[a], kind[b], c[b], R[b], size[b], margin,
+                     points, normals, depths, k, w)
         if k < 0:   # no narrow phase (the detector refuses such pairs when it is built)
             k = start
             continue
         for j in range(start, min(k, owner.shape[0])):
             owner[j] = q
     return k
+
+
+@njit(cache=True)
+def all_bounds(kind: np.ndarray, c: np.ndarray, R: np.ndarray, size: np.ndarray,
+               rows: np.ndarray, margin: float, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Write :func:`bounds` of the shapes ``rows`` into ``lo``, ``hi`` (len(rows), 3)."""
+    for j in range(rows.shape[0]):
+        s = rows[j]
+        bounds(kind[s], c[s], R[s], size[s], margin, lo[j], hi[j])
+
+
+@njit(cache=True)
+def plane_pairs(solids: np.ndarray, planes: np.ndarray, body: np.ndarray, group: np.ndarray,
+                mask: np.ndarray, n_bodies: int, excluded: np.ndarray,
+                pairs: np.ndarray) -> int:
+    """
+    Write the pairs (shape, plane) that the filters let meet, as :func:`broad_phase` does.
+
+    Every shape is tested against every plane (a plane's box is the whole space); the
+    same rules: not one body, one's group in the other's mask, the bodies' pair not
+    in ``excluded``. Returns the count (may pass the room of ``pairs``).
+    """
+    nb = n_bodies + 1
+    count = 0
+    for p in range(planes.shape[0]):
+        j = planes[p]
+        for q in range(solids.shape[0]):
+            i = solids[q]
+            if body[i] == body[j]:
+                continue
+            if (group[i] & mask[j]) == 0 and (group[j] & mask[i]) == 0:
+                continue
+            code = min(body[i], body[j]) * nb + max(body[i], body[j])
+            e = np.searchsorted(excluded, code)
+            if e < excluded.shape[0] and excluded[e] == code:
+                continue
+            if count < pairs.shape[0]:
+                pairs[count, 0], pairs[count, 1] = i, j
+            count += 1
+    return count
