@@ -310,7 +310,7 @@ def sections(quick: bool, node_args: list) -> list:
             'Collision detection: cost against shapes, beside MuJoCo',
             f'./dev.sh python bench/contact_detection.py{q}', [T('contact_detection.md')],
             about='A pile of spheres and boxes over a ground, N shapes: our detector '
-                  '(grid broad phase, narrow phases) against MuJoCo\'s kinematics and '
+                  "(grid broad phase, narrow phases) against MuJoCo's kinematics and "
                   'collision on the same bodies.')),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',

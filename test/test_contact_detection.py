@@ -131,7 +131,8 @@ def test_the_buffers_grow_when_a_crowd_overlaps():
     ({'kind': 'box', 'size': (1, 0, 1)}, 'size', 'must be positive'),
     ({'kind': 'box', 'size': (1, 1)}, 'size', 'expected shape'),
     ({'kind': 'capsule', 'radius': 0.1}, 'length', 'needs its length'),
-    ({'kind': 'plane', 'body': 'a'}, 'kind', "a plane is the world's"),
+    ({'kind': 'plane', 'body': 'a'}, 'body', "a plane is the world's"),
+    ({'kind': ['sphere'], 'radius': 1.0}, 'kind', 'unknown shape'),
     ({'kind': 'sphere', 'radius': 1.0, 'friction': -0.1}, 'friction', 'non-negative'),
     ({'kind': 'sphere', 'radius': 1.0, 'restitution': 1.5}, 'restitution', r'in \[0, 1\]'),
     ({'kind': 'sphere', 'radius': 1.0, 'collide': 'yes'}, 'collide', 'true or false'),
@@ -147,6 +148,9 @@ def test_a_bad_shape_is_refused_naming_the_field(spec, field, message):
 def test_a_detector_refuses_unknown_bodies_twice_named_shapes_and_pairs_it_cannot_test():
     with pytest.raises(SpecError, match=r"shapes\[0\]\.body: unknown body 'x'"):
         ContactDetector([CollisionShape('sphere', 'x', radius=1.0)], ['a'])
+    with pytest.raises(SpecError, match=r'excluded\[0\]: expected a pair of body names'):
+        ContactDetector([CollisionShape('sphere', 'a', radius=1.0)], ['a'],
+                        excluded=[('a', 'x')])
     with pytest.raises(SpecError, match=r"shape names used twice: \['a/sphere'\]"):
         ContactDetector([CollisionShape('sphere', 'a', radius=1.0)] * 2, ['a'])
     cyl = CollisionShape('cylinder', 'a', radius=0.1, length=0.2)

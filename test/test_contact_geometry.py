@@ -310,6 +310,39 @@ def test_a_capsule_lying_on_a_box_touches_at_both_ends():
     np.testing.assert_allclose(np.sort(p[:, 0]), [0.1 - 0.3, 0.1 + 0.3], atol=TOL)
 
 
+@pytest.mark.parametrize('kind', [BOX, CYLINDER])
+@pytest.mark.parametrize('tilt', [0.0, np.pi / 3])
+def test_a_capsule_standing_or_tilted_on_its_end_touches_once(kind, tilt):
+    # Its deepest point is its lower end: one contact (the end ball), not that and the
+    # end of its deepest stretch again.
+    solid = (kind, np.zeros(3), np.eye(3), np.array([1.0, 1.0, 0.1]) if kind == BOX
+             else np.array([1.0, 0.1, 0.0]))
+    R = rotation((tilt, 0.0, 0.0))
+    low = -0.3 * R[:, 2]                       # the lower end of the axis, from the centre
+    cap = capsule(np.array([0.0, 0.0, 0.1 + 0.05 - 1e-4]) - low, R)
+    p, n, d = check_swapped(cap, solid)
+    assert len(d) == 1
+    np.testing.assert_allclose(d, [1e-4], atol=TOL)
+
+
+@pytest.mark.parametrize('hl', [0.01, 0.05, 0.3])
+def test_a_short_capsule_across_an_edge_or_a_lying_cylinder_touches_once(hl):
+    # A strict minimum of the distance along the axis: one contact, however short the
+    # capsule (the tolerance's width is a length, not a fraction of the axis).
+    out = np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)
+    box = (BOX, np.zeros(3), np.eye(3), np.array([1.0, 1.0, 0.1]))
+    cap = capsule(np.array([1.0, 0.3, 0.1]) + (0.05 - 2e-4) * out,
+                  rotation((0, -np.pi / 4, 0)), hl=hl)
+    assert len(check_swapped(cap, box)[2]) == 1
+    # Across a lying cylinder of radius 0.5 m, 1e-6 m deep: its ends stay clear (they
+    # are higher by hl²/(2 (0.5 + r)), 9e-5 m at the shortest).
+    lying = (CYLINDER, np.zeros(3), rotation((np.pi / 2, 0.0, 0.0)), np.array([0.5, 1.0, 0.0]))
+    across = capsule((0.0, 0.0, 0.55 - 1e-6), rotation((0.0, np.pi / 2, 0.0)), hl=hl)
+    p, n, d = check_swapped(across, lying)
+    assert len(d) == 1
+    np.testing.assert_allclose(d, [1e-6], atol=1e-11)
+
+
 def test_a_capsule_over_a_boxs_edge_touches_at_its_end_and_over_the_edge():
     box = (BOX, np.zeros(3), np.eye(3), np.array([1.0, 1.0, 0.1]))
     lying = rotation((0.0, np.pi / 2, 0.0))   # axis along x, from x = 0.9 to 1.5
@@ -361,9 +394,10 @@ def test_a_capsules_depth_on_a_solid_matches_the_deepest_point_of_its_axis(kind)
         found += 1
         # bound: the reference's distances by L-BFGS-B to 1e-7; ours to 1e-12.
         assert abs(np.max(d) - (0.08 - deepest)) <= 1e-6
-        # Each contact: moving the capsule along its normal by its depth, that contact
-        # is gone (the capsule's axis then clears the solid by r there).
-        assert np.all(d <= np.max(d) + TOL) and np.allclose(np.linalg.norm(n, axis=1), 1.0)
+        np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=TOL)
+        # No contact twice: the points of a manifold lie apart.
+        gaps = [np.linalg.norm(p[i] - p[j]) for i in range(len(p)) for j in range(i)]
+        assert min(gaps, default=1.0) > 1e-4
     assert found > 5
 
 

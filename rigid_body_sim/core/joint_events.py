@@ -138,9 +138,9 @@ class JointEvents:
         """
         Tell whether only the bounds need watching: no row held, no friction, no drive limit.
 
-        Then a step that ends with every coordinate within its widened bounds
-        (:attr:`.JointLimits.window`, checked in the kernel that reads the
-        coordinates: :meth:`.JointSpace.advance`) has no event and stands as it is;
+        Then a step that ends with every coordinate within its widened bounds (the
+        joint table's window, :meth:`.JointLimits._watch`, checked in the kernel that
+        reads the coordinates: :meth:`.JointSpace.advance`) has no event and stands;
         :meth:`step` is needed only for one that does not. The tolerances are set
         first (:meth:`tighten`), as :meth:`step` sets them.
         """
@@ -167,10 +167,13 @@ class JointEvents:
             if h <= 4.0 * EPS * abs(t_end):   # an event at the step's end
                 self._charge(t_end - start.time)
                 return State(t_end, *state.parts), None
+            # From the step's start, the step is dt, as the plain step (and the fast path of
+            # :meth:`quiet`) takes it: t_end − t may differ from dt in its last bits.
+            step = sim.dt if state is start else h
             if first is not None:
                 new, first = first, None
             else:
-                new = sim._advance(state, h, t_end)
+                new = sim._advance(state, step, t_end)
             q, rates, over = self.coordinates(new, previous)
             crossed = _NONE if lim is None else lim.crossed(q)
             stopped = _NONE if fr is None else fr.stopped(rates)
@@ -201,7 +204,7 @@ class JointEvents:
             if lim is not None:
                 lim.counters.located_steps += 1
             which = (crossed, stopped, reached, releasing, returned)
-            state, previous, rates = self._locate(state, previous, h, new, q, rates, which)
+            state, previous, rates = self._locate(state, previous, step, new, q, rates, which)
             state = self._resolve(state, previous, rates, which, events)
             events += 1
 

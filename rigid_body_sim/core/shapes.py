@@ -98,13 +98,13 @@ class CollisionShape:
     name: str = ''
 
     def __post_init__(self) -> None:
-        if self.kind not in KINDS:
+        if not isinstance(self.kind, str) or self.kind not in KINDS:
             raise SpecError('kind', f'unknown shape {self.kind!r}; known: {sorted(KINDS)}')
         if self.body is not None and (not isinstance(self.body, str) or not self.body):
             raise SpecError('body', f'must be a body name or None (the world), got '
                                     f'{self.body!r}')
         if self.kind == 'plane' and self.body is not None:
-            raise SpecError('kind', f"a plane is the world's (a ground), not body "
+            raise SpecError('body', f"a plane is the world's (a ground), not body "
                                     f"{self.body!r}'s: give a box instead")
         want = SIZES[self.kind]
         for key in ('radius', 'length', 'size'):
@@ -229,7 +229,11 @@ class ContactDetector:
         self.group = np.array([self.shapes[k].group for k in live], dtype=np.int64)
         self.mask = np.array([self.shapes[k].mask for k in live], dtype=np.int64)
         codes = set()
-        for pair in excluded:
+        for k, pair in enumerate(excluded):
+            if isinstance(pair, str) or len(pair) != 2 \
+                    or any(x is not None and x not in index for x in pair):
+                raise SpecError(f'excluded[{k}]', f'expected a pair of body names (None: '
+                                                  f'the world), got {pair!r}')
             a, b = (n if x is None else index[x] for x in pair)
             codes.add(min(a, b) * (n + 1) + max(a, b))
         self.excluded = np.array(sorted(codes), dtype=np.int64)
@@ -261,11 +265,14 @@ class ContactDetector:
 
     def _check_pairs(self) -> None:
         """Refuse a pair of kinds with no narrow phase that may meet, naming both shapes."""
-        if not np.any(self.kind == int(Shape.CYLINDER)):
-            return   # (the other pair without one, two planes, are the world's: never met)
-        for i in range(len(self.live)):
-            for j in range(i + 1, len(self.live)):
-                if not supported(int(self.kind[i]), int(self.kind[j])) and self._meets(i, j):
+        # (The other pair without one, two planes, are the world's: never met.)
+        cylinders = np.flatnonzero(self.kind == int(Shape.CYLINDER))
+        others = np.flatnonzero((self.kind == int(Shape.CYLINDER))
+                                | (self.kind == int(Shape.BOX)))
+        for i in cylinders:
+            for j in others:
+                if i != j and not supported(int(self.kind[i]), int(self.kind[j])) \
+                        and self._meets(i, j):
                     a, b = self.shapes[self.live[i]], self.shapes[self.live[j]]
                     raise SpecError('shapes', f'{a.name!r} ({a.kind}) and {b.name!r} '
                                               f'({b.kind}) may touch, and a {a.kind} on a '
@@ -287,6 +294,9 @@ class ContactDetector:
         ``out`` holds each body frame's origin and orientation in the world
         (:data:`.kernels.layout.OUTPUT`), as :meth:`.BodySet.outputs` makes them.
         """
+        if out.shape[0] != self.n_bodies:
+            raise ValueError(f'detect: outputs of {out.shape[0]} bodies, the detector has '
+                             f'{self.n_bodies}')
         c, R = self.frames(out)
         solids = self._solids
         ms = len(solids)

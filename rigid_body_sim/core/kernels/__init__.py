@@ -25,6 +25,11 @@ They import only one another, numba, numpy and math; never the classes of
 ``complementarity``
     Projected Gauss–Seidel sweeps of a box-constrained LCP (the rows with bounds,
     :mod:`..complementarity`).
+``joints``
+    Joint coordinates and rates from the bodies' outputs, and the limits' watch.
+``contact``
+    Collision detection: the broad phase (a hashed grid) and the narrow phases of the
+    primitive shapes, with their manifolds (:mod:`..shapes`).
 
 :mod:`..kernel_cache` treats every module of this package as one unit.
 """

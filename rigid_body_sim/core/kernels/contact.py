@@ -272,10 +272,11 @@ def _capsule_on(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray,
     over an edge, a stretch where it lies along a face). A point of it is found by
     golden-section search (64 iterations: 1e-13 of the axis), its ends by bisection
     (to within 1e-12 m of the least distance); each end inside the axis is a contact
-    (one, their middle, where the two lie within 1e-5 of the axis: a strict minimum
-    that the tolerance widens, to ``sqrt(2 ρ 1e-12)`` where the distance is smooth
-    there, ``ρ`` its curvature radius: 1.4e-6 m for 1 m), and each end ball within
-    the margin is one. So a capsule lying on a face touches
+    (one, their middle, where the two lie within ``4 sqrt(2 ρ 1e-12)`` of each other:
+    a strict minimum that the tolerance widened, ``ρ`` the distance's curvature
+    radius, at most the solid's size plus ``r``: 6e-6 m for 1 m; none where that lies
+    within as much of an end, whose ball is a contact already), and each end ball
+    within the margin is one. So a capsule lying on a face touches
     at its two ends, one lying over the face's edge at its end on the face and over
     the edge, one across an edge once, one standing on an end at that end.
     ``flip``: the solid is shape ``a``.
@@ -321,12 +322,17 @@ def _capsule_on(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray,
             else:
                 outer = mid
         found[side] = inner
-    if found[1] - found[0] <= 1e-5:   # one point: the middle of what the tolerance left
+    # What the tolerance leaves around a strict minimum, as a fraction of the axis:
+    # sqrt(2 ρ tol), ρ the distance's curvature radius (at most the solid's size plus
+    # r), four times over.
+    rho = max(size[0], size[1], size[2]) + r
+    apart = 4.0 * math.sqrt(2.0 * rho * tol) / (2.0 * hl)
+    if found[1] - found[0] <= apart:   # one point: the middle of what the tolerance left
         found[0] = found[1] = 0.5 * (found[0] + found[1])
     for side in range(2):
         sv = found[side]
-        if sv <= 0.0 or sv >= 1.0 or (side == 1 and found[1] == found[0]):
-            continue   # an end (its ball is in already), or the same point twice
+        if sv <= apart or sv >= 1.0 - apart or (side == 1 and found[1] == found[0]):
+            continue   # at an end (its ball is in already), or the same point twice
         _axis_distance(kind, c, R, size, p0, u, sv, x, w)
         k = _ball_on(kind, c, R, size, x, r, flip, margin, points, normals, depths, k, w)
     return k
@@ -657,7 +663,7 @@ def _capsule_capsule(ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, cb: np.ndar
             s0 = ((q[0] - p[0]) * u[0] + (q[1] - p[1]) * u[1] + (q[2] - p[2]) * u[2]) / uu
             s1 = s0 + (v[0] * u[0] + v[1] * u[1] + v[2] * u[2]) / uu
             lo, hi = max(min(s0, s1), 0.0), min(max(s0, s1), 1.0)
-            if lo < hi:   # an overlap of positive length: its two ends
+            if (hi - lo) * lu > 1e-6 * (lu + lv):   # an overlap of some length: its ends
                 for s in (lo, hi):
                     for i in range(3):
                         x[i] = p[i] + s * u[i]
@@ -842,10 +848,15 @@ def broad_phase(lo: np.ndarray, hi: np.ndarray, body: np.ndarray, group: np.ndar
     for s in range(m):
         count = 1
         for r in range(3):
-            c0 = int(math.floor((lo[s, r] - origin[r]) / h))
-            c1 = int(math.floor((hi[s, r] - origin[r]) / h))
+            # (clamped: an int64 holds it; a span beyond BIG_CELLS makes the shape big
+            # before the product could overflow)
+            c0 = int(math.floor(min((lo[s, r] - origin[r]) / h, 1e15)))
+            c1 = int(math.floor(min((hi[s, r] - origin[r]) / h, 1e15)))
             cells[s, r], cells[s, 3 + r] = c0, c1
-            count *= c1 - c0 + 1
+            if c1 - c0 >= BIG_CELLS:
+                count = BIG_CELLS + 1
+            elif count <= BIG_CELLS:
+                count *= c1 - c0 + 1
         if count > BIG_CELLS or count < 1:
             big[s] = True
         else:
