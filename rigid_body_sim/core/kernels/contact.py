@@ -31,6 +31,7 @@ import numpy as np
 
 from .layout import O_ORIGIN_WORLD, O_QUAT_BODY_WORLD
 from .so3 import quat_matrix
+from .views import raw
 
 
 class Shape(IntEnum):
@@ -829,6 +830,9 @@ def broad_phase(lo: np.ndarray, hi: np.ndarray, body: np.ndarray, group: np.ndar
     m = lo.shape[0]
     if m < 2:
         return 0
+    # (views without reference counts for the calls of _candidate: :func:`.views.raw`)
+    lo, hi, body, group, mask = raw(lo), raw(hi), raw(body), raw(group), raw(mask)
+    excluded = raw(excluded)
     nb = n_bodies + 1
     ext = np.empty(m)
     origin = np.full(3, np.inf)
@@ -984,11 +988,15 @@ def narrow_phase(pairs: np.ndarray, kind: np.ndarray, c: np.ndarray, R: np.ndarr
     """
     k = 0
     w = np.empty(SCRATCH)
+    # Views without reference counts (:func:`.views.raw`): the narrow phases pass rows
+    # and slices of these down their calls, each counted twice otherwise.
+    ws, c, R, size = raw(w), raw(c), raw(R), raw(size)
+    points, normals, depths = raw(points), raw(normals), raw(depths)
     for q in range(pairs.shape[0]):
         a, b = pairs[q, 0], pairs[q, 1]
         start = k
         k = _collide(kind[a], c[a], R[a], size[a], kind[b], c[b], R[b], size[b], margin,
-                     points, normals, depths, k, w)
+                     points, normals, depths, k, ws)
         if k < 0:   # no narrow phase (the detector refuses such pairs when it is built)
             k = start
             continue
