@@ -29,6 +29,7 @@ from . import rotation as so3
 from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, ConstraintSet, JointType
+from .contact_step import ContactSteps, ContactWrenches
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Effect
@@ -40,6 +41,7 @@ from .limits import (DriveEfforts, ENGAGED, JointFriction, JointLimits, restitut
                      SceneJoint)
 from .robots import (build_robot, CommandGroup, drive_name, Interface, Joint, JointDrives,
                      JointSpace, JointSpec, JointState, mimic_name, RobotSpec)
+from .shapes import CollisionShape, ContactDetector
 from .solver import ConstraintSolver
 from .validate import finite_scalar, positive_scalar
 
@@ -122,7 +124,8 @@ class Simulation:
                  tolerance_budget: int = DEFAULT_BUDGET,
                  robots: Sequence[RobotSpec] = (),
                  command_groups: Sequence[CommandGroup] = (),
-                 scene_joints: Sequence[SceneJoint] = ()) -> None:
+                 scene_joints: Sequence[SceneJoint] = (),
+                 shapes: Sequence[CollisionShape] = ()) -> None:
         self.dt = positive_scalar(dt, 'dt')
         bodies, constraints = list(bodies), list(constraints)
         self.robots = []
@@ -170,6 +173,12 @@ class Simulation:
             self.drives = drives
             if len(drives.rows_of):
                 effects.append(drives)   # only where a joint is damped or servoed
+        detector = self._contact_detector(shapes, constraints)
+        contact_wrenches = None
+        if detector is not None:
+            contact_wrenches = ContactWrenches()
+            contact_wrenches.bind(self.bodies)
+            effects.append(contact_wrenches)
         self.dynamics = Dynamics(self.bodies, effects)
         self.integrator = integrator_class(integrator)(self.dynamics)
         self._initial_wrenches = [self._wrench_rows(e) for e in effects]
@@ -205,6 +214,15 @@ class Simulation:
                 raise SpecError('constraints', f'{name!r} is the name of a row that holds a '
                                                f'joint on its limit or its friction: rename '
                                                f'the constraint')
+        #: The contacts' steps (None: no shape collides with anything).
+        self.contact: Optional[ContactSteps] = None
+        if detector is not None:
+            if self.events is not None:
+                raise SpecError('shapes', 'contact with joints that have limits, Coulomb '
+                                          'friction or effort-limited exact drives is not '
+                                          'built yet (issue 21): switch those off, or the '
+                                          'shapes')
+            self.contact = ContactSteps(self, detector, contact_wrenches)
         self._tracking = len(self.joints) > 0
         self.reset()
 
@@ -307,6 +325,26 @@ class Simulation:
         limits = JointLimits(js, limited, restitution)
         return limits if len(limits) else None
 
+    def _contact_detector(self, shapes: Sequence[CollisionShape],
+                          constraints: list) -> Optional[ContactDetector]:
+        """
+        Return the detector of ``shapes`` (None: none collides).
+
+        Bodies joined by a constraint (a joint) never collide with each other, as in
+        MuJoCo and Gazebo; a body jointed to the world still meets the world's shapes.
+        """
+        shapes = list(shapes)
+        for i, shape in enumerate(shapes):
+            if not isinstance(shape, CollisionShape):
+                raise SpecError(f'shapes[{i}]', f'expected a CollisionShape, got {shape!r}')
+        if not any(s.collide for s in shapes):
+            return None
+        world = (None, 'world')
+        excluded = sorted({tuple(sorted((c.body_a, c.body_b))) for c in constraints
+                           if isinstance(c, Constraint) and c.body_b not in world
+                           and c.body_a not in world and c.body_a != c.body_b})
+        return ContactDetector(shapes, self.bodies.names, excluded)
+
     # -- time stepping --------------------------------------------------------------------
 
     @property
@@ -345,7 +383,9 @@ class Simulation:
             # Time as base + steps * dt, not a running sum: no rounding drift.
             t_end = self._time_base + (steps + 1) * dt
             seen, tracked = None, False
-            if events is None:
+            if self.contact is not None:
+                new = self.contact.step(self.state, t_end)
+            elif events is None:
                 new = self._advance(self.state, dt, t_end)
             elif self.joints.tracked and events.quiet():
                 # Inactive limits: the step, and its coordinates checked against the
@@ -509,6 +549,8 @@ class Simulation:
                 solver.constraints.add(spec, self.state)
             self.dynamics.changed()
             self._reconcile_velocities()
+        if self.contact is not None:
+            self.contact.reset()
         if self.events is not None:
             for part in (self.limits, self.friction, self.drive_efforts):
                 if part is not None:

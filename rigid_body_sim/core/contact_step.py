@@ -1,0 +1,684 @@
+"""
+Contact: non-penetration and Coulomb friction as multipliers held over a step; impacts located.
+
+The shapes' contacts (:mod:`.shapes`: points, normals from shape ``b`` to shape
+``a``, depths) become rows at the state a step starts from. Each contact touching
+there (its gap within :data:`LOCATION_TOLERANCE`) is three rows on the velocity of
+its point on ``a`` relative to its point on ``b``: the normal ``n`` and two tangents
+``t₁``, ``t₂`` (``t₁`` along the sliding velocity when the contact slides, else any),
+with the forces ``λ = (λ_n, λ₁, λ₂)`` they carry
+
+    λ_n ≥ 0,   v_n ≥ 0,   λ_n v_n = 0          (it pushes, only while it touches)
+    |(λ₁, λ₂)| ≤ μ λ_n,   sliding ⇒ friction opposes it at μ λ_n     (Coulomb)
+
+held constant over the step, and the velocities those conditions ask of are the
+velocities at the step's end. With the other rows (the joints) held, the end
+velocities are affine in the rows' impulses ``p = λ h``: ``v⁺ = ṽ + A p``, ``ṽ``
+the step taken without contact forces and ``A = G M̄⁻¹ Gᵀ`` the rows' Delassus
+operator (``M̄⁻¹`` the inverse mass with the joints' rows held, by the solve's own
+projections; ``M⁻¹`` for a free body). That is a box-constrained LCP in ``p``
+(:mod:`.complementarity`, each tangent row's box ``±μ p_n``) whose boxes depend on
+its normal forces: solved by a fixed-point iteration on the boxes (each solve exact,
+warm-started), which also bounds the tangent force by the cone, not the pyramid: a
+contact whose friction leaves the cone has its box rescaled to the cone along the
+friction's direction, until every force is within :data:`FRICTION_TOLERANCE` of its
+conditions. A Delassus operator made singular by redundant contacts (a box flat on
+the ground: four normals on three freedoms) is regularized proximally (each solve
+adds ``ρ (p − p_k)``, ``ρ`` :data:`PROXIMAL` of its diagonal, and the iteration
+takes it out: the forces solve the unregularized problem to its tolerance).
+
+The step is then taken again with the contact forces as constant wrenches (each a
+world-frame force at the contact point: a world force and torque on each body),
+so the integrator's own step carries them: a body resting on the ground has its
+weight carried exactly and does not move (to rounding), a sphere rolls with its
+contact point still, a block slides with ``μ λ_n`` against its motion. This is
+Stewart and Trinkle's time-stepping (1996) with the forces held over the step
+instead of an impulse at its end: first order in time while contacts come and go
+(a release, a stick inside a step), exact for a contact that persists with a
+constant force. A step needing no contact force is the free step, unchanged.
+
+**Impacts** are located. After the step, a contact that was not touching at its
+start and now overlaps by more than the tolerance is an impact: the step is taken
+again up to the moment its depth crossed zero, found by regula falsi (Illinois) on
+partial steps from the step's start to :data:`LOCATION_TOLERANCE`, and there every
+touching contact takes an impulse: an LCP of the same form whose normal rows ask
+``v_n⁺ ≥ −e v_n⁻`` (Newton's law, ``e`` the pair's restitution) and whose
+friction impulses keep within ``μ p_n`` (a sticking impact stops the point's
+sliding). Then the rest of the step is taken. After :data:`MAX_BOUNCES` impacts in
+one step the next are inelastic (a bouncing ball's impacts accumulate in finite
+time); after :data:`MAX_EVENTS` the step stands and its depth is corrected below.
+So a dropped ball's bounces reach ``e^{2k} h`` and happen at their times, to the
+tolerance, with fixed steps as under the accuracy knob (whose tolerance tightens
+the location: :meth:`ContactSteps.tighten`).
+
+**Penetration** beyond the tolerance left by a step (a contact's curvature over the
+step, a spawn inside another body) is projected out at the step's end: the bodies
+move by ``M̄⁻¹ Gᵀ μ`` with ``μ ≥ 0`` the smallest pushes that zero every depth
+(the same LCP on the normal rows, positions only: velocities are untouched). Its
+largest value is reported (``max_depth``), as is the energy it may add (``m g``
+times a depth within the tolerance).
+
+Pairwise coefficients: ``μ = √(μ_a μ_b)`` (so two like surfaces have their own
+``μ``, and a frictionless one makes the pair frictionless) and ``e = max(e_a,
+e_b)``, as Box2D combines them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+import numpy as np
+
+from .bodies import State
+from .complementarity import solve as solve_blcp
+from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
+from .kernels.free_step import HAS_POSITION_FORCES
+from .kernels.layout import W_BODY, W_FORCE, W_TORQUE, W_WIDTH
+from .rotation import exp_quat, quat_multiply, quat_to_matrix
+from .shapes import ContactDetector, Contacts
+
+#: m: a contact whose gap is within this is touching (a row); an impact is located
+#: until the depth is within it.
+LOCATION_TOLERANCE = 1e-10
+#: m/s: a touching contact approaching faster than this is an impact; a sliding speed
+#: below it is sticking (the tangents' direction is then arbitrary).
+RATE_TOLERANCE = 1e-9
+#: m and m/s: the tightest tolerances under the accuracy knob.
+LOCATION_FLOOR = 1e-13
+RATE_FLOOR = 1e-13
+#: Relative: the friction iteration ends when no impulse changes by more than this
+#: fraction of the largest (and every friction is within the cone by as much).
+FRICTION_TOLERANCE = 1e-9
+#: Most iterations of the friction boxes (each an exact box LCP, warm-started).
+FRICTION_ITERATIONS = 60
+#: The proximal regularization, relative to the Delassus operator's largest diagonal.
+PROXIMAL = 1e-6
+#: Most regula-falsi iterations to locate one impact.
+MAX_LOCATION_ITERATIONS = 60
+#: Impacts in one step after which the next are inelastic (Zeno's cut).
+MAX_BOUNCES = 8
+#: Most events (impacts) in one step: beyond them the step stands.
+MAX_EVENTS = 32
+EPS = float(np.finfo(float).eps)
+
+
+def pair_friction(mu_a: np.ndarray, mu_b: np.ndarray) -> np.ndarray:
+    """Return the pair's Coulomb coefficient ``√(μ_a μ_b)``."""
+    return np.sqrt(np.asarray(mu_a) * np.asarray(mu_b))
+
+
+def pair_restitution(e_a: np.ndarray, e_b: np.ndarray) -> np.ndarray:
+    """Return the pair's Newton coefficient ``max(e_a, e_b)``."""
+    return np.maximum(e_a, e_b)
+
+
+class ContactWrenches(Effect):
+    """
+    The contact forces of the step being taken, as constant world-frame wrenches.
+
+    Set by :class:`ContactSteps` before a step and cleared after it: each body's
+    force (N) at its centre and torque (N m) about it, in the world frame.
+    """
+
+    name = 'contact'
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._rows = np.zeros((0, W_WIDTH))
+
+    def act(self, bodies: np.ndarray, force: np.ndarray, torque: np.ndarray) -> None:
+        """Act with ``force`` (k, 3) and ``torque`` (k, 3), world frame, on ``bodies`` (k,)."""
+        rows = np.zeros((len(bodies), W_WIDTH))
+        rows[:, W_BODY] = bodies
+        rows[:, W_FORCE:W_FORCE + 3] = force
+        rows[:, W_TORQUE:W_TORQUE + 3] = torque
+        self._rows = rows
+
+    def clear(self) -> bool:
+        """Remove every wrench; return whether there was any."""
+        had = len(self._rows) > 0
+        self._rows = np.zeros((0, W_WIDTH))
+        return had
+
+    def __len__(self) -> int:
+        """Return the number of bodies acted on."""
+        return len(self._rows)
+
+    def add_to_kernel_model(self, model: KernelModel, time_mid: float) -> None:
+        """Add the wrenches as rows of kind WRENCH_APPLIED (world frame, at the centre)."""
+        if len(self._rows):
+            model.add_wrench_rows(self._rows)
+            model.flags |= HAS_POSITION_FORCES
+
+    def count_kernel_work(self, rhs: int, kicks: int, flows: int,
+                          acting: Optional[int] = None) -> None:
+        """Count every right-hand side and kick, per body acted on."""
+        k = len(self._rows) if acting is None else acting
+        self._count(rhs + kicks if k else 0, k)
+
+    def acting_in(self, local: np.ndarray, rows_kept: np.ndarray) -> int:
+        """Return the bodies of the subset acted on."""
+        return int(np.count_nonzero(rows_kept))
+
+    def accumulate(self, kin: Kinematics, acc: WrenchAccumulator) -> None:
+        """Add the wrenches (world frame) to ``acc``."""
+        if not len(self._rows):
+            return
+        self.evaluations += 1
+        body = self._rows[:, W_BODY].astype(int)
+        np.add.at(acc.force_world, body, self._rows[:, W_FORCE:W_FORCE + 3])
+        np.add.at(acc.torque_world, body, self._rows[:, W_TORQUE:W_TORQUE + 3])
+
+
+@dataclass
+class ContactRows:
+    """
+    The touching contacts at one state and their rows (``c`` contacts, ``3c`` rows).
+
+    Rows ``3k``, ``3k + 1``, ``3k + 2`` are contact ``k``'s normal and tangents.
+    ``G`` (3c, 6n) maps the bodies' velocities (per body ``v`` world, ``Ω``
+    principal) to the rows' relative velocities.
+    """
+
+    state: State               #: where the rows were built
+    contacts: Contacts
+    frame: np.ndarray          #: (c, 3, 3) rows n, t₁, t₂ (world)
+    lever_a: np.ndarray        #: (c, 3) contact point − centre of a (world)
+    lever_b: np.ndarray        #: (c, 3) contact point − centre of b (world; 0: the world)
+    mu: np.ndarray             #: (c,)
+    restitution: np.ndarray    #: (c,)
+    G: np.ndarray              #: (3c, 6n)
+
+    def __len__(self) -> int:
+        """Return the number of contacts."""
+        return len(self.mu)
+
+
+@dataclass
+class ContactRecord:
+    """The contacts of the latest step and the forces they carried over it."""
+
+    time: float = 0.0
+    rows: Optional[ContactRows] = None
+    force: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+class ContactSteps:
+    """
+    A simulation's steps with contact (see the module docstring).
+
+    Parameters
+    ----------
+    sim : Simulation
+    detector : ContactDetector
+    wrenches : ContactWrenches
+        The effect the step's contact forces are put in (one of the dynamics').
+
+    """
+
+    def __init__(self, sim: Any, detector: ContactDetector, wrenches: ContactWrenches) -> None:
+        self.sim = sim
+        self.detector = detector
+        self.wrenches = wrenches
+        shapes = detector.shapes
+        self._mu = np.array([s.friction for s in shapes], dtype=float)
+        self._e = np.array([s.restitution for s in shapes], dtype=float)
+        self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
+        self.record = ContactRecord()
+        self.counters: dict = {}
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the contacts and the counters (a reset)."""
+        if self.wrenches.clear():
+            self.sim.dynamics.changed()
+        self.record = ContactRecord(time=self.sim.state.time if hasattr(self.sim, 'state')
+                                    else 0.0)
+        self._warm: dict = {}
+        self.counters = {'impacts': 0, 'located_steps': 0, 'events_capped': 0,
+                         'lcp_solves': 0, 'lcp_iterations_max': 0, 'lcp_failures': 0,
+                         'complementarity_max': 0.0, 'max_depth': 0.0,
+                         'projections': 0, 'max_projected': 0.0}
+
+    def tighten(self) -> None:
+        """Set the tolerances for the accuracy knob (``tolerance dt``, floored), or the defaults."""
+        control, dt = self.sim._control, self.sim.dt
+        if control is None:
+            self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
+        else:
+            budget = control.tolerance * dt
+            self.location = min(LOCATION_TOLERANCE, max(budget, LOCATION_FLOOR))
+            self.rate = min(RATE_TOLERANCE, max(budget, RATE_FLOOR))
+
+    # -- the rows -------------------------------------------------------------------------
+
+    def detect(self, state: State) -> Contacts:
+        """Return the detector's contacts at ``state`` (within its margin)."""
+        self.sim.bodies.outputs(state)
+        return self.detector.detect(self.sim.bodies.outputs_cache.out)
+
+    def rows(self, state: State, contacts: Optional[Contacts] = None,
+             separating: bool = True) -> ContactRows:
+        """
+        Return the rows of the contacts touching at ``state`` (gap within the tolerance).
+
+        ``separating`` False: without the contacts whose points move apart faster than
+        the rate tolerance (a ball just bounced: it flies, and comes back as an impact).
+        """
+        if contacts is None:
+            contacts = self.detect(state)
+        n = len(self.sim.bodies.names)
+        pos, quat = state.pos_com_world, state.quat_principal_world
+        R = quat_to_matrix(quat).reshape(n, 3, 3)
+        R_all = np.concatenate([R, np.eye(3)[None]])
+        centre = np.concatenate([pos, np.zeros((1, 3))])
+        w_world = np.concatenate([np.einsum('nij,nj->ni', R, state.ang_vel_principal),
+                                  np.zeros((1, 3))])
+        vel = np.concatenate([state.vel_com_world, np.zeros((1, 3))])
+        keep = contacts.depth >= -self.location
+        con = Contacts(*(part[keep] for part in contacts))
+        a, b = con.body_a, con.body_b
+        lever_a = con.point - centre[a]
+        lever_b = np.where((b < n)[:, None], con.point - centre[b], 0.0)
+        v_rel = (vel[a] + np.cross(w_world[a], lever_a)) \
+            - (vel[b] + np.cross(w_world[b], lever_b))
+        if not separating:
+            keep = np.sum(v_rel * con.normal, axis=1) <= self.rate
+            con = Contacts(*(part[keep] for part in con))
+            a, b, lever_a, lever_b, v_rel = a[keep], b[keep], lever_a[keep], lever_b[keep], \
+                v_rel[keep]
+        c = len(con.depth)
+        nrm = con.normal
+        v_t = v_rel - np.sum(v_rel * nrm, axis=1)[:, None] * nrm
+        speed = np.linalg.norm(v_t, axis=1)
+        frame = np.empty((c, 3, 3))
+        for k in range(c):
+            t1 = v_t[k] / speed[k] if speed[k] > self.rate else _any_tangent(nrm[k])
+            frame[k] = (nrm[k], t1, np.cross(nrm[k], t1))
+        G = np.zeros((3 * c, 6 * n))
+        for k in range(c):
+            for side, body, lever in ((1.0, a[k], lever_a[k]), (-1.0, b[k], lever_b[k])):
+                if body >= n:
+                    continue
+                d = frame[k]
+                G[3 * k:3 * k + 3, 6 * body:6 * body + 3] += side * d
+                # (r × d) · ω = (Rᵀ (r × d)) · Ω
+                G[3 * k:3 * k + 3, 6 * body + 3:6 * body + 6] += side * (
+                    np.cross(lever, d) @ R_all[body])
+        mu = pair_friction(self._mu[con.shape_a], self._mu[con.shape_b])
+        e = pair_restitution(self._e[con.shape_a], self._e[con.shape_b])
+        return ContactRows(state, con, frame, lever_a, lever_b, mu, e, G)
+
+    def response(self, state: State, G: np.ndarray) -> np.ndarray:
+        """
+        Return ``M̄⁻¹ Gᵀ`` (6n, r): the velocity change per unit impulse on each row.
+
+        ``M⁻¹ Gᵀ`` for free bodies; for bodies held by joints, the change the solve's
+        velocity projection leaves of it (the joints' rows held: their reactions take
+        their share of each impulse).
+        """
+        bodies = self.sim.bodies
+        n = len(bodies.names)
+        inv = np.concatenate([np.repeat(bodies.inv_mass[:, None], 3, axis=1),
+                              1.0 / np.asarray(bodies.moments)], axis=1).reshape(-1)
+        Y = inv[:, None] * G.T
+        solver = self.sim.dynamics.solver
+        if not len(solver.constraints):
+            return Y
+        zero = np.zeros((n, 3))
+        base = solver.project_velocities(State(state.time, state.pos_com_world,
+                                               state.quat_principal_world, zero, zero))
+        base = _stack(*base)
+        for r in range(Y.shape[1]):
+            col = Y[:, r].reshape(n, 6)
+            projected = solver.project_velocities(State(
+                state.time, state.pos_com_world, state.quat_principal_world,
+                col[:, :3], col[:, 3:]))
+            Y[:, r] = _stack(*projected) - base
+        return Y
+
+    # -- the LCP of the rows --------------------------------------------------------------
+
+    def solve(self, A: np.ndarray, q: np.ndarray, mu: np.ndarray,
+              start: Optional[np.ndarray] = None, normal_only: bool = False) -> np.ndarray:
+        """
+        Return the rows' impulses ``p`` (3c,): ``w = A p + q`` under the contact conditions.
+
+        Normal rows ``p_n ≥ 0 ⊥ w_n ≥ 0``; tangent rows within the cone ``μ p_n``
+        and ``w_t = 0`` inside it, sliding against ``w_t`` on it (see the module
+        docstring: the boxes' fixed point, proximal). ``normal_only``: the
+        tangent rows are left out (``p_t = 0``). Counted; a solve that does not
+        converge keeps its last iterate and is counted in ``lcp_failures``.
+        """
+        m = len(q)
+        if not m:
+            return np.zeros(0)
+        rows = np.arange(m) if not normal_only else np.arange(0, m, 3)
+        A_r, q_r = A[np.ix_(rows, rows)], q[rows]
+        rho = PROXIMAL * float(np.max(np.diag(A_r)))
+        A_p = A_r + rho * np.eye(len(rows))
+        p = np.zeros(len(rows)) if start is None else np.array(start[rows], dtype=float)
+        p[::1 if normal_only else 3] = np.maximum(p[::1 if normal_only else 3], 0.0)
+        lo, hi = np.zeros(len(rows)), np.full(len(rows), np.inf)
+        converged, it = False, 0
+        for it in range(1, FRICTION_ITERATIONS + 1):
+            if not normal_only:
+                pn = np.maximum(p[0::3], 0.0)
+                ft = np.stack([p[1::3], p[2::3]], axis=1)
+                mag = np.linalg.norm(ft, axis=1)
+                cone = mu * pn
+                over = mag > cone * (1.0 + FRICTION_TOLERANCE)
+                half = np.repeat(cone[:, None], 2, axis=1)
+                half[over] = cone[over, None] * np.abs(ft[over]) / mag[over, None]
+                lo[1::3], hi[1::3] = -half[:, 0], half[:, 0]
+                lo[2::3], hi[2::3] = -half[:, 1], half[:, 1]
+                p = np.clip(p, lo, hi)
+            sol = solve_blcp(A_p, q_r - rho * p, lo, hi, start=p)
+            change = float(np.max(np.abs(sol.f - p)))
+            p = sol.f
+            scale = max(float(np.max(np.abs(p))), 1e-300)
+            if sol.converged and change <= FRICTION_TOLERANCE * scale:
+                converged = True
+                break
+        cnt = self.counters
+        cnt['lcp_solves'] += 1
+        cnt['lcp_iterations_max'] = max(cnt['lcp_iterations_max'], it)
+        if not converged:
+            cnt['lcp_failures'] += 1
+        cnt['complementarity_max'] = max(cnt['complementarity_max'],
+                                         _residual(A_r, q_r, p, mu, normal_only))
+        out = np.zeros(m)
+        out[rows] = p
+        return out
+
+    # -- a step ---------------------------------------------------------------------------
+
+    def step(self, start: State, t_end: float) -> State:
+        """Take a step from ``start`` to ``t_end`` with contact forces and impacts (module doc)."""
+        sim = self.sim
+        self.tighten()
+        state, events, bounces = start, 0, 0
+        while True:
+            h = sim.dt if state is start else t_end - state.time
+            if h <= 4.0 * EPS * abs(t_end):
+                return self._accept(State(t_end, *state.parts))
+            rows = self.rows(state)
+            if len(rows) and events < MAX_EVENTS:
+                state, hit = self._impact(state, rows, bounces >= MAX_BOUNCES)
+                if hit:
+                    bounces += 1
+                    events += 1
+            rows = self.rows(state, separating=False)
+            new, held = self._held_step(state, rows, h, t_end)
+            if events >= MAX_EVENTS:
+                self.counters['events_capped'] += 1
+                return self._accept(new)
+            hit = self._new_overlap(rows, new)
+            if hit is None:
+                return self._accept(new)
+            self.counters['located_steps'] += 1
+            state = self._locate(state, rows, new, h, hit)
+            events += 1
+
+    def _held_step(self, state: State, rows: ContactRows, h: float, t_end: float) -> tuple:
+        """Take the step of ``h`` from ``state`` with the rows' forces held; return (new, forces)."""
+        sim = self.sim
+        t = state.time + h
+        self._set_forces(None)
+        free = sim._advance(state, h, t)
+        if not len(rows):
+            self.record = ContactRecord(state.time, rows, np.zeros((0, 3)))
+            return free, None
+        v_free = _stack(free.vel_com_world, free.ang_vel_principal)
+        Y = self.response(state, rows.G)
+        A = rows.G @ Y
+        q = rows.G @ v_free
+        p = self.solve(A, q, rows.mu, start=self._warm_start(rows))
+        force = (p.reshape(-1, 3)[:, :, None] * rows.frame).sum(axis=1) / h   # (c, 3) world
+        self._remember(rows, p)
+        self.record = ContactRecord(state.time, rows, force)
+        if not np.any(p):
+            return free, force
+        self._set_forces(rows, force)
+        return sim._advance(state, h, t), force
+
+    def _set_forces(self, rows: Optional[ContactRows], force: Optional[np.ndarray] = None
+                    ) -> None:
+        """Put the rows' forces (c, 3, world, on a; −force on b) in the wrench effect."""
+        dyn = self.sim.dynamics
+        if rows is None:
+            if self.wrenches.clear():
+                dyn.changed()
+            return
+        n = len(self.sim.bodies.names)
+        f_body, t_body = np.zeros((n + 1, 3)), np.zeros((n + 1, 3))
+        con = rows.contacts
+        np.add.at(f_body, con.body_a, force)
+        np.add.at(t_body, con.body_a, np.cross(rows.lever_a, force))
+        np.add.at(f_body, con.body_b, -force)
+        np.add.at(t_body, con.body_b, -np.cross(rows.lever_b, force))
+        acted = np.flatnonzero(np.any(f_body[:n] != 0.0, axis=1)
+                               | np.any(t_body[:n] != 0.0, axis=1))
+        self.wrenches.act(acted, f_body[acted], t_body[acted])
+        dyn.changed()
+
+    def _warm_start(self, rows: ContactRows) -> Optional[np.ndarray]:
+        """Return last step's impulses of the same contacts (pair and point), scaled, or None."""
+        if not self._warm:
+            return None
+        con = rows.contacts
+        out = np.zeros(3 * len(rows))
+        for k in range(len(rows)):
+            key = (int(con.shape_a[k]), int(con.shape_b[k]))
+            for point, p_n in self._warm.get(key, ()):
+                if np.sum((point - con.point[k]) ** 2) <= 1e-6:
+                    out[3 * k] = p_n
+                    break
+        return out
+
+    def _remember(self, rows: ContactRows, p: np.ndarray) -> None:
+        con = rows.contacts
+        warm: dict = {}
+        for k in range(len(rows)):
+            warm.setdefault((int(con.shape_a[k]), int(con.shape_b[k])), []).append(
+                (con.point[k].copy(), float(p[3 * k])))
+        self._warm = warm
+
+    # -- impacts --------------------------------------------------------------------------
+
+    def _new_overlap(self, rows: ContactRows, new: State) -> Optional[tuple]:
+        """
+        Return the event of ``new`` when a contact not touching at the step's start overlaps.
+
+        ``(depth, contacts)``: the deepest such contact's depth at ``new`` beyond the
+        tolerance, or None. A contact continues one touching at the start when it is of
+        the same pair of shapes and its point, in body a's frame, is within
+        :func:`_match_radius` of that one's.
+        """
+        con = self.detect(new)
+        depth = self._unmatched_depth(rows, con, new)
+        if depth is None or depth <= self.location:
+            return None
+        return depth, con
+
+    def _unmatched_depth(self, rows: ContactRows, con: Contacts, state: State
+                         ) -> Optional[float]:
+        """Return the deepest depth at ``state`` of contacts not continuing a row (None: none)."""
+        if not len(con.depth):
+            return None
+        fresh = np.ones(len(con.depth), dtype=bool)
+        if len(rows):
+            start = rows.contacts
+            key_start = start.shape_a * (len(self.detector.shapes) + 1) + start.shape_b
+            key_now = con.shape_a * (len(self.detector.shapes) + 1) + con.shape_b
+            local_start = self._in_body(start.point, start.body_a, rows.state)
+            local_now = self._in_body(con.point, con.body_a, state)
+            for k in range(len(con.depth)):
+                same = np.flatnonzero(key_start == key_now[k])
+                if len(same):
+                    d2 = np.sum((local_start[same] - local_now[k]) ** 2, axis=1)
+                    fresh[k] = not np.any(d2 <= self._match_radius(con.shape_a[k]) ** 2)
+        if not np.any(fresh):
+            return None
+        return float(np.max(con.depth[fresh]))
+
+    def _match_radius(self, shape: int) -> float:
+        """Return how far (m) a contact point may move on its shape and stay the same contact."""
+        return 0.25 * float(np.max(self.detector.shapes[shape].dimensions()))
+
+    def _in_body(self, points: np.ndarray, body: np.ndarray, state: State) -> np.ndarray:
+        """Return world ``points`` (k, 3) in their bodies' principal frames at ``state``."""
+        n = len(self.sim.bodies.names)
+        out = points.copy()
+        real = body < n
+        if np.any(real):
+            R = quat_to_matrix(state.quat_principal_world[body[real]]).reshape(-1, 3, 3)
+            out[real] = np.einsum('kji,kj->ki', R,
+                                  points[real] - state.pos_com_world[body[real]])
+        return out
+
+    def _locate(self, state: State, rows: ContactRows, new: State, h: float,
+                hit: tuple) -> State:
+        """
+        Return the state where the first new contact's depth crossed zero, within the step.
+
+        Regula falsi (Illinois) on the deepest new contact's depth over partial steps
+        from ``state`` with the same forces held, until the depth is within the
+        tolerance.
+        """
+        sim = self.sim
+        t0 = state.time
+        # At the start the new contact is apart, or touching and moving apart (a bounce
+        # that returns): its depth there counts as below the tolerance.
+        lo_t, lo_g = 0.0, min(self._depth_at(rows, state), -self.location)
+        hi_t, hi_g = h, hit[0]
+        side = 0
+        best = None
+        for _ in range(MAX_LOCATION_ITERATIONS):
+            tau = (lo_t * hi_g - hi_t * lo_g) / (hi_g - lo_g)
+            if not lo_t < tau < hi_t:
+                tau = 0.5 * (lo_t + hi_t)
+            trial = sim._advance(state, tau, t0 + tau)
+            g = self._depth_at(rows, trial)
+            if abs(g) <= self.location:
+                if self._approaching(trial):
+                    best = trial
+                    break
+                g = -self.location   # (leaving still: a bounce's start, before the crossing)
+            if g > 0.0:
+                hi_t, hi_g = tau, g
+                if side == 1:
+                    lo_g *= 0.5
+                side = 1
+            else:
+                lo_t, lo_g = tau, g
+                if side == -1:
+                    hi_g *= 0.5
+                side = -1
+            best = trial if g < 0.0 else best
+        if best is None:   # (never closer than the tolerance: the last state before it)
+            best = sim._advance(state, lo_t, t0 + lo_t) if lo_t > 0.0 else state
+        self._set_forces(None)
+        return best
+
+    def _approaching(self, state: State) -> bool:
+        """Tell whether a contact touching at ``state`` closes faster than the rate tolerance."""
+        rows = self.rows(state)
+        if not len(rows):
+            return False
+        v = _stack(state.vel_com_world, state.ang_vel_principal)
+        return bool(np.any((rows.G @ v)[0::3] < -self.rate))
+
+    def _depth_at(self, rows: ContactRows, state: State) -> float:
+        """Return the deepest new contact's depth at ``state`` (−margin when none is near)."""
+        depth = self._unmatched_depth(rows, self.detect(state), state)
+        return -self.detector.margin if depth is None else depth
+
+    def _impact(self, state: State, rows: ContactRows, inelastic: bool) -> tuple:
+        """
+        Resolve the impacts at ``state``: touching contacts approaching faster than the rate.
+
+        Returns ``(state, hit)``. The impulses' LCP (module docstring): normal rows
+        ``v_n⁺ ≥ −e v_n⁻``, friction within ``μ p_n``; ``inelastic``: ``e = 0``.
+        """
+        v = _stack(state.vel_com_world, state.ang_vel_principal)
+        rel = rows.G @ v
+        vn = rel[0::3]
+        approach = vn < -self.rate
+        if not np.any(approach):
+            return state, False
+        e = np.zeros(len(rows)) if inelastic else rows.restitution
+        target = np.where(approach, e * vn, 0.0)   # w_n = v_n⁺ + e v_n⁻ ≥ 0
+        q = rel.copy()
+        q[0::3] += target
+        Y = self.response(state, rows.G)
+        A = rows.G @ Y
+        p = self.solve(A, q, rows.mu)
+        dv = Y @ p
+        n = len(self.sim.bodies.names)
+        dv = dv.reshape(n, 6)
+        self.counters['impacts'] += int(np.count_nonzero(approach))
+        return State(state.time, state.pos_com_world, state.quat_principal_world,
+                     state.vel_com_world + dv[:, :3], state.ang_vel_principal + dv[:, 3:]), True
+
+    # -- the accepted step ----------------------------------------------------------------
+
+    def _accept(self, new: State) -> State:
+        """Clear the forces; project out depths beyond the tolerance; record the deepest."""
+        self._set_forces(None)
+        con = self.detect(new)
+        deep = con.depth > self.location
+        if not np.any(deep):
+            return new
+        self.counters['max_depth'] = max(self.counters['max_depth'], float(np.max(con.depth)))
+        rows = self.rows(new, con)
+        Y = self.response(new, rows.G)
+        A = rows.G @ Y
+        q = -np.maximum(rows.contacts.depth, 0.0)
+        q3 = np.zeros(3 * len(rows))
+        q3[0::3] = q
+        p = self.solve(A, q3, rows.mu, normal_only=True)
+        dq = (Y @ p).reshape(-1, 6)
+        self.counters['projections'] += 1
+        self.counters['max_projected'] = max(self.counters['max_projected'],
+                                             float(np.max(con.depth)))
+        quat = quat_multiply(new.quat_principal_world, exp_quat(dq[:, 3:]))
+        return State(new.time, new.pos_com_world + dq[:, :3], quat, new.vel_com_world,
+                     new.ang_vel_principal)
+
+
+def _stack(vel: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """Return the bodies' velocities as one vector (6n,): per body ``v`` then ``Ω``."""
+    return np.hstack([vel, omega]).reshape(-1)
+
+
+def _any_tangent(nrm: np.ndarray) -> np.ndarray:
+    """Return a unit vector perpendicular to unit ``nrm``."""
+    helper = np.eye(3)[int(np.argmin(np.abs(nrm)))]
+    t = np.cross(nrm, helper)
+    return t / np.linalg.norm(t)
+
+
+def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
+              normal_only: bool) -> float:
+    """
+    Return the contact conditions' residual at impulses ``p`` (velocity units, m/s).
+
+    Per normal row ``|min(p_n / A_nn, w_n)|``-like natural map; per contact's tangents
+    the sliding velocity left while the friction is inside the cone.
+    """
+    if not len(q):
+        return 0.0
+    w = A @ p + q
+    d = np.diag(A)
+    if normal_only:
+        return float(np.max(np.abs(np.minimum(p * d, w))))
+    pn, wn = p[0::3], w[0::3]
+    out = float(np.max(np.abs(np.minimum(pn * d[0::3], wn))))
+    ft = np.stack([p[1::3], p[2::3]], axis=1)
+    wt = np.stack([w[1::3], w[2::3]], axis=1)
+    inside = np.linalg.norm(ft, axis=1) < mu * pn * (1.0 - 1e-9)
+    if np.any(inside):
+        out = max(out, float(np.max(np.abs(wt[inside]))))
+    return out
