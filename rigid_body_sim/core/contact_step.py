@@ -242,7 +242,7 @@ class ContactSteps:
                          'projections': 0, 'max_projected': 0.0}
 
     def tighten(self) -> None:
-        """Set the tolerances for the accuracy knob (``tolerance dt``, floored), or the defaults."""
+        """Set the tolerances for the accuracy knob (``tolerance dt``, floored) or the defaults."""
         control, dt = self.sim._control, self.sim.dt
         if control is None:
             self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
@@ -422,7 +422,7 @@ class ContactSteps:
             events += 1
 
     def _held_step(self, state: State, rows: ContactRows, h: float, t_end: float) -> tuple:
-        """Take the step of ``h`` from ``state`` with the rows' forces held; return (new, forces)."""
+        """Take the step of ``h`` from ``state`` with the rows' forces held: (new, forces)."""
         sim = self.sim
         t = state.time + h
         self._set_forces(None)
