@@ -65,8 +65,9 @@ e_b)``, as Box2D combines them.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, NamedTuple, Optional
 
 import numpy as np
 
@@ -101,6 +102,18 @@ MAX_BOUNCES = 8
 #: Most events (impacts) in one step: beyond them the step stands.
 MAX_EVENTS = 32
 EPS = float(np.finfo(float).eps)
+#: How many of the latest impacts :attr:`ContactSteps.impacts` keeps.
+IMPACT_LOG = 256
+
+
+class ContactImpact(NamedTuple):
+    """One located impact of a contact."""
+
+    time: float          #: s, simulation time
+    shape_a: str
+    shape_b: str
+    approach: float      #: m/s, the normal velocity before (< 0)
+    rebound: float       #: m/s, after (``−e`` times it for a lone contact)
 
 
 def pair_friction(mu_a: np.ndarray, mu_b: np.ndarray) -> np.ndarray:
@@ -227,6 +240,8 @@ class ContactSteps:
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
         self.record = ContactRecord()
         self.counters: dict = {}
+        #: The latest impacts (at most IMPACT_LOG), oldest first.
+        self.impacts: deque = deque(maxlen=IMPACT_LOG)
         self.reset()
 
     def reset(self) -> None:
@@ -236,6 +251,7 @@ class ContactSteps:
         self.record = ContactRecord(time=self.sim.state.time if hasattr(self.sim, 'state')
                                     else 0.0)
         self._warm: dict = {}
+        self.impacts.clear()
         self.counters = {'impacts': 0, 'located_steps': 0, 'events_capped': 0,
                          'lcp_solves': 0, 'lcp_iterations_max': 0, 'lcp_failures': 0,
                          'complementarity_max': 0.0, 'max_depth': 0.0,
@@ -616,9 +632,15 @@ class ContactSteps:
         A = rows.G @ Y
         p = self.solve(A, q, rows.mu)
         dv = Y @ p
+        after = (rel + rows.G @ dv)[0::3]
         n = len(self.sim.bodies.names)
         dv = dv.reshape(n, 6)
         self.counters['impacts'] += int(np.count_nonzero(approach))
+        shapes, con = self.detector.shapes, rows.contacts
+        for k in np.flatnonzero(approach):
+            self.impacts.append(ContactImpact(state.time, shapes[con.shape_a[k]].name,
+                                              shapes[con.shape_b[k]].name, float(vn[k]),
+                                              float(after[k])))
         return State(state.time, state.pos_com_world, state.quat_principal_world,
                      state.vel_com_world + dv[:, :3], state.ang_vel_principal + dv[:, 3:]), True
 

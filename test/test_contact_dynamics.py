@@ -1,0 +1,218 @@
+"""
+Contact forces, friction and impacts against closed-form solutions (:mod:`.contact_step`).
+
+Every reference here is exact for the scene: free flight under constant gravity (every
+integrator below is exact for it to rounding: RKMK4 and the Lie–Poisson methods
+reproduce a quadratic trajectory), Newton's restitution at a located impact, Coulomb's
+law on an incline, a sphere rolling without slip. The tolerances are the impact's
+location tolerance (1e-10 m of gap, so a time off by at most 1e-10 m over the approach
+speed), the first-order stop of a sliding block inside its last step (``μ g h² / 2``),
+and rounding (ulps of the largest term, times the steps taken).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from rigid_body_sim.core import Gravity, RigidBody, Simulation
+from rigid_body_sim.core.constraints import Constraint
+from rigid_body_sim.core.contact_step import LOCATION_TOLERANCE
+from rigid_body_sim.core.errors import SpecError
+from rigid_body_sim.core.shapes import CollisionShape
+
+G = 9.81
+
+
+def _ball(radius=0.1, mass=1.0, height=0.5, e=0.5, mu=1.0, integrator='rkmk4', dt=1e-3,
+          velocity=(0.0, 0.0, 0.0)):
+    inertia = 0.4 * mass * radius ** 2
+    ball = RigidBody('ball', mass, (inertia, inertia, inertia), position_world=(0, 0, height),
+                     linear_velocity_world=velocity)
+    shapes = [CollisionShape('plane', None, restitution=e, friction=mu, name='ground'),
+              CollisionShape('sphere', 'ball', radius=radius, restitution=e, friction=mu)]
+    return Simulation([ball], [Gravity()], integrator=integrator, dt=dt, shapes=shapes)
+
+
+def _incline(theta, mu, kind='box', dt=1e-3, speed=0.0, half=0.1, mass=2.0):
+    """A body resting on a plane tilted by ``theta`` about x; returns (sim, downslope unit)."""
+    c, s = math.cos(theta), math.sin(theta)
+    quat = (math.sin(theta / 2), 0.0, 0.0, math.cos(theta / 2))
+    normal = np.array([0.0, -s, c])
+    down = np.array([0.0, -c, -s])
+    if kind == 'box':
+        inertia = mass * (2 * half) ** 2 / 6
+        shape = CollisionShape('box', 'b', size=(2 * half,) * 3, friction=mu)
+    else:
+        inertia = 0.4 * mass * half ** 2
+        shape = CollisionShape('sphere', 'b', radius=half, friction=mu)
+    body = RigidBody('b', mass, (inertia,) * 3, position_world=half * normal,
+                     orientation_xyzw=quat, linear_velocity_world=speed * down)
+    ground = CollisionShape('plane', None, orientation_xyzw=quat, friction=mu)
+    return Simulation([body], [Gravity()], integrator='rkmk4', dt=dt,
+                      shapes=[ground, shape]), down
+
+
+@pytest.mark.parametrize('integrator', ['rkmk4', 'lie_poisson2', 'lie_poisson4'])
+def test_a_dropped_ball_bounces_to_e_2k_h_at_the_analytic_times(integrator):
+    radius, drop, e = 0.1, 0.4, 0.5
+    sim = _ball(radius, height=radius + drop, e=e, integrator=integrator)
+    apexes = []
+    for _ in range(1600):
+        sim.step()
+        z = sim.state.pos_com_world[0, 2] - radius
+        vz = sim.state.vel_com_world[0, 2]
+        apexes.append(z + vz * vz / (2 * G))   # the height this flight reaches
+    impacts = list(sim.contact.impacts)
+    v1 = math.sqrt(2 * G * drop)
+    t = math.sqrt(2 * drop / G)
+    for k, impact in enumerate(impacts[:5]):
+        speed = v1 * e ** k
+        # Located to 1e-10 m of gap: the time to that over the speed, with rounding's room.
+        assert impact.time == pytest.approx(t, abs=LOCATION_TOLERANCE / speed + 1e-12)
+        assert impact.approach == pytest.approx(-speed, rel=1e-9)
+        assert impact.rebound == pytest.approx(e * speed, rel=1e-9)
+        t += 2 * e * speed / G
+    # Between bounces k and k + 1 the flight's height is e^{2k} h (energy to rounding).
+    times = sim.dt * np.arange(1, 1601)
+    edges = [0.0] + [i.time for i in impacts[:5]]
+    for k in range(1, 5):
+        inside = (times > edges[k] + 2 * sim.dt) & (times < edges[k + 1] - 2 * sim.dt)
+        assert np.any(inside)
+        heights = np.array(apexes)[inside]
+        np.testing.assert_allclose(heights, e ** (2 * k) * drop, rtol=1e-9)
+
+
+def test_a_ball_without_restitution_rests_carrying_its_weight():
+    sim = _ball(e=0.0, mass=1.5)
+    sim.step(1000)
+    z0 = sim.state.pos_com_world[0].copy()
+    sim.step(2000)
+    # At rest: no creep over 2 s, the ground carries m g.
+    assert np.max(np.abs(sim.state.pos_com_world[0] - z0)) <= 1e-15
+    assert np.max(np.abs(sim.state.vel_com_world)) <= 1e-15
+    assert abs(sim.state.pos_com_world[0, 2] - 0.1) <= LOCATION_TOLERANCE
+    force = sim.contact.record.force.sum(axis=0)
+    np.testing.assert_allclose(force, [0.0, 0.0, 1.5 * G], rtol=1e-13, atol=1e-13)
+
+
+def test_a_perfectly_elastic_ball_never_gains_energy():
+    radius, drop = 0.1, 0.3
+    sim = _ball(radius, height=radius + drop, e=1.0)
+    heights = []
+    for _ in range(2000):
+        sim.step()
+        z = sim.state.pos_com_world[0, 2] - radius
+        heights.append(z + sim.state.vel_com_world[0, 2] ** 2 / (2 * G))
+    assert len(sim.contact.impacts) >= 3
+    # Each impact located within 1e-10 m of the ground, and v' = −v exactly: the height
+    # is kept to rounding.
+    np.testing.assert_allclose(heights, drop, rtol=1e-9)
+
+
+@pytest.mark.parametrize('theta, mu', [(0.3, 0.5), (0.5, 0.6), (0.2, 10.0)])
+def test_a_block_on_an_incline_sticks_while_tan_theta_is_below_mu(theta, mu):
+    assert math.tan(theta) < mu
+    sim, _ = _incline(theta, mu, dt=1e-2)
+    p0 = sim.state.pos_com_world[0].copy()
+    sim.step(1000)   # 10 s
+    assert np.max(np.abs(sim.state.pos_com_world[0] - p0)) <= 1e-14
+    # The contact force carries the weight exactly: −m g, within the friction cone.
+    force = sim.contact.record.force.sum(axis=0)
+    np.testing.assert_allclose(force, [0.0, 0.0, 2.0 * G], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize('theta, mu', [(0.3, 0.2), (0.5, 0.0), (0.7, 0.5)])
+def test_a_block_on_an_incline_slides_at_g_sin_minus_mu_cos_above(theta, mu):
+    assert math.tan(theta) > mu
+    sim, down = _incline(theta, mu)
+    p0 = sim.state.pos_com_world[0].copy()
+    sim.step(1000)
+    travel = sim.state.pos_com_world[0] - p0
+    expected = 0.5 * G * (math.sin(theta) - mu * math.cos(theta))
+    np.testing.assert_allclose(travel, expected * down, rtol=1e-11, atol=1e-13)
+
+
+def test_a_box_sliding_on_flat_ground_stops_after_v2_over_2_mu_g():
+    mu, v0, dt = 0.5, 1.0, 1e-3
+    half, mass = 0.1, 2.0
+    inertia = mass * (2 * half) ** 2 / 6
+    box = RigidBody('b', mass, (inertia,) * 3, position_world=(0, 0, half),
+                    linear_velocity_world=(v0, 0, 0))
+    shapes = [CollisionShape('plane', None, friction=mu),
+              CollisionShape('box', 'b', size=(2 * half,) * 3, friction=mu)]
+    sim = Simulation([box], [Gravity()], integrator='rkmk4', dt=dt, shapes=shapes)
+    sim.step(400)
+    distance = sim.state.pos_com_world[0, 0]
+    # The stop falls inside a step whose held force stops the box at its end: at most
+    # μ g h² / 2 further than the exact stop.
+    exact = v0 ** 2 / (2 * mu * G)
+    assert exact - 1e-12 <= distance <= exact + mu * G * dt ** 2 / 2
+    assert np.max(np.abs(sim.state.vel_com_world)) <= 1e-14
+    x = sim.state.pos_com_world[0].copy()
+    sim.step(200)
+    assert np.max(np.abs(sim.state.pos_com_world[0] - x)) <= 1e-15   # and it stays
+
+
+def test_a_sphere_rolls_down_an_incline_at_five_sevenths_g_sin_theta():
+    theta = 0.3
+    sim, down = _incline(theta, 0.5, kind='sphere')
+    p0 = sim.state.pos_com_world[0].copy()
+    sim.step(1000)
+    travel = sim.state.pos_com_world[0] - p0
+    np.testing.assert_allclose(travel, 0.5 * 5.0 / 7.0 * G * math.sin(theta) * down,
+                               rtol=1e-11, atol=1e-13)
+    # Without slip: the contact point is still (v = ω × r, to rounding).
+    v = sim.state.vel_com_world[0]
+    w = sim.bodies.R_body_principal[0] @ sim.state.ang_vel_principal[0]
+    w_world = np.linalg.norm(w)
+    assert np.linalg.norm(v) == pytest.approx(w_world * 0.1, rel=1e-12)
+
+
+def test_a_body_spawned_inside_the_ground_is_pushed_out_without_exploding():
+    sim = _ball(height=0.08, e=0.0)   # 2 cm deep
+    sim.step()
+    con = sim.contact.detect(sim.state)
+    assert np.max(con.depth) <= LOCATION_TOLERANCE
+    # Positions only: no velocity was given to it (one step of gravity's at most).
+    assert np.linalg.norm(sim.state.vel_com_world) <= G * sim.dt
+    assert sim.contact.counters['max_depth'] == pytest.approx(0.02, rel=1e-9)
+    sim.step(500)
+    assert np.linalg.norm(sim.state.vel_com_world) <= 1e-14
+
+
+def test_a_stack_of_three_boxes_stands_still():
+    half, mass = 0.1, 1.0
+    inertia = mass * (2 * half) ** 2 / 6
+    bodies = [RigidBody(f'b{k}', mass, (inertia,) * 3, position_world=(0, 0, half * (2 * k + 1)))
+              for k in range(3)]
+    shapes = [CollisionShape('plane', None)] + [
+        CollisionShape('box', f'b{k}', size=(2 * half,) * 3) for k in range(3)]
+    sim = Simulation(bodies, [Gravity()], integrator='rkmk4', dt=1e-3, shapes=shapes)
+    p0 = sim.state.pos_com_world.copy()
+    sim.step(2000)
+    assert np.max(np.abs(sim.state.pos_com_world - p0)) <= 1e-13
+    # The ground carries the three, each box the ones above.
+    assert sim.contact.counters['lcp_failures'] == 0
+
+
+def test_bodies_joined_by_a_joint_never_collide():
+    bodies = [RigidBody('a', 1.0, (0.01,) * 3), RigidBody('b', 1.0, (0.01,) * 3,
+                                                       position_world=(0.05, 0, 0))]
+    shapes = [CollisionShape('sphere', 'a', radius=0.1), CollisionShape('sphere', 'b', radius=0.1)]
+    joint = Constraint('j', 'ball', 'a', 'b', anchor_world=(0.025, 0, 0))
+    sim = Simulation(bodies, [], constraints=[joint], shapes=shapes)
+    assert len(sim.contact.detect(sim.state).depth) == 0
+    free = Simulation(bodies, [], shapes=shapes)
+    assert len(free.contact.detect(free.state).depth) == 1
+
+
+def test_contact_with_joint_limits_is_refused_naming_the_shapes(tmp_path):
+    from rigid_body_sim.core.limits import SceneJoint
+    bodies = [RigidBody('a', 1.0, (0.01,) * 3, position_world=(0, 0, 1))]
+    hinge = Constraint('h', 'hinge', 'a', None, anchor_world=(0, 0, 1.2), axis_world=(1, 0, 0))
+    with pytest.raises(SpecError, match='shapes'):
+        Simulation(bodies, [Gravity()], constraints=[hinge],
+                   scene_joints=[SceneJoint('h', lower=-1.0, upper=1.0)],
+                   shapes=[CollisionShape('plane', None),
+                           CollisionShape('sphere', 'a', radius=0.1)])
