@@ -22,6 +22,14 @@ A scene file::
         orientation_xyzw: [0, 0, 0, 1]            # or orientation_rpy: [r, p, y] (rad, URDF)
         linear_velocity_world: [0, 0, 0]          # m/s, of the body origin
         angular_velocity_body: [0, 1, 0]          # rad/s
+        shapes:                                   # collision shapes (core.shapes), body frame
+          - {kind: box, size: [0.3, 0.2, 0.1], friction: 0.5, restitution: 0.2}
+          - {kind: sphere, radius: 0.05, position_body: [0, 0, 0.1]}   # also capsule,
+                                                  # cylinder: {radius:, length:} along z;
+                                                  # collide: false; group:, mask: (bits)
+    ground: {height: 0.0, normal: [0, 0, 1], friction: 0.8, restitution: 0.0}
+                                    # a plane (solid below); pair coefficients:
+                                    # mu = sqrt(mu_a mu_b), e = max(e_a, e_b)
 
     constraints:                    # joints (see rigid_body_sim.core.constraints)
       - {name: pivot, type: ball, body_a: box, body_b: world, anchor_world: [0, 0, 1.2]}
@@ -66,6 +74,7 @@ Shapes for ``inertia`` (uniform density, about the centre of mass):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
 from pathlib import Path
 import re
 from typing import Any, Optional, Union
@@ -79,11 +88,17 @@ from .core.effects import AppliedWrenches
 from .core.integrators import INTEGRATORS
 from .core.limits import SceneJoint
 from .core.robots import CommandGroup, RobotSpec
+from .core.shapes import CollisionShape
 from .core.validate import finite_array, positive_scalar
 from .urdf import parse_urdf, read_robot_xml, UrdfError
 
 TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constraints',
-            'constraint_time_constant', 'tolerance', 'robots', 'command_groups')
+            'constraint_time_constant', 'tolerance', 'robots', 'command_groups', 'ground')
+#: The ground: a plane through ``height`` along its unit ``normal`` (solid below).
+GROUND_KEYS = ('height', 'normal', 'friction', 'restitution')
+#: A body's collision shape (:class:`.core.shapes.CollisionShape`, its body implied).
+SHAPE_KEYS = ('kind', 'radius', 'length', 'size', 'position_body', 'orientation_xyzw',
+              'friction', 'restitution', 'collide', 'group', 'mask', 'name')
 GROUP_KEYS = ('name', 'joints', 'interface', 'mode', 'kp', 'kd')
 ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
               'initial_positions', 'initial_velocities', 'keep_fixed', 'limits',
@@ -94,7 +109,7 @@ CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a
 #: A hinge's or slider's limits and friction (:class:`.core.limits.SceneJoint`).
 SCENE_JOINT_KEYS = ('lower', 'upper', 'restitution', 'friction')
 BODY_KEYS = ('name', 'mass', 'inertia', 'com_body', 'position_world', 'orientation_xyzw',
-             'orientation_rpy', 'linear_velocity_world', 'angular_velocity_body')
+             'orientation_rpy', 'linear_velocity_world', 'angular_velocity_body', 'shapes')
 EFFECT_KEYS = {'gravity': ('g_world',), 'damping': ('linear', 'angular', 'bodies'),
                'wrenches': None}
 WRENCH_KEYS = ('body', 'force', 'torque', 'frame', 'point_body', 'start', 'duration')
@@ -217,7 +232,8 @@ def _build(data: Any, source: str) -> Scene:
                          time_constant, tolerance=data.get('tolerance'),
                          robots=[spec for spec, _ in robots],
                          command_groups=_groups(data.get('command_groups') or []),
-                         scene_joints=scene_joints)
+                         scene_joints=scene_joints,
+                         shapes=_collision_shapes(data.get('ground'), bodies_data))
     except SpecError as exc:
         # Map 'effects[i]...' from the core back to the scene's effect key.
         if exc.field.startswith('effects['):
@@ -340,7 +356,7 @@ def _body(data: Any, field: str) -> RigidBody:
     for key in ('name', 'mass', 'inertia'):
         if key not in data:
             raise SpecError(f'{field}.{key}', 'missing (required)')
-    kwargs = {k: v for k, v in data.items() if k not in ('orientation_rpy', 'inertia')}
+    kwargs = {k: v for k, v in data.items() if k not in ('orientation_rpy', 'inertia', 'shapes')}
     try:
         mass = positive_scalar(data['mass'], 'mass')
         kwargs['inertia'] = _inertia(data['inertia'], mass)
@@ -354,6 +370,49 @@ def _body(data: Any, field: str) -> RigidBody:
         return RigidBody(**kwargs)
     except SpecError as exc:
         raise exc.within(field) from None
+
+
+def _collision_shapes(ground: Any, bodies_data: list) -> list:
+    """Return the scene's collision shapes: its ``ground`` and each body's ``shapes``."""
+    out = []
+    if ground is not None:
+        g = _mapping(ground, 'ground', GROUND_KEYS)
+        normal = finite_array(g.get('normal', (0.0, 0.0, 1.0)), 'ground.normal', (3,))
+        length = float(np.linalg.norm(normal))
+        if not length > 0.0:
+            raise SpecError('ground.normal', f'must be a non-zero vector, got {normal!r}')
+        normal = normal / length
+        height = float(finite_array(g.get('height', 0.0), 'ground.height', ()))
+        # The plane's z axis is its normal: the shortest rotation from z to it.
+        axis = np.cross((0.0, 0.0, 1.0), normal)
+        angle = math.atan2(float(np.linalg.norm(axis)), float(normal[2]))
+        rotvec = np.zeros(3) if not np.any(axis) else axis / np.linalg.norm(axis) * angle
+        if not np.any(axis) and normal[2] < 0.0:
+            rotvec = np.array([math.pi, 0.0, 0.0])
+        try:
+            out.append(CollisionShape('plane', None, position_body=height * normal,
+                                      orientation_xyzw=Rotation.from_rotvec(rotvec).as_quat(),
+                                      friction=g.get('friction', 1.0),
+                                      restitution=g.get('restitution', 0.0), name='ground'))
+        except SpecError as exc:
+            raise exc.within('ground') from None
+    for i, body in enumerate(bodies_data):
+        entries = body.get('shapes') if isinstance(body, dict) else None
+        if entries is None:
+            continue
+        field = f'bodies[{i}].shapes'
+        if not isinstance(entries, list):
+            raise SpecError(field, f'expected a list of shapes, got {entries!r}')
+        for k, entry in enumerate(entries):
+            entry = _mapping(entry, f'{field}[{k}]', SHAPE_KEYS)
+            if 'kind' not in entry:
+                raise SpecError(f'{field}[{k}].kind', 'missing (required): sphere, box, '
+                                                      'capsule or cylinder')
+            try:
+                out.append(CollisionShape(body=body['name'], **entry))
+            except SpecError as exc:
+                raise exc.within(f'{field}[{k}]') from None
+    return out
 
 
 def _inertia(value: Any, mass: float) -> Any:

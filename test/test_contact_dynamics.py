@@ -35,7 +35,7 @@ def _ball(radius=0.1, mass=1.0, height=0.5, e=0.5, mu=1.0, integrator='rkmk4', d
 
 
 def _incline(theta, mu, kind='box', dt=1e-3, speed=0.0, half=0.1, mass=2.0):
-    """A body resting on a plane tilted by ``theta`` about x; returns (sim, downslope unit)."""
+    """Return a body resting on a plane tilted by ``theta`` about x, and the downslope."""
     c, s = math.cos(theta), math.sin(theta)
     quat = (math.sin(theta / 2), 0.0, 0.0, math.cos(theta / 2))
     normal = np.array([0.0, -s, c])
@@ -197,8 +197,8 @@ def test_a_stack_of_three_boxes_stands_still():
 
 
 def test_bodies_joined_by_a_joint_never_collide():
-    bodies = [RigidBody('a', 1.0, (0.01,) * 3), RigidBody('b', 1.0, (0.01,) * 3,
-                                                       position_world=(0.05, 0, 0))]
+    bodies = [RigidBody('a', 1.0, (0.01,) * 3),
+              RigidBody('b', 1.0, (0.01,) * 3, position_world=(0.05, 0, 0))]
     shapes = [CollisionShape('sphere', 'a', radius=0.1), CollisionShape('sphere', 'b', radius=0.1)]
     joint = Constraint('j', 'ball', 'a', 'b', anchor_world=(0.025, 0, 0))
     sim = Simulation(bodies, [], constraints=[joint], shapes=shapes)
@@ -216,3 +216,52 @@ def test_contact_with_joint_limits_is_refused_naming_the_shapes(tmp_path):
                    scene_joints=[SceneJoint('h', lower=-1.0, upper=1.0)],
                    shapes=[CollisionShape('plane', None),
                            CollisionShape('sphere', 'a', radius=0.1)])
+
+
+def test_contacts_report_the_forces_the_step_used():
+    sim, down = _incline(0.3, 0.2)
+    sim.step(10)
+    rep = sim.contacts()
+    assert rep['shape_a'] == ['b/box'] * 4 and rep['body_b'] == ['world'] * 4
+    # Sliding: each corner's friction is mu times its normal force, against the motion.
+    np.testing.assert_allclose(np.linalg.norm(rep['friction_force'], axis=1),
+                               0.2 * rep['normal_force'], rtol=1e-9)
+    assert np.all(rep['friction_force'] @ down < 0.0)
+    assert np.sum(rep['normal_force']) == pytest.approx(2.0 * G * math.cos(0.3), rel=1e-12)
+    assert rep['counters']['lcp_failures'] == 0
+    assert Simulation([RigidBody('a', 1.0, (1.0,) * 3)]).contacts() == {}
+
+
+def test_a_scene_ground_and_body_shapes(tmp_path):
+    from rigid_body_sim.scene import load_scene, SceneError
+    text = """
+dt: 0.001
+integrator: rkmk4
+effects: {gravity: {}}
+ground: {height: 0.5, normal: [0, 0, 2], friction: 0.5, restitution: 0.5}
+bodies:
+  - {name: ball, mass: 1.0, inertia: {sphere: 0.1}, position_world: [0, 0, 1.0],
+     shapes: [{kind: sphere, radius: 0.1, restitution: 0.5}]}
+"""
+    path = tmp_path / 'drop.yaml'
+    path.write_text(text)
+    sim = load_scene(path).simulation
+    sim.step(300)
+    first = sim.contact.impacts[0]
+    # Dropped 0.4 m onto a ground 0.5 m up (its normal normalized).
+    assert first.time == pytest.approx(math.sqrt(0.8 / G), abs=1e-9)
+    assert first.rebound == pytest.approx(-0.5 * first.approach, rel=1e-12)
+    for bad, where in (('ground: {normal: [0, 0, 0]}', 'ground.normal'),
+                       ('ground: {friction: -1}', 'ground.friction'),
+                       ('ground: {height: .nan}', 'ground.height')):
+        path.write_text(text.replace(
+            'ground: {height: 0.5, normal: [0, 0, 2], friction: 0.5, restitution: 0.5}', bad))
+        with pytest.raises(SceneError, match=where.replace('.', r'\.')):
+            load_scene(path)
+    path.write_text(text.replace('radius: 0.1, restitution', 'radius: 0.0, restitution'))
+    with pytest.raises(SceneError, match=r'bodies\[0\]\.shapes\[0\]\.radius'):
+        load_scene(path)
+    path.write_text(text.replace('{kind: sphere, radius: 0.1, restitution: 0.5}',
+                                 '{radius: 0.1}'))
+    with pytest.raises(SceneError, match=r'bodies\[0\]\.shapes\[0\]\.kind'):
+        load_scene(path)

@@ -933,6 +933,42 @@ class Simulation:
                 'slipping': {names[i]: int(fr.mode[i]) for i in fr.slipping()},
                 'counters': dict(fr.counters)}
 
+    def contacts(self) -> dict:
+        """
+        Return the contacts of the latest step and the forces they carried over it.
+
+        ``{'time': s, 'shape_a': [name], 'shape_b': [name], 'body_a': [name], 'body_b':
+        [name or 'world'], 'point': (c, 3) m, 'normal': (c, 3) from b to a,
+        'normal_force': (c,) N, 'friction_force': (c, 3) N, 'depth': (c,) m,
+        'counters': {...}}``, world frame, at the state the step's (last) held forces
+        were found (``time``): the force on shape a is ``normal_force · normal +
+        friction_force``, on b its opposite. ``counters`` (since the reset): impacts,
+        steps with a located impact, those cut at :data:`.contact_step.MAX_EVENTS`, the
+        contact LCPs solved, their most iterations, failures and largest residual (m/s),
+        the deepest penetration a step left and the projections that took it out.
+        Empty without collision shapes.
+        """
+        if self.contact is None:
+            return {}
+        rec = self.contact.record
+        names = self.bodies.names + ['world']
+        shapes = self.contact.detector.shapes
+        out: dict = {'time': rec.time, 'counters': dict(self.contact.counters)}
+        if rec.rows is None or not len(rec.rows):
+            z3 = np.zeros((0, 3))
+            return {**out, 'shape_a': [], 'shape_b': [], 'body_a': [], 'body_b': [],
+                    'point': z3, 'normal': z3, 'normal_force': np.zeros(0),
+                    'friction_force': z3, 'depth': np.zeros(0)}
+        con = rec.rows.contacts
+        fn = np.sum(rec.force * con.normal, axis=1)
+        return {**out, 'shape_a': [shapes[k].name for k in con.shape_a],
+                'shape_b': [shapes[k].name for k in con.shape_b],
+                'body_a': [names[k] for k in con.body_a],
+                'body_b': [names[k] for k in con.body_b],
+                'point': con.point.copy(), 'normal': con.normal.copy(), 'normal_force': fn,
+                'friction_force': rec.force - fn[:, None] * con.normal,
+                'depth': con.depth.copy()}
+
     def complementarity(self) -> dict:
         """
         Return how well the rows with bounds kept their complementarity since the reset.
