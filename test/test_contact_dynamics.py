@@ -207,15 +207,30 @@ def test_bodies_joined_by_a_joint_never_collide():
     assert len(free.contact.detect(free.state).depth) == 1
 
 
-def test_contact_with_joint_limits_is_refused_naming_the_shapes(tmp_path):
+@pytest.mark.parametrize('limited', [False, True])
+def test_a_hinged_rod_resting_on_the_ground_carries_half_its_weight(limited):
+    # A rod hinged at one end, its other end a ball on the ground, the hinge level with
+    # the contact point (so friction there has no moment about it): moments about the
+    # hinge give the ground m g / 2 (the hinge the other half). With limits on the
+    # hinge (never reached) the joints' events run along the contact's steps.
     from rigid_body_sim.core.limits import SceneJoint
-    bodies = [RigidBody('a', 1.0, (0.01,) * 3, position_world=(0, 0, 1))]
-    hinge = Constraint('h', 'hinge', 'a', None, anchor_world=(0, 0, 1.2), axis_world=(1, 0, 0))
-    with pytest.raises(SpecError, match='shapes'):
-        Simulation(bodies, [Gravity()], constraints=[hinge],
-                   scene_joints=[SceneJoint('h', lower=-1.0, upper=1.0)],
-                   shapes=[CollisionShape('plane', None),
-                           CollisionShape('sphere', 'a', radius=0.1)])
+    length, radius, mass = 1.0, 0.05, 3.0
+    rod = RigidBody('rod', mass, (1e-3, mass * length ** 2 / 12, mass * length ** 2 / 12),
+                    position_world=(length / 2, 0, radius))
+    hinge = Constraint('h', 'hinge', 'rod', None, anchor_world=(0, 0, 0),
+                       axis_world=(0, 1, 0))
+    joints = [SceneJoint('h', lower=-1.0, upper=1.0)] if limited else []
+    sim = Simulation([rod], [Gravity()], integrator='rkmk4', dt=1e-3, constraints=[hinge],
+                     scene_joints=joints,
+                     shapes=[CollisionShape('plane', None),
+                             CollisionShape('sphere', 'rod', radius=radius,
+                                            position_body=(length / 2, 0, 0))])
+    p0 = sim.state.pos_com_world.copy()
+    sim.step(500)
+    rep = sim.contacts()
+    assert rep['normal_force'] == pytest.approx([mass * G / 2], rel=1e-9)
+    assert np.max(np.abs(sim.state.pos_com_world - p0)) <= 1e-12
+    assert (sim.events is not None) == limited
 
 
 def test_contacts_report_the_forces_the_step_used():

@@ -95,6 +95,11 @@ FRICTION_TOLERANCE = 1e-9
 FRICTION_ITERATIONS = 60
 #: The proximal regularization, relative to the Delassus operator's largest diagonal.
 PROXIMAL = 1e-6
+#: Relative to the rows' velocities without contact forces: how far a step's end may
+#: leave them from the LCP's model before the model is corrected and solved again.
+MODEL_TOLERANCE = 1e-12
+#: Most corrections of the model per step.
+MODEL_CORRECTIONS = 2
 #: Most regula-falsi iterations to locate one impact.
 MAX_LOCATION_ITERATIONS = 60
 #: Impacts in one step after which the next are inelastic (Zeno's cut).
@@ -238,6 +243,7 @@ class ContactSteps:
         self._mu = np.array([s.friction for s in shapes], dtype=float)
         self._e = np.array([s.restitution for s in shapes], dtype=float)
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
+        self._joint_event = False
         self.record = ContactRecord()
         self.counters: dict = {}
         #: The latest impacts (at most IMPACT_LOG), oldest first.
@@ -255,7 +261,8 @@ class ContactSteps:
         self.counters = {'impacts': 0, 'located_steps': 0, 'events_capped': 0,
                          'lcp_solves': 0, 'lcp_iterations_max': 0, 'lcp_failures': 0,
                          'complementarity_max': 0.0, 'max_depth': 0.0,
-                         'projections': 0, 'max_projected': 0.0}
+                         'projections': 0, 'max_projected': 0.0, 'joint_event_overlaps': 0,
+                         'model_corrections': 0}
 
     def tighten(self) -> None:
         """Set the tolerances for the accuracy knob (``tolerance dt``, floored) or the defaults."""
@@ -266,6 +273,24 @@ class ContactSteps:
             budget = control.tolerance * dt
             self.location = min(LOCATION_TOLERANCE, max(budget, LOCATION_FLOOR))
             self.rate = min(RATE_TOLERANCE, max(budget, RATE_FLOOR))
+
+    def _advance(self, state: State, h: float, t: float, accepted: bool = False) -> State:
+        """
+        Take the integrator's step of ``h`` from ``state`` to ``t``.
+
+        ``accepted``: the step that stands (with the contact forces found), taken with
+        the joints' events (limits, friction, drives' efforts) located inside it; the
+        trials (the step without contact forces, the location's partial steps) are the
+        integrator's alone, with the joints' rows as they are: the events' bookkeeping
+        changes only along the steps that stand.
+        """
+        events = self.sim.events
+        if events is None or not accepted:
+            return self.sim._advance(state, h, t)
+        located = events.counters['located_steps']
+        new = events.step(state, t, span=h)[0]
+        self._joint_event = events.counters['located_steps'] > located
+        return new
 
     # -- the rows -------------------------------------------------------------------------
 
@@ -426,6 +451,7 @@ class ContactSteps:
                     bounces += 1
                     events += 1
             rows = self.rows(state, separating=False)
+            self._joint_event = False
             new, held = self._held_step(state, rows, h, t_end)
             if events >= MAX_EVENTS:
                 self.counters['events_capped'] += 1
@@ -433,31 +459,64 @@ class ContactSteps:
             hit = self._new_overlap(rows, new)
             if hit is None:
                 return self._accept(new)
+            if self._joint_event:
+                # A joint's event was resolved inside the step (its bookkeeping changed
+                # along it): the contact's impact is not located back into it; the step
+                # stands and its depth is projected out (first order, counted).
+                self.counters['joint_event_overlaps'] += 1
+                return self._accept(new)
             self.counters['located_steps'] += 1
             state = self._locate(state, rows, new, h, hit)
             events += 1
 
     def _held_step(self, state: State, rows: ContactRows, h: float, t_end: float) -> tuple:
-        """Take the step of ``h`` from ``state`` with the rows' forces held: (new, forces)."""
-        sim = self.sim
+        """
+        Take the step of ``h`` from ``state`` with the rows' forces held: (new, forces).
+
+        The LCP's affine model ``w = A p + q`` is the step's own response to first
+        order; where the step, taken with the forces found, ends with the rows'
+        velocities off the model's by more than :data:`MODEL_TOLERANCE` (a body
+        turning under its joints within the step: ``O(h²)`` relative), the model's
+        offset is corrected by what the step showed and the LCP solved again (at
+        most :data:`MODEL_CORRECTIONS` times): a contact that should rest does, to
+        rounding, instead of lifting by the model's error each step.
+        """
         t = state.time + h
+        events = self.sim.events
         self._set_forces(None)
-        free = sim._advance(state, h, t)
+        free = self._advance(state, h, t)
         if not len(rows):
             self.record = ContactRecord(state.time, rows, np.zeros((0, 3)))
+            if events is not None:
+                free = self._advance(state, h, t, accepted=True)
             return free, None
         v_free = _stack(free.vel_com_world, free.ang_vel_principal)
         Y = self.response(state, rows.G)
         A = rows.G @ Y
         q = rows.G @ v_free
         p = self.solve(A, q, rows.mu, start=self._warm_start(rows))
-        force = (p.reshape(-1, 3)[:, :, None] * rows.frame).sum(axis=1) / h   # (c, 3) world
+        new = free
+        for correction in range(MODEL_CORRECTIONS + 1):
+            force = (p.reshape(-1, 3)[:, :, None] * rows.frame).sum(axis=1) / h   # (c, 3)
+            if not np.any(p):
+                new = free
+                break
+            self._set_forces(rows, force)
+            new = self._advance(state, h, t)
+            w = rows.G @ _stack(new.vel_com_world, new.ang_vel_principal)
+            offset = w - (A @ p + q)
+            if correction == MODEL_CORRECTIONS or \
+                    float(np.max(np.abs(offset))) <= MODEL_TOLERANCE * max(
+                        float(np.max(np.abs(q))), self.rate):
+                break
+            self.counters['model_corrections'] += 1
+            q = q + offset
+            p = self.solve(A, q, rows.mu, start=p)
         self._remember(rows, p)
         self.record = ContactRecord(state.time, rows, force)
-        if not np.any(p):
-            return free, force
-        self._set_forces(rows, force)
-        return sim._advance(state, h, t), force
+        if events is not None:   # the step that stands, with the joints' events
+            new = self._advance(state, h, t, accepted=True)
+        return new, force
 
     def _set_forces(self, rows: Optional[ContactRows], force: Optional[np.ndarray] = None
                     ) -> None:
@@ -575,7 +634,7 @@ class ContactSteps:
             tau = (lo_t * hi_g - hi_t * lo_g) / (hi_g - lo_g)
             if not lo_t < tau < hi_t:
                 tau = 0.5 * (lo_t + hi_t)
-            trial = sim._advance(state, tau, t0 + tau)
+            trial = self._advance(state, tau, t0 + tau)
             g = self._depth_at(rows, trial)
             if abs(g) <= self.location:
                 if self._approaching(trial):
@@ -594,7 +653,7 @@ class ContactSteps:
                 side = -1
             best = trial if g < 0.0 else best
         if best is None:   # (never closer than the tolerance: the last state before it)
-            best = sim._advance(state, lo_t, t0 + lo_t) if lo_t > 0.0 else state
+            best = self._advance(state, lo_t, t0 + lo_t) if lo_t > 0.0 else state
         self._set_forces(None)
         return best
 

@@ -149,14 +149,17 @@ class JointEvents:
         self.tighten()
         return True
 
-    def step(self, start: State, t_end: float, first: Optional[State] = None) -> tuple:
+    def step(self, start: State, t_end: float, first: Optional[State] = None,
+             span: Optional[float] = None) -> tuple:
         """
         Take a step from ``start`` to ``t_end`` with every event inside it resolved.
 
         Returns the new state and ``(coordinates, rates over their limits)`` there
         (None when the step ended on an event), which the joints' tracking takes
         instead of reading them again. ``first``: the integrator's step from
-        ``start`` to ``t_end``, when the caller took it already.
+        ``start`` to ``t_end``, when the caller took it already. ``span``: the
+        length of the first integrator step (default ``dt``, as a plain step takes
+        it; a part of a step, such as a contact's located impact leaves, gives its own).
         """
         sim, lim, fr = self.sim, self.limits, self.friction
         state, previous = start, sim.joints.positions
@@ -169,7 +172,7 @@ class JointEvents:
                 return State(t_end, *state.parts), None
             # From the step's start, the step is dt, as the plain step (and the fast path of
             # :meth:`quiet`) takes it: t_end − t may differ from dt in its last bits.
-            step = sim.dt if state is start else h
+            step = (sim.dt if span is None else span) if state is start else h
             if first is not None:
                 new, first = first, None
             else:

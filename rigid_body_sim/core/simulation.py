@@ -217,11 +217,6 @@ class Simulation:
         #: The contacts' steps (None: no shape collides with anything).
         self.contact: Optional[ContactSteps] = None
         if detector is not None:
-            if self.events is not None:
-                raise SpecError('shapes', 'contact with joints that have limits, Coulomb '
-                                          'friction or effort-limited exact drives is not '
-                                          'built yet (issue 21): switch those off, or the '
-                                          'shapes')
             self.contact = ContactSteps(self, detector, contact_wrenches)
         self._tracking = len(self.joints) > 0
         self.reset()
