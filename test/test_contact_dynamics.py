@@ -18,7 +18,6 @@ import pytest
 from rigid_body_sim.core import Gravity, RigidBody, Simulation
 from rigid_body_sim.core.constraints import Constraint
 from rigid_body_sim.core.contact_step import LOCATION_TOLERANCE
-from rigid_body_sim.core.errors import SpecError
 from rigid_body_sim.core.shapes import CollisionShape
 
 G = 9.81

@@ -622,7 +622,6 @@ class ContactSteps:
         from ``state`` with the same forces held, until the depth is within the
         tolerance.
         """
-        sim = self.sim
         t0 = state.time
         # At the start the new contact is apart, or touching and moving apart (a bounce
         # that returns): its depth there counts as below the tolerance.
