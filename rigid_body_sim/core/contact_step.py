@@ -300,12 +300,13 @@ class ContactSteps:
         return self.detector.detect(self.sim.bodies.outputs_cache.out)
 
     def rows(self, state: State, contacts: Optional[Contacts] = None,
-             separating: bool = True) -> ContactRows:
+             separating: bool = True, select: Optional[np.ndarray] = None) -> ContactRows:
         """
         Return the rows of the contacts touching at ``state`` (gap within the tolerance).
 
         ``separating`` False: without the contacts whose points move apart faster than
         the rate tolerance (a ball just bounced: it flies, and comes back as an impact).
+        ``select``: the contacts of ``contacts`` to take instead of the touching ones.
         """
         if contacts is None:
             contacts = self.detect(state)
@@ -317,7 +318,7 @@ class ContactSteps:
         w_world = np.concatenate([np.einsum('nij,nj->ni', R, state.ang_vel_principal),
                                   np.zeros((1, 3))])
         vel = np.concatenate([state.vel_com_world, np.zeros((1, 3))])
-        keep = contacts.depth >= -self.location
+        keep = contacts.depth >= -self.location if select is None else select
         con = Contacts(*(part[keep] for part in contacts))
         a, b = con.body_a, con.body_b
         lever_a = con.point - centre[a]
@@ -337,19 +338,52 @@ class ContactSteps:
         for k in range(c):
             t1 = v_t[k] / speed[k] if speed[k] > self.rate else _any_tangent(nrm[k])
             frame[k] = (nrm[k], t1, np.cross(nrm[k], t1))
-        G = np.zeros((3 * c, 6 * n))
-        for k in range(c):
-            for side, body, lever in ((1.0, a[k], lever_a[k]), (-1.0, b[k], lever_b[k])):
-                if body >= n:
-                    continue
-                d = frame[k]
-                G[3 * k:3 * k + 3, 6 * body:6 * body + 3] += side * d
-                # (r × d) · ω = (Rᵀ (r × d)) · Ω
-                G[3 * k:3 * k + 3, 6 * body + 3:6 * body + 6] += side * (
-                    np.cross(lever, d) @ R_all[body])
+        G = _jacobian(frame, a, b, lever_a, lever_b, R_all, n)
         mu = pair_friction(self._mu[con.shape_a], self._mu[con.shape_b])
         e = pair_restitution(self._e[con.shape_a], self._e[con.shape_b])
         return ContactRows(state, con, frame, lever_a, lever_b, mu, e, G)
+
+    def rows_at(self, rows: ContactRows, state: State) -> np.ndarray:
+        """
+        Return the rows' ``G`` at ``state`` (a step's end): each row at its contact there.
+
+        Each contact is found again at ``state`` (the same pair, its point continuing:
+        :meth:`_continuing`; a box's corner, a rolling ball's lowest point), its
+        normal the one found there and its tangents the start's turned onto it (with
+        body b); a row whose contact is not found keeps its start's ``G``. The rows'
+        velocities at a step's end are what the contact conditions ask of: at the
+        start's ``G`` a pivot whose lever turns within the step would end moving.
+        """
+        con = self.detect(state)
+        G = rows.G.copy()
+        if not len(con.depth):
+            return G
+        n = len(self.sim.bodies.names)
+        R = quat_to_matrix(state.quat_principal_world).reshape(n, 3, 3)
+        R_all = np.concatenate([R, np.eye(3)[None]])
+        R0 = np.concatenate([quat_to_matrix(rows.state.quat_principal_world).reshape(n, 3, 3),
+                             np.eye(3)[None]])
+        centre = np.concatenate([state.pos_com_world, np.zeros((1, 3))])
+        start = rows.contacts
+        for k in range(len(rows)):
+            one = np.zeros(len(rows), dtype=bool)
+            one[k] = True
+            match = np.flatnonzero(self._continuing(rows, one, con, state))
+            if not len(match):
+                continue
+            j = match[int(np.argmax(con.depth[match]))]
+            a, b = int(start.body_a[k]), int(start.body_b[k])
+            nrm = con.normal[j]
+            turn = R_all[b] @ R0[b].T
+            t1 = turn @ rows.frame[k, 1]
+            t1 = t1 - np.dot(t1, nrm) * nrm
+            t1 /= np.linalg.norm(t1)
+            frame = np.array([[nrm, t1, np.cross(nrm, t1)]])
+            lever_a = con.point[j] - centre[a]
+            lever_b = con.point[j] - centre[b] if b < n else np.zeros(3)
+            G[3 * k:3 * k + 3] = _jacobian(frame, np.array([a]), np.array([b]),
+                                           lever_a[None], lever_b[None], R_all, n)
+        return G
 
     def response(self, state: State, G: np.ndarray) -> np.ndarray:
         """
@@ -382,15 +416,18 @@ class ContactSteps:
     # -- the LCP of the rows --------------------------------------------------------------
 
     def solve(self, A: np.ndarray, q: np.ndarray, mu: np.ndarray,
-              start: Optional[np.ndarray] = None, normal_only: bool = False) -> np.ndarray:
+              start: Optional[np.ndarray] = None, normal_only: bool = False,
+              equal: Optional[np.ndarray] = None) -> np.ndarray:
         """
         Return the rows' impulses ``p`` (3c,): ``w = A p + q`` under the contact conditions.
 
         Normal rows ``p_n ≥ 0 ⊥ w_n ≥ 0``; tangent rows within the cone ``μ p_n``
         and ``w_t = 0`` inside it, sliding against ``w_t`` on it (see the module
         docstring: the boxes' fixed point, proximal). ``normal_only``: the
-        tangent rows are left out (``p_t = 0``). Counted; a solve that does not
-        converge keeps its last iterate and is counted in ``lcp_failures``.
+        tangent rows are left out (``p_t = 0``); ``equal`` (c,) bool: those
+        contacts' normal rows are equalities (``w_n = 0``, ``p_n`` of either sign).
+        Counted; a solve that does not converge keeps its last iterate and is counted
+        in ``lcp_failures``.
         """
         m = len(q)
         if not m:
@@ -400,8 +437,11 @@ class ContactSteps:
         rho = PROXIMAL * float(np.max(np.diag(A_r)))
         A_p = A_r + rho * np.eye(len(rows))
         p = np.zeros(len(rows)) if start is None else np.array(start[rows], dtype=float)
-        p[::1 if normal_only else 3] = np.maximum(p[::1 if normal_only else 3], 0.0)
         lo, hi = np.zeros(len(rows)), np.full(len(rows), np.inf)
+        if equal is not None:
+            lo[::1 if normal_only else 3][equal] = -np.inf
+        p[::1 if normal_only else 3] = np.maximum(p[::1 if normal_only else 3],
+                                                  lo[::1 if normal_only else 3])
         converged, it = False, 0
         for it in range(1, FRICTION_ITERATIONS + 1):
             if not normal_only:
@@ -427,8 +467,9 @@ class ContactSteps:
         cnt['lcp_iterations_max'] = max(cnt['lcp_iterations_max'], it)
         if not converged:
             cnt['lcp_failures'] += 1
-        cnt['complementarity_max'] = max(cnt['complementarity_max'],
-                                         _residual(A_r, q_r, p, mu, normal_only))
+        if equal is None:
+            cnt['complementarity_max'] = max(cnt['complementarity_max'],
+                                             _residual(A_r, q_r, p, mu, normal_only))
         out = np.zeros(m)
         out[rows] = p
         return out
@@ -503,7 +544,7 @@ class ContactSteps:
                 break
             self._set_forces(rows, force)
             new = self._advance(state, h, t)
-            w = rows.G @ _stack(new.vel_com_world, new.ang_vel_principal)
+            w = self.rows_at(rows, new) @ _stack(new.vel_com_world, new.ang_vel_principal)
             offset = w - (A @ p + q)
             if correction == MODEL_CORRECTIONS or \
                     float(np.max(np.abs(offset))) <= MODEL_TOLERANCE * max(
@@ -582,21 +623,34 @@ class ContactSteps:
         """Return the deepest depth at ``state`` of contacts not continuing a row (None: none)."""
         if not len(con.depth):
             return None
-        fresh = np.ones(len(con.depth), dtype=bool)
-        if len(rows):
-            start = rows.contacts
-            key_start = start.shape_a * (len(self.detector.shapes) + 1) + start.shape_b
-            key_now = con.shape_a * (len(self.detector.shapes) + 1) + con.shape_b
-            local_start = self._in_body(start.point, start.body_a, rows.state)
-            local_now = self._in_body(con.point, con.body_a, state)
-            for k in range(len(con.depth)):
-                same = np.flatnonzero(key_start == key_now[k])
-                if len(same):
-                    d2 = np.sum((local_start[same] - local_now[k]) ** 2, axis=1)
-                    fresh[k] = not np.any(d2 <= self._match_radius(con.shape_a[k]) ** 2)
+        fresh = ~self._continuing(rows, np.ones(len(rows), dtype=bool), con, state)
         if not np.any(fresh):
             return None
         return float(np.max(con.depth[fresh]))
+
+    def _continuing(self, rows: Optional[ContactRows], which: np.ndarray, con: Contacts,
+                    state: State) -> np.ndarray:
+        """
+        Tell, per contact of ``con`` at ``state``, whether it continues one of ``rows[which]``.
+
+        The same pair of shapes, and its point, in body a's frame, within
+        :meth:`_match_radius` of that row's at the rows' state.
+        """
+        out = np.zeros(len(con.depth), dtype=bool)
+        if rows is None or not len(rows) or not np.any(which) or not len(con.depth):
+            return out
+        start = Contacts(*(part[which] for part in rows.contacts))
+        count = len(self.detector.shapes) + 1
+        key_start = start.shape_a * count + start.shape_b
+        key_now = con.shape_a * count + con.shape_b
+        local_start = self._in_body(start.point, start.body_a, rows.state)
+        local_now = self._in_body(con.point, con.body_a, state)
+        for k in range(len(con.depth)):
+            same = np.flatnonzero(key_start == key_now[k])
+            if len(same):
+                d2 = np.sum((local_start[same] - local_now[k]) ** 2, axis=1)
+                out[k] = bool(np.any(d2 <= self._match_radius(con.shape_a[k]) ** 2))
+        return out
 
     def _match_radius(self, shape: int) -> float:
         """Return how far (m) a contact point may move on its shape and stay the same contact."""
@@ -705,27 +759,68 @@ class ContactSteps:
     # -- the accepted step ----------------------------------------------------------------
 
     def _accept(self, new: State) -> State:
-        """Clear the forces; project out depths beyond the tolerance; record the deepest."""
+        """
+        Clear the forces and correct the contacts' positions at the step's end.
+
+        Contacts deeper than the tolerance are pushed out (``depth ≥ 0``: the smallest
+        pushes, an LCP), and those continuing a row that pushed over the step and left
+        apart from it are brought back (``depth = 0``): a constant force over a step
+        holds a contact whose force varies only to first order (a box tipping on its
+        edge rises by ``O(h³)`` a step), and a contact that carries a load stays on its
+        surface, as a joint's rows are held by the projection. Positions only; the
+        deepest depth and the projections are counted.
+        """
         self._set_forces(None)
         con = self.detect(new)
+        rec = self.record
+        active = None
+        if rec.rows is not None and len(rec.rows):
+            active = np.sum(rec.force * rec.rows.contacts.normal, axis=1) > 0.0
+        held = self._continuing(rec.rows, active, con, new) if active is not None \
+            else np.zeros(len(con.depth), dtype=bool)
         deep = con.depth > self.location
-        if not np.any(deep):
+        lifted = held & (con.depth < -self.location)
+        if not (np.any(deep) or np.any(lifted)):
             return new
-        self.counters['max_depth'] = max(self.counters['max_depth'], float(np.max(con.depth)))
-        rows = self.rows(new, con)
+        if np.any(deep):
+            self.counters['max_depth'] = max(self.counters['max_depth'],
+                                             float(np.max(con.depth)))
+        select = held | (con.depth >= -self.location)
+        rows = self.rows(new, con, select=select)
         Y = self.response(new, rows.G)
         A = rows.G @ Y
-        q = -np.maximum(rows.contacts.depth, 0.0)
         q3 = np.zeros(3 * len(rows))
-        q3[0::3] = q
-        p = self.solve(A, q3, rows.mu, normal_only=True)
+        q3[0::3] = -rows.contacts.depth
+        p = self.solve(A, q3, rows.mu, normal_only=True, equal=held[select])
         dq = (Y @ p).reshape(-1, 6)
         self.counters['projections'] += 1
         self.counters['max_projected'] = max(self.counters['max_projected'],
-                                             float(np.max(con.depth)))
+                                             float(np.max(np.abs(rows.contacts.depth))))
         quat = quat_multiply(new.quat_principal_world, exp_quat(dq[:, 3:]))
         return State(new.time, new.pos_com_world + dq[:, :3], quat, new.vel_com_world,
                      new.ang_vel_principal)
+
+
+def _jacobian(frame: np.ndarray, a: np.ndarray, b: np.ndarray, lever_a: np.ndarray,
+              lever_b: np.ndarray, R_all: np.ndarray, n: int) -> np.ndarray:
+    """
+    Return the rows' ``G`` (3c, 6n): each contact's frame rows on its point of a less b.
+
+    ``R_all`` (n + 1, 3, 3) the principal-to-world rotations and the world's identity;
+    a row ``d`` on body ``i`` with lever ``r`` is ``d`` on ``v`` and ``Rᵀ (r × d)`` on
+    ``Ω`` (``(r × d) · ω``).
+    """
+    c = len(a)
+    G = np.zeros((3 * c, 6 * n))
+    for k in range(c):
+        for side, body, lever in ((1.0, a[k], lever_a[k]), (-1.0, b[k], lever_b[k])):
+            if body >= n:
+                continue
+            d = frame[k]
+            G[3 * k:3 * k + 3, 6 * body:6 * body + 3] += side * d
+            G[3 * k:3 * k + 3, 6 * body + 3:6 * body + 6] += side * (
+                np.cross(lever, d) @ R_all[body])
+    return G
 
 
 def _stack(vel: np.ndarray, omega: np.ndarray) -> np.ndarray:
