@@ -72,11 +72,11 @@ from typing import Any, NamedTuple, Optional
 import numpy as np
 
 from .bodies import State
-from .complementarity import solve as solve_blcp
+from .complementarity import solve_direct
 from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
 from .kernels.free_step import HAS_POSITION_FORCES
 from .kernels.layout import W_BODY, W_FORCE, W_TORQUE, W_WIDTH
-from .rotation import exp_quat, quat_multiply, quat_to_matrix
+from .rotation import cross, exp_quat, quat_multiply, quat_to_matrix
 from .shapes import ContactDetector, Contacts
 
 #: m: a contact whose gap is within this is touching (a row); an impact is located
@@ -90,7 +90,7 @@ LOCATION_FLOOR = 1e-13
 RATE_FLOOR = 1e-13
 #: Relative: the friction iteration ends when no impulse changes by more than this
 #: fraction of the largest (and every friction is within the cone by as much).
-FRICTION_TOLERANCE = 1e-9
+FRICTION_TOLERANCE = 1e-8
 #: Most iterations of the friction boxes (each an exact box LCP, warm-started).
 FRICTION_ITERATIONS = 60
 #: The proximal regularization, relative to the Delassus operator's largest diagonal.
@@ -241,9 +241,14 @@ class ContactSteps:
         self.wrenches = wrenches
         shapes = detector.shapes
         self._mu = np.array([s.friction for s in shapes], dtype=float)
+        # m: how far a contact's point may move on its shape a and stay the same contact
+        # (a quarter of the shape's largest dimension).
+        self._radius = np.array([0.25 * float(np.max(s.dimensions())) for s in shapes])
         self._e = np.array([s.restitution for s in shapes], dtype=float)
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
         self._joint_event = False
+        self._seen: Optional[tuple] = None
+        self._frames_seen: Optional[tuple] = None
         self.record = ContactRecord()
         self.counters: dict = {}
         #: The latest impacts (at most IMPACT_LOG), oldest first.
@@ -294,10 +299,26 @@ class ContactSteps:
 
     # -- the rows -------------------------------------------------------------------------
 
+    def _rotations(self, state: State) -> np.ndarray:
+        """Return the principal-to-world rotations (n + 1, 3, 3) at ``state``, the world's last."""
+        seen = self._frames_seen
+        if seen is not None and seen[0] is state and seen[1] is state.y:
+            return seen[2]
+        n = len(self.sim.bodies.names)
+        R = np.concatenate([quat_to_matrix(state.quat_principal_world).reshape(n, 3, 3),
+                            np.eye(3)[None]])
+        self._frames_seen = (state, state.y, R)
+        return R
+
     def detect(self, state: State) -> Contacts:
-        """Return the detector's contacts at ``state`` (within its margin)."""
+        """Return the detector's contacts at ``state`` (within its margin; kept for the state)."""
+        seen = self._seen
+        if seen is not None and seen[0] is state and seen[1] is state.y:
+            return seen[2]
         self.sim.bodies.outputs(state)
-        return self.detector.detect(self.sim.bodies.outputs_cache.out)
+        con = self.detector.detect(self.sim.bodies.outputs_cache.out)
+        self._seen = (state, state.y, con)
+        return con
 
     def rows(self, state: State, contacts: Optional[Contacts] = None,
              separating: bool = True, select: Optional[np.ndarray] = None) -> ContactRows:
@@ -311,11 +332,9 @@ class ContactSteps:
         if contacts is None:
             contacts = self.detect(state)
         n = len(self.sim.bodies.names)
-        pos, quat = state.pos_com_world, state.quat_principal_world
-        R = quat_to_matrix(quat).reshape(n, 3, 3)
-        R_all = np.concatenate([R, np.eye(3)[None]])
-        centre = np.concatenate([pos, np.zeros((1, 3))])
-        w_world = np.concatenate([np.einsum('nij,nj->ni', R, state.ang_vel_principal),
+        R_all = self._rotations(state)
+        centre = np.concatenate([state.pos_com_world, np.zeros((1, 3))])
+        w_world = np.concatenate([np.einsum('nij,nj->ni', R_all[:n], state.ang_vel_principal),
                                   np.zeros((1, 3))])
         vel = np.concatenate([state.vel_com_world, np.zeros((1, 3))])
         keep = contacts.depth >= -self.location if select is None else select
@@ -323,8 +342,8 @@ class ContactSteps:
         a, b = con.body_a, con.body_b
         lever_a = con.point - centre[a]
         lever_b = np.where((b < n)[:, None], con.point - centre[b], 0.0)
-        v_rel = (vel[a] + np.cross(w_world[a], lever_a)) \
-            - (vel[b] + np.cross(w_world[b], lever_b))
+        v_rel = (vel[a] + cross(w_world[a], lever_a)) \
+            - (vel[b] + cross(w_world[b], lever_b))
         if not separating:
             keep = np.sum(v_rel * con.normal, axis=1) <= self.rate
             con = Contacts(*(part[keep] for part in con))
@@ -334,10 +353,10 @@ class ContactSteps:
         nrm = con.normal
         v_t = v_rel - np.sum(v_rel * nrm, axis=1)[:, None] * nrm
         speed = np.linalg.norm(v_t, axis=1)
-        frame = np.empty((c, 3, 3))
-        for k in range(c):
-            t1 = v_t[k] / speed[k] if speed[k] > self.rate else _any_tangent(nrm[k])
-            frame[k] = (nrm[k], t1, np.cross(nrm[k], t1))
+        t1 = _any_tangent(nrm)
+        slide = speed > self.rate
+        t1[slide] = v_t[slide] / speed[slide, None]
+        frame = np.stack([nrm, t1, cross(nrm, t1)], axis=1)
         G = _jacobian(frame, a, b, lever_a, lever_b, R_all, n)
         mu = pair_friction(self._mu[con.shape_a], self._mu[con.shape_b])
         e = pair_restitution(self._e[con.shape_a], self._e[con.shape_b])
@@ -348,41 +367,33 @@ class ContactSteps:
         Return the rows' ``G`` at ``state`` (a step's end): each row at its contact there.
 
         Each contact is found again at ``state`` (the same pair, its point continuing:
-        :meth:`_continuing`; a box's corner, a rolling ball's lowest point), its
-        normal the one found there and its tangents the start's turned onto it (with
-        body b); a row whose contact is not found keeps its start's ``G``. The rows'
-        velocities at a step's end are what the contact conditions ask of: at the
-        start's ``G`` a pivot whose lever turns within the step would end moving.
+        :meth:`_match`; a box's corner, a rolling ball's lowest point), its normal the
+        one found there and its tangents the start's turned onto it (with body b); a
+        row whose contact is not found keeps its start's ``G``. The rows' velocities
+        at a step's end are what the contact conditions ask of: at the start's ``G`` a
+        pivot whose lever turns within the step would end moving.
         """
         con = self.detect(state)
+        match = self._match(rows, np.ones(len(rows), dtype=bool), con, state)
         G = rows.G.copy()
-        if not len(con.depth):
+        found = np.flatnonzero(match >= 0)
+        if not len(found):
             return G
         n = len(self.sim.bodies.names)
-        R = quat_to_matrix(state.quat_principal_world).reshape(n, 3, 3)
-        R_all = np.concatenate([R, np.eye(3)[None]])
-        R0 = np.concatenate([quat_to_matrix(rows.state.quat_principal_world).reshape(n, 3, 3),
-                             np.eye(3)[None]])
+        R_all, R0 = self._rotations(state), self._rotations(rows.state)
         centre = np.concatenate([state.pos_com_world, np.zeros((1, 3))])
-        start = rows.contacts
-        for k in range(len(rows)):
-            one = np.zeros(len(rows), dtype=bool)
-            one[k] = True
-            match = np.flatnonzero(self._continuing(rows, one, con, state))
-            if not len(match):
-                continue
-            j = match[int(np.argmax(con.depth[match]))]
-            a, b = int(start.body_a[k]), int(start.body_b[k])
-            nrm = con.normal[j]
-            turn = R_all[b] @ R0[b].T
-            t1 = turn @ rows.frame[k, 1]
-            t1 = t1 - np.dot(t1, nrm) * nrm
-            t1 /= np.linalg.norm(t1)
-            frame = np.array([[nrm, t1, np.cross(nrm, t1)]])
-            lever_a = con.point[j] - centre[a]
-            lever_b = con.point[j] - centre[b] if b < n else np.zeros(3)
-            G[3 * k:3 * k + 3] = _jacobian(frame, np.array([a]), np.array([b]),
-                                           lever_a[None], lever_b[None], R_all, n)
+        j = match[found]
+        a, b = rows.contacts.body_a[found], rows.contacts.body_b[found]
+        nrm = con.normal[j]
+        t1 = np.einsum('kij,kjl,kl->ki', R_all[b], np.transpose(R0[b], (0, 2, 1)),
+                       rows.frame[found, 1])
+        t1 = t1 - np.sum(t1 * nrm, axis=1)[:, None] * nrm
+        t1 /= np.linalg.norm(t1, axis=1)[:, None]
+        frame = np.stack([nrm, t1, cross(nrm, t1)], axis=1)
+        point = con.point[j]
+        lever_b = np.where((b < n)[:, None], point - centre[b], 0.0)
+        rows3 = (3 * found[:, None] + np.arange(3)[None, :]).reshape(-1)
+        G[rows3] = _jacobian(frame, a, b, point - centre[a], lever_b, R_all, n)
         return G
 
     def response(self, state: State, G: np.ndarray) -> np.ndarray:
@@ -434,6 +445,7 @@ class ContactSteps:
             return np.zeros(0)
         rows = np.arange(m) if not normal_only else np.arange(0, m, 3)
         A_r, q_r = A[np.ix_(rows, rows)], q[rows]
+        A_r = 0.5 * (A_r + A_r.T)   # (symmetric to rounding: G M̄⁻¹ Gᵀ)
         rho = PROXIMAL * float(np.max(np.diag(A_r)))
         A_p = A_r + rho * np.eye(len(rows))
         p = np.zeros(len(rows)) if start is None else np.array(start[rows], dtype=float)
@@ -445,17 +457,11 @@ class ContactSteps:
         converged, it = False, 0
         for it in range(1, FRICTION_ITERATIONS + 1):
             if not normal_only:
-                pn = np.maximum(p[0::3], 0.0)
-                ft = np.stack([p[1::3], p[2::3]], axis=1)
-                mag = np.linalg.norm(ft, axis=1)
-                cone = mu * pn
-                over = mag > cone * (1.0 + FRICTION_TOLERANCE)
-                half = np.repeat(cone[:, None], 2, axis=1)
-                half[over] = cone[over, None] * np.abs(ft[over]) / mag[over, None]
-                lo[1::3], hi[1::3] = -half[:, 0], half[:, 0]
-                lo[2::3], hi[2::3] = -half[:, 1], half[:, 1]
+                half = mu * np.maximum(p[0::3], 0.0)
+                lo[1::3], hi[1::3] = -half, half
+                lo[2::3], hi[2::3] = -half, half
                 p = np.clip(p, lo, hi)
-            sol = solve_blcp(A_p, q_r - rho * p, lo, hi, start=p)
+            sol = solve_direct(A_p, q_r - rho * p, lo, hi, start=p)
             change = float(np.max(np.abs(sol.f - p)))
             p = sol.f
             scale = max(float(np.max(np.abs(p))), 1e-300)
@@ -571,9 +577,9 @@ class ContactSteps:
         f_body, t_body = np.zeros((n + 1, 3)), np.zeros((n + 1, 3))
         con = rows.contacts
         np.add.at(f_body, con.body_a, force)
-        np.add.at(t_body, con.body_a, np.cross(rows.lever_a, force))
+        np.add.at(t_body, con.body_a, cross(rows.lever_a, force))
         np.add.at(f_body, con.body_b, -force)
-        np.add.at(t_body, con.body_b, -np.cross(rows.lever_b, force))
+        np.add.at(t_body, con.body_b, -cross(rows.lever_b, force))
         acted = np.flatnonzero(np.any(f_body[:n] != 0.0, axis=1)
                                | np.any(t_body[:n] != 0.0, axis=1))
         self.wrenches.act(acted, f_body[acted], t_body[acted])
@@ -610,7 +616,7 @@ class ContactSteps:
         ``(depth, contacts)``: the deepest such contact's depth at ``new`` beyond the
         tolerance, or None. A contact continues one touching at the start when it is of
         the same pair of shapes and its point, in body a's frame, is within
-        :func:`_match_radius` of that one's.
+        a quarter of its shape's largest dimension of that one's.
         """
         con = self.detect(new)
         depth = self._unmatched_depth(rows, con, new)
@@ -630,31 +636,50 @@ class ContactSteps:
 
     def _continuing(self, rows: Optional[ContactRows], which: np.ndarray, con: Contacts,
                     state: State) -> np.ndarray:
-        """
-        Tell, per contact of ``con`` at ``state``, whether it continues one of ``rows[which]``.
-
-        The same pair of shapes, and its point, in body a's frame, within
-        :meth:`_match_radius` of that row's at the rows' state.
-        """
-        out = np.zeros(len(con.depth), dtype=bool)
+        """Tell, per contact of ``con`` at ``state``, whether it continues one of ``rows[which]``."""
         if rows is None or not len(rows) or not np.any(which) or not len(con.depth):
-            return out
-        start = Contacts(*(part[which] for part in rows.contacts))
+            return np.zeros(len(con.depth), dtype=bool)
+        return np.any(self._near(rows, which, con, state), axis=0)
+
+    def _near(self, rows: ContactRows, which: np.ndarray, con: Contacts,
+              state: State) -> np.ndarray:
+        """
+        Return (r, c) bool: row ``r`` (of ``which``) and contact ``c`` are the same contact.
+
+        The same pair of shapes, and the contact's point, in body a's frame at
+        ``state``, within a quarter of shape a's largest dimension of the row's at the
+        rows' state.
+        """
+        return self._distances(rows, which, con, state)[0]
+
+    def _distances(self, rows: ContactRows, which: np.ndarray, con: Contacts,
+                   state: State) -> tuple:
+        """Return :meth:`_near` and the squared distances (r, c) of the points in body a."""
+        start = rows.contacts
         count = len(self.detector.shapes) + 1
         key_start = start.shape_a * count + start.shape_b
         key_now = con.shape_a * count + con.shape_b
         local_start = self._in_body(start.point, start.body_a, rows.state)
         local_now = self._in_body(con.point, con.body_a, state)
-        for k in range(len(con.depth)):
-            same = np.flatnonzero(key_start == key_now[k])
-            if len(same):
-                d2 = np.sum((local_start[same] - local_now[k]) ** 2, axis=1)
-                out[k] = bool(np.any(d2 <= self._match_radius(con.shape_a[k]) ** 2))
+        d2 = np.sum((local_start[:, None, :] - local_now[None, :, :]) ** 2, axis=2)
+        radius = self._radius[con.shape_a]
+        near = which[:, None] & (key_start[:, None] == key_now[None, :]) \
+            & (d2 <= radius[None, :] ** 2)
+        return near, d2
+
+    def _match(self, rows: ContactRows, which: np.ndarray, con: Contacts,
+               state: State) -> np.ndarray:
+        """Return, per row, the nearest contact of ``con`` continuing it (−1: none)."""
+        out = np.full(len(rows), -1, dtype=int)
+        if not len(rows) or not len(con.depth):
+            return out
+        near, d2 = self._distances(rows, which, con, state)
+        d2 = np.where(near, d2, np.inf)
+        best = np.argmin(d2, axis=1) if d2.shape[1] else np.zeros(len(rows), dtype=int)
+        has = np.isfinite(d2[np.arange(len(rows)), best])
+        out[has] = best[has]
         return out
 
-    def _match_radius(self, shape: int) -> float:
-        """Return how far (m) a contact point may move on its shape and stay the same contact."""
-        return 0.25 * float(np.max(self.detector.shapes[shape].dimensions()))
 
     def _in_body(self, points: np.ndarray, body: np.ndarray, state: State) -> np.ndarray:
         """Return world ``points`` (k, 3) in their bodies' principal frames at ``state``."""
@@ -662,7 +687,7 @@ class ContactSteps:
         out = points.copy()
         real = body < n
         if np.any(real):
-            R = quat_to_matrix(state.quat_principal_world[body[real]]).reshape(-1, 3, 3)
+            R = self._rotations(state)[body[real]]
             out[real] = np.einsum('kji,kj->ki', R,
                                   points[real] - state.pos_com_world[body[real]])
         return out
@@ -811,16 +836,15 @@ def _jacobian(frame: np.ndarray, a: np.ndarray, b: np.ndarray, lever_a: np.ndarr
     ``Ω`` (``(r × d) · ω``).
     """
     c = len(a)
-    G = np.zeros((3 * c, 6 * n))
-    for k in range(c):
-        for side, body, lever in ((1.0, a[k], lever_a[k]), (-1.0, b[k], lever_b[k])):
-            if body >= n:
-                continue
-            d = frame[k]
-            G[3 * k:3 * k + 3, 6 * body:6 * body + 3] += side * d
-            G[3 * k:3 * k + 3, 6 * body + 3:6 * body + 6] += side * (
-                np.cross(lever, d) @ R_all[body])
-    return G
+    G = np.zeros((3 * c, 6 * (n + 1)))
+    rows = np.arange(3 * c)
+    d = frame.reshape(3 * c, 3)
+    for side, body, lever in ((1.0, a, lever_a), (-1.0, b, lever_b)):
+        body3 = np.repeat(body, 3)
+        ang = np.einsum('ki,kij->kj', cross(np.repeat(lever, 3, axis=0), d), R_all[body3])
+        cols = 6 * body3[:, None] + np.arange(6)[None, :]
+        np.add.at(G, (rows[:, None], cols), side * np.concatenate([d, ang], axis=1))
+    return G[:, :6 * n]
 
 
 def _stack(vel: np.ndarray, omega: np.ndarray) -> np.ndarray:
@@ -829,10 +853,10 @@ def _stack(vel: np.ndarray, omega: np.ndarray) -> np.ndarray:
 
 
 def _any_tangent(nrm: np.ndarray) -> np.ndarray:
-    """Return a unit vector perpendicular to unit ``nrm``."""
-    helper = np.eye(3)[int(np.argmin(np.abs(nrm)))]
-    t = np.cross(nrm, helper)
-    return t / np.linalg.norm(t)
+    """Return unit vectors (c, 3) perpendicular to the unit normals ``nrm`` (c, 3)."""
+    helper = np.eye(3)[np.argmin(np.abs(nrm), axis=1)]
+    t = cross(nrm, helper)
+    return t / np.linalg.norm(t, axis=1)[:, None]
 
 
 def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
