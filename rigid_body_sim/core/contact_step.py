@@ -100,6 +100,9 @@ PROXIMAL = 1e-6
 MODEL_TOLERANCE = 1e-12
 #: Most corrections of the model per step.
 MODEL_CORRECTIONS = 2
+#: m/s: a loaded contact's normal velocity at a step's end within this of zero is the
+#: LCP's model error (it ended the step at zero), set to zero (:meth:`ContactSteps._accept`).
+HOLD_RATE = 1e-6
 #: Most regula-falsi iterations to locate one impact.
 MAX_LOCATION_ITERATIONS = 60
 #: Impacts in one step after which the next are inelastic (Zeno's cut).
@@ -207,6 +210,18 @@ class ContactRows:
     mu: np.ndarray             #: (c,)
     restitution: np.ndarray    #: (c,)
     G: np.ndarray              #: (3c, 6n)
+    #: (c,) bool: sliding faster than the rate tolerance at the rows' state (t₁ along it)
+    sliding: np.ndarray
+    #: (c,) m/s: the normal relative velocity at the rows' state (> 0: apart)
+    vn: np.ndarray
+
+    def subset(self, keep: np.ndarray) -> 'ContactRows':
+        """Return the rows of the contacts ``keep`` (bool (c,))."""
+        rows3 = np.repeat(keep, 3)
+        return ContactRows(self.state, Contacts(*(part[keep] for part in self.contacts)),
+                           self.frame[keep], self.lever_a[keep], self.lever_b[keep],
+                           self.mu[keep], self.restitution[keep], self.G[rows3],
+                           self.sliding[keep], self.vn[keep])
 
     def __len__(self) -> int:
         """Return the number of contacts."""
@@ -241,12 +256,12 @@ class ContactSteps:
         self.wrenches = wrenches
         shapes = detector.shapes
         self._mu = np.array([s.friction for s in shapes], dtype=float)
-        # m: how far a contact's point may move on its shape a and stay the same contact
-        # (a quarter of the shape's largest dimension).
-        self._radius = np.array([0.25 * float(np.max(s.dimensions())) for s in shapes])
+        # m: how far a contact's point may move on its shape a and stay the same contact:
+        # a quarter of the shape's smallest half size (a box's corners are further apart).
+        self._radius = np.array([0.25 * float(np.min(d[d > 0.0], initial=np.inf))
+                                 for d in (s.dimensions() for s in shapes)])
         self._e = np.array([s.restitution for s in shapes], dtype=float)
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
-        self._joint_event = False
         self._seen: Optional[tuple] = None
         self._frames_seen: Optional[tuple] = None
         self.record = ContactRecord()
@@ -266,8 +281,8 @@ class ContactSteps:
         self.counters = {'impacts': 0, 'located_steps': 0, 'events_capped': 0,
                          'lcp_solves': 0, 'lcp_iterations_max': 0, 'lcp_failures': 0,
                          'complementarity_max': 0.0, 'max_depth': 0.0,
-                         'projections': 0, 'max_projected': 0.0, 'joint_event_overlaps': 0,
-                         'model_corrections': 0}
+                         'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
+                         'held_rates': 0}
 
     def tighten(self) -> None:
         """Set the tolerances for the accuracy knob (``tolerance dt``, floored) or the defaults."""
@@ -292,10 +307,7 @@ class ContactSteps:
         events = self.sim.events
         if events is None or not accepted:
             return self.sim._advance(state, h, t)
-        located = events.counters['located_steps']
-        new = events.step(state, t, span=h)[0]
-        self._joint_event = events.counters['located_steps'] > located
-        return new
+        return events.step(state, t, span=h)[0]
 
     # -- the rows -------------------------------------------------------------------------
 
@@ -344,14 +356,9 @@ class ContactSteps:
         lever_b = np.where((b < n)[:, None], con.point - centre[b], 0.0)
         v_rel = (vel[a] + cross(w_world[a], lever_a)) \
             - (vel[b] + cross(w_world[b], lever_b))
-        if not separating:
-            keep = np.sum(v_rel * con.normal, axis=1) <= self.rate
-            con = Contacts(*(part[keep] for part in con))
-            a, b, lever_a, lever_b, v_rel = a[keep], b[keep], lever_a[keep], lever_b[keep], \
-                v_rel[keep]
-        c = len(con.depth)
         nrm = con.normal
-        v_t = v_rel - np.sum(v_rel * nrm, axis=1)[:, None] * nrm
+        vn = np.sum(v_rel * nrm, axis=1)
+        v_t = v_rel - vn[:, None] * nrm
         speed = np.linalg.norm(v_t, axis=1)
         t1 = _any_tangent(nrm)
         slide = speed > self.rate
@@ -360,7 +367,8 @@ class ContactSteps:
         G = _jacobian(frame, a, b, lever_a, lever_b, R_all, n)
         mu = pair_friction(self._mu[con.shape_a], self._mu[con.shape_b])
         e = pair_restitution(self._e[con.shape_a], self._e[con.shape_b])
-        return ContactRows(state, con, frame, lever_a, lever_b, mu, e, G)
+        out = ContactRows(state, con, frame, lever_a, lever_b, mu, e, G, slide, vn)
+        return out if separating else out.subset(vn <= self.rate)
 
     def rows_at(self, rows: ContactRows, state: State) -> np.ndarray:
         """
@@ -428,14 +436,18 @@ class ContactSteps:
 
     def solve(self, A: np.ndarray, q: np.ndarray, mu: np.ndarray,
               start: Optional[np.ndarray] = None, normal_only: bool = False,
-              equal: Optional[np.ndarray] = None) -> np.ndarray:
+              equal: Optional[np.ndarray] = None,
+              sliding: Optional[np.ndarray] = None) -> np.ndarray:
         """
         Return the rows' impulses ``p`` (3c,): ``w = A p + q`` under the contact conditions.
 
         Normal rows ``p_n ≥ 0 ⊥ w_n ≥ 0``; tangent rows within the cone ``μ p_n``
         and ``w_t = 0`` inside it, sliding against ``w_t`` on it (see the module
         docstring: the boxes' fixed point, proximal). ``normal_only``: the
-        tangent rows are left out (``p_t = 0``); ``equal`` (c,) bool: those
+        tangent rows are left out (``p_t = 0``); ``sliding`` (c,) bool: those
+        contacts' friction is along ``t₁`` alone (the slip's direction: Coulomb's
+        friction opposes the slip; a sticking contact's two rows are the pyramid
+        ``|λᵢ| ≤ μ λ_n``); ``equal`` (c,) bool: those
         contacts' normal rows are equalities (``w_n = 0``, ``p_n`` of either sign).
         Counted; a solve that does not converge keeps its last iterate and is counted
         in ``lcp_failures``.
@@ -447,6 +459,9 @@ class ContactSteps:
         A_r, q_r = A[np.ix_(rows, rows)], q[rows]
         A_r = 0.5 * (A_r + A_r.T)   # (symmetric to rounding: G M̄⁻¹ Gᵀ)
         rho = PROXIMAL * float(np.max(np.diag(A_r)))
+        # What the impulses' rounding is (a target inconsistent across redundant rows by
+        # its rounding moves them along their null space by about this each iteration).
+        floor = 64.0 * EPS * float(np.max(np.abs(q_r))) / float(np.max(np.diag(A_r)))
         A_p = A_r + rho * np.eye(len(rows))
         p = np.zeros(len(rows)) if start is None else np.array(start[rows], dtype=float)
         lo, hi = np.zeros(len(rows)), np.full(len(rows), np.inf)
@@ -459,13 +474,21 @@ class ContactSteps:
             if not normal_only:
                 half = mu * np.maximum(p[0::3], 0.0)
                 lo[1::3], hi[1::3] = -half, half
-                lo[2::3], hi[2::3] = -half, half
+                half2 = half if sliding is None else np.where(sliding, 0.0, half)
+                lo[2::3], hi[2::3] = -half2, half2
                 p = np.clip(p, lo, hi)
-            sol = solve_direct(A_p, q_r - rho * p, lo, hi, start=p)
-            change = float(np.max(np.abs(sol.f - p)))
-            p = sol.f
+            # Rows whose box is a point (no friction yet, or none: μ = 0, a sliding
+            # contact's t₂) are fixed there, out of the problem.
+            free = hi > lo
+            shift = A_p[np.ix_(free, ~free)] @ p[~free]
+            sol = solve_direct(A_p[np.ix_(free, free)], q_r[free] - rho * p[free] + shift,
+                               lo[free], hi[free], start=p[free])
+            new = p.copy()
+            new[free] = sol.f
+            change = float(np.max(np.abs(new - p)))
+            p = new
             scale = max(float(np.max(np.abs(p))), 1e-300)
-            if sol.converged and change <= FRICTION_TOLERANCE * scale:
+            if sol.converged and change <= FRICTION_TOLERANCE * scale + floor:
                 converged = True
                 break
         cnt = self.counters
@@ -475,7 +498,7 @@ class ContactSteps:
             cnt['lcp_failures'] += 1
         if equal is None:
             cnt['complementarity_max'] = max(cnt['complementarity_max'],
-                                             _residual(A_r, q_r, p, mu, normal_only))
+                                             _residual(A_r, q_r, p, mu, normal_only, sliding))
         out = np.zeros(m)
         out[rows] = p
         return out
@@ -491,65 +514,85 @@ class ContactSteps:
             h = sim.dt if state is start else t_end - state.time
             if h <= 4.0 * EPS * abs(t_end):
                 return self._accept(State(t_end, *state.parts))
-            rows = self.rows(state)
-            if len(rows) and events < MAX_EVENTS:
-                state, hit = self._impact(state, rows, bounces >= MAX_BOUNCES)
+            touching = self.rows(state)
+            if len(touching) and events < MAX_EVENTS:
+                state, hit = self._impact(state, touching, bounces >= MAX_BOUNCES)
                 if hit:
                     bounces += 1
                     events += 1
-            rows = self.rows(state, separating=False)
-            self._joint_event = False
-            new, held = self._held_step(state, rows, h, t_end)
+                    touching = self.rows(state)
+            rows = touching.subset(touching.vn <= self.rate)
+            trial = self._held_step(state, rows, h, t_end)
+            hit = None if events >= MAX_EVENTS else self._new_overlap(rows, trial)
             if events >= MAX_EVENTS:
                 self.counters['events_capped'] += 1
-                return self._accept(new)
-            hit = self._new_overlap(rows, new)
             if hit is None:
-                return self._accept(new)
-            if self._joint_event:
-                # A joint's event was resolved inside the step (its bookkeeping changed
-                # along it): the contact's impact is not located back into it; the step
-                # stands and its depth is projected out (first order, counted).
-                self.counters['joint_event_overlaps'] += 1
-                return self._accept(new)
+                return self._accept(self._stands(state, h, t_end, trial))
+            located, tau = self._locate(state, rows, h, hit)
+            if tau <= 0.0:
+                # Overlapping already at the start (a contact deep and moving apart: a
+                # spawn inside another body): nothing to locate; the step stands and
+                # is projected.
+                return self._accept(self._stands(state, h, t_end, trial))
             self.counters['located_steps'] += 1
-            state = self._locate(state, rows, new, h, hit)
+            state = self._stands(state, tau, state.time + tau, located)
             events += 1
 
-    def _held_step(self, state: State, rows: ContactRows, h: float, t_end: float) -> tuple:
+    def _stands(self, state: State, h: float, t: float, trial: State) -> State:
         """
-        Take the step of ``h`` from ``state`` with the rows' forces held: (new, forces).
+        Return the step of ``h`` from ``state`` that stands: the trial, or with joint events.
 
-        The LCP's affine model ``w = A p + q`` is the step's own response to first
-        order; where the step, taken with the forces found, ends with the rows'
-        velocities off the model's by more than :data:`MODEL_TOLERANCE` (a body
-        turning under its joints within the step: ``O(h²)`` relative), the model's
-        offset is corrected by what the step showed and the LCP solved again (at
-        most :data:`MODEL_CORRECTIONS` times): a contact that should rest does, to
-        rounding, instead of lifting by the model's error each step.
+        With joints' events (limits, friction, drives' efforts) the step is taken again
+        with them, its contact forces held: their bookkeeping changes only along
+        steps that stand.
         """
-        t = state.time + h
-        events = self.sim.events
+        if self.sim.events is None:
+            return trial
+        return self._advance(state, h, t, accepted=True)
+
+    def _held_step(self, state: State, rows: ContactRows, h: float, t_end: float) -> State:
+        """
+        Return the trial step of ``h`` from ``state`` to ``t_end`` with the rows' forces held.
+
+        The forces stay in the wrench effect (for the location's partial steps and the
+        step that stands) until :meth:`_accept` clears them. The LCP's affine model
+        ``w = A p + q`` is the step's own response to first order; where the step,
+        taken with the forces found, ends with the rows' velocities (at the end's
+        geometry, :meth:`rows_at`) off the model's by more than
+        :data:`MODEL_TOLERANCE`, the model's offset is corrected by what the step
+        showed and the LCP solved again (at most :data:`MODEL_CORRECTIONS` times): a
+        contact that should rest does, to rounding, instead of lifting by the model's
+        error each step.
+        """
         self._set_forces(None)
-        free = self._advance(state, h, t)
+        free = self._advance(state, h, t_end)
         if not len(rows):
             self.record = ContactRecord(state.time, rows, np.zeros((0, 3)))
-            if events is not None:
-                free = self._advance(state, h, t, accepted=True)
-            return free, None
+            return free
         v_free = _stack(free.vel_com_world, free.ang_vel_principal)
         Y = self.response(state, rows.G)
         A = rows.G @ Y
         q = rows.G @ v_free
-        p = self.solve(A, q, rows.mu, start=self._warm_start(rows))
+        p = self.solve(A, q, rows.mu, start=self._warm_start(rows), sliding=rows.sliding)
+        turned = self._slipping(rows, p, A @ p + q)
+        if turned is not None:
+            # Contacts that stuck at the start and slip over the step: their friction
+            # along their slip (Coulomb's direction), not the pyramid's corner.
+            rows = turned
+            Y = self.response(state, rows.G)
+            A = rows.G @ Y
+            q = rows.G @ v_free
+            p = self.solve(A, q, rows.mu, start=p, sliding=rows.sliding)
         new = free
+        force = np.zeros((len(rows), 3))
         for correction in range(MODEL_CORRECTIONS + 1):
             force = (p.reshape(-1, 3)[:, :, None] * rows.frame).sum(axis=1) / h   # (c, 3)
             if not np.any(p):
+                self._set_forces(None)
                 new = free
                 break
             self._set_forces(rows, force)
-            new = self._advance(state, h, t)
+            new = self._advance(state, h, t_end)
             w = self.rows_at(rows, new) @ _stack(new.vel_com_world, new.ang_vel_principal)
             offset = w - (A @ p + q)
             if correction == MODEL_CORRECTIONS or \
@@ -558,12 +601,42 @@ class ContactSteps:
                 break
             self.counters['model_corrections'] += 1
             q = q + offset
-            p = self.solve(A, q, rows.mu, start=p)
+            p = self.solve(A, q, rows.mu, start=p, sliding=rows.sliding)
         self._remember(rows, p)
         self.record = ContactRecord(state.time, rows, force)
-        if events is not None:   # the step that stands, with the joints' events
-            new = self._advance(state, h, t, accepted=True)
-        return new, force
+        return new
+
+    def _slipping(self, rows: ContactRows, p: np.ndarray, w: np.ndarray
+                  ) -> Optional[ContactRows]:
+        """
+        Return the rows with the contacts that begin to slip turned to their slip, or None.
+
+        A contact sticking at the rows' state (two friction rows, the pyramid) whose
+        friction ends on a bound with its point slipping at the step's end faster than
+        the rate tolerance slips: its ``t₁`` is turned along that slip and it becomes
+        a sliding contact (one friction row, ``|λ₁| ≤ μ λ_n``).
+        """
+        c = len(rows)
+        if not c:
+            return None
+        bound = rows.mu * np.maximum(p[0::3], 0.0)
+        on = (np.abs(p[1::3]) >= bound * (1.0 - 1e-9)) | (np.abs(p[2::3]) >= bound * (1.0 - 1e-9))
+        slip = w[1::3, None] * rows.frame[:, 1] + w[2::3, None] * rows.frame[:, 2]
+        speed = np.linalg.norm(slip, axis=1)
+        turn = ~rows.sliding & on & (bound > 0.0) & (speed > self.rate)
+        if not np.any(turn):
+            return None
+        frame, sliding = rows.frame.copy(), rows.sliding.copy()
+        t1 = slip[turn] / speed[turn, None]
+        nrm = frame[turn, 0]
+        frame[turn] = np.stack([nrm, t1, cross(nrm, t1)], axis=1)
+        sliding[turn] = True
+        n = len(self.sim.bodies.names)
+        con = rows.contacts
+        G = _jacobian(frame, con.body_a, con.body_b, rows.lever_a, rows.lever_b,
+                      self._rotations(rows.state), n)
+        return ContactRows(rows.state, con, frame, rows.lever_a, rows.lever_b, rows.mu,
+                           rows.restitution, G, sliding, rows.vn)
 
     def _set_forces(self, rows: Optional[ContactRows], force: Optional[np.ndarray] = None
                     ) -> None:
@@ -616,7 +689,7 @@ class ContactSteps:
         ``(depth, contacts)``: the deepest such contact's depth at ``new`` beyond the
         tolerance, or None. A contact continues one touching at the start when it is of
         the same pair of shapes and its point, in body a's frame, is within
-        a quarter of its shape's largest dimension of that one's.
+        a quarter of its shape's smallest half size of that one's.
         """
         con = self.detect(new)
         depth = self._unmatched_depth(rows, con, new)
@@ -636,7 +709,7 @@ class ContactSteps:
 
     def _continuing(self, rows: Optional[ContactRows], which: np.ndarray, con: Contacts,
                     state: State) -> np.ndarray:
-        """Tell, per contact of ``con`` at ``state``, whether it continues one of ``rows[which]``."""
+        """Tell per contact of ``con`` at ``state`` whether it continues any of rows ``which``."""
         if rows is None or not len(rows) or not np.any(which) or not len(con.depth):
             return np.zeros(len(con.depth), dtype=bool)
         return np.any(self._near(rows, which, con, state), axis=0)
@@ -647,8 +720,8 @@ class ContactSteps:
         Return (r, c) bool: row ``r`` (of ``which``) and contact ``c`` are the same contact.
 
         The same pair of shapes, and the contact's point, in body a's frame at
-        ``state``, within a quarter of shape a's largest dimension of the row's at the
-        rows' state.
+        ``state``, within a quarter of shape a's smallest half size of the row's at the
+        rows' state (a sliding contact moves less in a step).
         """
         return self._distances(rows, which, con, state)[0]
 
@@ -680,7 +753,6 @@ class ContactSteps:
         out[has] = best[has]
         return out
 
-
     def _in_body(self, points: np.ndarray, body: np.ndarray, state: State) -> np.ndarray:
         """Return world ``points`` (k, 3) in their bodies' principal frames at ``state``."""
         n = len(self.sim.bodies.names)
@@ -692,32 +764,34 @@ class ContactSteps:
                                   points[real] - state.pos_com_world[body[real]])
         return out
 
-    def _locate(self, state: State, rows: ContactRows, new: State, h: float,
-                hit: tuple) -> State:
+    def _locate(self, state: State, touching: ContactRows, h: float, hit: tuple) -> tuple:
         """
-        Return the state where the first new contact's depth crossed zero, within the step.
+        Return ``(state, τ)``: where the first new contact's depth crossed zero, ``τ`` in.
 
-        Regula falsi (Illinois) on the deepest new contact's depth over partial steps
-        from ``state`` with the same forces held, until the depth is within the
-        tolerance.
+        Regula falsi (Illinois) on the deepest new contact's depth over partial trial
+        steps from ``state`` with the same forces held, until the depth is within the
+        tolerance and the new contact closes; ``τ = 0`` when it overlaps already at
+        ``state`` (nothing to locate).
         """
         t0 = state.time
+        start_depth = self._depth_at(touching, state)
+        if start_depth > self.location:
+            return state, 0.0
         # At the start the new contact is apart, or touching and moving apart (a bounce
         # that returns): its depth there counts as below the tolerance.
-        lo_t, lo_g = 0.0, min(self._depth_at(rows, state), -self.location)
+        lo_t, lo_g = 0.0, min(start_depth, -self.location)
         hi_t, hi_g = h, hit[0]
         side = 0
-        best = None
+        best, best_t = None, 0.0
         for _ in range(MAX_LOCATION_ITERATIONS):
             tau = (lo_t * hi_g - hi_t * lo_g) / (hi_g - lo_g)
             if not lo_t < tau < hi_t:
                 tau = 0.5 * (lo_t + hi_t)
             trial = self._advance(state, tau, t0 + tau)
-            g = self._depth_at(rows, trial)
+            g = self._depth_at(touching, trial)
             if abs(g) <= self.location:
-                if self._approaching(trial):
-                    best = trial
-                    break
+                if self._approaching(touching, trial):
+                    return trial, tau
                 g = -self.location   # (leaving still: a bounce's start, before the crossing)
             if g > 0.0:
                 hi_t, hi_g = tau, g
@@ -729,19 +803,21 @@ class ContactSteps:
                 if side == -1:
                     hi_g *= 0.5
                 side = -1
-            best = trial if g < 0.0 else best
+                best, best_t = trial, tau
         if best is None:   # (never closer than the tolerance: the last state before it)
-            best = self._advance(state, lo_t, t0 + lo_t) if lo_t > 0.0 else state
-        self._set_forces(None)
-        return best
+            return state, 0.0
+        return best, best_t
 
-    def _approaching(self, state: State) -> bool:
-        """Tell whether a contact touching at ``state`` closes faster than the rate tolerance."""
-        rows = self.rows(state)
-        if not len(rows):
+    def _approaching(self, touching: ContactRows, state: State) -> bool:
+        """Tell whether a new contact (continuing none of ``touching``) closes at ``state``."""
+        con = self.detect(state)
+        near = con.depth >= -self.location
+        fresh = near & ~self._continuing(touching, np.ones(len(touching), dtype=bool), con,
+                                         state)
+        if not np.any(fresh):
             return False
-        v = _stack(state.vel_com_world, state.ang_vel_principal)
-        return bool(np.any((rows.G @ v)[0::3] < -self.rate))
+        rows = self.rows(state, con, select=fresh)
+        return bool(np.any(rows.vn < -self.rate))
 
     def _depth_at(self, rows: ContactRows, state: State) -> float:
         """Return the deepest new contact's depth at ``state`` (−margin when none is near)."""
@@ -767,7 +843,7 @@ class ContactSteps:
         q[0::3] += target
         Y = self.response(state, rows.G)
         A = rows.G @ Y
-        p = self.solve(A, q, rows.mu)
+        p = self.solve(A, q, rows.mu, sliding=rows.sliding)
         dv = Y @ p
         after = (rel + rows.G @ dv)[0::3]
         n = len(self.sim.bodies.names)
@@ -792,8 +868,11 @@ class ContactSteps:
         apart from it are brought back (``depth = 0``): a constant force over a step
         holds a contact whose force varies only to first order (a box tipping on its
         edge rises by ``O(h³)`` a step), and a contact that carries a load stays on its
-        surface, as a joint's rows are held by the projection. Positions only; the
-        deepest depth and the projections are counted.
+        surface, as a joint's rows are held by the projection. Positions first; then
+        the loaded contacts' normal velocities, where they are off zero by less than
+        :data:`HOLD_RATE` (the model's error, not the physics: the LCP ended them at
+        zero), are set to zero by the same mass-weighted projection. Counted: the
+        deepest depth, the projections, the rates held.
         """
         self._set_forces(None)
         con = self.detect(new)
@@ -805,25 +884,42 @@ class ContactSteps:
             else np.zeros(len(con.depth), dtype=bool)
         deep = con.depth > self.location
         lifted = held & (con.depth < -self.location)
-        if not (np.any(deep) or np.any(lifted)):
+        if np.any(deep) or np.any(lifted):
+            if np.any(deep):
+                self.counters['max_depth'] = max(self.counters['max_depth'],
+                                                 float(np.max(con.depth)))
+            select = held | (con.depth >= -self.location)
+            rows = self.rows(new, con, select=select)
+            Y = self.response(new, rows.G)
+            A = rows.G @ Y
+            q3 = np.zeros(3 * len(rows))
+            q3[0::3] = -rows.contacts.depth
+            p = self.solve(A, q3, rows.mu, normal_only=True, equal=held[select])
+            dq = (Y @ p).reshape(-1, 6)
+            self.counters['projections'] += 1
+            self.counters['max_projected'] = max(self.counters['max_projected'],
+                                                 float(np.max(np.abs(rows.contacts.depth))))
+            quat = quat_multiply(new.quat_principal_world, exp_quat(dq[:, 3:]))
+            new = State(new.time, new.pos_com_world + dq[:, :3], quat, new.vel_com_world,
+                        new.ang_vel_principal)
+            con = self.detect(new)
+            held = self._continuing(rec.rows, active, con, new)
+        if not np.any(held):
             return new
-        if np.any(deep):
-            self.counters['max_depth'] = max(self.counters['max_depth'],
-                                             float(np.max(con.depth)))
-        select = held | (con.depth >= -self.location)
-        rows = self.rows(new, con, select=select)
+        rows = self.rows(new, con, select=held)
+        off = (np.abs(rows.vn) > RATE_FLOOR) & (np.abs(rows.vn) <= HOLD_RATE)
+        if not np.any(off):
+            return new
+        rows = rows.subset(off)
         Y = self.response(new, rows.G)
         A = rows.G @ Y
         q3 = np.zeros(3 * len(rows))
-        q3[0::3] = -rows.contacts.depth
-        p = self.solve(A, q3, rows.mu, normal_only=True, equal=held[select])
-        dq = (Y @ p).reshape(-1, 6)
-        self.counters['projections'] += 1
-        self.counters['max_projected'] = max(self.counters['max_projected'],
-                                             float(np.max(np.abs(rows.contacts.depth))))
-        quat = quat_multiply(new.quat_principal_world, exp_quat(dq[:, 3:]))
-        return State(new.time, new.pos_com_world + dq[:, :3], quat, new.vel_com_world,
-                     new.ang_vel_principal)
+        q3[0::3] = rows.vn
+        p = self.solve(A, q3, rows.mu, normal_only=True, equal=np.ones(len(rows), dtype=bool))
+        dv = (Y @ p).reshape(-1, 6)
+        self.counters['held_rates'] += 1
+        return State(new.time, new.pos_com_world, new.quat_principal_world,
+                     new.vel_com_world + dv[:, :3], new.ang_vel_principal + dv[:, 3:])
 
 
 def _jacobian(frame: np.ndarray, a: np.ndarray, b: np.ndarray, lever_a: np.ndarray,
@@ -860,12 +956,13 @@ def _any_tangent(nrm: np.ndarray) -> np.ndarray:
 
 
 def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
-              normal_only: bool) -> float:
+              normal_only: bool, sliding: Optional[np.ndarray] = None) -> float:
     """
     Return the contact conditions' residual at impulses ``p`` (velocity units, m/s).
 
-    Per normal row ``|min(p_n / A_nn, w_n)|``-like natural map; per contact's tangents
-    the sliding velocity left while the friction is inside the cone.
+    Per normal row ``|min(p_n A_nn, w_n)|`` (a natural map); per friction row whose
+    impulse is inside its bound ``μ p_n``, the slip left along it (a sliding contact
+    has its ``t₁`` row alone); a friction row on its bound must slip against it.
     """
     if not len(q):
         return 0.0
@@ -875,9 +972,18 @@ def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
         return float(np.max(np.abs(np.minimum(p * d, w))))
     pn, wn = p[0::3], w[0::3]
     out = float(np.max(np.abs(np.minimum(pn * d[0::3], wn))))
-    ft = np.stack([p[1::3], p[2::3]], axis=1)
-    wt = np.stack([w[1::3], w[2::3]], axis=1)
-    inside = np.linalg.norm(ft, axis=1) < mu * pn * (1.0 - 1e-9)
-    if np.any(inside):
-        out = max(out, float(np.max(np.abs(wt[inside]))))
+    bound = mu * np.maximum(pn, 0.0)
+    # (a bound is the previous iterate's μ p_n: within the iteration's tolerance of it)
+    slack = 2.0 * (FRICTION_TOLERANCE * float(np.max(np.abs(p)))
+                   + 64.0 * EPS * float(np.max(np.abs(q))) / float(np.max(d)))
+    for col in (1, 2):
+        f, v = p[col::3], w[col::3]
+        present = np.ones(len(f), dtype=bool) if col == 1 or sliding is None else ~sliding
+        inside = present & (np.abs(f) < bound - slack)
+        if np.any(inside):
+            out = max(out, float(np.max(np.abs(v[inside]))))
+        # On its bound the row's force opposes its slip (or there is none).
+        on = present & ~inside & (bound > 0.0)
+        if np.any(on):
+            out = max(out, float(np.max(np.maximum(f[on] * v[on], 0.0) / bound[on])))
     return out
