@@ -329,3 +329,80 @@ def test_a_box_pushed_past_the_tipping_force_turns_about_its_edge_at_first_order
         assert sim.contact.counters['impacts'] == 0
     assert abs(errors[0]) <= 2.0 * 1e-3   # (1.7e-3 measured: 1.7 dt, in 1/s)
     assert 1.8 <= errors[0] / errors[1] <= 2.2
+
+
+def test_a_spinning_sliding_box_keeps_coulomb_and_never_gains_energy():
+    # Sliding at 1 m/s and spinning at 10 rad/s: each corner slides its own way. Every
+    # friction force is at most mu times its normal force (a sliding contact's along its
+    # slip alone), every LCP converges, and no step adds energy.
+    mu, mass, half = 0.5, 2.0, 0.1
+    box = RigidBody('b', mass, (mass * (2 * half) ** 2 / 6,) * 3, position_world=(0, 0, half),
+                    linear_velocity_world=(1.0, 0, 0), angular_velocity_body=(0, 0, 10))
+    sim = Simulation([box], [Gravity()], integrator='rkmk4', dt=1e-3,
+                     shapes=[CollisionShape('plane', None, friction=mu),
+                             CollisionShape('box', 'b', size=(2 * half,) * 3, friction=mu)])
+
+    def energy():
+        d = sim.diagnostics()
+        return d.total_energy
+
+    e = energy()
+    for _ in range(150):
+        sim.step()
+        rep = sim.contacts()
+        excess = np.linalg.norm(rep['friction_force'], axis=1) - mu * rep['normal_force']
+        # The boxes are the previous iterate's mu p_n, the fixed point to 1e-8 of the
+        # largest impulse (1e-7 is its room).
+        assert np.all(excess <= 1e-7 * np.max(rep['normal_force'], initial=0.0))
+        now = energy()
+        assert now <= e + 1e-12
+        e = now
+    assert sim.contact.counters['lcp_failures'] == 0
+    assert sim.contact.counters['complementarity_max'] <= 1e-9   # (RATE_TOLERANCE)
+
+
+@pytest.mark.parametrize('axis', [(1, 1, 0), (1, 2, 0)])
+def test_a_sphere_sliding_down_a_skew_incline_slides_straight_down(axis):
+    # Friction too weak to roll it (mu < 2/7 tan theta): it slides, friction along its
+    # slip, at g (sin - mu cos) straight down the slope, whatever the tilt's axis.
+    theta, mu, half, mass = 0.5, 0.05, 0.1, 2.0
+    axis = np.array(axis, dtype=float) / np.linalg.norm(axis)
+    quat = np.r_[math.sin(theta / 2) * axis, math.cos(theta / 2)]
+    from rigid_body_sim.core.rotation import quat_to_matrix
+    normal = quat_to_matrix(quat)[:, 2]
+    body = RigidBody('b', mass, (0.4 * mass * half ** 2,) * 3, position_world=half * normal,
+                     orientation_xyzw=quat)
+    sim = Simulation([body], [Gravity()], integrator='rkmk4', dt=1e-3,
+                     shapes=[CollisionShape('plane', None, orientation_xyzw=quat, friction=mu),
+                             CollisionShape('sphere', 'b', radius=half, friction=mu)])
+    sim.step(200)
+    g = np.array([0.0, 0.0, -G])
+    down = g - (g @ normal) * normal
+    down /= np.linalg.norm(down)
+    travel = sim.state.pos_com_world[0] - half * normal
+    expected = 0.5 * G * (math.sin(theta) - mu * math.cos(theta)) * 0.2 ** 2
+    # The first step starts stuck (the pyramid), then slides: its slip turned in that
+    # step, first order: 1e-4 of the travel is its room.
+    assert travel @ down == pytest.approx(expected, rel=1e-4)
+    assert np.linalg.norm(travel - (travel @ down) * down) <= 1e-4 * expected
+
+
+def test_a_plank_landing_flat_has_its_impact_located():
+    # A 1 m plank 0.1 m wide, dropped flat: its four corners are 0.1 m apart across its
+    # width, and each is its own contact (the impact located, nothing sinks).
+    plank = RigidBody('p', 1.0, (0.01, 0.1, 0.1), position_world=(0, 0, 0.3))
+    sim = Simulation([plank], [Gravity()], integrator='rkmk4', dt=1e-3,
+                     shapes=[CollisionShape('plane', None),
+                             CollisionShape('box', 'p', size=(1.0, 0.1, 0.1))])
+    sim.step(300)
+    assert sim.contact.counters['impacts'] >= 4
+    assert sim.contact.counters['max_depth'] == 0.0
+    assert sim.state.pos_com_world[0, 2] == pytest.approx(0.05, abs=LOCATION_TOLERANCE)
+
+
+def test_contact_steps_keep_time_exact_and_a_deep_body_moving_out_is_not_located():
+    sim = _ball(height=0.08, e=0.0, velocity=(0, 0, 0.5), dt=0.1)
+    sim.step()
+    assert sim.contact.counters['located_steps'] == 0   # 2 cm deep, leaving: projected
+    sim.step(999)
+    assert sim.time == 100.0   # base + steps dt, as without shapes
