@@ -406,3 +406,34 @@ def test_contact_steps_keep_time_exact_and_a_deep_body_moving_out_is_not_located
     assert sim.contact.counters['located_steps'] == 0   # 2 cm deep, leaving: projected
     sim.step(999)
     assert sim.time == 100.0   # base + steps dt, as without shapes
+
+
+def test_the_default_scene_box_flips_lands_slides_and_rests_and_the_ball_bounces_to_rest():
+    from pathlib import Path
+    from rigid_body_sim.scene import load_scene
+    sim = load_scene(Path(__file__).resolve().parents[1] / 'config' /
+                     'default_scene.yaml').simulation
+    spins, landed = [], None
+    while landed is None:   # in the air: it turns over about its intermediate axis
+        sim.step()
+        spins.append(sim.twist('tumbling_box', frame='body')[1][1])
+        if 'tumbling_box' in sim.contacts()['body_a']:
+            landed = sim.pose('tumbling_box')[0][:2].copy()
+    assert max(spins) > 10.0 and min(spins) < -10.0 and sim.time > 0.85
+    sim.step(int(round((6.0 - sim.time) / sim.dt)))   # to 6 s
+    # Both at rest on the ground, still to rounding, the box flat (its 0.1 m side up).
+    for name, height in (('tumbling_box', 0.05), ('ball', 0.1)):
+        v, w = sim.twist(name)
+        assert np.linalg.norm(v) <= 1e-12 and np.linalg.norm(w) <= 1e-12
+        assert sim.pose(name)[0][2] == pytest.approx(height, abs=1e-9)
+    p = sim.state.pos_com_world.copy()
+    sim.step(int(round(2.0 / sim.dt)))
+    assert np.max(np.abs(sim.state.pos_com_world - p)) <= 1e-13
+    # The ball's bounces: each 0.8 of the approach speed before it, located.
+    ball = [i for i in sim.contact.impacts if i.shape_a == 'ball/sphere']
+    for i in ball[:5]:
+        assert i.rebound == pytest.approx(-0.8 * i.approach, rel=1e-9)
+    # The box slid on from where it first touched (at 0.6 m/s along x, friction 0.5:
+    # a few centimetres).
+    assert 0.01 < np.linalg.norm(sim.pose('tumbling_box')[0][:2] - landed) < 0.1
+    assert sim.contact.counters['lcp_failures'] == 0

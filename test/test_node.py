@@ -896,3 +896,58 @@ def test_the_tolerance_parameter_turns_the_accuracy_knob_and_diagnostics_report_
     ros.client.wait_for(lambda: any({kv.key: kv.value for kv in d.status[0].values}
                                     .get('tolerance') == 'off' for d in diags),
                         'diagnostics with the knob off', node=node)
+
+
+BALL_ON_GROUND = """
+name: ball_on_ground
+integrator: rkmk4
+dt: 0.001
+effects: {gravity: {}}
+ground: {friction: 0.5}
+bodies:
+  - {name: ball, mass: 1.5, inertia: {sphere: 0.1}, position_world: [0.0, 0.0, 0.3],
+     shapes: [{kind: sphere, radius: 0.1}]}
+"""
+
+
+def test_contacts_markers_and_diagnostics_report_the_cores_contacts(ros, tmp_path):
+    # A ball dropped 0.2 m, at rest on the ground after 1 s: ~/contacts carries the
+    # core's contact (bit for bit: the same steps), its weight as the normal force;
+    # ~/markers draws the point and the force; diagnostics count the impacts.
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rigid_body_sim_interfaces.msg import Contacts
+    from visualization_msgs.msg import MarkerArray
+    scene = _scene(tmp_path, BALL_ON_GROUND)
+    node = ros.start({'scene': scene, 'start_paused': True})
+    contacts = ros.client.subscribe(Contacts, f'{NODE}/contacts')
+    markers = ros.client.subscribe(MarkerArray, f'{NODE}/markers')
+    diags = ros.client.subscribe(DiagnosticArray, '/diagnostics')
+    reply = _step(ros, node, 1000)
+    t = time_seconds(reply.time)
+    ros.client.wait_for(lambda: any(time_seconds(m.header.stamp) == t for m in contacts)
+                        and any(time_seconds(m.markers[0].header.stamp) == t
+                                for m in markers), 'contacts and markers at t', node=node)
+    got = next(m for m in contacts if time_seconds(m.header.stamp) == t)
+    sim = load_scene(scene).simulation
+    sim.step(1000)
+    rep = sim.contacts()
+    assert (got.shape_a, got.shape_b, got.body_a, got.body_b) == (
+        ['ball/sphere'], ['ground'], ['ball'], ['world'])
+    np.testing.assert_array_equal(got.normal_force, rep['normal_force'])
+    np.testing.assert_array_equal(got.depth, rep['depth'])
+    np.testing.assert_array_equal([got.point[0].x, got.point[0].y, got.point[0].z],
+                                  rep['point'][0])
+    # At rest: the ground carries m g (to rounding of the held force).
+    assert got.normal_force[0] == pytest.approx(1.5 * 9.81, rel=1e-12)
+    array = next(m for m in markers if time_seconds(m.markers[0].header.stamp) == t).markers
+    points = [m for m in array if m.ns == 'contacts']
+    assert len(points) == 2 and len(points[0].points) == 1 and len(points[1].points) == 2
+    # The force's line: 1 cm per N, up from the point.
+    assert points[1].points[1].z - points[1].points[0].z == pytest.approx(
+        0.01 * 1.5 * 9.81, rel=1e-12)
+    ros.client.wait_for(lambda: any(_values(d).get('contacts') == '1' for d in diags),
+                        'diagnostics with the contact', node=node)
+    values = next(_values(d) for d in reversed(diags) if _values(d).get('contacts') == '1')
+    assert int(values['contact_impacts_total']) >= 1
+    assert values['contact_lcp_failures_total'] == '0'
+    assert float(values['contact_depth_left_max_m']) == 0.0

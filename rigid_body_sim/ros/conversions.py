@@ -17,7 +17,7 @@ from geometry_msgs.msg import (Point, Pose, PoseStamped, Quaternion, Transform,
                                TransformStamped, Twist, TwistStamped, Vector3, Wrench,
                                WrenchStamped)
 import numpy as np
-from rigid_body_sim_interfaces.msg import BodyStates
+from rigid_body_sim_interfaces.msg import BodyStates, Contacts
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 
@@ -42,6 +42,11 @@ def time_seconds(stamp: Time) -> float:
 def vector3(v: np.ndarray) -> Vector3:
     """Return a Vector3 of a (3,) array."""
     return Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def point(v: np.ndarray) -> Point:
+    """Return a Point of a (3,) array."""
+    return Point(x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
 def array3(v) -> np.ndarray:
@@ -106,6 +111,26 @@ def body_states(header: Header, names: Sequence[str], position: np.ndarray,
     msg.orientation = _doubles(quat_xyzw)
     msg.linear_velocity = _doubles(linear_velocity)
     msg.angular_velocity = _doubles(angular_velocity)
+    return msg
+
+
+def contacts(header: Header, report: dict) -> Contacts:
+    """
+    Return a Contacts message of :meth:`.core.simulation.Simulation.contacts`' report.
+
+    The header's stamp is the caller's; ``report['time']`` is where the forces were found.
+    """
+    def vectors(a: np.ndarray, kind: type) -> list:
+        return [kind(x=float(v[0]), y=float(v[1]), z=float(v[2])) for v in a]
+
+    msg = Contacts(header=header, shape_a=list(report['shape_a']),
+                   shape_b=list(report['shape_b']), body_a=list(report['body_a']),
+                   body_b=list(report['body_b']))
+    msg.point = vectors(report['point'], Point)
+    msg.normal = vectors(report['normal'], Vector3)
+    msg.normal_force = _doubles(report['normal_force'])
+    msg.friction_force = vectors(report['friction_force'], Vector3)
+    msg.depth = _doubles(report['depth'])
     return msg
 
 

@@ -48,7 +48,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, qos_profile_services_defa
     QoSProfile, ReliabilityPolicy
 from rclpy.service_introspection import ServiceIntrospectionState
 from rclpy.signals import SignalHandlerOptions
-from rigid_body_sim_interfaces.msg import BodyStates, Metrics
+from rigid_body_sim_interfaces.msg import BodyStates, Contacts, Metrics
 from rigid_body_sim_interfaces.srv import AddConstraint, RemoveConstraint, Step
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -59,9 +59,9 @@ from visualization_msgs.msg import MarkerArray
 
 from . import conversions as conv
 from .inputs import Rejected, Rejection, shown
-from .outputs import body_topic, constraint_topic, group_topic, JOINT_COMMANDS_TOPIC, \
-    JOINT_STATES_TOPIC, MARKERS_TOPIC, METRICS_TOPIC, ROBOT_DESCRIPTION_TOPIC, STATES_TOPIC, \
-    TF_STATIC_TOPIC, TF_TOPIC
+from .outputs import body_topic, constraint_topic, CONTACTS_TOPIC, group_topic, \
+    JOINT_COMMANDS_TOPIC, JOINT_STATES_TOPIC, MARKERS_TOPIC, METRICS_TOPIC, \
+    ROBOT_DESCRIPTION_TOPIC, STATES_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 from .pacing import Pacer, WindowStats
 from .session import Due, Session
 from .settings import BY_NAME, PARAMETERS, Settings
@@ -197,6 +197,8 @@ class SimNode(Node):
         for topic, msg_type in ((STATES_TOPIC, BodyStates), (METRICS_TOPIC, Metrics),
                                 (MARKERS_TOPIC, MarkerArray)):
             self._pubs[topic] = self.create_publisher(msg_type, topic, 10)
+        if self.sim.contact is not None:   # (a scene with collision shapes)
+            self._pubs[CONTACTS_TOPIC] = self.create_publisher(Contacts, CONTACTS_TOPIC, 10)
         self._constraint_topics: set = set()
         self._sync_constraint_publishers()
         self._clock_pub = self.create_publisher(Clock, '/clock', 10)
@@ -581,11 +583,13 @@ class SimNode(Node):
         bodies, reactions = self._audience
         states, metrics, markers = (self._pubs[t].get_subscription_count() for t in
                                     (STATES_TOPIC, METRICS_TOPIC, MARKERS_TOPIC))
-        if not (bodies or reactions or states or metrics or markers):
+        contacts = CONTACTS_TOPIC in self._pubs and \
+            self._pubs[CONTACTS_TOPIC].get_subscription_count()
+        if not (bodies or reactions or states or metrics or markers or contacts):
             return
         for topic, msg in self.session.snapshot(bodies=bodies, states=bool(states),
                                                 reactions=reactions, metrics=bool(metrics),
-                                                markers=bool(markers)):
+                                                markers=bool(markers), contacts=bool(contacts)):
             self._pubs[topic].publish(msg)
         self._window.record_publish(time.perf_counter() - t0)
 
@@ -717,6 +721,18 @@ class SimNode(Node):
                     for joint, sign in saturation['saturated'].items()) or 'none'
                 values['joint_drive_saturations_total'] = \
                     str(saturation['counters']['saturations'])
+        contacts = sim.contacts()
+        if contacts:
+            # The latest step's contacts, and what contact did since the reset.
+            c = contacts['counters']
+            values['contacts'] = str(len(contacts['normal_force']))
+            values['contact_depth_max_m'] = f'{float(np.max(contacts["depth"], initial=0.0)):.3g}'
+            values['contact_depth_left_max_m'] = f'{c["max_depth"]:.3g}'
+            values['contact_complementarity_residual_max'] = f'{c["complementarity_max"]:.3g}'
+            values['contact_lcp_iterations_max'] = str(c['lcp_iterations_max'])
+            values['contact_lcp_failures_total'] = str(c['lcp_failures'])
+            values['contact_impacts_total'] = str(c['impacts'])
+            values['contact_events_capped_total'] = str(c['events_capped'])
         rejected = session.totals.rejected
         for cause in Rejection:
             values[f'rejected_{cause.value}'] = str(rejected.get(cause.value, 0))
@@ -734,6 +750,9 @@ class SimNode(Node):
             f'E={d.total_energy:.6g} J  dE={energy_change:+.1e} J  '
             + (f'violation={d.constraint_violation:.1e}  reaction_max={reaction_max:.3g} N'
                if sim.constraint_names else '')
+            + (f'contacts={len(contacts["normal_force"])}  '
+               f'depth_left_max={contacts["counters"]["max_depth"]:.1e} m'
+               if contacts else '')
             + (f'  overruns={w.overruns}' if w.overruns else '') + f'  [{summary}]')
         self._new_window(now)
 

@@ -35,6 +35,9 @@ from ..core.robots import rpy_matrix
 
 #: m: diameter of the sphere that marks a joint.
 JOINT_MARKER_SIZE = 0.04
+#: m: size of the points that mark contacts; m per N: length of a contact force's line.
+CONTACT_MARKER_SIZE = 0.02
+CONTACT_FORCE_SCALE = 0.01
 #: Body colours (RGBA), cycled.
 PALETTE = ((0.12, 0.47, 0.71, 0.9), (1.0, 0.5, 0.05, 0.9), (0.17, 0.63, 0.17, 0.9),
            (0.58, 0.4, 0.74, 0.9), (0.55, 0.34, 0.29, 0.9), (0.89, 0.47, 0.76, 0.9))
@@ -56,6 +59,7 @@ def group_topic(group: str) -> str:
 
 
 STATES_TOPIC = '~/body_states'
+CONTACTS_TOPIC = '~/contacts'
 METRICS_TOPIC = '~/metrics'
 MARKERS_TOPIC = '~/markers'
 #: Robots: namespace-relative, as joint_state_broadcaster and robot_state_publisher name them.
@@ -110,7 +114,8 @@ class Outputs:
 
     def snapshot(self, stamp, bodies: Optional[Sequence[int]] = None,
                  states: bool = True, reactions: Optional[Sequence[str]] = None,
-                 metrics: Optional[tuple] = None, markers: bool = True) -> list:
+                 metrics: Optional[tuple] = None, markers: bool = True,
+                 contacts: bool = False) -> list:
         """
         Return ``[(topic, message), ...]`` of one publish, in publish order.
 
@@ -128,6 +133,8 @@ class Outputs:
             ``(step_count, energy at the last reset)``: include ``~/metrics``.
         markers : bool
             Include ``~/markers``.
+        contacts : bool
+            Include ``~/contacts`` (a scene with collision shapes).
 
         """
         sim = self.sim
@@ -149,6 +156,8 @@ class Outputs:
             out.append((METRICS_TOPIC, self.metrics(world, *metrics)))
         if markers:
             out.append((MARKERS_TOPIC, self.markers(world)))
+        if contacts and sim.contact is not None:
+            out.append((CONTACTS_TOPIC, conv.contacts(world, sim.contacts())))
         return out
 
     def _reactions(self, stamp, pos: np.ndarray, quat: np.ndarray, names: set) -> list:
@@ -284,7 +293,32 @@ class Outputs:
                 pose=conv.pose(point, [0.0, 0.0, 0.0, 1.0]),
                 scale=conv.vector3([JOINT_MARKER_SIZE] * 3),
                 color=ColorRGBA(r=0.84, g=0.15, b=0.16, a=1.0), text=name))
+        if sim.contact is not None:
+            out += self._contact_markers(header)
         return MarkerArray(markers=out)
+
+    def _contact_markers(self, header: Header) -> list:
+        """
+        Return the latest step's contact points and forces (namespace ``contacts``).
+
+        The points (yellow, id 0) and each force on shape a as a line from its point,
+        CONTACT_FORCE_SCALE m per N (id 1): a resting body's lines carry its weight.
+        """
+        rep = self.sim.contacts()
+        point = rep['point']
+        force = rep['normal_force'][:, None] * rep['normal'] + rep['friction_force']
+        yellow = ColorRGBA(r=0.95, g=0.77, b=0.06, a=1.0)
+        ends = np.empty((2 * len(point), 3))
+        ends[0::2], ends[1::2] = point, point + CONTACT_FORCE_SCALE * force
+        identity = conv.pose(np.zeros(3), [0.0, 0.0, 0.0, 1.0])
+        return [Marker(header=header, ns='contacts', id=0, type=Marker.POINTS,
+                       action=Marker.ADD, pose=identity,
+                       scale=conv.vector3([CONTACT_MARKER_SIZE] * 3), color=yellow,
+                       points=[conv.point(p) for p in point]),
+                Marker(header=header, ns='contacts', id=1, type=Marker.LINE_LIST,
+                       action=Marker.ADD, pose=identity,
+                       scale=conv.vector3([CONTACT_MARKER_SIZE / 3, 0.0, 0.0]),
+                       color=yellow, points=[conv.point(p) for p in ends])]
 
     def _visual_markers(self, header: Header, pos_body: np.ndarray,
                         R_body: np.ndarray) -> list:
