@@ -56,6 +56,9 @@ A scene file::
         limit_restitution: 0.0              # Newton's e at the bounds, or {joint: e}
         friction: true                      # Coulomb friction of <dynamics friction>
         effort_limits: true                 # exact drives bounded by <limit effort>
+        collisions: false                   # the links' <collision> boxes, cylinders and
+                                            # spheres as contact shapes (meshes: named,
+                                            # not simulated)
     command_groups:                 # joints commanded together (others take efforts)
       - {name: arm_controller, joints: [joint1, joint2], interface: position,
          mode: servo, kp: 100.0, kd: 5.0}   # effort | position | velocity; N m/rad, N m s/rad
@@ -102,7 +105,7 @@ SHAPE_KEYS = ('kind', 'radius', 'length', 'size', 'position_body', 'orientation_
 GROUP_KEYS = ('name', 'joints', 'interface', 'mode', 'kp', 'kd')
 ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
               'initial_positions', 'initial_velocities', 'keep_fixed', 'limits',
-              'limit_restitution', 'friction', 'effort_limits')
+              'limit_restitution', 'friction', 'effort_limits', 'collisions')
 ROBOT_SUFFIXES = ('.urdf', '.xacro')
 CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
                    'anchor_b_body', 'axis_world', 'length')
@@ -336,6 +339,20 @@ def _robots(data: Any, source: str) -> list:
         efforts = entry.get('effort_limits', True)
         if not isinstance(efforts, bool):
             raise SpecError(f'{field}.effort_limits', f'expected true or false, got {efforts!r}')
+        collide = entry.get('collisions', False)
+        if not isinstance(collide, bool):
+            raise SpecError(f'{field}.collisions', f'expected true or false, got {collide!r}')
+        collisions = []
+        if collide:
+            # Each <collision> a shape on its link's body; a mesh is not one (no convex
+            # hulls yet): named in the robot's warning, never dropped silently.
+            parsed.ignored = [x for x in parsed.ignored if not x.startswith('<collision>')]
+            for c in parsed.collisions:
+                if c.shape == 'mesh':
+                    parsed.ignored.append(f'mesh <collision> of link {c.link!r} ({c.uri}: '
+                                          f'no convex hulls yet)')
+                else:
+                    collisions.append((c.link, c.shape, c.size, c.xyz, c.rpy))
         name = entry.get('name', parsed.name)
         if not isinstance(name, str) or not name:
             raise SpecError(f'{field}.name', f'expected a non-empty string, got {name!r}')
@@ -346,7 +363,8 @@ def _robots(data: Any, source: str) -> list:
                          keep_fixed=tuple(keep), prefix=prefix, source=str(path),
                          enforce_limits=limits,
                          limit_restitution=entry.get('limit_restitution', 0.0),
-                         enforce_friction=friction, enforce_efforts=efforts)
+                         enforce_friction=friction, enforce_efforts=efforts,
+                         collisions=tuple(collisions))
         out.append((spec, parsed))
     return out
 
@@ -356,7 +374,8 @@ def _body(data: Any, field: str) -> RigidBody:
     for key in ('name', 'mass', 'inertia'):
         if key not in data:
             raise SpecError(f'{field}.{key}', 'missing (required)')
-    kwargs = {k: v for k, v in data.items() if k not in ('orientation_rpy', 'inertia', 'shapes')}
+    kwargs = {k: v for k, v in data.items()
+              if k not in ('orientation_rpy', 'inertia', 'shapes')}
     try:
         mass = positive_scalar(data['mass'], 'mass')
         kwargs['inertia'] = _inertia(data['inertia'], mass)

@@ -50,6 +50,18 @@ class Visual:
 
 
 @dataclass
+class Collision:
+    """A link's collision geometry: ``box|cylinder|sphere|mesh``, its size, pose in the link."""
+
+    link: str
+    shape: str
+    size: tuple            # box (lx, ly, lz); cylinder (r, length); sphere (r,); mesh scale
+    xyz: np.ndarray
+    rpy: np.ndarray
+    uri: str = ''          # mesh: as written
+
+
+@dataclass
 class ParsedUrdf:
     """What a URDF holds for the simulator."""
 
@@ -60,6 +72,8 @@ class ParsedUrdf:
     visuals: list = field(default_factory=list)
     ignored: list = field(default_factory=list)   # elements not simulated, as 'tag (where)'
     source: str = ''
+    #: The links' <collision> geometry (shapes for contact when a scene asks for them).
+    collisions: list = field(default_factory=list)
 
 
 def read_robot_xml(path: Any, xacro_args: Optional[dict] = None) -> str:
@@ -162,7 +176,7 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
         if material.name and getattr(material, 'color', None) is not None \
                 and material.name not in colours:
             colours[material.name] = tuple(float(c) for c in material.color.rgba)
-    links, visuals = [], []
+    links, visuals, collisions = [], [], []
     for link in robot.links:
         where = f'{line_of("link", link.name)}: link {link.name!r}'
         inertial = link.inertial
@@ -187,6 +201,10 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
             v = _visual(link.name, visual, source, colours)
             if v is not None:
                 visuals.append(v)
+        for geometry in getattr(link, 'collisions', None) or []:
+            c = _collision(link.name, geometry)
+            if c is not None:
+                collisions.append(c)
     joints = []
     for joint in robot.joints:
         where = f'{line_of("joint", joint.name)}: joint {joint.name!r}'
@@ -217,7 +235,7 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
             raise UrdfError(f'{line_of("joint", j.name)}: joint {j.name!r}: mimic.joint: '
                             f'unknown joint {j.mimic[0]!r}')
     return ParsedUrdf(robot.name, xml if isinstance(xml, str) else xml.decode(), links,
-                      joints, visuals, ignored, source)
+                      joints, visuals, ignored, source, collisions)
 
 
 def prefixed_xml(xml: str, prefix: str) -> str:
@@ -302,6 +320,22 @@ def _visual(link: str, visual: Any, source: str, colours: dict) -> Optional[Visu
         scale = (1.0, 1.0, 1.0) if g.scale is None else tuple(g.scale)
         return Visual(link, 'mesh', scale, xyz, rpy, uri=g.filename,
                       path=resolve_uri(g.filename, source), rgba=rgba)
+    return None
+
+
+def _collision(link: str, collision: Any) -> Optional[Collision]:
+    from urdf_parser_py import urdf as up
+    xyz, rpy = _origin(collision.origin)
+    g = collision.geometry
+    if isinstance(g, up.Box):
+        return Collision(link, 'box', tuple(g.size), xyz, rpy)
+    if isinstance(g, up.Cylinder):
+        return Collision(link, 'cylinder', (g.radius, g.length), xyz, rpy)
+    if isinstance(g, up.Sphere):
+        return Collision(link, 'sphere', (g.radius,), xyz, rpy)
+    if isinstance(g, up.Mesh):
+        scale = (1.0, 1.0, 1.0) if g.scale is None else tuple(g.scale)
+        return Collision(link, 'mesh', scale, xyz, rpy, uri=g.filename)
     return None
 
 

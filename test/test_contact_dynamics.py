@@ -437,3 +437,40 @@ def test_the_default_scene_box_flips_lands_slides_and_rests_and_the_ball_bounces
     # a few centimetres).
     assert 0.01 < np.linalg.norm(sim.pose('tumbling_box')[0][:2] - landed) < 0.1
     assert sim.contact.counters['lcp_failures'] == 0
+
+
+ROD_URDF = """<robot name="rod">
+  <link name="world"/>
+  <link name="rod">
+    <inertial><origin xyz="0.5 0 0.05"/><mass value="3"/>
+      <inertia ixx="1e-3" iyy="0.25" izz="0.25" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="1.0 0 0.05"/><geometry><sphere radius="0.05"/></geometry></collision>
+    <collision><geometry><mesh filename="rod.stl"/></geometry></collision>
+  </link>
+  <joint name="hinge" type="revolute"><parent link="world"/><child link="rod"/>
+    <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="10" velocity="10"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize('collisions', [True, False])
+def test_a_urdf_links_collision_geometry_meets_the_ground(tmp_path, collisions):
+    # The hinged rod of the test above as a URDF robot with joint limits: its link's
+    # <collision> sphere rests on the ground, which carries m g / 2; the mesh is named in
+    # the robot's warning, not simulated. Without collisions: true it falls through.
+    from rigid_body_sim.scene import load_scene
+    (tmp_path / 'rod.urdf').write_text(ROD_URDF)
+    (tmp_path / 'scene.yaml').write_text(
+        'dt: 0.001\nintegrator: rkmk4\neffects: {gravity: {}}\nground: {}\n'
+        f'robots: [{{urdf: rod.urdf, collisions: {str(collisions).lower()}}}]\n')
+    scene = load_scene(tmp_path / 'scene.yaml')
+    sim = scene.simulation
+    sim.step(300)
+    if not collisions:
+        assert sim.joint_state().positions[0] > 0.1   # (falling: the ground meets nothing)
+        assert any('<collision> x2' in w for w in scene.warnings)
+        return
+    assert any("mesh <collision> of link 'rod'" in w for w in scene.warnings)
+    assert sim.contacts()['normal_force'] == pytest.approx([3.0 * G / 2], rel=1e-9)
+    assert abs(sim.joint_state().positions[0]) <= 1e-12
+    assert sim.events is not None   # (its limits' events along the contact's steps)

@@ -287,6 +287,11 @@ class RobotSpec:
     enforce_efforts : bool
         Bound the exact drives' efforts by the joints' URDF ``<limit effort>``
         (:class:`.limits.DriveEfforts`; servos and effort commands are clamped either way).
+    collisions : sequence of tuple
+        The links' collision shapes, ``(link, kind, size, xyz, rpy)``: ``kind`` 'box'
+        (``size`` its sides), 'cylinder' (radius, length) or 'sphere' (radius,), posed
+        in the link's frame as URDF's ``<collision><origin>``; each becomes a
+        :class:`.shapes.CollisionShape` on the link's body (:func:`robot_shapes`).
 
     """
 
@@ -305,6 +310,7 @@ class RobotSpec:
     limit_restitution: Any = 0.0
     enforce_friction: bool = True
     enforce_efforts: bool = True
+    collisions: Sequence = ()
 
 
 @dataclass

@@ -40,7 +40,7 @@ from .kernels import free_step
 from .limits import (DriveEfforts, ENGAGED, JointFriction, JointLimits, restitution_of,
                      SceneJoint)
 from .robots import (build_robot, CommandGroup, drive_name, Interface, Joint, JointDrives,
-                     JointSpace, JointSpec, JointState, mimic_name, RobotSpec)
+                     JointSpace, JointSpec, JointState, mimic_name, RobotSpec, rpy_matrix)
 from .shapes import CollisionShape, ContactDetector
 from .solver import ConstraintSolver
 from .validate import finite_scalar, positive_scalar
@@ -173,6 +173,7 @@ class Simulation:
             self.drives = drives
             if len(drives.rows_of):
                 effects.append(drives)   # only where a joint is damped or servoed
+        shapes = list(shapes) + self._robot_shapes()
         detector = self._contact_detector(shapes, constraints)
         contact_wrenches = None
         if detector is not None:
@@ -320,13 +321,42 @@ class Simulation:
         limits = JointLimits(js, limited, restitution)
         return limits if len(limits) else None
 
+    def _robot_shapes(self) -> list:
+        """Return the robots' link collision shapes on their bodies (specs' ``collisions``)."""
+        out = []
+        for model in self.robots:
+            spec = model.spec
+            for k, (link, kind, size, xyz, rpy) in enumerate(spec.collisions):
+                frame = model.links[link]
+                R = frame.rotation @ rpy_matrix(rpy)
+                where = f'robots.{spec.name}.links.{link}.collision'
+                try:
+                    if kind == 'box':
+                        dims = {'size': tuple(size)}
+                    elif kind == 'cylinder':
+                        dims = {'radius': size[0], 'length': size[1]}
+                    elif kind == 'sphere':
+                        dims = {'radius': size[0]}
+                    else:
+                        raise SpecError('kind', f"expected 'box', 'cylinder' or 'sphere', "
+                                                f'got {kind!r}')
+                    out.append(CollisionShape(
+                        kind, frame.body, position_body=frame.position + frame.rotation @ xyz,
+                        orientation_xyzw=so3.matrix_to_quat(R), name=f'{spec.prefix}{link}/'
+                        f'collision{k}', **dims))
+                except SpecError as exc:
+                    raise exc.within(where) from None
+        return out
+
     def _contact_detector(self, shapes: Sequence[CollisionShape],
                           constraints: list) -> Optional[ContactDetector]:
         """
         Return the detector of ``shapes`` (None: none collides).
 
         Bodies joined by a constraint (a joint) never collide with each other, as in
-        MuJoCo and Gazebo; a body jointed to the world still meets the world's shapes.
+        MuJoCo and Gazebo; a body jointed to the world still meets the world's shapes,
+        but one welded to it (a ``fixed`` constraint: a robot's fixed base) is part of
+        the world and does not (as MuJoCo's bodies without joints).
         """
         shapes = list(shapes)
         for i, shape in enumerate(shapes):
@@ -335,9 +365,12 @@ class Simulation:
         if not any(s.collide for s in shapes):
             return None
         world = (None, 'world')
-        excluded = sorted({tuple(sorted((c.body_a, c.body_b))) for c in constraints
-                           if isinstance(c, Constraint) and c.body_b not in world
-                           and c.body_a not in world and c.body_a != c.body_b})
+        joined = [c for c in constraints if isinstance(c, Constraint)]
+        excluded = {tuple(sorted((c.body_a, c.body_b))) for c in joined
+                    if c.body_b not in world and c.body_a not in world and c.body_a != c.body_b}
+        excluded = sorted(excluded) + [
+            (c.body_a if c.body_a not in world else c.body_b, None) for c in joined
+            if c.type is JointType.FIXED and (c.body_a in world) != (c.body_b in world)]
         return ContactDetector(shapes, self.bodies.names, excluded)
 
     # -- time stepping --------------------------------------------------------------------
