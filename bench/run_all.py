@@ -17,7 +17,8 @@ the reactions after a step; ``--skip-constraints`` skips these six),
 ``bench/joint_limits.py`` (the Panda into its limits), ``bench/complementarity.py``
 (the rows' LCP), ``bench/drive_efforts.py`` (its
 exact drives bounded by their efforts; the Panda's URDF from the bench requirements),
-``bench/contact_detection.py`` (collision detection against the number of shapes) and
+``bench/contact_detection.py`` (collision detection against the number of shapes),
+``bench/contact_dynamics.py`` (contact forces: cost, penetration, error) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
 latency; with the Panda, joint_states and /tf at 1 kHz; ``--skip-node``).
@@ -312,6 +313,12 @@ def sections(quick: bool, node_args: list) -> list:
             about='A pile of spheres and boxes over a ground, N shapes: our detector '
                   "(grid broad phase, narrow phases) against MuJoCo's kinematics and "
                   'collision on the same bodies.')),
+        ('skip_mujoco', 'contact_dynamics', ['--quick'] if quick else [], report.Section(
+            'Contact dynamics: cost, penetration and error beside MuJoCo',
+            f'./dev.sh python bench/contact_dynamics.py{q}', [T('contact_dynamics.md')],
+            about='A sphere dropped, a box sliding to a stop, a stack of ten boxes: the '
+                  "whole step's cost, the deepest penetration and each scene's error "
+                  'against its closed form, ours and MuJoCo from the same state.')),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],
