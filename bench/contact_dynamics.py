@@ -116,7 +116,7 @@ def run_mujoco(body_xml, friction, steps, velocity=None) -> dict:
 
 
 def error(name: str, r: dict) -> float:
-    """Return the scene's own error (m) of a run (see the module docstring)."""
+    """Return the scene's own error (m) of run ``r`` (see the module docstring)."""
     if name == 'sphere drop':
         return float(r['pos'][0, 2] - 0.1)
     if name == 'box slide':
@@ -155,9 +155,9 @@ def table(rows: list) -> str:
         lines.append(f'| {r["scene"]} | {o["step"] * 1e6:.0f} | {mj[0]} | {mj[1]} | '
                      f'{o["depth"]:.1e} | {mj[2]} | {error(r["scene"], o):+.2e} | {mj[3]} |')
     return '\n'.join(lines) + (
-        '\n\nErrors: the sphere\'s rest height offset, the slide\'s stop distance less '
-        '`v² / (2 μ g)`, the stack\'s largest box displacement. Ours is exact in the three to '
-        'the step\'s first-order stop (the slide: at most `μ g dt² / 2` = 2.5e-6 m) and to '
+        "\n\nErrors: the sphere's rest height offset, the slide's stop distance less "
+        "`v² / (2 μ g)`, the stack's largest box displacement. Ours is exact in the three to "
+        "the step's first-order stop (the slide: at most `μ g dt² / 2` = 2.5e-6 m) and to "
         'rounding; its contact rows are Python over compiled detection and steps, hence the '
         'cost.')
 
