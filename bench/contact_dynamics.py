@@ -116,7 +116,7 @@ def run_mujoco(body_xml, friction, steps, velocity=None) -> dict:
 
 
 def error(name: str, r: dict) -> float:
-    """Return the scene's own error (m) of run ``r`` (see the module docstring)."""
+    """Return how far run ``r`` is from its scene's closed form, m (module docstring)."""
     if name == 'sphere drop':
         return float(r['pos'][0, 2] - 0.1)
     if name == 'box slide':
