@@ -178,18 +178,25 @@ def test_a_body_spawned_inside_the_ground_is_pushed_out_without_exploding():
     assert np.linalg.norm(sim.state.vel_com_world) <= 1e-14
 
 
-def test_a_stack_of_three_boxes_stands_still():
-    half, mass = 0.1, 1.0
-    inertia = mass * (2 * half) ** 2 / 6
-    bodies = [RigidBody(f'b{k}', mass, (inertia,) * 3, position_world=(0, 0, half * (2 * k + 1)))
-              for k in range(3)]
-    shapes = [CollisionShape('plane', None)] + [
-        CollisionShape('box', f'b{k}', size=(2 * half,) * 3) for k in range(3)]
+@pytest.mark.parametrize('masses', [[1.0] * 10, [1.0, 1e4], [1e4, 1.0, 1e4]],
+                         ids=['ten_boxes', 'ratio_1e4_on_top', 'ratio_1e4_both_ways'])
+def test_a_stack_of_boxes_stands_still_and_the_ground_carries_it(masses):
+    # Ten like boxes, and boxes of mass ratio 1e4 stacked: nothing moves (rounding over
+    # 1 s), the ground carries the whole weight (each LCP solved to its tolerance,
+    # 1e-8 of the largest impulse, and rounding of the heaviest weight).
+    half = 0.05
+    bodies = [RigidBody(f'b{k}', m, (m * (2 * half) ** 2 / 6,) * 3,
+                        position_world=(0, 0, half * (2 * k + 1))) for k, m in enumerate(masses)]
+    shapes = [CollisionShape('plane', None, friction=0.8)] + [
+        CollisionShape('box', f'b{k}', size=(2 * half,) * 3, friction=0.8)
+        for k in range(len(masses))]
     sim = Simulation(bodies, [Gravity()], integrator='rkmk4', dt=1e-3, shapes=shapes)
     p0 = sim.state.pos_com_world.copy()
-    sim.step(2000)
+    sim.step(1000)
     assert np.max(np.abs(sim.state.pos_com_world - p0)) <= 1e-13
-    # The ground carries the three, each box the ones above.
+    rep = sim.contacts()
+    ground = sum(f for f, b in zip(rep['normal_force'], rep['body_b']) if b == 'world')
+    assert ground == pytest.approx(G * sum(masses), rel=1e-8)
     assert sim.contact.counters['lcp_failures'] == 0
 
 
