@@ -481,3 +481,19 @@ def test_a_urdf_links_collision_geometry_meets_the_ground(tmp_path, collisions):
     assert sim.contacts()['normal_force'] == pytest.approx([3.0 * G / 2], rel=1e-9)
     assert abs(sim.joint_state().positions[0]) <= 1e-12
     assert sim.events is not None   # (its limits' events along the contact's steps)
+
+
+def test_the_accuracy_knob_locates_impacts_to_its_tolerance():
+    # dt = 10 ms; the knob's tolerance 1e-9 per unit time makes the location tolerance
+    # 1e-9 x dt = 1e-11 m of gap: the first impact's time within that over its speed.
+    radius, drop = 0.1, 0.4
+    ball = RigidBody('ball', 1.0, (0.004,) * 3, position_world=(0, 0, radius + drop))
+    sim = Simulation([ball], [Gravity()], integrator='rkmk4', dt=1e-2, tolerance=1e-9,
+                     shapes=[CollisionShape('plane', None, restitution=0.5),
+                             CollisionShape('sphere', 'ball', radius=radius, restitution=0.5)])
+    sim.step(60)
+    assert sim.contact.location == pytest.approx(1e-11)
+    first = sim.contact.impacts[0]
+    speed = math.sqrt(2 * G * drop)
+    assert first.time == pytest.approx(math.sqrt(2 * drop / G), abs=1e-11 / speed + 1e-15)
+    assert sim.accuracy().misses == 0
