@@ -236,7 +236,9 @@ def _build(data: Any, source: str) -> Scene:
                          robots=[spec for spec, _ in robots],
                          command_groups=_groups(data.get('command_groups') or []),
                          scene_joints=scene_joints,
-                         shapes=_collision_shapes(data.get('ground'), bodies_data))
+                         shapes=_collision_shapes(
+                             ({} if data['ground'] is None else data['ground'])
+                             if 'ground' in data else None, bodies_data))
     except SpecError as exc:
         # Map 'effects[i]...' from the core back to the scene's effect key.
         if exc.field.startswith('effects['):

@@ -235,6 +235,9 @@ def test_a_hinged_rod_resting_on_the_ground_carries_half_its_weight(limited):
     assert rep['normal_force'] == pytest.approx([mass * G / 2], rel=1e-9)
     assert np.max(np.abs(sim.state.pos_com_world - p0)) <= 1e-12
     assert (sim.events is not None) == limited
+    # Read between steps, the hinge's reaction sees the contact's force: the other half.
+    force = sim.reactions()['h']['rod'].force_world
+    np.testing.assert_allclose(force, [0.0, 0.0, mass * G / 2], rtol=1e-9, atol=1e-9)
 
 
 def test_contacts_report_the_forces_the_step_used():
@@ -497,3 +500,80 @@ def test_the_accuracy_knob_locates_impacts_to_its_tolerance():
     speed = math.sqrt(2 * G * drop)
     assert first.time == pytest.approx(math.sqrt(2 * drop / G), abs=1e-11 / speed + 1e-15)
     assert sim.accuracy().misses == 0
+
+
+def test_a_push_along_the_pyramids_diagonal_slides_as_coulomb_says():
+    # Pushed with 1.3 mu m g along (1, 1, 0): within the pyramid's corner (up to 1.41)
+    # but outside Coulomb's cone: it slides at (1.3 - 1) mu g along the push.
+    mu, mass, half = 0.5, 2.0, 0.1
+    box = RigidBody('b', mass, (mass * (2 * half) ** 2 / 6,) * 3, position_world=(0, 0, half))
+    sim = Simulation([box], [Gravity()], integrator='rkmk4', dt=1e-3,
+                     shapes=[CollisionShape('plane', None, friction=mu),
+                             CollisionShape('box', 'b', size=(2 * half,) * 3, friction=mu)])
+    direction = np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0)
+    sim.apply_wrench('b', force=1.3 * mu * mass * G * direction)
+    sim.step(200)
+    travel = sim.state.pos_com_world[0] - (0, 0, half)
+    # First order in its first step (it starts stuck, the pyramid): 1e-3 of the travel.
+    np.testing.assert_allclose(travel, 0.5 * 0.3 * mu * G * 0.2 ** 2 * direction,
+                               rtol=1e-3, atol=1e-5)
+    rep = sim.contacts()
+    excess = np.linalg.norm(rep['friction_force'], axis=1) - mu * rep['normal_force']
+    assert np.all(excess <= 1e-7 * np.max(rep['normal_force']))
+
+
+BASE_URDF = """<robot name="arm">
+  <link name="base"><inertial><mass value="5"/>
+      <inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.05"/><geometry><box size="0.2 0.2 0.1"/></geometry>
+    </collision></link>
+  <link name="link1"><inertial><origin xyz="0 0 0.2"/><mass value="1"/>
+      <inertia ixx="0.01" iyy="0.01" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.2"/><geometry><box size="0.05 0.05 0.4"/></geometry>
+    </collision></link>
+  <joint name="j1" type="continuous"><parent link="base"/><child link="link1"/>
+    <origin xyz="0 0 0.08"/><axis xyz="0 0 1"/></joint>
+</robot>
+"""
+
+
+def test_a_fixed_base_robots_base_is_the_world_and_meets_nothing_of_its_own(tmp_path):
+    # The base's box overlaps link1's at their joint (2 cm): the base, fixed to the
+    # world, is named as not simulated; link1 turns freely, no contact, no failure.
+    from rigid_body_sim.scene import load_scene
+    (tmp_path / 'arm.urdf').write_text(BASE_URDF)
+    (tmp_path / 'scene.yaml').write_text(
+        'dt: 0.001\nintegrator: rkmk4\neffects: {gravity: {}}\nground:\n'
+        'robots: [{urdf: arm.urdf, fixed_base: true, collisions: true,\n'
+        '          initial_velocities: {j1: 1.0}}]\n')
+    scene = load_scene(tmp_path / 'scene.yaml')
+    assert any("<collision> of link 'base' not simulated" in w for w in scene.warnings)
+    sim = scene.simulation
+    assert [s.name for s in sim.contact.detector.shapes] == ['ground', 'link1/collision0']
+    sim.step(100)
+    assert len(sim.contacts()['normal_force']) == 0
+    assert sim.joint_state().velocities[0] == pytest.approx(1.0, rel=1e-12)
+    assert sim.contact.counters['lcp_failures'] == 0
+
+
+def test_welded_bodies_and_immovable_contacts_are_no_trouble():
+    # Two boxes welded to the world, overlapping each other and the ground: static, no
+    # contact between them. A ball on an axle through its centre, fixed to the world,
+    # 0.1 mm into the ground: the contact's rows no force moves carry nothing.
+    boxes = [RigidBody('a', 1.0, (0.01,) * 3, position_world=(0, 0, 0.04)),
+             RigidBody('b', 1.0, (0.01,) * 3, position_world=(0.099, 0, 0.04))]
+    welds = [Constraint('wa', 'fixed', 'a', None, anchor_world=(0, 0, 0.04)),
+             Constraint('wb', 'fixed', 'b', None, anchor_world=(0.099, 0, 0.04))]
+    sim = Simulation(boxes, [Gravity()], constraints=welds,
+                     shapes=[CollisionShape('plane', None)]
+                     + [CollisionShape('box', n, size=(0.1,) * 3) for n in 'ab'])
+    sim.step(20)
+    assert len(sim.contact.detect(sim.state).depth) == 0
+    ball = RigidBody('ball', 1.0, (0.004,) * 3, position_world=(0, 0, 0.0999))
+    axle = Constraint('axle', 'ball', 'ball', None, anchor_world=(0, 0, 0.0999))
+    sim = Simulation([ball], [Gravity()], constraints=[axle],
+                     shapes=[CollisionShape('plane', None),
+                             CollisionShape('sphere', 'ball', radius=0.1)])
+    sim.step(20)
+    assert sim.contact.counters['immovable_rows'] > 0
+    assert np.all(np.isfinite(sim.state.pos_com_world))

@@ -19,13 +19,18 @@ operator (``M̄⁻¹`` the inverse mass with the joints' rows held, by the solve
 projections; ``M⁻¹`` for a free body). That is a box-constrained LCP in ``p``
 (:mod:`.complementarity`, each tangent row's box ``±μ p_n``) whose boxes depend on
 its normal forces: solved by a fixed-point iteration on the boxes (each solve exact,
-warm-started), which also bounds the tangent force by the cone, not the pyramid: a
-contact whose friction leaves the cone has its box rescaled to the cone along the
-friction's direction, until every force is within :data:`FRICTION_TOLERANCE` of its
-conditions. A Delassus operator made singular by redundant contacts (a box flat on
-the ground: four normals on three freedoms) is regularized proximally (each solve
-adds ``ρ (p − p_k)``, ``ρ`` :data:`PROXIMAL` of its diagonal, and the iteration
-takes it out: the forces solve the unregularized problem to its tolerance).
+warm-started) until no impulse changes by more than :data:`FRICTION_TOLERANCE` of the
+largest. Coulomb's cone, not the pyramid: a contact sliding at the step's start has one
+friction row, along its slip (``t₁``), so its friction opposes the slip at ``μ λ_n``;
+a sticking contact has two (the pyramid), and where its friction ends on a bound with
+its point slipping, or outside the cone inside the pyramid (up to ``√2 μ λ_n`` along a
+diagonal), it is turned to slide, along its slip or against its friction, and the
+problem solved again (:meth:`ContactSteps._slipping`). A Delassus operator made
+singular by redundant contacts (a box flat on the ground: four normals on three
+freedoms) is regularized proximally (each solve adds ``ρ (p − p_k)``, ``ρ``
+:data:`PROXIMAL` of its diagonal, and the iteration takes it out: the forces solve the
+unregularized problem to its tolerance); a row no force moves (a point on an axle
+fixed to the world) carries nothing.
 
 The step is then taken again with the contact forces as constant wrenches (each a
 world-frame force at the contact point: a world force and torque on each body),
@@ -282,7 +287,7 @@ class ContactSteps:
                          'lcp_solves': 0, 'lcp_iterations_max': 0, 'lcp_failures': 0,
                          'complementarity_max': 0.0, 'max_depth': 0.0,
                          'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
-                         'held_rates': 0}
+                         'held_rates': 0, 'immovable_rows': 0}
 
     def tighten(self) -> None:
         """Set the tolerances for the accuracy knob (``tolerance dt``, floored) or the defaults."""
@@ -456,6 +461,24 @@ class ContactSteps:
         if not m:
             return np.zeros(0)
         rows = np.arange(m) if not normal_only else np.arange(0, m, 3)
+        # A row no impulse moves (a point on an axle fixed to the world) carries none: a
+        # contact whose normal row is one is left out, a friction row that is one is
+        # held at zero (``pinned``).
+        diag = np.diag(A)[rows]
+        movable = diag > 1e-12 * float(np.max(diag, initial=0.0))
+        pinned = np.zeros(len(rows), dtype=bool)
+        if not np.all(movable):
+            self.counters['immovable_rows'] += int(np.count_nonzero(~movable))
+            keep = movable if normal_only else np.repeat(movable[0::3], 3)
+            if not np.any(keep):
+                return np.zeros(m)
+            if not normal_only:
+                pinned = ~movable[keep]
+                mu = mu[movable[0::3]]
+                sliding = None if sliding is None else sliding[movable[0::3]]
+            if equal is not None:
+                equal = equal[movable] if normal_only else equal[movable[0::3]]
+            rows = rows[keep]
         A_r, q_r = A[np.ix_(rows, rows)], q[rows]
         A_r = 0.5 * (A_r + A_r.T)   # (symmetric to rounding: G M̄⁻¹ Gᵀ)
         rho = PROXIMAL * float(np.max(np.diag(A_r)))
@@ -476,6 +499,7 @@ class ContactSteps:
                 lo[1::3], hi[1::3] = -half, half
                 half2 = half if sliding is None else np.where(sliding, 0.0, half)
                 lo[2::3], hi[2::3] = -half2, half2
+                lo[pinned], hi[pinned] = 0.0, 0.0
                 p = np.clip(p, lo, hi)
             # Rows whose box is a point (no friction yet, or none: μ = 0, a sliding
             # contact's t₂) are fixed there, out of the problem.
@@ -614,16 +638,28 @@ class ContactSteps:
         A contact sticking at the rows' state (two friction rows, the pyramid) whose
         friction ends on a bound with its point slipping at the step's end faster than
         the rate tolerance slips: its ``t₁`` is turned along that slip and it becomes
-        a sliding contact (one friction row, ``|λ₁| ≤ μ λ_n``).
+        a sliding contact (one friction row, ``|λ₁| ≤ μ λ_n``). So does one whose
+        friction left Coulomb's cone inside the pyramid (a push along the pyramid's
+        diagonal, up to ``√2 μ λ_n``): it slips against its friction.
         """
         c = len(rows)
         if not c:
             return None
         bound = rows.mu * np.maximum(p[0::3], 0.0)
-        on = (np.abs(p[1::3]) >= bound * (1.0 - 1e-9)) | (np.abs(p[2::3]) >= bound * (1.0 - 1e-9))
+        # (a bound is the previous iterate's μ p_n: within the iteration's tolerance)
+        slack = 2.0 * FRICTION_TOLERANCE * float(np.max(np.abs(p)))
+        on = (np.abs(p[1::3]) >= bound - slack) | (np.abs(p[2::3]) >= bound - slack)
         slip = w[1::3, None] * rows.frame[:, 1] + w[2::3, None] * rows.frame[:, 2]
         speed = np.linalg.norm(slip, axis=1)
-        turn = ~rows.sliding & on & (bound > 0.0) & (speed > self.rate)
+        # A sticking contact whose friction left the cone (the pyramid's corner: up to
+        # √2 μ λ_n) cannot stick: it slips against its friction.
+        friction = p[1::3, None] * rows.frame[:, 1] + p[2::3, None] * rows.frame[:, 2]
+        size = np.linalg.norm(friction, axis=1)
+        beyond = size > bound + slack
+        slip = np.where((beyond & (speed <= self.rate))[:, None],
+                        -friction / np.maximum(size, 1e-300)[:, None] * self.rate * 2.0, slip)
+        speed = np.linalg.norm(slip, axis=1)
+        turn = ~rows.sliding & (bound > 0.0) & ((on & (speed > self.rate)) | beyond)
         if not np.any(turn):
             return None
         frame, sliding = rows.frame.copy(), rows.sliding.copy()
@@ -877,6 +913,16 @@ class ContactSteps:
         self._set_forces(None)
         con = self.detect(new)
         rec = self.record
+        try:
+            return self._settle(new, con, rec)
+        finally:
+            # What reads the model between steps (joint reactions, efforts) sees the
+            # forces the step's last part held; the next step's trial clears them.
+            if rec.rows is not None and len(rec.rows) and np.any(rec.force):
+                self._set_forces(rec.rows, rec.force)
+
+    def _settle(self, new: State, con: Contacts, rec: ContactRecord) -> State:
+        """Return ``new`` with its contacts' positions and loaded rates corrected."""
         active = None
         if rec.rows is not None and len(rec.rows):
             active = np.sum(rec.force * rec.rows.contacts.normal, axis=1) > 0.0
@@ -907,10 +953,10 @@ class ContactSteps:
         if not np.any(held):
             return new
         rows = self.rows(new, con, select=held)
-        off = (np.abs(rows.vn) > RATE_FLOOR) & (np.abs(rows.vn) <= HOLD_RATE)
-        if not np.any(off):
+        near = np.abs(rows.vn) <= HOLD_RATE
+        if not np.any(near & (np.abs(rows.vn) > RATE_FLOOR)):
             return new
-        rows = rows.subset(off)
+        rows = rows.subset(near)   # (every loaded contact near zero held at zero together)
         Y = self.response(new, rows.G)
         A = rows.G @ Y
         q3 = np.zeros(3 * len(rows))

@@ -326,8 +326,16 @@ class Simulation:
         out = []
         for model in self.robots:
             spec = model.spec
-            for k, (link, kind, size, xyz, rpy) in enumerate(spec.collisions):
+            count: dict = {}
+            for link, kind, size, xyz, rpy in spec.collisions:
+                k = count[link] = count.get(link, -1) + 1   # (the link's k-th <collision>)
                 frame = model.links[link]
+                if frame.body is None:
+                    # A link fixed to the world (a fixed base) is the world: its shapes
+                    # would meet its children at their joints. Named, not simulated.
+                    model.notes.append(f'<collision> of link {spec.prefix + link!r} not '
+                                       f'simulated (fixed to the world)')
+                    continue
                 R = frame.rotation @ rpy_matrix(rpy)
                 where = f'robots.{spec.name}.links.{link}.collision'
                 try:
@@ -368,9 +376,24 @@ class Simulation:
         joined = [c for c in constraints if isinstance(c, Constraint)]
         excluded = {tuple(sorted((c.body_a, c.body_b))) for c in joined
                     if c.body_b not in world and c.body_a not in world and c.body_a != c.body_b}
-        excluded = sorted(excluded) + [
-            (c.body_a if c.body_a not in world else c.body_b, None) for c in joined
-            if c.type is JointType.FIXED and (c.body_a in world) != (c.body_b in world)]
+        # The bodies welded to the world, directly or through a chain of welds: static,
+        # part of the world, they meet neither its shapes nor each other.
+        welded: set = set()
+        grew = True
+        while grew:
+            grew = False
+            for c in joined:
+                if c.type is not JointType.FIXED:
+                    continue
+                ends = {c.body_a, c.body_b}
+                held = {e for e in ends if e in world or e in welded}
+                for e in ends - held if held else ():
+                    if e not in world:
+                        welded.add(e)
+                        grew = True
+        static = sorted(welded)
+        excluded = sorted(excluded) + [(b, None) for b in static] + [
+            (a, b) for i, a in enumerate(static) for b in static[i + 1:]]
         return ContactDetector(shapes, self.bodies.names, excluded)
 
     # -- time stepping --------------------------------------------------------------------

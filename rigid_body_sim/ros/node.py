@@ -750,6 +750,7 @@ class SimNode(Node):
             f'E={d.total_energy:.6g} J  dE={energy_change:+.1e} J  '
             + (f'violation={d.constraint_violation:.1e}  reaction_max={reaction_max:.3g} N'
                if sim.constraint_names else '')
+            + ('  ' if sim.constraint_names and contacts else '')
             + (f'contacts={len(contacts["normal_force"])}  '
                f'depth_left_max={contacts["counters"]["max_depth"]:.1e} m'
                if contacts else '')
