@@ -59,6 +59,8 @@ A scene file::
         collisions: false                   # the links' <collision> boxes, cylinders and
                                             # spheres as contact shapes (meshes: named,
                                             # not simulated)
+        self_collide: false                 # true: its links meet each other too (false:
+                                            # Gazebo's default)
     command_groups:                 # joints commanded together (others take efforts)
       - {name: arm_controller, joints: [joint1, joint2], interface: position,
          mode: servo, kp: 100.0, kd: 5.0}   # effort | position | velocity; N m/rad, N m s/rad
@@ -105,7 +107,7 @@ SHAPE_KEYS = ('kind', 'radius', 'length', 'size', 'position_body', 'orientation_
 GROUP_KEYS = ('name', 'joints', 'interface', 'mode', 'kp', 'kd')
 ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
               'initial_positions', 'initial_velocities', 'keep_fixed', 'limits',
-              'limit_restitution', 'friction', 'effort_limits', 'collisions')
+              'limit_restitution', 'friction', 'effort_limits', 'collisions', 'self_collide')
 ROBOT_SUFFIXES = ('.urdf', '.xacro')
 CONSTRAINT_KEYS = ('name', 'type', 'body_a', 'body_b', 'anchor_world', 'anchor_a_body',
                    'anchor_b_body', 'axis_world', 'length')
@@ -344,6 +346,10 @@ def _robots(data: Any, source: str) -> list:
         collide = entry.get('collisions', False)
         if not isinstance(collide, bool):
             raise SpecError(f'{field}.collisions', f'expected true or false, got {collide!r}')
+        self_collide = entry.get('self_collide', False)
+        if not isinstance(self_collide, bool):
+            raise SpecError(f'{field}.self_collide', f'expected true or false, got '
+                                                     f'{self_collide!r}')
         collisions = []
         if collide:
             # Each <collision> a shape on its link's body; a mesh is not one (no convex
@@ -366,7 +372,7 @@ def _robots(data: Any, source: str) -> list:
                          enforce_limits=limits,
                          limit_restitution=entry.get('limit_restitution', 0.0),
                          enforce_friction=friction, enforce_efforts=efforts,
-                         collisions=tuple(collisions))
+                         collisions=tuple(collisions), self_collide=self_collide)
         out.append((spec, parsed))
     return out
 

@@ -577,3 +577,37 @@ def test_welded_bodies_and_immovable_contacts_are_no_trouble():
     sim.step(20)
     assert sim.contact.counters['immovable_rows'] > 0
     assert np.all(np.isfinite(sim.state.pos_com_world))
+
+
+CHAIN_URDF = """<robot name="chain">
+  <link name="a"><inertial><mass value="1"/>
+      <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+  <link name="b"><inertial><mass value="1"/>
+      <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="c"><inertial><mass value="1"/>
+      <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="-0.15 0 0"/><geometry><sphere radius="0.1"/></geometry>
+    </collision></link>
+  <joint name="j1" type="continuous"><parent link="a"/><child link="b"/>
+    <origin xyz="0.1 0 0"/><axis xyz="0 0 1"/></joint>
+  <joint name="j2" type="continuous"><parent link="b"/><child link="c"/>
+    <origin xyz="0.1 0 0"/><axis xyz="0 0 1"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize('self_collide', [False, True])
+def test_a_robots_links_meet_each_other_only_with_self_collide(tmp_path, self_collide):
+    # Links a and c (not joined by a joint) overlap by 15 cm: with self_collide (off by
+    # default, as Gazebo) they are a contact; without, the robot's shapes meet only others.
+    from rigid_body_sim.scene import load_scene
+    (tmp_path / 'chain.urdf').write_text(CHAIN_URDF)
+    (tmp_path / 'scene.yaml').write_text(
+        'dt: 0.001\nrobots: [{urdf: chain.urdf, collisions: true, '
+        f'self_collide: {str(self_collide).lower()}}}]\n')
+    sim = load_scene(tmp_path / 'scene.yaml').simulation
+    con = sim.contact.detect(sim.state)
+    assert len(con.depth) == (1 if self_collide else 0)
+    if self_collide:
+        assert con.depth[0] == pytest.approx(0.15, rel=1e-12)

@@ -291,7 +291,11 @@ class RobotSpec:
         The links' collision shapes, ``(link, kind, size, xyz, rpy)``: ``kind`` 'box'
         (``size`` its sides), 'cylinder' (radius, length) or 'sphere' (radius,), posed
         in the link's frame as URDF's ``<collision><origin>``; each becomes a
-        :class:`.shapes.CollisionShape` on the link's body (:func:`robot_shapes`).
+        :class:`.shapes.CollisionShape` on the link's body (:meth:`.Simulation._robot_shapes`).
+    self_collide : bool
+        Whether the robot's links meet each other (beyond the pairs its joints join,
+        which never do); False (Gazebo's default): they meet only other bodies and the
+        world.
 
     """
 
@@ -311,6 +315,7 @@ class RobotSpec:
     enforce_friction: bool = True
     enforce_efforts: bool = True
     collisions: Sequence = ()
+    self_collide: bool = False
 
 
 @dataclass

@@ -41,7 +41,7 @@ from .limits import (DriveEfforts, ENGAGED, JointFriction, JointLimits, restitut
                      SceneJoint)
 from .robots import (build_robot, CommandGroup, drive_name, Interface, Joint, JointDrives,
                      JointSpace, JointSpec, JointState, mimic_name, RobotSpec, rpy_matrix)
-from .shapes import CollisionShape, ContactDetector
+from .shapes import ALL_BITS, CollisionShape, ContactDetector
 from .solver import ConstraintSolver
 from .validate import finite_scalar, positive_scalar
 
@@ -324,8 +324,12 @@ class Simulation:
     def _robot_shapes(self) -> list:
         """Return the robots' link collision shapes on their bodies (specs' ``collisions``)."""
         out = []
-        for model in self.robots:
+        for r, model in enumerate(self.robots):
             spec = model.spec
+            # Without self collision the robot's shapes share a group bit of their own
+            # that their mask leaves out: they meet every other shape, not each other.
+            bit = 1 << (1 + r % 30)
+            bits = {} if spec.self_collide else {'group': bit, 'mask': ALL_BITS & ~bit}
             count: dict = {}
             for link, kind, size, xyz, rpy in spec.collisions:
                 k = count[link] = count.get(link, -1) + 1   # (the link's k-th <collision>)
@@ -351,7 +355,7 @@ class Simulation:
                     out.append(CollisionShape(
                         kind, frame.body, position_body=frame.position + frame.rotation @ xyz,
                         orientation_xyzw=so3.matrix_to_quat(R), name=f'{spec.prefix}{link}/'
-                        f'collision{k}', **dims))
+                        f'collision{k}', **dims, **bits))
                 except SpecError as exc:
                     raise exc.within(where) from None
         return out
