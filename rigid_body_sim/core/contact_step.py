@@ -330,11 +330,12 @@ class ContactSteps:
     def detect(self, state: State) -> Contacts:
         """Return the detector's contacts at ``state`` (within its margin; kept for the state)."""
         seen = self._seen
-        if seen is not None and seen[0] is state and seen[1] is state.y:
+        if seen is not None and seen[0] is state and seen[1] is state.y \
+                and seen[3] is self.detector.excluded:   # (joints added or removed since)
             return seen[2]
         self.sim.bodies.outputs(state)
         con = self.detector.detect(self.sim.bodies.outputs_cache.out)
-        self._seen = (state, state.y, con)
+        self._seen = (state, state.y, con, self.detector.excluded)
         return con
 
     def rows(self, state: State, contacts: Optional[Contacts] = None,

@@ -228,15 +228,8 @@ class ContactDetector:
                                 for k in live]).reshape(m, 3, 3)
         self.group = np.array([self.shapes[k].group for k in live], dtype=np.int64)
         self.mask = np.array([self.shapes[k].mask for k in live], dtype=np.int64)
-        codes = set()
-        for k, pair in enumerate(excluded):
-            if isinstance(pair, str) or len(pair) != 2 \
-                    or any(x is not None and x not in index for x in pair):
-                raise SpecError(f'excluded[{k}]', f'expected a pair of body names (None: '
-                                                  f'the world), got {pair!r}')
-            a, b = (n if x is None else index[x] for x in pair)
-            codes.add(min(a, b) * (n + 1) + max(a, b))
-        self.excluded = np.array(sorted(codes), dtype=np.int64)
+        self._index = index
+        self.excluded = self._codes(excluded)
         plane = self.kind == int(Shape.PLANE)
         self._planes = np.flatnonzero(plane)
         self._solids = np.flatnonzero(~plane)
@@ -251,6 +244,33 @@ class ContactDetector:
         self._points, self._normals = np.zeros((cap, 3)), np.zeros((cap, 3))
         self._depths, self._owner = np.zeros(cap), np.zeros(cap, dtype=np.int64)
         self.counters = {'detections': 0, 'pairs_tested': 0, 'contacts': 0}
+
+    def _codes(self, excluded: Any) -> np.ndarray:
+        """Return the sorted codes of the excluded body pairs (names; None: the world)."""
+        index, n = self._index, self.n_bodies
+        codes = set()
+        for k, pair in enumerate(excluded):
+            if isinstance(pair, str) or len(pair) != 2 \
+                    or any(x is not None and x not in index for x in pair):
+                raise SpecError(f'excluded[{k}]', f'expected a pair of body names (None: '
+                                                  f'the world), got {pair!r}')
+            a, b = (n if x is None else index[x] for x in pair)
+            codes.add(min(a, b) * (n + 1) + max(a, b))
+        return np.array(sorted(codes), dtype=np.int64)
+
+    def exclude(self, excluded: Any) -> None:
+        """
+        Replace the excluded body pairs (a joint added or removed at run time).
+
+        Raises SpecError, changing nothing, when a pair of kinds with no narrow phase
+        (a cylinder on a box) could then meet, naming both shapes.
+        """
+        old, self.excluded = self.excluded, self._codes(excluded)
+        try:
+            self._check_pairs()
+        except SpecError:
+            self.excluded = old
+            raise
 
     def _meets(self, i: int, j: int) -> bool:
         """Tell whether rows ``i`` and ``j`` may ever be tested (bodies, filters, exclusions)."""

@@ -376,6 +376,11 @@ class Simulation:
                 raise SpecError(f'shapes[{i}]', f'expected a CollisionShape, got {shape!r}')
         if not any(s.collide for s in shapes):
             return None
+        return ContactDetector(shapes, self.bodies.names, self._exclusions(constraints))
+
+    @staticmethod
+    def _exclusions(constraints: Sequence) -> list:
+        """Return the body pairs that never collide: joined, or both welded to the world."""
         world = (None, 'world')
         joined = [c for c in constraints if isinstance(c, Constraint)]
         excluded = {tuple(sorted((c.body_a, c.body_b))) for c in joined
@@ -396,9 +401,13 @@ class Simulation:
                         welded.add(e)
                         grew = True
         static = sorted(welded)
-        excluded = sorted(excluded) + [(b, None) for b in static] + [
+        return sorted(excluded) + [(b, None) for b in static] + [
             (a, b) for i, a in enumerate(static) for b in static[i + 1:]]
-        return ContactDetector(shapes, self.bodies.names, excluded)
+
+    def _specs_now(self, without: Optional[str] = None) -> list:
+        """Return the descriptions of the constraints present (but ``without``)."""
+        cs = self.dynamics.solver.constraints
+        return [cs.spec(name) for name in cs.names if name != without]
 
     # -- time stepping --------------------------------------------------------------------
 
@@ -605,6 +614,7 @@ class Simulation:
             self.dynamics.changed()
             self._reconcile_velocities()
         if self.contact is not None:
+            self.contact.detector.exclude(self._exclusions(self._specs_now()))
             self.contact.reset()
         if self.events is not None:
             for part in (self.limits, self.friction, self.drive_efforts):
@@ -909,6 +919,8 @@ class Simulation:
         self.dynamics.changed()
         if self.events is not None:   # rows may have moved
             self.events.rows_changed()
+        if self.contact is not None:   # bodies joined now never collide (only fewer pairs)
+            self.contact.detector.exclude(self._exclusions(self._specs_now()))
         self._reconcile_velocities()
 
     def _reconcile_velocities(self) -> None:
@@ -933,6 +945,14 @@ class Simulation:
             joint = self.joints.names[self.joints.mimics[self._mimic_names.index(name)][0]]
             raise SpecError('name', f'{name!r} makes joint {joint!r} follow its leader (a URDF '
                                     f'mimic joint): it cannot be removed')
+        if self.contact is not None:
+            # Its bodies may collide from now on: refused, changing nothing, where they
+            # could then meet as a pair of kinds with no narrow phase.
+            self.dynamics.solver.constraints.spec(name)   # (an unknown name: its error)
+            try:
+                self.contact.detector.exclude(self._exclusions(self._specs_now(name)))
+            except SpecError as exc:
+                raise SpecError('name', f'{name!r} cannot be removed: {exc.problem}') from None
         spec = self.dynamics.solver.constraints.remove(name)
         self.dynamics.changed()
         if self.events is not None:   # rows may have moved
