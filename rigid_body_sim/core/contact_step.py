@@ -78,9 +78,11 @@ import numpy as np
 
 from .bodies import State
 from .complementarity import solve_direct
+from .dynamics import STEPS
 from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
-from .kernels.free_step import HAS_POSITION_FORCES
-from .kernels.layout import W_BODY, W_FORCE, W_TORQUE, W_WIDTH
+from .kernels import contact_step as kern
+from .kernels.free_step import HAS_POSITION_FORCES, state_outputs
+from .kernels.layout import O_WIDTH, W_BODY, W_FORCE, W_TORQUE, W_WIDTH
 from .rotation import cross, exp_quat, quat_multiply, quat_to_matrix
 from .shapes import ContactDetector, Contacts
 
@@ -269,7 +271,14 @@ class ContactSteps:
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
         self._seen: Optional[tuple] = None
         self._frames_seen: Optional[tuple] = None
+        self._lazy: Optional[tuple] = None
         self.record = ContactRecord()
+        #: Take the steps no event interrupts in the compiled kernel (scenes of free
+        #: bodies: :meth:`compiled_steps`); False: every step in Python (the reference).
+        self.compiled = True
+        self._kernel_key: Optional[tuple] = None
+        self._kernel_args: tuple = ()
+        self._scratch: Optional[tuple] = None
         self.counters: dict = {}
         #: The latest impacts (at most IMPACT_LOG), oldest first.
         self.impacts: deque = deque(maxlen=IMPACT_LOG)
@@ -281,13 +290,30 @@ class ContactSteps:
             self.sim.dynamics.changed()
         self.record = ContactRecord(time=self.sim.state.time if hasattr(self.sim, 'state')
                                     else 0.0)
-        self._warm: dict = {}
+        #: The last step's rows' normal impulses: shapes a and b, points, impulses.
+        self._warm: tuple = _NO_WARM
         self.impacts.clear()
         self.counters = {'impacts': 0, 'located_steps': 0, 'events_capped': 0,
                          'lcp_solves': 0, 'lcp_iterations_max': 0, 'lcp_failures': 0,
                          'complementarity_max': 0.0, 'max_depth': 0.0,
                          'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
-                         'held_rates': 0, 'immovable_rows': 0}
+                         'held_rates': 0, 'immovable_rows': 0, 'compiled_steps': 0}
+
+    @property
+    def record(self) -> ContactRecord:
+        """Return the latest step's contacts and forces (built when read, after compiled steps)."""
+        if self._lazy is not None:
+            state, con, sel, force = self._lazy
+            self._lazy = None
+            mask = np.zeros(len(con.depth), dtype=bool)
+            mask[sel] = True
+            rows = self.rows(state, con, select=mask)
+            self._record = ContactRecord(state.time, rows, force)
+        return self._record
+
+    @record.setter
+    def record(self, value: ContactRecord) -> None:
+        self._record, self._lazy = value, None
 
     def tighten(self) -> None:
         """Set the tolerances for the accuracy knob (``tolerance dt``, floored) or the defaults."""
@@ -696,26 +722,129 @@ class ContactSteps:
         dyn.changed()
 
     def _warm_start(self, rows: ContactRows) -> Optional[np.ndarray]:
-        """Return last step's impulses of the same contacts (pair and point), scaled, or None."""
-        if not self._warm:
+        """
+        Return last step's normal impulses of the same contacts, or None.
+
+        The same pair of shapes, the point within :data:`.kernels.contact_step.WARM_RADIUS2`
+        (m²) of the last one's; the first such (in the last step's order).
+        """
+        sa, sb, point, p_n = self._warm
+        if not len(p_n):
             return None
         con = rows.contacts
+        same = (con.shape_a[:, None] == sa[None, :]) & (con.shape_b[:, None] == sb[None, :]) \
+            & (np.sum((con.point[:, None, :] - point[None, :, :]) ** 2, axis=2)
+               <= kern.WARM_RADIUS2)
         out = np.zeros(3 * len(rows))
-        for k in range(len(rows)):
-            key = (int(con.shape_a[k]), int(con.shape_b[k]))
-            for point, p_n in self._warm.get(key, ()):
-                if np.sum((point - con.point[k]) ** 2) <= 1e-6:
-                    out[3 * k] = p_n
-                    break
+        has = np.any(same, axis=1)
+        out[0::3][has] = p_n[np.argmax(same, axis=1)[has]]
         return out
 
     def _remember(self, rows: ContactRows, p: np.ndarray) -> None:
         con = rows.contacts
-        warm: dict = {}
-        for k in range(len(rows)):
-            warm.setdefault((int(con.shape_a[k]), int(con.shape_b[k])), []).append(
-                (con.point[k].copy(), float(p[3 * k])))
+        self._warm = (con.shape_a.copy(), con.shape_b.copy(), con.point.copy(),
+                      p[0::3].copy())
+
+    # -- compiled steps -------------------------------------------------------------------
+
+    def compiled_steps(self, start: State, n: int, t_end: Any) -> tuple:
+        """
+        Take up to ``n`` steps from ``start`` in the compiled kernel; return ``(taken, state)``.
+
+        Scenes of free bodies with the knob off (:mod:`.kernels.contact_step`): each
+        step no event interrupts is taken there, with the Python path's arithmetic,
+        until one meets an event (an impact, a contact beginning to slip, a depth to
+        project), which :meth:`step` then takes. ``t_end(k)``: the time the ``k``-th
+        step (from 0) ends at. Elsewhere (joints, the knob, ``compiled`` False):
+        ``(0, start)``.
+        """
+        sim = self.sim
+        dyn = sim.dynamics
+        if not self.compiled or sim.events is not None or sim._control is not None \
+                or dyn.constrained or n < 1:
+            return 0, start
+        self.tighten()
+        self._set_forces(None)
+        dt = sim.dt
+        model = dyn.kernel_model(start.time + 0.5 * dt)
+        wbuf, det, out, prm = self._kernel_arguments(model)
+        integ = sim.integrator
+        cnt = np.zeros(len(kern.COUNTERS))
+        before = dyn.defer_effect_work() if dyn.effects else None
+        while True:
+            taken, code, y, warm, rec = kern.contact_steps(
+                n, start.y, dt, int(integ.KERNEL), (model[0], model[1], wbuf), len(model[2]),
+                model[3], integ._kick_buffer, dyn.tally, STEPS, integ._ws,
+                dyn.bodies.outputs_cache.frames, out, det, self._buffers(), self._mu, self._e,
+                self._radius, self._warm, prm, cnt)
+            if code != kern.GROW or taken:
+                break
+            self._grow()
+        if before is not None:
+            dyn.count_effect_work_since(before)
+        integ._kick_at = None
+        if not taken:
+            return 0, start
+        for name, value in zip(kern.COUNTERS, cnt.tolist()):
+            if name in ('lcp_iterations_max', 'complementarity_max'):
+                self.counters[name] = max(self.counters[name], type(self.counters[name])(value))
+            elif value:
+                self.counters[name] += int(value)
+        self.counters['compiled_steps'] += taken
         self._warm = warm
+        sel, force, con, y_last = rec
+        last = State.of(start.time if taken == 1 else t_end(taken - 2), y_last)
+        self._lazy = (last, Contacts(*con[1:]), sel, force)
+        new = State.of(t_end(taken - 1), y)
+        if dyn.bodies.want_outputs():
+            c = dyn.bodies.outputs_cache
+            state_outputs(y, c.frames, c.out)
+            c.adopt(new)
+        return taken, new
+
+    def _kernel_arguments(self, model: tuple) -> tuple:
+        """Return the kernel's ``wbuf``, ``det``, ``out`` and ``prm`` (kept while they hold)."""
+        d = self.detector
+        key = self._kernel_key
+        if key is not None and key[0] is model and key[1] is d.excluded \
+                and key[2] == (self.location, self.rate):
+            return self._kernel_args
+        n = len(self.sim.bodies.names)
+        wrench = model[2]
+        wbuf = np.zeros((len(wrench) + n, W_WIDTH))
+        wbuf[:len(wrench)] = wrench
+        det = (d.kind, d.size, d.c_body, d.R_body, d.body, d.group, d.mask, d._solids,
+               d._planes, d._solid_body, d._solid_group, d._solid_mask, d.excluded, d.live,
+               float(d.margin))
+        prm = np.zeros(kern.P_WIDTH)
+        prm[kern.P_LOCATION], prm[kern.P_RATE] = self.location, self.rate
+        prm[kern.P_FRICTION_TOLERANCE] = FRICTION_TOLERANCE
+        prm[kern.P_FRICTION_ITERATIONS] = FRICTION_ITERATIONS
+        prm[kern.P_PROXIMAL], prm[kern.P_MODEL_TOLERANCE] = PROXIMAL, MODEL_TOLERANCE
+        prm[kern.P_MODEL_CORRECTIONS], prm[kern.P_HOLD_RATE] = MODEL_CORRECTIONS, HOLD_RATE
+        prm[kern.P_RATE_FLOOR] = RATE_FLOOR
+        self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), prm)
+        self._kernel_key = (model, d.excluded, (self.location, self.rate))
+        return self._kernel_args
+
+    def _buffers(self) -> tuple:
+        """Return the detector's buffers and the kernel's scratch for its shapes' frames."""
+        d = self.detector
+        scratch = self._scratch
+        if scratch is None:
+            m, ms = len(d.live), len(d._solids)
+            scratch = self._scratch = (np.empty((ms, 3)), np.empty((ms, 3)), np.empty((m, 3)),
+                                       np.empty((m, 3, 3)))
+        return (d._pairs, d._plane_pairs, d._points, d._normals, d._depths, d._owner) + scratch
+
+    def _grow(self) -> None:
+        """Double the detector's buffers (the kernel found them too small)."""
+        d = self.detector
+        d._pairs = np.zeros((2 * len(d._pairs), 2), dtype=np.int64)
+        d._plane_pairs = np.zeros((2 * len(d._plane_pairs), 2), dtype=np.int64)
+        cap = 2 * len(d._depths)
+        d._points, d._normals = np.zeros((cap, 3)), np.zeros((cap, 3))
+        d._depths, d._owner = np.zeros(cap), np.zeros(cap, dtype=np.int64)
 
     # -- impacts --------------------------------------------------------------------------
 
@@ -967,6 +1096,10 @@ class ContactSteps:
         self.counters['held_rates'] += 1
         return State(new.time, new.pos_com_world, new.quat_principal_world,
                      new.vel_com_world + dv[:, :3], new.ang_vel_principal + dv[:, 3:])
+
+
+_NO_WARM = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3)),
+            np.zeros(0))
 
 
 def _jacobian(frame: np.ndarray, a: np.ndarray, b: np.ndarray, lever_a: np.ndarray,

@@ -436,7 +436,12 @@ class Simulation:
                 e for e in effects if type(e).begin_step is not Effect.begin_step])
         switching = cached[2]
         events = self.events
-        for _ in range(n):
+        # Contact steps no event interrupts run in the compiled kernel, several at once when
+        # nothing between them needs Python (no switching effects, joints or wrenches).
+        batch = self.contact is not None and not switching and not self._tracking \
+            and (self._wrenches is None or not len(self._wrenches))
+        done = 0
+        while done < n:
             steps = self._steps
             if switching:
                 mid = self._time_base + (steps + 0.5) * dt
@@ -448,7 +453,17 @@ class Simulation:
             t_end = self._time_base + (steps + 1) * dt
             seen, tracked = None, False
             if self.contact is not None:
-                new = self.contact.step(self.state, t_end)
+                base = self._time_base
+                taken, new = self.contact.compiled_steps(
+                    self.state, n - done if batch else 1,
+                    lambda k: base + (steps + k + 1) * dt)
+                if taken > 1:   # (batch: nothing below applies)
+                    self.state = new
+                    self._steps = steps + taken
+                    done += taken
+                    continue
+                if not taken:
+                    new = self.contact.step(self.state, t_end)
             elif events is None:
                 new = self._advance(self.state, dt, t_end)
             elif self.joints.tracked and events.quiet():
@@ -464,6 +479,7 @@ class Simulation:
                 new, seen = events.step(self.state, t_end)
             self.state = new
             self._steps = steps + 1
+            done += 1
             if self._tracking:
                 if seen is not None:   # the events' check read the coordinates at new
                     self.bodies.outputs(new)

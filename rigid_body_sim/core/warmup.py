@@ -10,7 +10,8 @@ a free body with every effect, a small constrained scene (dense solves), a
 chain long enough for the tree solve and a ring (a closed loop: the tree solve
 of a spanning tree and the Schur complement of the loop-closing rows); the
 complementarity problems' projected Gauss–Seidel sweeps on a small problem; one
-collision shape of each kind, all touching (:mod:`.shapes`).
+collision shape of each kind, all touching (:mod:`.shapes`); a box resting on the
+ground (:mod:`.kernels.contact_step`).
 """
 
 from __future__ import annotations
@@ -60,6 +61,12 @@ def warm_up() -> float:
     shapes.append(CollisionShape('plane'))
     touching = Simulation(bodies, [], 'lie_poisson2', 1e-3)
     ContactDetector(shapes, [b.name for b in bodies]).detect(touching._outputs_now())
+    # Contact steps: a box resting on the ground (the compiled steps of free bodies).
+    resting = Simulation([RigidBody('box', 1.0, (1.0, 1.0, 1.0), position_world=(0, 0, 0.25))],
+                         [Gravity()], 'rkmk4', 1e-3,
+                         shapes=[CollisionShape('plane'),
+                                 CollisionShape('box', 'box', size=(0.5, 0.5, 0.5))])
+    resting.step(3)
     return time.perf_counter() - start
 
 

@@ -1,0 +1,142 @@
+"""
+The compiled contact steps (:mod:`.kernels.contact_step`) against the Python path they compile.
+
+The Python path of :class:`.contact_step.ContactSteps` is the reference (its physics is
+tested against closed forms in ``test_contact_dynamics.py``, which now runs through the
+compiled steps wherever a scene is of free bodies). Here each scene runs twice from the
+same state, compiled and not, and the two must agree: the same arithmetic in another
+order (sums over rows and bodies, LAPACK's solves against numpy's), so each step differs
+by rounding, ulps of the largest term. The bound: 1e-12 m and m/s over a run of up to
+2,000 steps of O(1) states (2,000 steps times 64 ulps is 3e-11 of the largest term,
+and a resting or sliding scene does not amplify it); forces to 1e-9 of the weight.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from rigid_body_sim.core import Gravity, RigidBody, Simulation
+from rigid_body_sim.core.shapes import CollisionShape
+
+G = 9.81
+
+
+def _cube(name, half, mass, position, velocity=(0.0, 0.0, 0.0), omega=(0.0, 0.0, 0.0),
+          quat=(0.0, 0.0, 0.0, 1.0)):
+    inertia = mass * (2 * half) ** 2 / 6
+    return RigidBody(name, mass, (inertia,) * 3, position_world=position,
+                     linear_velocity_world=velocity, angular_velocity_body=omega,
+                     orientation_xyzw=quat)
+
+
+def _scene(name, integrator):
+    """Return ``(bodies, shapes, steps)`` of a scene."""
+    if name == 'resting box':
+        return ([_cube('b', 0.1, 2.0, (0, 0, 0.1))],
+                [CollisionShape('box', 'b', size=(0.2,) * 3, friction=0.5)], 1000)
+    if name == 'sliding box':
+        return ([_cube('b', 0.1, 2.0, (0, 0, 0.1), velocity=(1.0, 0.3, 0))],
+                [CollisionShape('box', 'b', size=(0.2,) * 3, friction=0.5)], 1000)
+    if name == 'stack':
+        return ([_cube(f'b{k}', 0.05, 1.0, (0, 0, 0.05 * (2 * k + 1))) for k in range(5)],
+                [CollisionShape('box', f'b{k}', size=(0.1,) * 3, friction=0.8)
+                 for k in range(5)], 300)
+    if name == 'bouncing ball':
+        r = 0.1
+        ball = RigidBody('s', 1.0, (0.4 * r * r,) * 3, position_world=(0, 0, 0.5),
+                         linear_velocity_world=(0.5, 0, 0), angular_velocity_body=(0, 0, 3))
+        return [ball], [CollisionShape('sphere', 's', radius=r, friction=0.3,
+                                       restitution=0.5)], 2000
+    if name == 'capsule rolling':
+        r = 0.05
+        cap = RigidBody('c', 1.0, (0.01, 0.01, 0.002), position_world=(0, 0, r),
+                        orientation_xyzw=(math.sqrt(0.5), 0, 0, math.sqrt(0.5)),
+                        linear_velocity_world=(0.4, 0, 0))
+        return [cap], [CollisionShape('capsule', 'c', radius=r, length=0.2, friction=0.6)], 1000
+    raise KeyError(name)
+
+
+def _pair(name, integrator):
+    sims = []
+    for compiled in (True, False):
+        bodies, shapes, steps = _scene(name, integrator)
+        sim = Simulation(bodies, [Gravity()], integrator=integrator, dt=1e-3,
+                         shapes=[CollisionShape('plane', None, friction=0.5)] + shapes)
+        sim.contact.compiled = compiled
+        sims.append(sim)
+    return sims[0], sims[1], steps
+
+
+@pytest.mark.parametrize('integrator', ['rkmk4', 'lie_poisson2', 'symplectic_euler'])
+@pytest.mark.parametrize('name', ['resting box', 'sliding box', 'stack', 'bouncing ball',
+                                  'capsule rolling'])
+def test_compiled_steps_agree_with_the_python_path(name, integrator):
+    fast, slow, steps = _pair(name, integrator)
+    for k in range(steps):
+        fast.step()
+        slow.step()
+        if k % 100 == 99 or k == steps - 1:
+            a, b = fast.state, slow.state
+            assert fast.time == slow.time
+            np.testing.assert_allclose(a.pos_com_world, b.pos_com_world, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(a.vel_com_world, b.vel_com_world, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(a.ang_vel_principal, b.ang_vel_principal, rtol=0,
+                                       atol=1e-10)
+            np.testing.assert_allclose(np.abs(a.quat_principal_world @ b.quat_principal_world
+                                              .T).diagonal(), 1.0, rtol=0, atol=1e-12)
+    cf, cs = fast.contact.counters, slow.contact.counters
+    # The kernel took the steps no event interrupted (most of them), the Python path none.
+    assert cf['compiled_steps'] >= 0.9 * steps and cs['compiled_steps'] == 0
+    for key in ('impacts', 'located_steps', 'lcp_failures', 'projections'):
+        assert cf[key] == cs[key], key
+    assert cf['complementarity_max'] <= max(cs['complementarity_max'], 1e-12)
+    # The forces of the last step, read back (built from the kernel's record): each body's
+    # net contact force and torque (a box flat on the ground has four normals on three
+    # freedoms: how they share the load is not unique, their sum is).
+    rf, rs = fast.contacts(), slow.contacts()
+    assert rf['time'] == rs['time'] and rf['shape_a'] == rs['shape_a']
+    mg = G * 5.0   # (the heaviest load: the stack's bottom box carries 5 kg)
+    np.testing.assert_allclose(_net_wrenches(fast, rf), _net_wrenches(slow, rs), rtol=0,
+                               atol=1e-9 * mg)
+
+
+def _net_wrenches(sim, con):
+    """Return each body's net contact force and torque about its centre (n, 6)."""
+    names = sim.bodies.names
+    centre = sim.state.pos_com_world
+    out = np.zeros((len(names), 6))
+    force = con['normal_force'][:, None] * con['normal'] + con['friction_force']
+    for k, point in enumerate(con['point']):
+        for body, sign in ((con['body_a'][k], 1.0), (con['body_b'][k], -1.0)):
+            if body in names:
+                i = names.index(body)
+                out[i, :3] += sign * force[k]
+                out[i, 3:] += sign * np.cross(point - centre[i], force[k])
+    return out
+
+
+def test_batched_steps_are_the_single_steps():
+    """``step(n)`` runs the kernel's steps in one call: the same steps as one at a time."""
+    one, _, _ = _pair('sliding box', 'rkmk4')
+    many, _, _ = _pair('sliding box', 'rkmk4')
+    for _ in range(700):
+        one.step()
+    many.step(700)
+    assert one.time == many.time
+    np.testing.assert_array_equal(one.state.y, many.state.y)
+    assert one.contacts()['normal_force'].tolist() == many.contacts()['normal_force'].tolist()
+    assert many.contact.counters == one.contact.counters
+
+
+def test_a_detector_buffer_too_small_is_grown_and_the_step_taken():
+    fast, slow, _ = _pair('stack', 'rkmk4')
+    d = fast.contact.detector
+    d._depths, d._owner = np.zeros(1), np.zeros(1, dtype=np.int64)
+    d._points, d._normals = np.zeros((1, 3)), np.zeros((1, 3))
+    d._pairs = np.zeros((1, 2), dtype=np.int64)
+    fast.step(50)
+    slow.step(50)
+    assert fast.contact.counters['compiled_steps'] == 50
+    assert len(d._depths) >= 20   # (5 boxes: 4 points each, on the ground or the box below)
+    np.testing.assert_allclose(fast.state.y, slow.state.y, rtol=0, atol=1e-12)
