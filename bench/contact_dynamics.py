@@ -12,7 +12,8 @@ cone, the Newton solver, semi-implicit Euler), from the same state:
 * **10-box stack**: ten 0.1 m cubes of 1 kg stacked exactly, friction 0.8: it stands.
 
 Reported per scene: the mean wall time of a step over the run (the whole step: detection,
-contact forces, integration), the deepest penetration over the run's last half (rest:
+contact forces, integration; ours with the compiled contact steps, up to 100 steps a call,
+one a call, and in Python alone), the deepest penetration over the run's last half (rest:
 ours' detector's depth; MuJoCo's ``-contact.dist``), and the scene's own error: the
 sphere's rest height's offset, the slide's stop distance against ``v² / (2 μ g)``, the
 stack's largest displacement of a box from where it started.
@@ -43,6 +44,8 @@ except ImportError:   # (bench/requirements.txt)
 
 OUT = Path(__file__).resolve().parent / 'out'
 G, DT = 9.81, 1e-3
+#: Steps per ``step(n)`` call in the batched runs.
+CHUNK = 100
 
 
 def cube(half: float, mass: float) -> tuple:
@@ -76,21 +79,28 @@ def scenes() -> dict:
     return out
 
 
-def run_ours(bodies, shapes, friction, steps) -> dict:
-    """Run our simulation; return cost, depth over the last half, and the final state."""
+def run_ours(bodies, shapes, friction, steps, compiled=True, chunk=1) -> dict:
+    """
+    Run our simulation; return cost, depth over the last half, and the final state.
+
+    ``compiled`` False: every step in Python (``ContactSteps.compiled``); ``chunk``:
+    steps per ``step(n)`` call (the depth is read after each call).
+    """
     sim = Simulation(bodies, [Gravity()], integrator='rkmk4', dt=DT,
                      shapes=[CollisionShape('plane', None, friction=friction)] + shapes)
+    sim.contact.compiled = compiled
     p0 = sim.state.pos_com_world.copy()
     deepest, wall = 0.0, 0.0
-    for k in range(steps):
+    for k in range(0, steps, chunk):
         t0 = time.perf_counter()
-        sim.step()
+        sim.step(min(chunk, steps - k))
         wall += time.perf_counter() - t0
         if k >= steps // 2:
             depth = sim.contact.detect(sim.state).depth
             deepest = max(deepest, float(np.max(depth, initial=0.0)))
     return {'step': wall / steps, 'depth': deepest, 'pos': sim.state.pos_com_world.copy(),
-            'p0': p0, 'failures': sim.contact.counters['lcp_failures']}
+            'p0': p0, 'failures': sim.contact.counters['lcp_failures'],
+            'compiled': sim.contact.counters['compiled_steps'] / steps}
 
 
 def run_mujoco(body_xml, friction, steps, velocity=None) -> dict:
@@ -129,7 +139,9 @@ def run(seconds: float) -> list:
     rows = []
     steps = int(round(seconds / DT))
     for name, (bodies, shapes, body_xml, friction) in scenes().items():
-        ours = run_ours(bodies, shapes, friction, steps)
+        ours = run_ours(bodies, shapes, friction, steps, chunk=CHUNK)
+        ours['one'] = run_ours(bodies, shapes, friction, steps)['step']
+        ours['python'] = run_ours(bodies, shapes, friction, steps, compiled=False)['step']
         mj = None
         if mujoco is not None:
             mj = run_mujoco(body_xml, friction, steps,
@@ -144,22 +156,29 @@ def run(seconds: float) -> list:
 
 def table(rows: list) -> str:
     """Markdown table of :func:`run`."""
-    lines = ['| scene | ours, us/step | MuJoCo, us/step | ours / MuJoCo | deepest (ours), m | '
-             'deepest (MuJoCo), m | error (ours), m | error (MuJoCo), m |',
-             '|---|---|---|---|---|---|---|---|']
+    lines = ['| scene | ours, step(100), us/step | ours, step(), us/step | ours, Python path, '
+             'us/step | steps compiled | MuJoCo, us/step | ours step(100) / MuJoCo | '
+             'deepest (ours), m | deepest (MuJoCo), m | error (ours), m | error (MuJoCo), m |',
+             '|---|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
         o, m = r['ours'], r['mj']
         mj = ('-', '-', '-', '-') if m is None else (
-            f'{m["step"] * 1e6:.1f}', f'{o["step"] / m["step"]:.0f}', f'{m["depth"]:.1e}',
+            f'{m["step"] * 1e6:.1f}', f'{o["step"] / m["step"]:.1f}', f'{m["depth"]:.1e}',
             f'{error(r["scene"], m):+.2e}')
-        lines.append(f'| {r["scene"]} | {o["step"] * 1e6:.0f} | {mj[0]} | {mj[1]} | '
-                     f'{o["depth"]:.1e} | {mj[2]} | {error(r["scene"], o):+.2e} | {mj[3]} |')
+        lines.append(f'| {r["scene"]} | {o["step"] * 1e6:.1f} | {o["one"] * 1e6:.1f} | '
+                     f'{o["python"] * 1e6:.0f} | {100 * o["compiled"]:.1f} % | {mj[0]} | '
+                     f'{mj[1]} | {o["depth"]:.1e} | {mj[2]} | {error(r["scene"], o):+.2e} | '
+                     f'{mj[3]} |')
     return '\n'.join(lines) + (
         "\n\nErrors: the sphere's rest height offset, the slide's stop distance less "
         "`v² / (2 μ g)`, the stack's largest box displacement. Ours is exact in the three to "
         "the step's first-order stop (the slide: at most `μ g dt² / 2` = 2.5e-6 m) and to "
-        'rounding; its contact rows are Python over compiled detection and steps, hence the '
-        'cost.')
+        'rounding. Ours three ways: `step(100)` (the compiled kernel takes up to 100 steps a '
+        "call), `step()` one step a call (a node's loop: the Python call and its checks each "
+        'step), and every step in Python (`ContactSteps.compiled = False`: the reference, and '
+        'what scenes with joints still pay). "steps compiled": the share the kernel took; '
+        'the rest (impacts, a contact beginning to slip, a depth to project) ran in Python. '
+        'MuJoCo: one `mj_step` call a step.')
 
 
 def main(argv=None) -> int:

@@ -252,26 +252,34 @@ def apply_rows(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
 @njit(cache=True)
 def delassus(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
              minv: np.ndarray) -> np.ndarray:
-    """Return ``A = G M⁻¹ Gᵀ`` (3c, 3c); ``minv`` (n, 6) per body ``1/m`` (3) and ``1/J`` (3)."""
+    """
+    Return ``A = G M⁻¹ Gᵀ`` (3c, 3c); ``minv`` (n, 6) per body ``1/m`` (3) and ``1/J`` (3).
+
+    Only the blocks of two contacts on a common body are non-zero (a stack's contacts
+    meet those of the interfaces next to them alone): those are the ones computed.
+    """
     n = minv.shape[0]
-    m = Ga.shape[0]
-    A = np.zeros((m, m))
-    for r in range(m):
-        for s in range(m):
-            acc = 0.0
-            for side_r in range(2):
-                i = ba[r // 3] if side_r == 0 else bb[r // 3]
-                if i >= n:
-                    continue
-                Gr = Ga if side_r == 0 else Gb
-                for side_s in range(2):
-                    j = ba[s // 3] if side_s == 0 else bb[s // 3]
-                    if j != i:
+    c = ba.shape[0]
+    A = np.zeros((3 * c, 3 * c))
+    for k in range(c):
+        for side_k in range(2):
+            i = ba[k] if side_k == 0 else bb[k]
+            if i >= n:
+                continue
+            Gk = Ga if side_k == 0 else Gb
+            for m in range(c):
+                for side_m in range(2):
+                    if (ba[m] if side_m == 0 else bb[m]) != i:
                         continue
-                    Gs = Ga if side_s == 0 else Gb
-                    for x in range(6):
-                        acc += Gr[r, x] * minv[i, x] * Gs[s, x]
-            A[r, s] = acc
+                    Gm = Ga if side_m == 0 else Gb
+                    for a in range(3):
+                        r = 3 * k + a
+                        for b in range(3):
+                            s = 3 * m + b
+                            acc = 0.0
+                            for x in range(6):
+                                acc += Gk[r, x] * minv[i, x] * Gm[s, x]
+                            A[r, s] += acc
     return A
 
 
@@ -337,7 +345,7 @@ def solve_direct(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                 rhs[a] = -s
                 for b in range(nf):
                     Sf[a, b] = S[i, free[b]]
-            x = np.linalg.solve(Sf, rhs)
+            x = spd_solve(Sf, rhs)
             for a in range(nf):
                 target[free[a]] = x[a]
         hit, best, side = -1, np.inf, FREE
@@ -382,6 +390,54 @@ def solve_direct(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             return f, True, it
         state[kw] = FREE
     return f, False, cap
+
+
+@njit(cache=True)
+def spd_solve(S: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """
+    Return ``S⁻¹ b`` for ``S`` symmetric positive definite, by Cholesky.
+
+    The free rows' systems are ``A + ρ I`` restricted (``ρ > 0``): positive definite. A
+    pivot that rounding made non-positive falls back to LAPACK's LU (of the original).
+    """
+    n = b.shape[0]
+    # Each row's first non-zero column: L keeps the envelope (a stack's rows are banded).
+    first = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        first[i] = i
+        for j in range(i):
+            if S[i, j] != 0.0:
+                first[i] = j
+                break
+    L = S.copy()
+    for j in range(n):
+        d = L[j, j]
+        for k in range(first[j], j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return np.linalg.solve(S, b)
+        d = math.sqrt(d)
+        L[j, j] = d
+        for i in range(j + 1, n):
+            if first[i] > j:
+                L[i, j] = 0.0
+                continue
+            s = L[i, j]
+            for k in range(max(first[i], first[j]), j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / d
+    x = b.copy()
+    for i in range(n):
+        s = x[i]
+        for k in range(first[i], i):
+            s -= L[i, k] * x[k]
+        x[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):
+        s = x[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return x
 
 
 @njit(cache=True)
@@ -637,12 +693,17 @@ def contact_steps(n_steps: int, y0: np.ndarray, dt: float, method: int, model: t
     """
     y = y0
     record = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0)
+    # A step's end's contacts are the next one's start's (the end's rates held change no
+    # position).
+    found, have = _no_contacts(0), False
     for taken in range(n_steps):
         res = _one_step(y, dt, method, model, n_applied, flags, kick, counts, steps_slot, ws,
-                        frames, out, det, buf, shape_mu, shape_e, radius, warm, prm, cnt)
-        code, y_new, warm_new, rec = res
+                        frames, out, det, buf, shape_mu, shape_e, radius, warm, prm, cnt,
+                        found, have)
+        code, y_new, warm_new, rec, found = res
         if code != DONE:
             return taken, code, y, warm, record
+        have = True
         y, warm, record = y_new, warm_new, (rec[0], rec[1], rec[2], y)
     return n_steps, DONE, y, warm, record
 
@@ -652,17 +713,23 @@ def _one_step(y0: np.ndarray, h: float, method: int, model: tuple, n_applied: in
               kick: np.ndarray, counts: np.ndarray, steps_slot: int, ws: np.ndarray,
               frames: np.ndarray, out: np.ndarray, det: tuple, buf: tuple,
               shape_mu: np.ndarray, shape_e: np.ndarray, radius: np.ndarray, warm: tuple,
-              prm: np.ndarray, cnt_total: np.ndarray) -> tuple:
-    """One step of :func:`contact_steps`: ``(code, y, warm, record)``."""
+              prm: np.ndarray, cnt_total: np.ndarray, found: tuple, have: bool) -> tuple:
+    """
+    Take one step of :func:`contact_steps`: ``(code, y, warm, record, contacts at y)``.
+
+    ``found``: the contacts at ``y0`` when ``have`` (the last step's end's).
+    """
     body, gforce, wbuf = model
     loc, rate = prm[P_LOCATION], prm[P_RATE]
     cnt = np.zeros(cnt_total.shape[0])
     pos0, quat0, vel0, om0 = state_parts(y0)
     n = pos0.shape[0]
     count = shape_mu.shape[0] + 1
-    fail = (BAIL, y0, warm, (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0)))
-    grow = (GROW, y0, warm, (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0)))
-    con0 = detect(pos0, quat0, vel0, om0, det, buf, frames, out)
+    fail = (BAIL, y0, warm, (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0)),
+            found)
+    grow = (GROW, y0, warm, (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0)),
+            found)
+    con0 = found if have else detect(pos0, quat0, vel0, om0, det, buf, frames, out)
     c0, sa0, sb0, ba0, bb0, pt0, nr0, dp0 = con0
     if c0 < 0:
         return grow
@@ -843,14 +910,14 @@ def _one_step(y0: np.ndarray, h: float, method: int, model: tuple, n_applied: in
     # The warm start of the next step: these rows' normal impulses (none: as it was).
     if not c:
         _merge(cnt_total, cnt)
-        return DONE, new, warm, (sel, force, con0)
+        return DONE, new, warm, (sel, force, con0), con1
     w_sa, w_sb = sa0[sel].copy(), sb0[sel].copy()
     w_pt = pt0[sel].copy()
     w_pn = np.empty(c)
     for k in range(c):
         w_pn[k] = p[3 * k]
     _merge(cnt_total, cnt)
-    return DONE, new, (w_sa, w_sb, w_pt, w_pn), (sel, force, con0)
+    return DONE, new, (w_sa, w_sb, w_pt, w_pn), (sel, force, con0), con1
 
 
 @njit(cache=True)
