@@ -733,6 +733,7 @@ class SimNode(Node):
             values['contact_lcp_failures_total'] = str(c['lcp_failures'])
             values['contact_impacts_total'] = str(c['impacts'])
             values['contact_events_capped_total'] = str(c['events_capped'])
+            values['contact_compiled_steps_total'] = str(c['compiled_steps'])
         rejected = session.totals.rejected
         for cause in Rejection:
             values[f'rejected_{cause.value}'] = str(rejected.get(cause.value, 0))
