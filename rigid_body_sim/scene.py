@@ -58,7 +58,9 @@ A scene file::
         effort_limits: true                 # exact drives bounded by <limit effort>
         collisions: false                   # the links' <collision> boxes, cylinders and
                                             # spheres as contact shapes (meshes: named,
-                                            # not simulated)
+                                            # not simulated); or a mapping, which is true:
+                                            # {friction: 1.0, restitution: 0.0, group: 1,
+                                            #  mask: ..., links: {foot: {friction: 0.9}}}
         self_collide: false                 # true: its links meet each other too (false:
                                             # Gazebo's default)
     command_groups:                 # joints commanded together (others take efforts)
@@ -344,8 +346,15 @@ def _robots(data: Any, source: str) -> list:
         if not isinstance(efforts, bool):
             raise SpecError(f'{field}.effort_limits', f'expected true or false, got {efforts!r}')
         collide = entry.get('collisions', False)
-        if not isinstance(collide, bool):
-            raise SpecError(f'{field}.collisions', f'expected true or false, got {collide!r}')
+        options: dict = {}
+        if isinstance(collide, dict):
+            options = _collision_options(collide, f'{field}.collisions',
+                                         {link.name for link in parsed.links})
+            collide = True
+        elif not isinstance(collide, bool):
+            raise SpecError(f'{field}.collisions', f'expected true, false or a mapping '
+                                                   f'{{friction, restitution, group, mask, '
+                                                   f'links}}, got {collide!r}')
         self_collide = entry.get('self_collide', False)
         if not isinstance(self_collide, bool):
             raise SpecError(f'{field}.self_collide', f'expected true or false, got '
@@ -372,9 +381,57 @@ def _robots(data: Any, source: str) -> list:
                          enforce_limits=limits,
                          limit_restitution=entry.get('limit_restitution', 0.0),
                          enforce_friction=friction, enforce_efforts=efforts,
-                         collisions=tuple(collisions), self_collide=self_collide)
+                         collisions=tuple(collisions), self_collide=self_collide,
+                         collision_options=options)
         out.append((spec, parsed))
     return out
+
+
+#: What a robot's ``collisions:`` mapping may set, for all its shapes or a link's.
+COLLISION_KEYS = ('friction', 'restitution', 'group', 'mask', 'links')
+LINK_COLLISION_KEYS = ('friction', 'restitution')
+
+
+def _collision_options(data: dict, field: str, links: set) -> dict:
+    """
+    Return a robot's ``collisions:`` mapping, checked: its shapes' surface and filters.
+
+    ``{friction, restitution, group, mask}`` for all the robot's shapes (as a body's
+    ``shapes:`` entries), ``links: {link: {friction, restitution}}`` per link over them.
+    Errors name the key (``robots[0].collisions.links.foot.friction``).
+    """
+    for key in data:
+        if key not in COLLISION_KEYS:
+            raise SpecError(f'{field}.{key}', f'unknown key; known: {list(COLLISION_KEYS)}')
+    out = {k: data[k] for k in COLLISION_KEYS[:4] if k in data}
+    _check_surface(out, field)
+    per = data.get('links', {}) or {}
+    if not isinstance(per, dict):
+        raise SpecError(f'{field}.links', f'expected a mapping {{link: {{friction, '
+                                          f'restitution}}}}, got {per!r}')
+    out['links'] = {}
+    for link, values in per.items():
+        where = f'{field}.links.{link}'
+        if link not in links:
+            raise SpecError(where, f'unknown link; the robot has {sorted(links)}')
+        if not isinstance(values, dict):
+            raise SpecError(where, f'expected a mapping {{friction, restitution}}, got '
+                                   f'{values!r}')
+        for key in values:
+            if key not in LINK_COLLISION_KEYS:
+                raise SpecError(f'{where}.{key}', f'unknown key; known: '
+                                                  f'{list(LINK_COLLISION_KEYS)}')
+        _check_surface(values, where)
+        out['links'][link] = dict(values)
+    return out
+
+
+def _check_surface(values: dict, field: str) -> None:
+    """Check friction, restitution, group and mask as a shape would, naming ``field``'s key."""
+    try:
+        CollisionShape('sphere', 'check', radius=1.0, **values)
+    except SpecError as exc:
+        raise exc.within(field) from None
 
 
 def _body(data: Any, field: str) -> RigidBody:

@@ -11,6 +11,7 @@ and rounding (ulps of the largest term, times the steps taken).
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -612,6 +613,60 @@ def test_a_robots_links_meet_each_other_only_with_self_collide(tmp_path, self_co
     assert len(con.depth) == (1 if self_collide else 0)
     if self_collide:
         assert con.depth[0] == pytest.approx(0.15, rel=1e-12)
+
+
+BALL_URDF = """<robot name="ball">
+  <link name="ball"><inertial><mass value="1"/>
+      <inertia ixx="0.004" iyy="0.004" izz="0.004" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+</robot>
+"""
+
+
+def test_a_robots_collisions_mapping_sets_its_shapes_surface_and_filters(tmp_path):
+    # collisions: {...} is collisions: true with the robot's shapes' friction,
+    # restitution, group and mask, and per link over them; the filters keep the
+    # self-collision bit (off by default). Its restitution is the impact's: a URDF ball
+    # dropped on a ground of e = 0 rebounds at e = 0.5 of its approach.
+    from rigid_body_sim.scene import load_scene
+    (tmp_path / 'chain.urdf').write_text(CHAIN_URDF)
+    (tmp_path / 'scene.yaml').write_text(
+        'dt: 0.001\nrobots: [{urdf: chain.urdf, collisions: {friction: 0.3, restitution: 0.2, '
+        'group: 4, mask: 5, links: {c: {friction: 0.9}}}}]\n')
+    sim = load_scene(tmp_path / 'scene.yaml').simulation
+    shapes = {s.name: s for s in sim.contact.detector.shapes}
+    a, c = shapes['a/collision0'], shapes['c/collision0']
+    assert (a.friction, a.restitution, c.friction, c.restitution) == (0.3, 0.2, 0.9, 0.2)
+    bit = a.group & ~4
+    assert bit and a.group == c.group == 4 | bit and a.mask == c.mask == 5 & ~bit
+    (tmp_path / 'ball.urdf').write_text(BALL_URDF)
+    (tmp_path / 'drop.yaml').write_text(
+        'dt: 0.001\neffects: {gravity: {}}\nground: {restitution: 0.0}\n'
+        'robots: [{urdf: ball.urdf, base_pose: {xyz: [0, 0, 0.5], rpy: [0, 0, 0]}, '
+        'collisions: {restitution: 0.5}}]\n')
+    sim = load_scene(tmp_path / 'drop.yaml').simulation
+    sim.step(400)
+    first = sim.contact.impacts[0]
+    assert first.approach == pytest.approx(-math.sqrt(2 * G * 0.4), rel=1e-9)
+    assert first.rebound == pytest.approx(-0.5 * first.approach, rel=1e-9)
+
+
+@pytest.mark.parametrize('collisions, field', [
+    ('{friction: -1}', 'robots[0].collisions.friction'),
+    ('{restitution: 2}', 'robots[0].collisions.restitution'),
+    ('{mask: -3}', 'robots[0].collisions.mask'),
+    ('{colour: red}', 'robots[0].collisions.colour'),
+    ('{links: {nowhere: {friction: 1}}}', 'robots[0].collisions.links.nowhere'),
+    ('{links: {a: {group: 2}}}', 'robots[0].collisions.links.a.group'),
+    ('{links: {a: {friction: .nan}}}', 'robots[0].collisions.links.a.friction'),
+    ('7', 'robots[0].collisions')])
+def test_a_bad_collisions_mapping_is_refused_naming_its_key(tmp_path, collisions, field):
+    from rigid_body_sim.scene import load_scene, SceneError
+    (tmp_path / 'chain.urdf').write_text(CHAIN_URDF)
+    (tmp_path / 'scene.yaml').write_text(
+        f'dt: 0.001\nrobots: [{{urdf: chain.urdf, collisions: {collisions}}}]\n')
+    with pytest.raises(SceneError, match=r'scene\.yaml: ' + re.escape(field) + ': '):
+        load_scene(tmp_path / 'scene.yaml')
 
 
 def test_joints_added_and_removed_at_run_time_change_which_bodies_collide():

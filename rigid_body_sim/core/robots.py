@@ -296,6 +296,10 @@ class RobotSpec:
         Whether the robot's links meet each other (beyond the pairs its joints join,
         which never do); False (Gazebo's default): they meet only other bodies and the
         world.
+    collision_options : dict
+        Its shapes' ``friction``, ``restitution``, ``group`` and ``mask`` (as
+        :class:`.shapes.CollisionShape`'s; absent: its defaults), and ``links: {link:
+        {friction, restitution}}`` per URDF link over them.
 
     """
 
@@ -316,6 +320,7 @@ class RobotSpec:
     enforce_efforts: bool = True
     collisions: Sequence = ()
     self_collide: bool = False
+    collision_options: dict = field(default_factory=dict)
 
 
 @dataclass

@@ -329,7 +329,12 @@ class Simulation:
             # Without self collision the robot's shapes share a group bit of their own
             # that their mask leaves out: they meet every other shape, not each other.
             bit = 1 << (1 + r % 30)
-            bits = {} if spec.self_collide else {'group': bit, 'mask': ALL_BITS & ~bit}
+            opts = spec.collision_options
+            surface = {k: opts[k] for k in ('friction', 'restitution') if k in opts}
+            bits = {k: opts[k] for k in ('group', 'mask') if k in opts}
+            if not spec.self_collide:
+                bits = {'group': bits.get('group', 0) | bit,
+                        'mask': bits.get('mask', ALL_BITS) & ~bit}
             count: dict = {}
             for link, kind, size, xyz, rpy in spec.collisions:
                 k = count[link] = count.get(link, -1) + 1   # (the link's k-th <collision>)
@@ -355,7 +360,8 @@ class Simulation:
                     out.append(CollisionShape(
                         kind, frame.body, position_body=frame.position + frame.rotation @ xyz,
                         orientation_xyzw=so3.matrix_to_quat(R), name=f'{spec.prefix}{link}/'
-                        f'collision{k}', **dims, **bits))
+                        f'collision{k}', **dims, **bits,
+                        **{**surface, **opts.get('links', {}).get(link, {})}))
                 except SpecError as exc:
                     raise exc.within(where) from None
         return out
