@@ -953,3 +953,86 @@ def test_contacts_markers_and_diagnostics_report_the_cores_contacts(ros, tmp_pat
     # A ball resting on the ground: its steps at rest are the compiled kernel's.
     assert int(values['contact_compiled_steps_total']) >= 1
     assert float(values['contact_depth_left_max_m']) == 0.0
+
+
+CUBE_URDF = """<robot name="cube">
+  <link name="cube"><inertial><mass value="1"/>
+      <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.1 0 0" rpy="0 0 0.5"/>
+      <geometry><box size="0.1 0.2 0.3"/></geometry></collision></link>
+</robot>
+"""
+
+SHAPES_SCENE = """
+name: shapes
+integrator: rkmk4
+dt: 0.001
+effects: {gravity: {}}
+ground: {height: -1.0}
+bodies:
+  - {name: ball, mass: 1.0, inertia: {sphere: 0.1}, position_world: [0.0, 0.0, 0.3],
+     shapes: [{kind: sphere, radius: 0.1}]}
+  - {name: rod, mass: 1.0, inertia: {box: [0.1, 0.1, 0.5]}, position_world: [1.0, 0.0, 0.3],
+     orientation_xyzw: [0.0, 0.7071067811865476, 0.0, 0.7071067811865476],
+     shapes: [{kind: capsule, radius: 0.05, length: 0.4}]}
+robots:
+  - {urdf: cube.urdf, base_pose: {xyz: [2.0, 0.0, 0.5], rpy: [0, 0, 0]}, collisions: true}
+"""
+
+
+@pytest.mark.parametrize('on', [True, False])
+def test_collision_markers_draw_every_collision_shape_on_request(ros, tmp_path, on):
+    # collision_markers: ~/markers draws the scene's collision shapes where the core has
+    # them: a sphere, a capsule (its cylinder and two end spheres), a URDF <collision>
+    # box posed by its link, the ground as a slab whose top is the plane. Off (the
+    # default): none.
+    from visualization_msgs.msg import Marker, MarkerArray
+    (tmp_path / 'cube.urdf').write_text(CUBE_URDF)
+    scene = _scene(tmp_path, SHAPES_SCENE)
+    node = ros.start({'scene': scene, 'start_paused': True, 'collision_markers': on})
+    markers = ros.client.subscribe(MarkerArray, f'{NODE}/markers')
+    reply = _step(ros, node, 100)
+    t = time_seconds(reply.time)
+    ros.client.wait_for(lambda: any(time_seconds(m.markers[0].header.stamp) == t
+                                    for m in markers), 'markers at t', node=node)
+    array = next(m for m in markers if time_seconds(m.markers[0].header.stamp) == t).markers
+    drawn = {m.id: m for m in array if m.ns == 'collisions'}
+    if not on:
+        assert drawn == {}
+        return
+    sim = load_scene(scene).simulation
+    sim.step(100)
+    det = sim.contact.detector
+    sim.bodies.outputs(sim.state)
+    centre, R = det.frames(sim.bodies.outputs_cache.out)
+    names = [det.shapes[s].name for s in det.live]
+    m = len(names)
+    rod = names.index('rod/capsule')
+    assert sorted(drawn) == list(range(m)) + [m + 2 * rod, m + 2 * rod + 1]
+    for k, name in enumerate(names):
+        got = drawn[k]
+        p = [got.pose.position.x, got.pose.position.y, got.pose.position.z]
+        shape = det.shapes[det.live[k]]
+        if shape.kind == 'plane':
+            assert got.type == Marker.CUBE and got.scale.z == 0.001
+            np.testing.assert_allclose(p, centre[k] - [0, 0, 0.0005], rtol=0, atol=1e-15)
+            assert centre[k][2] == -1.0
+            continue
+        np.testing.assert_array_equal(p, centre[k])
+        q = [got.pose.orientation.x, got.pose.orientation.y, got.pose.orientation.z,
+             got.pose.orientation.w]
+        np.testing.assert_allclose(so3.quat_to_matrix(np.array(q)), R[k], rtol=0, atol=1e-12)
+        assert got.text == name
+        if name == 'cube/collision0':   # the URDF box, sides as written, posed by its link
+            assert got.type == Marker.CUBE
+            assert [got.scale.x, got.scale.y, got.scale.z] == [0.1, 0.2, 0.3]
+        elif name == 'rod/capsule':
+            assert got.type == Marker.CYLINDER and got.scale.z == 0.4
+            ends = [drawn[m + 2 * k + e] for e in (0, 1)]
+            for end, sign in zip(ends, (1.0, -1.0)):
+                assert end.type == Marker.SPHERE and end.scale.x == 0.1
+                np.testing.assert_allclose(
+                    [end.pose.position.x, end.pose.position.y, end.pose.position.z],
+                    centre[k] + sign * 0.2 * R[k][:, 2], rtol=0, atol=1e-15)
+        else:
+            assert got.type == Marker.SPHERE and got.scale.x == 0.2

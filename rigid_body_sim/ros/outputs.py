@@ -38,6 +38,8 @@ JOINT_MARKER_SIZE = 0.04
 #: m: size of the points that mark contacts; m per N: length of a contact force's line.
 CONTACT_MARKER_SIZE = 0.02
 CONTACT_FORCE_SCALE = 0.01
+#: m: a plane's collision marker, a square slab this wide and this thick.
+PLANE_MARKER_SIDE, PLANE_MARKER_THICKNESS = 20.0, 0.001
 #: Body colours (RGBA), cycled.
 PALETTE = ((0.12, 0.47, 0.71, 0.9), (1.0, 0.5, 0.05, 0.9), (0.17, 0.63, 0.17, 0.9),
            (0.58, 0.4, 0.74, 0.9), (0.55, 0.34, 0.29, 0.9), (0.89, 0.47, 0.76, 0.9))
@@ -108,6 +110,8 @@ class Outputs:
                     None if frame.body is None else index[frame.body],
                     frame.position + frame.rotation @ np.asarray(v.xyz, dtype=float),
                     frame.rotation @ R_v, v, prefix + v.link))
+        #: Draw the collision shapes in ~/markers (the node's ``collision_markers``).
+        self.collision_markers = False
         drawn = {i for i, *_ in self._visuals if i is not None}
         #: Bodies drawn as their shape or box: all but the robots' bodies with visuals.
         self._plain = [i for i in range(len(sim.bodies.names)) if i not in drawn]
@@ -295,7 +299,55 @@ class Outputs:
                 color=ColorRGBA(r=0.84, g=0.15, b=0.16, a=1.0), text=name))
         if sim.contact is not None:
             out += self._contact_markers(header)
+            if self.collision_markers:
+                out += self._collision_markers(header)
         return MarkerArray(markers=out)
+
+    def _collision_markers(self, header: Header) -> list:
+        """
+        Return the collision shapes where they are now (namespace ``collisions``, grey).
+
+        Sphere, box and cylinder as themselves; a capsule as its cylinder (id ``k``)
+        and its two end spheres (ids ``m + 2k``, ``m + 2k + 1``, ``m`` the shapes'
+        count); a plane as a 20 m square slab 1 mm thick whose top is the plane. Shape
+        ``k`` of the detector's shapes that collide has id ``k``.
+        """
+        sim = self.sim
+        det = sim.contact.detector
+        sim.bodies.outputs(sim.state)
+        centre, R = det.frames(sim.bodies.outputs_cache.out)
+        grey = ColorRGBA(r=0.6, g=0.6, b=0.65, a=0.5)
+        m = len(det.live)
+        out = []
+        for k, s in enumerate(det.live):
+            shape = det.shapes[s]
+            c, rot = centre[k], R[k]
+            quat = so3.matrix_to_quat(rot)
+            ends = ()
+            if shape.kind == 'sphere':
+                kind, scale = Marker.SPHERE, [2 * shape.radius] * 3
+            elif shape.kind == 'box':
+                kind, scale = Marker.CUBE, list(shape.size)
+            elif shape.kind in ('cylinder', 'capsule'):
+                kind, scale = Marker.CYLINDER, [2 * shape.radius, 2 * shape.radius,
+                                                shape.length]
+                if shape.kind == 'capsule':
+                    half = 0.5 * shape.length * rot[:, 2]
+                    ends = (c + half, c - half)
+            else:   # a plane: its normal is its z axis
+                kind, scale = Marker.CUBE, [PLANE_MARKER_SIDE, PLANE_MARKER_SIDE,
+                                            PLANE_MARKER_THICKNESS]
+                c = c - 0.5 * PLANE_MARKER_THICKNESS * rot[:, 2]
+            out.append(Marker(header=header, ns='collisions', id=k, type=kind,
+                              action=Marker.ADD, pose=conv.pose(c, quat),
+                              scale=conv.vector3(scale), color=grey, text=shape.name))
+            for e, end in enumerate(ends):
+                out.append(Marker(header=header, ns='collisions', id=m + 2 * k + e,
+                                  type=Marker.SPHERE, action=Marker.ADD,
+                                  pose=conv.pose(end, quat),
+                                  scale=conv.vector3([2 * shape.radius] * 3), color=grey,
+                                  text=shape.name))
+        return out
 
     def _contact_markers(self, header: Header) -> list:
         """

@@ -84,6 +84,7 @@ class Session:
         self.scene_tolerance = self.sim.accuracy().tolerance
         self.configure()
         self.outputs = Outputs(self.sim, scene.shapes, settings.world_frame, scene.robots)
+        self.outputs.collision_markers = settings.collision_markers
         self.totals = Totals()
         self.pending: dict = {}   # body -> (force, torque, frame): the latest message
         self.superseded = 0       # wrench messages replaced before a step used them
@@ -106,6 +107,7 @@ class Session:
         self.sim.set_tolerance(s.tolerance or self.scene_tolerance)
         if hasattr(self, 'outputs'):
             self.outputs.world_frame = s.world_frame
+            self.outputs.collision_markers = s.collision_markers
 
     def check_settings(self, settings: Any) -> None:
         """

@@ -171,6 +171,9 @@ PARAMETERS = (
               'Hz of simulated time: joint_states (robots); 0: as publish_rate'),
     Parameter('tf_rate', 0.0, _rate_or_zero(1e6),
               "Hz of simulated time: /tf of the robots' moving links; 0: as publish_rate"),
+    Parameter('collision_markers', False, _boolean,
+              "~/markers draws the collision shapes too (namespace collisions: the robots' "
+              "URDF <collision> geometry, the bodies' shapes, the ground)"),
     Parameter('tf', 'links', _tf_mode,
               "links: the robots' link frames on /tf and /tf_static; off: none (e.g. when "
               'robot_state_publisher publishes them from joint_states)', read_only=True),
@@ -199,6 +202,7 @@ class Settings:
     per_body_topics: bool = True
     joint_state_rate: float = 0.0
     tf_rate: float = 0.0
+    collision_markers: bool = False
     tf: str = 'links'
 
     @property
