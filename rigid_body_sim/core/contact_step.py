@@ -279,6 +279,8 @@ class ContactSteps:
         self._kernel_key: Optional[tuple] = None
         self._kernel_args: tuple = ()
         self._scratch: Optional[tuple] = None
+        #: The kernel's impacts, a row each: time, shapes a and b, approach, rebound.
+        self._log = np.zeros((IMPACT_LOG, 5))
         self.counters: dict = {}
         #: The latest impacts (at most IMPACT_LOG), oldest first.
         self.impacts: deque = deque(maxlen=IMPACT_LOG)
@@ -747,16 +749,15 @@ class ContactSteps:
 
     # -- compiled steps -------------------------------------------------------------------
 
-    def compiled_steps(self, start: State, n: int, t_end: Any) -> tuple:
+    def compiled_steps(self, start: State, n: int, base: float, steps: int) -> tuple:
         """
         Take up to ``n`` steps from ``start`` in the compiled kernel; return ``(taken, state)``.
 
-        Scenes of free bodies with the knob off (:mod:`.kernels.contact_step`): each
-        step no event interrupts is taken there, with the Python path's arithmetic,
-        until one meets an event (an impact, a contact beginning to slip, a depth to
-        project), which :meth:`step` then takes. ``t_end(k)``: the time the ``k``-th
-        step (from 0) ends at. Elsewhere (joints, the knob, ``compiled`` False):
-        ``(0, start)``.
+        Scenes of free bodies with the knob off (:mod:`.kernels.contact_step`): the
+        same steps as :meth:`step`, the ``k``-th (from 0) ending at ``base + (steps + k +
+        1) dt`` (the simulation's clock), until one meets what the kernel gives back (a
+        row no force moves, a full impact log), which :meth:`step` then takes.
+        Elsewhere (joints, the knob, ``compiled`` False): ``(0, start)``.
         """
         sim = self.sim
         dyn = sim.dynamics
@@ -772,11 +773,12 @@ class ContactSteps:
         cnt = np.zeros(len(kern.COUNTERS))
         before = dyn.defer_effect_work() if dyn.effects else None
         while True:
-            taken, code, y, warm, rec = kern.contact_steps(
-                n, start.y, dt, int(integ.KERNEL), (model[0], model[1], wbuf), len(model[2]),
-                model[3], integ._kick_buffer, dyn.tally, STEPS, integ._ws,
-                dyn.bodies.outputs_cache.frames, out, det, self._buffers(), self._mu, self._e,
-                self._radius, self._warm, prm, cnt)
+            taken, code, y, warm, rec, logged = kern.contact_steps(
+                n, start.y, start.time, base, steps, dt, int(integ.KERNEL),
+                (model[0], model[1], wbuf), len(model[2]), model[3], integ._kick_buffer,
+                dyn.tally, STEPS, integ._ws, dyn.bodies.outputs_cache.frames, out, det,
+                self._buffers(), self._mu, self._e, self._radius, self._warm, prm, cnt,
+                self._log)
             if code != kern.GROW or taken:
                 break
             self._grow()
@@ -786,16 +788,19 @@ class ContactSteps:
         if not taken:
             return 0, start
         for name, value in zip(kern.COUNTERS, cnt.tolist()):
-            if name in ('lcp_iterations_max', 'complementarity_max'):
+            if name in kern.MAXIMA:
                 self.counters[name] = max(self.counters[name], type(self.counters[name])(value))
             elif value:
                 self.counters[name] += int(value)
         self.counters['compiled_steps'] += taken
+        shapes = self.detector.shapes
+        for time, a, b, approach, rebound in self._log[:logged].tolist():
+            self.impacts.append(ContactImpact(time, shapes[int(a)].name, shapes[int(b)].name,
+                                              approach, rebound))
         self._warm = warm
-        sel, force, con, y_last = rec
-        last = State.of(start.time if taken == 1 else t_end(taken - 2), y_last)
-        self._lazy = (last, Contacts(*con[1:]), sel, force)
-        new = State.of(t_end(taken - 1), y)
+        sel, force, con, y_rec, t_rec = rec
+        self._lazy = (State.of(t_rec, y_rec), Contacts(*con[1:]), sel, force)
+        new = State.of(base + (steps + taken) * dt, y)
         if dyn.bodies.want_outputs():
             c = dyn.bodies.outputs_cache
             state_outputs(y, c.frames, c.out)
@@ -823,6 +828,8 @@ class ContactSteps:
         prm[kern.P_PROXIMAL], prm[kern.P_MODEL_TOLERANCE] = PROXIMAL, MODEL_TOLERANCE
         prm[kern.P_MODEL_CORRECTIONS], prm[kern.P_HOLD_RATE] = MODEL_CORRECTIONS, HOLD_RATE
         prm[kern.P_RATE_FLOOR] = RATE_FLOOR
+        prm[kern.P_MAX_EVENTS], prm[kern.P_MAX_BOUNCES] = MAX_EVENTS, MAX_BOUNCES
+        prm[kern.P_MAX_LOCATION_ITERATIONS] = MAX_LOCATION_ITERATIONS
         self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), prm)
         self._kernel_key = (model, d.excluded, (self.location, self.rate))
         return self._kernel_args

@@ -459,10 +459,8 @@ class Simulation:
             t_end = self._time_base + (steps + 1) * dt
             seen, tracked = None, False
             if self.contact is not None:
-                base = self._time_base
                 taken, new = self.contact.compiled_steps(
-                    self.state, n - done if batch else 1,
-                    lambda k: base + (steps + k + 1) * dt)
+                    self.state, n - done if batch else 1, self._time_base, steps)
                 if taken > 1:   # (batch: nothing below applies)
                     self.state = new
                     self._steps = steps + taken

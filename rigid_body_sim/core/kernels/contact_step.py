@@ -1,35 +1,34 @@
 """
-Compiled kernels: contact steps of bodies no joint couples, whole, until an event.
+Compiled kernels: contact steps of bodies no joint couples, whole.
 
 :class:`..contact_step.ContactSteps` takes a step with contact in Python over
 compiled detection and integration: some sixty numpy calls and up to four
-integrator calls a step, about a millisecond. Most steps of a scene of free bodies
-have no event in them (no impact, no contact beginning to slip, no depth to
-project): for those the same arithmetic runs here, in one compiled call, for as
-many steps as the caller asks (:func:`contact_steps`). A step that meets anything
-else is given back untouched (``BAIL``) and the Python path takes it: it is the
-reference, and this is its common case, compiled. Per step, as
-:meth:`..contact_step.ContactSteps.step` with its docstring's names:
+integrator calls a step, about a millisecond. For scenes of free bodies the same
+steps run here, as many as the caller asks in one call (:func:`contact_steps`),
+with the Python path's arithmetic and structure (its docstring's names), function
+for function:
 
-1. detection at the start; the touching contacts' rows (``G`` as two (3c, 6)
-   blocks, on body ``a`` and body ``b``); one approaching faster than the rate
-   tolerance is an impact: ``BAIL``;
-2. the free trial step; with rows, the LCP ``w = A p + q`` (``A = G M⁻¹ Gᵀ``, ``q =
-   G ṽ``) by the friction boxes' fixed point over a proximal active-set solve
-   (:func:`solve_direct`, :func:`solve_rows`), warm-started from the last step's
-   normal impulses of the same contacts; a sticking contact that begins to slip:
-   ``BAIL``;
-3. the step with the forces held (world wrenches), the model checked at the end's
-   geometry (each contact found again: :func:`match`) and corrected up to
-   ``MODEL_CORRECTIONS`` times;
-4. a new contact deeper than the tolerance (an impact inside the step): ``BAIL``;
-5. the end: a contact deeper than the tolerance or a loaded contact left apart
-   (a projection): ``BAIL``; the loaded contacts' normal rates within ``HOLD_RATE``
-   of zero are set to zero by the same mass-weighted projection.
+* :func:`_step` (``ContactSteps.step``): the touching contacts' rows at the start
+  (``G`` as two (3c, 6) blocks, on body ``a`` and body ``b``); :func:`_impact` for
+  those approaching; :func:`_held`, the trial step with the forces held; a new
+  contact overlapping at its end is located (:func:`_locate`) and the step taken
+  again from there, up to ``MAX_EVENTS`` events; :func:`_accept` at the end;
+* :func:`_held` (``_held_step``): the LCP ``w = A p + q`` (``A = G M⁻¹ Gᵀ``, ``q =
+  G ṽ``) by the friction boxes' fixed point over a proximal active-set solve
+  (:func:`solve_rows`, :func:`solve_direct` with an envelope Cholesky), warm-started
+  from the last step's normal impulses; sticking contacts that begin to slip turned
+  to their slip (:func:`slip_turn`); the step with the forces held, its model
+  checked at the end's geometry (each contact found again: :func:`match`) and
+  corrected up to ``MODEL_CORRECTIONS`` times;
+* :func:`_locate` (``_locate``): regula falsi (Illinois) on the new contact's depth;
+* :func:`_accept` (``_settle``): depth projected out, loaded contacts held.
 
-The results agree with the Python path's to rounding (the tests run both). The
-counters a step adds are written to ``cnt`` (:data:`COUNTERS`); a step given back
-adds nothing there (its work is counted by the Python path that takes it).
+What the kernel does not take it gives back untouched (``BAIL``) and the Python path
+takes that step: a row no impulse moves (a point on an axle: joints, which this
+kernel never sees), a non-finite step (the Python path raises its error), a full
+impact log. The results agree with the Python path's to rounding (the tests run
+both). The counters a step adds are written to ``cnt`` (:data:`COUNTERS`); a step
+given back adds nothing there (the Python path that takes it counts its work).
 """
 
 from __future__ import annotations
@@ -42,15 +41,20 @@ import numpy as np
 from .contact import all_bounds, broad_phase, narrow_phase, plane_pairs, shape_frames
 from .free_step import FINITE, free_step, HAS_POSITION_FORCES, outputs, state_parts
 from .layout import O_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_KIND, W_POINT, W_TORQUE, WRENCH_APPLIED
-from .so3 import quat_matrix
+from .so3 import quat_exp_multiply, quat_matrix
 
 #: Slots of the tolerances ``prm`` (the constants of :mod:`..contact_step`).
 (P_LOCATION, P_RATE, P_FRICTION_TOLERANCE, P_FRICTION_ITERATIONS, P_PROXIMAL,
- P_MODEL_TOLERANCE, P_MODEL_CORRECTIONS, P_HOLD_RATE, P_RATE_FLOOR, P_WIDTH) = range(10)
+ P_MODEL_TOLERANCE, P_MODEL_CORRECTIONS, P_HOLD_RATE, P_RATE_FLOOR, P_MAX_EVENTS,
+ P_MAX_BOUNCES, P_MAX_LOCATION_ITERATIONS, P_WIDTH) = range(13)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
-            'model_corrections', 'held_rates')
-C_SOLVES, C_ITERATIONS_MAX, C_FAILURES, C_COMPLEMENTARITY, C_CORRECTIONS, C_HELD = range(6)
+            'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
+            'max_depth', 'projections', 'max_projected')
+(C_SOLVES, C_ITERATIONS_MAX, C_FAILURES, C_COMPLEMENTARITY, C_CORRECTIONS, C_HELD,
+ C_IMPACTS, C_LOCATED, C_CAPPED, C_MAX_DEPTH, C_PROJECTIONS, C_MAX_PROJECTED) = range(12)
+#: The counters that are maxima (the others are sums).
+MAXIMA = ('lcp_iterations_max', 'complementarity_max', 'max_depth', 'max_projected')
 #: Why :func:`contact_steps` stopped: every step taken; an event (the Python path's);
 #: the detector's buffers too small (grow them and call again).
 DONE, BAIL, GROW = 0, 1, 2
@@ -442,14 +446,15 @@ def spd_solve(S: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
-               normal_only: bool, equal: bool, sliding: np.ndarray, prm: np.ndarray,
-               cnt: np.ndarray) -> tuple:
+               normal_only: bool, equal: np.ndarray, has_equal: bool, sliding: np.ndarray,
+               prm: np.ndarray, cnt: np.ndarray) -> tuple:
     """
     Return ``(p, ok)``: the rows' impulses as :meth:`..contact_step.ContactSteps.solve`.
 
-    ``start`` (3c,) the warm start; ``equal``: every normal row an equality (the
-    projections); ``sliding`` (c,) contacts with one friction row. ``ok`` False: a
-    row no impulse moves (the Python path's case, given back).
+    ``start`` (3c,) the warm start; ``equal`` (c,): the contacts whose normal row is
+    an equality (the projections; ``has_equal`` False: none, and the residual is
+    counted); ``sliding`` (c,) contacts with one friction row. ``ok`` False: a row no
+    impulse moves (the Python path's case, given back).
     """
     m = q.shape[0]
     nr = m // 3 if normal_only else m
@@ -483,7 +488,7 @@ def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
     lo, hi = np.zeros(nr), np.full(nr, np.inf)
     step3 = 1 if normal_only else 3
     for a in range(0, nr, step3):
-        if equal:
+        if has_equal and equal[a // step3]:
             lo[a] = -np.inf
         p[a] = max(p[a], lo[a])
     converged, it = False, 0
@@ -534,7 +539,7 @@ def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
     cnt[C_ITERATIONS_MAX] = max(cnt[C_ITERATIONS_MAX], it)
     if not converged:
         cnt[C_FAILURES] += 1
-    if not equal:
+    if not has_equal:
         cnt[C_COMPLEMENTARITY] = max(cnt[C_COMPLEMENTARITY],
                                      residual(Ar, qr, p, mu, normal_only, sliding, tol))
     out = np.zeros(m)
@@ -575,14 +580,24 @@ def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal
 
 
 @njit(cache=True)
-def slipping(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndarray,
-             w: np.ndarray, rate: float, tol: float) -> bool:
-    """Tell whether a sticking contact begins to slip (``_slipping`` would turn one)."""
+def slip_turn(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndarray,
+              w: np.ndarray, rate: float, tol: float) -> tuple:
+    """
+    Return ``(turned, frame, sliding)``: the sticking contacts that begin to slip turned.
+
+    As ``ContactSteps._slipping``: a sticking contact whose friction ends on a bound
+    with its point slipping faster than ``rate``, or whose friction left Coulomb's
+    cone inside the pyramid, slides, its ``t₁`` along the slip (or against its
+    friction); the frames and flags are new arrays.
+    """
     c = mu.shape[0]
     pmax = 0.0
     for a in range(p.shape[0]):
         pmax = max(pmax, abs(p[a]))
     slack = 2.0 * tol * pmax
+    frame2, sliding2 = frame.copy(), sliding.copy()
+    turned = False
+    s = np.zeros(3)
     for k in range(c):
         if sliding[k]:
             continue
@@ -590,18 +605,28 @@ def slipping(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndarr
         if not bound > 0.0:
             continue
         on = abs(p[3 * k + 1]) >= bound - slack or abs(p[3 * k + 2]) >= bound - slack
-        s = np.zeros(3)
-        fr = np.zeros(3)
+        f = np.zeros(3)
         for x in range(3):
             s[x] = w[3 * k + 1] * frame[k, 1, x] + w[3 * k + 2] * frame[k, 2, x]
-            fr[x] = p[3 * k + 1] * frame[k, 1, x] + p[3 * k + 2] * frame[k, 2, x]
-        speed = math.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
-        size = math.sqrt(fr[0] ** 2 + fr[1] ** 2 + fr[2] ** 2)
-        if size > bound + slack:
-            return True
-        if on and speed > rate:
-            return True
-    return False
+            f[x] = p[3 * k + 1] * frame[k, 1, x] + p[3 * k + 2] * frame[k, 2, x]
+        speed = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
+        size = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        beyond = size > bound + slack
+        if beyond and speed <= rate:
+            for x in range(3):
+                s[x] = -f[x] / max(size, 1e-300) * rate * 2.0
+            speed = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
+        if not ((on and speed > rate) or beyond):
+            continue
+        turned = True
+        sliding2[k] = True
+        nrm = frame[k, 0]
+        for x in range(3):
+            frame2[k, 1, x] = s[x] / speed
+        x0, x1, x2 = _cross(nrm[0], nrm[1], nrm[2], frame2[k, 1, 0], frame2[k, 1, 1],
+                            frame2[k, 1, 2])
+        frame2[k, 2, 0], frame2[k, 2, 1], frame2[k, 2, 2] = x0, x1, x2
+    return turned, frame2, sliding2
 
 
 # -- contacts found again -------------------------------------------------------------------
@@ -675,256 +700,533 @@ def _advance(method: int, y0: np.ndarray, h: float, model: tuple, nw: int, flags
 
 
 @njit(cache=True)
-def contact_steps(n_steps: int, y0: np.ndarray, dt: float, method: int, model: tuple,
-                  n_applied: int, flags: int, kick: np.ndarray, counts: np.ndarray,
-                  steps_slot: int, ws: np.ndarray, frames: np.ndarray, out: np.ndarray,
-                  det: tuple, buf: tuple, shape_mu: np.ndarray, shape_e: np.ndarray,
-                  radius: np.ndarray, warm: tuple, prm: np.ndarray, cnt: np.ndarray) -> tuple:
+def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: int,
+                  dt: float, method: int, model: tuple, n_applied: int, flags: int,
+                  kick: np.ndarray, counts: np.ndarray, steps_slot: int, ws: np.ndarray,
+                  frames: np.ndarray, out: np.ndarray, det: tuple, buf: tuple,
+                  shape_mu: np.ndarray, shape_e: np.ndarray, radius: np.ndarray, warm: tuple,
+                  prm: np.ndarray, cnt: np.ndarray, log: np.ndarray) -> tuple:
     """
-    Take up to ``n_steps`` contact steps from ``y0`` (the module docstring); stop at a ``BAIL``.
+    Take up to ``n_steps`` contact steps from ``y0`` at time ``t0``; stop at a ``BAIL``.
 
+    Step ``k`` ends at ``base + (steps0 + k + 1) dt`` (the simulation's clock).
     ``model``: ``(body, gforce, wbuf)``, ``wbuf`` (k + n, W_WIDTH) the applied wrench
     rows (first ``n_applied``) and room for one contact wrench per body; ``warm``:
-    ``(shape_a, shape_b, point, p_n)`` of the last step's rows. Returns ``(taken,
-    code, y, warm, record)``: the steps taken (``y`` the state after them; ``y0``
-    when none), why they stopped (``DONE``, ``BAIL`` or ``GROW``: the detector's
-    buffers are too small), the warm start for the next, and the last step's record
-    ``(sel, force, contacts at its start, its start's state buffer)``.
+    ``(shape_a, shape_b, point, p_n)`` of the last step's rows; ``log`` (L, 5): the
+    impacts, a row each (time, shape a, shape b, approach, rebound). Returns ``(taken,
+    code, y, warm, record, impacts)``: the steps taken (``y`` the state after them;
+    ``y0`` when none), why they stopped (``DONE``, ``BAIL`` or ``GROW``: the detector's
+    buffers are too small), the warm start for the next, the last held step's record
+    ``(sel, force, contacts at its start, its start's state buffer, its time)`` and the
+    rows of ``log`` written.
     """
-    y = y0
-    record = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0)
-    # A step's end's contacts are the next one's start's (the end's rates held change no
-    # position).
-    found, have = _no_contacts(0), False
-    for taken in range(n_steps):
-        res = _one_step(y, dt, method, model, n_applied, flags, kick, counts, steps_slot, ws,
-                        frames, out, det, buf, shape_mu, shape_e, radius, warm, prm, cnt,
-                        found, have)
-        code, y_new, warm_new, rec, found = res
-        if code != DONE:
-            return taken, code, y, warm, record
-        have = True
-        y, warm, record = y_new, warm_new, (rec[0], rec[1], rec[2], y)
-    return n_steps, DONE, y, warm, record
-
-
-@njit(cache=True)
-def _one_step(y0: np.ndarray, h: float, method: int, model: tuple, n_applied: int, flags: int,
-              kick: np.ndarray, counts: np.ndarray, steps_slot: int, ws: np.ndarray,
-              frames: np.ndarray, out: np.ndarray, det: tuple, buf: tuple,
-              shape_mu: np.ndarray, shape_e: np.ndarray, radius: np.ndarray, warm: tuple,
-              prm: np.ndarray, cnt_total: np.ndarray, found: tuple, have: bool) -> tuple:
-    """
-    Take one step of :func:`contact_steps`: ``(code, y, warm, record, contacts at y)``.
-
-    ``found``: the contacts at ``y0`` when ``have`` (the last step's end's).
-    """
-    body, gforce, wbuf = model
-    loc, rate = prm[P_LOCATION], prm[P_RATE]
-    cnt = np.zeros(cnt_total.shape[0])
-    pos0, quat0, vel0, om0 = state_parts(y0)
-    n = pos0.shape[0]
-    count = shape_mu.shape[0] + 1
-    fail = (BAIL, y0, warm, (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0)),
-            found)
-    grow = (GROW, y0, warm, (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0)),
-            found)
-    con0 = found if have else detect(pos0, quat0, vel0, om0, det, buf, frames, out)
-    c0, sa0, sb0, ba0, bb0, pt0, nr0, dp0 = con0
-    if c0 < 0:
-        return grow
-    R0 = rotations(quat0)
-    touching = np.empty(c0, dtype=np.int64)
-    nt = 0
-    for j in range(c0):
-        if dp0[j] >= -loc:
-            touching[nt] = j
-            nt += 1
-    touching = touching[:nt]
-    frame, la, lb, mu, e, sliding, vn, Ga, Gb = rows(pos0, vel0, om0, R0, touching, ba0, bb0,
-                                                     pt0, nr0, sa0, sb0, shape_mu, shape_e,
-                                                     rate)
-    keep = np.empty(nt, dtype=np.int64)
-    c = 0
-    for k in range(nt):
-        if vn[k] < -rate:
-            return fail   # an impact
-        if vn[k] <= rate:
-            keep[c] = k
-            c += 1
-    keep = keep[:c]
-    sel = touching[keep]
-    frame, la, lb, mu, sliding = frame[keep], la[keep], lb[keep], mu[keep], sliding[keep]
-    rows3 = np.empty(3 * c, dtype=np.int64)
-    for k in range(c):
-        for a in range(3):
-            rows3[3 * k + a] = 3 * keep[k] + a
-    Ga, Gb = Ga[rows3], Gb[rows3]
-    ba, bb = ba0[sel], bb0[sel]
+    body = model[0]
+    n = body.shape[0]
     minv = np.empty((n, 6))
     for i in range(n):
         for a in range(3):
             minv[i, a] = body[i, 1]
             minv[i, 3 + a] = 1.0 / body[i, 2 + a]
-    # The free trial step.
-    free, finite = _advance(method, y0, h, model, n_applied, flags, kick, counts, steps_slot,
-                            ws, frames)
+    ctx = (method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out, det,
+           buf, shape_mu, shape_e, radius, prm, minv, dt)
+    y, t = y0, t0
+    record = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
+    # A step's end's contacts are the next one's start's.
+    found, have = _no_contacts(0), False
+    n_log = 0
+    for taken in range(n_steps):
+        t_end = base + (steps0 + taken + 1) * dt
+        res = _step(y, t, t_end, ctx, warm, cnt, found, have, log, n_log)
+        code, y_new, warm_new, rec, found, n_new = res
+        if code != DONE:
+            return taken, code, y, warm, record, n_log
+        have = True
+        y, t, warm, record, n_log = y_new, t_end, warm_new, rec, n_new
+    return n_steps, DONE, y, warm, record, n_log
+
+
+@njit(cache=True)
+def _advance_ctx(ctx: tuple, y0: np.ndarray, h: float, nw: int, flags: int) -> tuple:
+    """Return :func:`_advance` with the arrays of ``ctx``."""
+    (method, model, n_applied, _, kick, counts, steps_slot, ws, frames, out, det, buf,
+     shape_mu, shape_e, radius, prm, minv, dt) = ctx
+    return _advance(method, y0, h, model, nw, flags, kick, counts, steps_slot, ws, frames)
+
+
+@njit(cache=True)
+def _detect_ctx(ctx: tuple, y: np.ndarray) -> tuple:
+    """Return :func:`detect` at state buffer ``y`` with the arrays of ``ctx``."""
+    det, buf, frames, out = ctx[10], ctx[11], ctx[8], ctx[9]
+    pos, quat, vel, om = state_parts(y)
+    return detect(pos, quat, vel, om, det, buf, frames, out)
+
+
+@njit(cache=True)
+def _make_rows(ctx: tuple, y: np.ndarray, con: tuple, sel: np.ndarray) -> tuple:
+    """Return the rows of contacts ``sel`` of ``con`` at ``y`` (:func:`rows`), and their bodies."""
+    c0, sa, sb, ba, bb, pt, nr, dp = con
+    pos, quat, vel, om = state_parts(y)
+    R = rotations(quat)
+    frame, la, lb, mu, e, sliding, vn, Ga, Gb = rows(pos, vel, om, R, sel, ba, bb, pt, nr, sa,
+                                                     sb, ctx[12], ctx[13], ctx[15][P_RATE])
+    return sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba[sel], bb[sel]
+
+
+@njit(cache=True)
+def _subset(r: tuple, keep: np.ndarray) -> tuple:
+    """Return rows ``r``'s contacts ``keep`` (indices)."""
+    sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
+    rows3 = np.empty(3 * keep.shape[0], dtype=np.int64)
+    for k in range(keep.shape[0]):
+        for a in range(3):
+            rows3[3 * k + a] = 3 * keep[k] + a
+    return (sel[keep], frame[keep], la[keep], lb[keep], mu[keep], e[keep], sliding[keep],
+            vn[keep], Ga[rows3], Gb[rows3], ba[keep], bb[keep])
+
+
+@njit(cache=True)
+def _where(mask: np.ndarray) -> np.ndarray:
+    """Return the indices where ``mask`` holds."""
+    k = 0
+    for j in range(mask.shape[0]):
+        if mask[j]:
+            k += 1
+    out = np.empty(k, dtype=np.int64)
+    k = 0
+    for j in range(mask.shape[0]):
+        if mask[j]:
+            out[k] = j
+            k += 1
+    return out
+
+
+@njit(cache=True)
+def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
+                which: np.ndarray, con: tuple, y: np.ndarray) -> tuple:
+    """Return :func:`match` of the rows (``r_sel`` of ``r_con`` at ``r_y``) on ``con`` at ``y``."""
+    _, sa0, sb0, ba0, _, pt0, _, _ = r_con
+    _, sa1, sb1, ba1, _, pt1, _, _ = con
+    pos0, quat0, _, _ = state_parts(r_y)
+    pos1, quat1, _, _ = state_parts(y)
+    return match(sa0[r_sel], sb0[r_sel], ba0[r_sel], pt0[r_sel], pos0, rotations(quat0),
+                 which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), ctx[14],
+                 ctx[12].shape[0] + 1)
+
+
+@njit(cache=True)
+def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
+          cnt_total: np.ndarray, found: tuple, have: bool, log: np.ndarray,
+          n_log: int) -> tuple:
+    """
+    Take one step, as ``ContactSteps.step``: ``(code, y, warm, record, contacts at y, n_log)``.
+
+    ``found``: the contacts at ``y0`` when ``have`` (the last step's end's).
+    """
+    prm, dt = ctx[15], ctx[17]
+    loc, rate = prm[P_LOCATION], prm[P_RATE]
+    max_events, max_bounces = int(prm[P_MAX_EVENTS]), int(prm[P_MAX_BOUNCES])
+    cnt = np.zeros(cnt_total.shape[0])
+    empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
+    fail = (BAIL, y0, warm, empty, found, n_log)
+    grow = (GROW, y0, warm, empty, found, n_log)
+    con = found if have else _detect_ctx(ctx, y0)
+    if con[0] < 0:
+        return grow
+    state, t = y0, t0
+    events, bounces = 0, 0
+    first = True
+    record = empty
+    while True:
+        h = dt if first else t_end - t
+        if not first and h <= 4.0 * EPS * abs(t_end):
+            code, new, con_new = _accept(ctx, state, record, cnt)
+            break
+        first = False
+        touching = _make_rows(ctx, state, con, _where(con[7] >= -loc))
+        if touching[0].shape[0] and events < max_events:
+            code, state2, hit, n_log = _impact(ctx, state, t, con, touching,
+                                               bounces >= max_bounces, cnt, log, n_log)
+            if code != DONE:
+                return fail
+            if hit:
+                bounces += 1
+                events += 1
+                state = state2
+                touching = _make_rows(ctx, state, con, _where(con[7] >= -loc))
+        rows_ = _subset(touching, _where(touching[7] <= rate))
+        code, trial, nw, fl, warm, record, con_trial = _held(ctx, state, t, con, rows_, h,
+                                                             warm, cnt)
+        if code != DONE:
+            return grow if code == GROW else fail
+        hit_depth = -np.inf
+        if events < max_events:
+            cont = _continuing(ctx, con, rows_[0], state,
+                               np.ones(rows_[0].shape[0], dtype=np.bool_), con_trial, trial)[1]
+            for j in range(con_trial[0]):
+                if not cont[j] and con_trial[7][j] > loc:
+                    hit_depth = max(hit_depth, con_trial[7][j])
+        else:
+            cnt[C_CAPPED] += 1
+        if hit_depth == -np.inf:
+            code, new, con_new = _accept(ctx, trial, record, cnt)
+            break
+        code, located, tau = _locate(ctx, state, con, rows_, h, hit_depth, nw, fl)
+        if code != DONE:
+            return grow if code == GROW else fail
+        if tau <= 0.0:
+            code, new, con_new = _accept(ctx, trial, record, cnt)
+            break
+        cnt[C_LOCATED] += 1
+        state, t = located, t + tau
+        events += 1
+        con = _detect_ctx(ctx, state)
+        if con[0] < 0:
+            return grow
+    if code != DONE:
+        return grow if code == GROW else fail
+    _merge(cnt_total, cnt)
+    return DONE, new, warm, record, con_new, n_log
+
+
+@njit(cache=True)
+def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic: bool,
+            cnt: np.ndarray, log: np.ndarray, n_log: int) -> tuple:
+    """
+    Resolve the impacts at ``y``, as ``ContactSteps._impact``: ``(code, y, hit, n_log)``.
+
+    ``code`` BAIL: the log is full (or a row no impulse moves).
+    """
+    sel, frame, la, lb, mu, e, sliding, vn_, Ga, Gb, ba, bb = r
+    prm, minv = ctx[15], ctx[16]
+    rate = prm[P_RATE]
+    pos, quat, vel, om = state_parts(y)
+    rel = apply_rows(Ga, Gb, ba, bb, vel, om)
+    c = sel.shape[0]
+    approaching = 0
+    for k in range(c):
+        if rel[3 * k] < -rate:
+            approaching += 1
+    if approaching == 0:
+        return DONE, y, False, n_log
+    if n_log + approaching > log.shape[0]:
+        return BAIL, y, False, n_log
+    q = rel.copy()
+    for k in range(c):
+        if rel[3 * k] < -rate:
+            q[3 * k] += (0.0 if inelastic else e[k]) * rel[3 * k]
+    A = delassus(Ga, Gb, ba, bb, minv)
+    p, ok = solve_rows(A, q, mu, np.zeros(3 * c), False, np.zeros(c, dtype=np.bool_), False,
+                       sliding, prm, cnt)
+    if not ok:
+        return BAIL, y, False, n_log
+    dv = response(Ga, Gb, ba, bb, minv, p)
+    new = y.copy()
+    npos, nquat, nvel, nom = state_parts(new)
+    for i in range(npos.shape[0]):
+        for a in range(3):
+            nvel[i, a] += dv[i, a]
+            nom[i, a] += dv[i, 3 + a]
+    after = rel + apply_rows(Ga, Gb, ba, bb, dv[:, :3].copy(), dv[:, 3:].copy())
+    cnt[C_IMPACTS] += approaching
+    sa, sb = con[1], con[2]
+    for k in range(c):
+        if rel[3 * k] < -rate:
+            log[n_log, 0], log[n_log, 1], log[n_log, 2] = t, sa[sel[k]], sb[sel[k]]
+            log[n_log, 3], log[n_log, 4] = rel[3 * k], after[3 * k]
+            n_log += 1
+    return DONE, new, True, n_log
+
+
+@njit(cache=True)
+def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, warm: tuple,
+          cnt: np.ndarray) -> tuple:
+    """
+    Take the trial step with the rows' forces held, as ``ContactSteps._held_step``.
+
+    Returns ``(code, new, nw, flags, warm, record, contacts at new)``: ``nw`` and
+    ``flags`` the wrench rows the forces left in ``wbuf`` (the location's partial steps
+    hold them).
+    """
+    (method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out, det, buf,
+     shape_mu, shape_e, radius, prm, minv, dt) = ctx
+    wbuf = model[2]
+    sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
+    c = sel.shape[0]
+    n = minv.shape[0]
+    rate = prm[P_RATE]
+    free, finite = _advance_ctx(ctx, y0, h, n_applied, flags)
+    none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t)
     if not finite:
-        return fail
-    new = free
-    force = np.zeros((c, 3))
-    p = np.zeros(3 * c)
-    con1 = _no_contacts(0)
-    have1 = False
-    if c:
-        fpos, fquat, fvel, fom = state_parts(free)
+        return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+    if c == 0:
+        con1 = _detect_ctx(ctx, free)
+        code = GROW if con1[0] < 0 else DONE
+        return code, free, n_applied, flags, warm, (sel, np.zeros((0, 3)), con, y0, t), con1
+    fpos, fquat, fvel, fom = state_parts(free)
+    A = delassus(Ga, Gb, ba, bb, minv)
+    q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
+    start = np.zeros(3 * c)
+    w_sa, w_sb, w_pt, w_pn = warm
+    pt0 = con[5]
+    for k in range(c):
+        j = sel[k]
+        for x in range(w_pn.shape[0]):
+            if w_sa[x] == con[1][j] and w_sb[x] == con[2][j] and (
+                    (w_pt[x, 0] - pt0[j, 0]) ** 2 + (w_pt[x, 1] - pt0[j, 1]) ** 2
+                    + (w_pt[x, 2] - pt0[j, 2]) ** 2) <= WARM_RADIUS2:
+                start[3 * k] = w_pn[x]
+                break
+    no_equal = np.zeros(c, dtype=np.bool_)
+    p, ok = solve_rows(A, q, mu, start, False, no_equal, False, sliding, prm, cnt)
+    if not ok:
+        return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+    w = A @ p + q
+    turned, frame2, sliding2 = slip_turn(frame, mu, sliding, p, w, rate,
+                                         prm[P_FRICTION_TOLERANCE])
+    if turned:
+        pos0, quat0, _, _ = state_parts(y0)
+        frame, sliding = frame2, sliding2
+        Ga, Gb = jacobian(frame, ba, bb, la, lb, rotations(quat0), n)
         A = delassus(Ga, Gb, ba, bb, minv)
         q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
-        start = np.zeros(3 * c)
-        w_sa, w_sb, w_pt, w_pn = warm
-        for k in range(c):
-            j = sel[k]
-            for x in range(w_pn.shape[0]):
-                if w_sa[x] == sa0[j] and w_sb[x] == sb0[j] and (
-                        (w_pt[x, 0] - pt0[j, 0]) ** 2 + (w_pt[x, 1] - pt0[j, 1]) ** 2
-                        + (w_pt[x, 2] - pt0[j, 2]) ** 2) <= WARM_RADIUS2:
-                    start[3 * k] = w_pn[x]
-                    break
-        p, ok = solve_rows(A, q, mu, start, False, False, sliding, prm, cnt)
+        p, ok = solve_rows(A, q, mu, p, False, no_equal, False, sliding, prm, cnt)
         if not ok:
-            return fail
-        if slipping(frame, mu, sliding, p, A @ p + q, rate, prm[P_FRICTION_TOLERANCE]):
-            return fail
-        corrections = int(prm[P_MODEL_CORRECTIONS])
-        for correction in range(corrections + 1):
-            any_p = False
-            for k in range(c):
-                for x in range(3):
-                    force[k, x] = (p[3 * k] * frame[k, 0, x] + p[3 * k + 1] * frame[k, 1, x]
-                                   + p[3 * k + 2] * frame[k, 2, x]) / h
-                    if p[3 * k + x] != 0.0:
-                        any_p = True
-            if not any_p:
-                new = free
-                have1 = False
-                break
-            nw = _contact_wrenches(wbuf, n_applied, n, ba, bb, la, lb, force)
-            new, finite = _advance(method, y0, h, model, nw, flags | HAS_POSITION_FORCES,
-                                   kick, counts, steps_slot, ws, frames)
-            if not finite:
-                return fail
-            npos, nquat, nvel, nom = state_parts(new)
-            con1 = detect(npos, nquat, nvel, nom, det, buf, frames, out)
-            if con1[0] < 0:
-                return grow
-            have1 = True
-            R1 = rotations(nquat)
-            G1a, G1b = _rows_at(sa0[sel], sb0[sel], ba, bb, pt0[sel], pos0, R0, frame, Ga, Gb,
-                                con1, npos, R1, radius, count)
-            w = apply_rows(G1a, G1b, ba, bb, nvel, nom)
-            model_w = A @ p + q
-            off, qmax = 0.0, 0.0
-            for r in range(3 * c):
-                off = max(off, abs(w[r] - model_w[r]))
-                qmax = max(qmax, abs(q[r]))
-            if correction == corrections or off <= prm[P_MODEL_TOLERANCE] * max(qmax, rate):
-                break
-            cnt[C_CORRECTIONS] += 1
-            q = q + (w - model_w)
-            p, ok = solve_rows(A, q, mu, p, False, False, sliding, prm, cnt)
-            if not ok:
-                return fail
-    npos, nquat, nvel, nom = state_parts(new)
-    if not have1:
-        con1 = detect(npos, nquat, nvel, nom, det, buf, frames, out)
+            return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+    pos0, quat0, _, _ = state_parts(y0)
+    R0 = rotations(quat0)
+    count = shape_mu.shape[0] + 1
+    sa_r, sb_r, pt_r = con[1][sel], con[2][sel], con[5][sel]
+    new = free
+    nw, fl = n_applied, flags
+    force = np.zeros((c, 3))
+    con1 = _no_contacts(0)
+    have1 = False
+    corrections = int(prm[P_MODEL_CORRECTIONS])
+    for correction in range(corrections + 1):
+        any_p = False
+        for k in range(c):
+            for x in range(3):
+                force[k, x] = (p[3 * k] * frame[k, 0, x] + p[3 * k + 1] * frame[k, 1, x]
+                               + p[3 * k + 2] * frame[k, 2, x]) / h
+                if p[3 * k + x] != 0.0:
+                    any_p = True
+        if not any_p:
+            new, nw, fl, have1 = free, n_applied, flags, False
+            break
+        nw = _contact_wrenches(wbuf, n_applied, n, ba, bb, la, lb, force)
+        fl = flags | HAS_POSITION_FORCES
+        new, finite = _advance_ctx(ctx, y0, h, nw, fl)
+        if not finite:
+            return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+        con1 = _detect_ctx(ctx, new)
         if con1[0] < 0:
-            return grow
-    c1, sa1, sb1, ba1, bb1, pt1, nr1, dp1 = con1
-    R1 = rotations(nquat)
-    # A new contact overlapping beyond the tolerance: an impact inside the step.
-    every = np.ones(c, dtype=np.bool_)
-    _, cont = match(sa0[sel], sb0[sel], ba, pt0[sel], pos0, R0, every, sa1, sb1, ba1, pt1,
-                    npos, R1, radius, count)
-    for j in range(c1):
-        if not cont[j] and dp1[j] > loc:
-            return fail
-    # The end: the loaded contacts held to zero normal rate (depth to project: given back).
-    active = np.zeros(c, dtype=np.bool_)
-    for k in range(c):
-        active[k] = (force[k, 0] * nr0[sel[k], 0] + force[k, 1] * nr0[sel[k], 1]
-                     + force[k, 2] * nr0[sel[k], 2]) > 0.0
-    _, held = match(sa0[sel], sb0[sel], ba, pt0[sel], pos0, R0, active, sa1, sb1, ba1, pt1,
-                    npos, R1, radius, count)
-    nh = 0
-    for j in range(c1):
-        if dp1[j] > loc or (held[j] and dp1[j] < -loc):
-            return fail
-        if held[j]:
-            nh += 1
-    if nh:
-        hs = np.empty(nh, dtype=np.int64)
-        k = 0
-        for j in range(c1):
-            if held[j]:
-                hs[k] = j
-                k += 1
-        hframe, hla, hlb, hmu, he, hsl, hvn, hGa, hGb = rows(npos, nvel, nom, R1, hs, ba1, bb1,
-                                                             pt1, nr1, sa1, sb1, shape_mu,
-                                                             shape_e, rate)
-        needed = False
-        nn = 0
-        for k in range(nh):
-            if abs(hvn[k]) <= prm[P_HOLD_RATE]:
-                nn += 1
-                if abs(hvn[k]) > prm[P_RATE_FLOOR]:
-                    needed = True
-        if needed:
-            near = np.empty(nn, dtype=np.int64)
-            k = 0
-            for x in range(nh):
-                if abs(hvn[x]) <= prm[P_HOLD_RATE]:
-                    near[k] = x
-                    k += 1
-            r3 = np.empty(3 * nn, dtype=np.int64)
-            for x in range(nn):
-                for a in range(3):
-                    r3[3 * x + a] = 3 * near[x] + a
-            sGa, sGb = hGa[r3], hGb[r3]
-            sba, sbb = ba1[hs[near]], bb1[hs[near]]
-            A2 = delassus(sGa, sGb, sba, sbb, minv)
-            q3 = np.zeros(3 * nn)
-            for x in range(nn):
-                q3[3 * x] = hvn[near[x]]
-            p2, ok = solve_rows(A2, q3, hmu[near], np.zeros(3 * nn), True, True, hsl[near],
-                                prm, cnt)
-            if not ok:
-                return fail
-            dv = response(sGa, sGb, sba, sbb, minv, p2)
-            new = new.copy()
-            npos, nquat, nvel, nom = state_parts(new)
-            for i in range(n):
-                for a in range(3):
-                    nvel[i, a] += dv[i, a]
-                    nom[i, a] += dv[i, 3 + a]
-            cnt[C_HELD] += 1
-    # The warm start of the next step: these rows' normal impulses (none: as it was).
-    if not c:
-        _merge(cnt_total, cnt)
-        return DONE, new, warm, (sel, force, con0), con1
-    w_sa, w_sb = sa0[sel].copy(), sb0[sel].copy()
-    w_pt = pt0[sel].copy()
+            return GROW, y0, 0, flags, warm, none, _no_contacts(0)
+        have1 = True
+        npos, nquat, nvel, nom = state_parts(new)
+        G1a, G1b = _rows_at(sa_r, sb_r, ba, bb, pt_r, pos0, R0, frame, Ga, Gb, con1, npos,
+                            rotations(nquat), radius, count)
+        w1 = apply_rows(G1a, G1b, ba, bb, nvel, nom)
+        model_w = A @ p + q
+        off, qmax = 0.0, 0.0
+        for x in range(3 * c):
+            off = max(off, abs(w1[x] - model_w[x]))
+            qmax = max(qmax, abs(q[x]))
+        if correction == corrections or off <= prm[P_MODEL_TOLERANCE] * max(qmax, rate):
+            break
+        cnt[C_CORRECTIONS] += 1
+        q = q + (w1 - model_w)
+        p, ok = solve_rows(A, q, mu, p, False, no_equal, False, sliding, prm, cnt)
+        if not ok:
+            return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+    if not have1:
+        con1 = _detect_ctx(ctx, new)
+        if con1[0] < 0:
+            return GROW, y0, 0, flags, warm, none, _no_contacts(0)
     w_pn = np.empty(c)
     for k in range(c):
         w_pn[k] = p[3 * k]
-    _merge(cnt_total, cnt)
-    return DONE, new, (w_sa, w_sb, w_pt, w_pn), (sel, force, con0), con1
+    warm = (sa_r.copy(), sb_r.copy(), pt_r.copy(), w_pn)
+    return DONE, new, nw, fl, warm, (sel, force, con, y0, t), con1
+
+
+@njit(cache=True)
+def _locate(ctx: tuple, y0: np.ndarray, con: tuple, r: tuple, h: float, hit_depth: float,
+            nw: int, fl: int) -> tuple:
+    """
+    Return ``(code, state, τ)``: where the first new contact's depth crossed zero.
+
+    As ``ContactSteps._locate``: regula falsi (Illinois) over partial steps from ``y0``
+    with the forces held (``wbuf[:nw]``); ``τ = 0`` when the new contact overlaps at
+    ``y0`` already.
+    """
+    prm = ctx[15]
+    loc, rate = prm[P_LOCATION], prm[P_RATE]
+    margin = ctx[10][14]
+    sel = r[0]
+    every = np.ones(sel.shape[0], dtype=np.bool_)
+    g0, code = _new_depth(ctx, con, sel, y0, every, con, y0, margin)
+    if code != DONE:
+        return code, y0, 0.0
+    if g0 > loc:
+        return DONE, y0, 0.0
+    lo_t, lo_g = 0.0, min(g0, -loc)
+    hi_t, hi_g = h, hit_depth
+    side = 0
+    best, best_t, have_best = y0, 0.0, False
+    for _ in range(int(prm[P_MAX_LOCATION_ITERATIONS])):
+        tau = (lo_t * hi_g - hi_t * lo_g) / (hi_g - lo_g)
+        if not lo_t < tau < hi_t:
+            tau = 0.5 * (lo_t + hi_t)
+        trial, finite = _advance_ctx(ctx, y0, tau, nw, fl)
+        if not finite:
+            return BAIL, y0, 0.0
+        con_t = _detect_ctx(ctx, trial)
+        if con_t[0] < 0:
+            return GROW, y0, 0.0
+        g, code = _new_depth(ctx, con, sel, y0, every, con_t, trial, margin)
+        if abs(g) <= loc:
+            cont = _continuing(ctx, con, sel, y0, every, con_t, trial)[1]
+            fresh = np.zeros(con_t[0], dtype=np.bool_)
+            for j in range(con_t[0]):
+                fresh[j] = con_t[7][j] >= -loc and not cont[j]
+            idx = _where(fresh)
+            if idx.shape[0]:
+                rt = _make_rows(ctx, trial, con_t, idx)
+                for k in range(idx.shape[0]):
+                    if rt[7][k] < -rate:
+                        return DONE, trial, tau
+            g = -loc
+        if g > 0.0:
+            hi_t, hi_g = tau, g
+            if side == 1:
+                lo_g *= 0.5
+            side = 1
+        else:
+            lo_t, lo_g = tau, g
+            if side == -1:
+                hi_g *= 0.5
+            side = -1
+            best, best_t, have_best = trial, tau, True
+    if not have_best:
+        return DONE, y0, 0.0
+    return DONE, best, best_t
+
+
+@njit(cache=True)
+def _new_depth(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
+               which: np.ndarray, con: tuple, y: np.ndarray, margin: float) -> tuple:
+    """Return the deepest depth of contacts continuing no row (−margin: none), and DONE."""
+    cont = _continuing(ctx, r_con, r_sel, r_y, which, con, y)[1]
+    out = -np.inf
+    for j in range(con[0]):
+        if not cont[j]:
+            out = max(out, con[7][j])
+    return (-margin if out == -np.inf else out), DONE
+
+
+@njit(cache=True)
+def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
+    """
+    Correct the step's end, as ``ContactSteps._settle``: ``(code, y, contacts at y)``.
+
+    Depth beyond the tolerance and loaded contacts left apart are projected out
+    (positions: the smallest pushes, loaded contacts held at zero depth); the loaded
+    contacts' normal rates within ``HOLD_RATE`` of zero are set to zero.
+    """
+    prm, minv = ctx[15], ctx[16]
+    loc = prm[P_LOCATION]
+    sel, force, r_con, r_y, _ = record
+    c = sel.shape[0]
+    con = _detect_ctx(ctx, y)
+    if con[0] < 0:
+        return GROW, y, con
+    active = np.zeros(c, dtype=np.bool_)
+    nr = r_con[6]
+    for k in range(c):
+        active[k] = (force[k, 0] * nr[sel[k], 0] + force[k, 1] * nr[sel[k], 1]
+                     + force[k, 2] * nr[sel[k], 2]) > 0.0
+    held = _continuing(ctx, r_con, sel, r_y, active, con, y)[1]
+    deep = lifted = False
+    dmax = -np.inf
+    for j in range(con[0]):
+        if con[7][j] > loc:
+            deep = True
+        if held[j] and con[7][j] < -loc:
+            lifted = True
+        dmax = max(dmax, con[7][j])
+    if deep or lifted:
+        if deep:
+            cnt[C_MAX_DEPTH] = max(cnt[C_MAX_DEPTH], dmax)
+        pick = np.zeros(con[0], dtype=np.bool_)
+        for j in range(con[0]):
+            pick[j] = held[j] or con[7][j] >= -loc
+        idx = _where(pick)
+        pr = _make_rows(ctx, y, con, idx)
+        m = idx.shape[0]
+        A = delassus(pr[8], pr[9], pr[10], pr[11], minv)
+        q3 = np.zeros(3 * m)
+        biggest = 0.0
+        for k in range(m):
+            q3[3 * k] = -con[7][idx[k]]
+            biggest = max(biggest, abs(con[7][idx[k]]))
+        p, ok = solve_rows(A, q3, pr[4], np.zeros(3 * m), True, held[idx], True, pr[6], prm,
+                           cnt)
+        if not ok:
+            return BAIL, y, con
+        dq = response(pr[8], pr[9], pr[10], pr[11], minv, p)
+        cnt[C_PROJECTIONS] += 1
+        cnt[C_MAX_PROJECTED] = max(cnt[C_MAX_PROJECTED], biggest)
+        y = y.copy()
+        pos, quat, vel, om = state_parts(y)
+        for i in range(pos.shape[0]):
+            for a in range(3):
+                pos[i, a] += dq[i, a]
+            quat_exp_multiply(quat[i], dq[i, 3], dq[i, 4], dq[i, 5], quat[i])
+        con = _detect_ctx(ctx, y)
+        if con[0] < 0:
+            return GROW, y, con
+        held = _continuing(ctx, r_con, sel, r_y, active, con, y)[1]
+    hs = _where(held)
+    nh = hs.shape[0]
+    if nh == 0:
+        return DONE, y, con
+    hr = _make_rows(ctx, y, con, hs)
+    hvn = hr[7]
+    needed = False
+    for k in range(nh):
+        if abs(hvn[k]) <= prm[P_HOLD_RATE] and abs(hvn[k]) > prm[P_RATE_FLOOR]:
+            needed = True
+    if not needed:
+        return DONE, y, con
+    near = np.zeros(nh, dtype=np.bool_)
+    for k in range(nh):
+        near[k] = abs(hvn[k]) <= prm[P_HOLD_RATE]
+    sr = _subset(hr, _where(near))
+    nn = sr[0].shape[0]
+    A2 = delassus(sr[8], sr[9], sr[10], sr[11], minv)
+    q3 = np.zeros(3 * nn)
+    for x in range(nn):
+        q3[3 * x] = sr[7][x]
+    p2, ok = solve_rows(A2, q3, sr[4], np.zeros(3 * nn), True, np.ones(nn, dtype=np.bool_),
+                        True, sr[6], prm, cnt)
+    if not ok:
+        return BAIL, y, con
+    dv = response(sr[8], sr[9], sr[10], sr[11], minv, p2)
+    y = y.copy()
+    pos, quat, vel, om = state_parts(y)
+    for i in range(pos.shape[0]):
+        for a in range(3):
+            vel[i, a] += dv[i, a]
+            om[i, a] += dv[i, 3 + a]
+    cnt[C_HELD] += 1
+    return DONE, y, con
 
 
 @njit(cache=True)
 def _merge(total: np.ndarray, cnt: np.ndarray) -> None:
     """Add a step's counters to ``total`` (the largest of the maxima)."""
     for x in range(cnt.shape[0]):
-        if x == C_ITERATIONS_MAX or x == C_COMPLEMENTARITY:
+        if x in (C_ITERATIONS_MAX, C_COMPLEMENTARITY, C_MAX_DEPTH, C_MAX_PROJECTED):
             total[x] = max(total[x], cnt[x])
         else:
             total[x] += cnt[x]
