@@ -63,6 +63,11 @@ move by ``M̄⁻¹ Gᵀ μ`` with ``μ ≥ 0`` the smallest pushes that zero eve
 largest value is reported (``max_depth``), as is the energy it may add (``m g``
 times a depth within the tolerance).
 
+In scenes of free bodies with the knob off, the steps run in a compiled kernel
+(:mod:`.kernels.contact_step`, :meth:`ContactSteps.compiled_steps`) that follows this
+module's methods function for function; this module stays the reference (and takes
+every step of scenes with joints).
+
 Pairwise coefficients: ``μ = √(μ_a μ_b)`` (so two like surfaces have their own
 ``μ``, and a frictionless one makes the pair frictionless) and ``e = max(e_a,
 e_b)``, as Box2D combines them.
@@ -273,8 +278,8 @@ class ContactSteps:
         self._frames_seen: Optional[tuple] = None
         self._lazy: Optional[tuple] = None
         self.record = ContactRecord()
-        #: Take the steps no event interrupts in the compiled kernel (scenes of free
-        #: bodies: :meth:`compiled_steps`); False: every step in Python (the reference).
+        #: Take the steps of scenes of free bodies in the compiled kernel
+        #: (:meth:`compiled_steps`); False: every step in Python (the reference).
         self.compiled = True
         self._kernel_key: Optional[tuple] = None
         self._kernel_args: tuple = ()
