@@ -277,6 +277,7 @@ class ContactSteps:
         self._seen: Optional[tuple] = None
         self._frames_seen: Optional[tuple] = None
         self._lazy: Optional[tuple] = None
+        self._overlaps: Optional[ContactRows] = None
         self.record = ContactRecord()
         #: Take the steps of scenes of free bodies in the compiled kernel
         #: (:meth:`compiled_steps`); False: every step in Python (the reference).
@@ -580,6 +581,7 @@ class ContactSteps:
                     events += 1
                     touching = self.rows(state)
             rows = touching.subset(touching.vn <= self.rate)
+            self._overlaps = self._overlapping(state, rows)
             trial = self._held_step(state, rows, h, t_end)
             hit = None if events >= MAX_EVENTS else self._new_overlap(rows, trial)
             if events >= MAX_EVENTS:
@@ -880,10 +882,36 @@ class ContactSteps:
         """Return the deepest depth at ``state`` of contacts not continuing a row (None: none)."""
         if not len(con.depth):
             return None
-        fresh = ~self._continuing(rows, np.ones(len(rows), dtype=bool), con, state)
+        fresh = ~self._known(rows, con, state)
         if not np.any(fresh):
             return None
         return float(np.max(con.depth[fresh]))
+
+    def _known(self, rows: ContactRows, con: Contacts, state: State) -> np.ndarray:
+        """
+        Tell per contact of ``con`` at ``state`` whether it is not new in this (partial) step.
+
+        It continues a row, or an overlap the step started from (:meth:`_overlapping`).
+        """
+        known = self._continuing(rows, np.ones(len(rows), dtype=bool), con, state)
+        if self._overlaps is not None:
+            known |= self._continuing(self._overlaps, np.ones(len(self._overlaps), dtype=bool),
+                                      con, state)
+        return known
+
+    def _overlapping(self, state: State, rows: ContactRows) -> Optional[ContactRows]:
+        """
+        Return the contacts deeper than the tolerance at ``state`` that are not rows, or None.
+
+        A contact moving apart from an overlap (one a step's end left for its projection,
+        jammed in a pile): not an impact to locate, and not the new contact whose depth
+        the location follows. Counted as new, it would stop every location in the step
+        (the step would stand from its start, :meth:`_locate`'s ``τ = 0``).
+        """
+        con = self.detect(state)
+        deep = (con.depth > self.location) \
+            & ~self._continuing(rows, np.ones(len(rows), dtype=bool), con, state)
+        return self.rows(state, con, select=deep) if np.any(deep) else None
 
     def _continuing(self, rows: Optional[ContactRows], which: np.ndarray, con: Contacts,
                     state: State) -> np.ndarray:
@@ -990,8 +1018,7 @@ class ContactSteps:
         """Tell whether a new contact (continuing none of ``touching``) closes at ``state``."""
         con = self.detect(state)
         near = con.depth >= -self.location
-        fresh = near & ~self._continuing(touching, np.ones(len(touching), dtype=bool), con,
-                                         state)
+        fresh = near & ~self._known(touching, con, state)
         if not np.any(fresh):
             return False
         rows = self.rows(state, con, select=fresh)
@@ -1082,7 +1109,11 @@ class ContactSteps:
             A = rows.G @ Y
             q3 = np.zeros(3 * len(rows))
             q3[0::3] = -rows.contacts.depth
-            p = self.solve(A, q3, rows.mu, normal_only=True, equal=held[select])
+            # Lifted loaded contacts are pulled back to their surface (an equality); the
+            # others pushed out (``depth ≥ 0``): held at zero too, a jammed pile's
+            # contacts could leave no push that takes its depth out.
+            lift = held & (con.depth < -self.location)
+            p = self.solve(A, q3, rows.mu, normal_only=True, equal=lift[select])
             dq = (Y @ p).reshape(-1, 6)
             self.counters['projections'] += 1
             self.counters['max_projected'] = max(self.counters['max_projected'],

@@ -854,14 +854,20 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
                 state = state2
                 touching = _make_rows(ctx, state, con, _where(con[7] >= -loc))
         rows_ = _subset(touching, _where(touching[7] <= rate))
+        # The overlaps the (partial) step starts from that are not rows (``_overlapping``).
+        cont0 = _continuing(ctx, con, rows_[0], state,
+                            np.ones(rows_[0].shape[0], dtype=np.bool_), con, state)[1]
+        deep0 = np.zeros(con[0], dtype=np.bool_)
+        for j in range(con[0]):
+            deep0[j] = con[7][j] > loc and not cont0[j]
+        ov = _where(deep0)
         code, trial, nw, fl, warm, record, con_trial = _held(ctx, state, t, con, rows_, h,
                                                              warm, cnt)
         if code != DONE:
             return grow if code == GROW else fail
         hit_depth = -np.inf
         if events < max_events:
-            cont = _continuing(ctx, con, rows_[0], state,
-                               np.ones(rows_[0].shape[0], dtype=np.bool_), con_trial, trial)[1]
+            cont = _known(ctx, con, rows_[0], ov, state, con_trial, trial)
             for j in range(con_trial[0]):
                 if not cont[j] and con_trial[7][j] > loc:
                     hit_depth = max(hit_depth, con_trial[7][j])
@@ -870,7 +876,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         if hit_depth == -np.inf:
             code, new, con_new = _accept(ctx, trial, record, cnt)
             break
-        code, located, tau = _locate(ctx, state, con, rows_, h, hit_depth, nw, fl)
+        code, located, tau = _locate(ctx, state, con, rows_, ov, h, hit_depth, nw, fl)
         if code != DONE:
             return grow if code == GROW else fail
         if tau <= 0.0:
@@ -1050,21 +1056,20 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
 
 
 @njit(cache=True)
-def _locate(ctx: tuple, y0: np.ndarray, con: tuple, r: tuple, h: float, hit_depth: float,
-            nw: int, fl: int) -> tuple:
+def _locate(ctx: tuple, y0: np.ndarray, con: tuple, r: tuple, ov: np.ndarray, h: float,
+            hit_depth: float, nw: int, fl: int) -> tuple:
     """
     Return ``(code, state, τ)``: where the first new contact's depth crossed zero.
 
     As ``ContactSteps._locate``: regula falsi (Illinois) over partial steps from ``y0``
     with the forces held (``wbuf[:nw]``); ``τ = 0`` when the new contact overlaps at
-    ``y0`` already.
+    ``y0`` already; ``ov``: the overlaps ``y0`` has that are not rows (not new).
     """
     prm = ctx[15]
     loc, rate = prm[P_LOCATION], prm[P_RATE]
     margin = ctx[10][14]
     sel = r[0]
-    every = np.ones(sel.shape[0], dtype=np.bool_)
-    g0, code = _new_depth(ctx, con, sel, y0, every, con, y0, margin)
+    g0, code = _new_depth(ctx, con, sel, ov, y0, con, y0, margin)
     if code != DONE:
         return code, y0, 0.0
     if g0 > loc:
@@ -1083,9 +1088,9 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, r: tuple, h: float, hit_dept
         con_t = _detect_ctx(ctx, trial)
         if con_t[0] < 0:
             return GROW, y0, 0.0
-        g, code = _new_depth(ctx, con, sel, y0, every, con_t, trial, margin)
+        g, code = _new_depth(ctx, con, sel, ov, y0, con_t, trial, margin)
         if abs(g) <= loc:
-            cont = _continuing(ctx, con, sel, y0, every, con_t, trial)[1]
+            cont = _known(ctx, con, sel, ov, y0, con_t, trial)
             fresh = np.zeros(con_t[0], dtype=np.bool_)
             for j in range(con_t[0]):
                 fresh[j] = con_t[7][j] >= -loc and not cont[j]
@@ -1113,10 +1118,23 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, r: tuple, h: float, hit_dept
 
 
 @njit(cache=True)
-def _new_depth(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
-               which: np.ndarray, con: tuple, y: np.ndarray, margin: float) -> tuple:
-    """Return the deepest depth of contacts continuing no row (−margin: none), and DONE."""
-    cont = _continuing(ctx, r_con, r_sel, r_y, which, con, y)[1]
+def _known(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y: np.ndarray,
+           con: tuple, y: np.ndarray) -> np.ndarray:
+    """Tell per contact of ``con`` at ``y`` whether it continues a row or an overlap ``ov``."""
+    known = _continuing(ctx, r_con, r_sel, r_y, np.ones(r_sel.shape[0], dtype=np.bool_), con,
+                        y)[1]
+    if ov.shape[0]:
+        also = _continuing(ctx, r_con, ov, r_y, np.ones(ov.shape[0], dtype=np.bool_), con, y)[1]
+        for j in range(known.shape[0]):
+            known[j] = known[j] or also[j]
+    return known
+
+
+@njit(cache=True)
+def _new_depth(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y: np.ndarray,
+               con: tuple, y: np.ndarray, margin: float) -> tuple:
+    """Return the deepest depth of new contacts (−margin: none), and DONE."""
+    cont = _known(ctx, r_con, r_sel, ov, r_y, con, y)
     out = -np.inf
     for j in range(con[0]):
         if not cont[j]:
@@ -1169,8 +1187,10 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
         for k in range(m):
             q3[3 * k] = -con[7][idx[k]]
             biggest = max(biggest, abs(con[7][idx[k]]))
-        p, ok = solve_rows(A, q3, pr[4], np.zeros(3 * m), True, held[idx], True, pr[6], prm,
-                           cnt)
+        lift = np.zeros(m, dtype=np.bool_)
+        for k in range(m):
+            lift[k] = held[idx[k]] and con[7][idx[k]] < -loc
+        p, ok = solve_rows(A, q3, pr[4], np.zeros(3 * m), True, lift, True, pr[6], prm, cnt)
         if not ok:
             return BAIL, y, con
         dq = response(pr[8], pr[9], pr[10], pr[11], minv, p)
