@@ -909,8 +909,10 @@ class ContactSteps:
         (the step would stand from its start, :meth:`_locate`'s ``τ = 0``).
         """
         con = self.detect(state)
-        deep = (con.depth > self.location) \
-            & ~self._continuing(rows, np.ones(len(rows), dtype=bool), con, state)
+        deep = con.depth > self.location
+        if not np.any(deep):
+            return None
+        deep &= ~self._continuing(rows, np.ones(len(rows), dtype=bool), con, state)
         return self.rows(state, con, select=deep) if np.any(deep) else None
 
     def _continuing(self, rows: Optional[ContactRows], which: np.ndarray, con: Contacts,

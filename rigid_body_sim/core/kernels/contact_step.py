@@ -855,11 +855,12 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
                 touching = _make_rows(ctx, state, con, _where(con[7] >= -loc))
         rows_ = _subset(touching, _where(touching[7] <= rate))
         # The overlaps the (partial) step starts from that are not rows (``_overlapping``).
-        cont0 = _continuing(ctx, con, rows_[0], state,
-                            np.ones(rows_[0].shape[0], dtype=np.bool_), con, state)[1]
         deep0 = np.zeros(con[0], dtype=np.bool_)
-        for j in range(con[0]):
-            deep0[j] = con[7][j] > loc and not cont0[j]
+        if np.any(con[7] > loc):
+            cont0 = _continuing(ctx, con, rows_[0], state,
+                                np.ones(rows_[0].shape[0], dtype=np.bool_), con, state)[1]
+            for j in range(con[0]):
+                deep0[j] = con[7][j] > loc and not cont0[j]
         ov = _where(deep0)
         code, trial, nw, fl, warm, record, con_trial = _held(ctx, state, t, con, rows_, h,
                                                              warm, cnt)
