@@ -95,7 +95,7 @@ from .core.effects import AppliedWrenches
 from .core.integrators import INTEGRATORS
 from .core.limits import SceneJoint
 from .core.robots import CommandGroup, RobotSpec
-from .core.shapes import CollisionShape
+from .core.shapes import ALL_BITS, CollisionShape
 from .core.validate import finite_array, positive_scalar
 from .urdf import parse_urdf, read_robot_xml, UrdfError
 
@@ -351,6 +351,12 @@ def _robots(data: Any, source: str) -> list:
             options = _collision_options(collide, f'{field}.collisions',
                                          {link.name for link in parsed.links})
             collide = True
+            group, mask = options.get('group', 0), options.get('mask', ALL_BITS)
+            if not entry.get('self_collide', False) and group & mask:
+                raise SpecError(f'{field}.collisions.mask',
+                                f'shares bits {group & mask} with the group {group}: the '
+                                f"robot's links would meet each other, and self_collide is "
+                                f"false; give a mask without the group's bits")
         elif not isinstance(collide, bool):
             raise SpecError(f'{field}.collisions', f'expected true, false or a mapping '
                                                    f'{{friction, restitution, group, mask, '

@@ -175,17 +175,20 @@ def _net_wrenches(sim, con):
     return out
 
 
-def test_batched_steps_are_the_single_steps():
+@pytest.mark.parametrize('name', ['sliding box', 'bouncing ball', 'sphere pile'])
+def test_batched_steps_are_the_single_steps(name):
     """``step(n)`` runs the kernel's steps in one call: the same steps as one at a time."""
-    one, _, _ = _pair('sliding box', 'rkmk4')
-    many, _, _ = _pair('sliding box', 'rkmk4')
-    for _ in range(700):
+    one, _, steps = _pair(name, 'rkmk4')
+    many, _, _ = _pair(name, 'rkmk4')
+    for _ in range(steps):
         one.step()
-    many.step(700)
+    many.step(steps)
     assert one.time == many.time
     np.testing.assert_array_equal(one.state.y, many.state.y)
     assert one.contacts()['normal_force'].tolist() == many.contacts()['normal_force'].tolist()
     assert many.contact.counters == one.contact.counters
+    assert list(many.contact.impacts) == list(one.contact.impacts)
+    assert one.contact.counters['impacts'] > 0 or name == 'sliding box'
 
 
 def test_a_detector_buffer_too_small_is_grown_and_the_step_taken():
@@ -199,3 +202,20 @@ def test_a_detector_buffer_too_small_is_grown_and_the_step_taken():
     assert fast.contact.counters['compiled_steps'] == 50
     assert len(d._depths) >= 20   # (5 boxes: 4 points each, on the ground or the box below)
     np.testing.assert_allclose(fast.state.y, slow.state.y, rtol=0, atol=1e-12)
+
+
+def test_effect_work_is_charged_to_the_steps_that_did_it():
+    # Gravity is charged for every right-hand side of the compiled steps, as of the Python
+    # path's; the contact effect for the Python path's steps with contact forces alone
+    # (the kernel's wrenches are not its evaluations), never for a batch that came before.
+    fast, slow, _ = _pair('resting box', 'rkmk4')
+    fast.step(50)
+    slow.step(50)
+    wf, ws = fast.work(), slow.work()
+    assert wf['gravity_evaluations'] == ws['gravity_evaluations'] > 0
+    assert wf['contact_evaluations'] == 0 < ws['contact_evaluations']
+    fast.contact.compiled = False
+    fast.step()
+    once = fast.work()['contact_evaluations']
+    slow.step()
+    assert once == slow.work()['contact_evaluations'] - ws['contact_evaluations']

@@ -300,6 +300,7 @@ class ContactSteps:
                                     else 0.0)
         #: The last step's rows' normal impulses: shapes a and b, points, impulses.
         self._warm: tuple = _NO_WARM
+        self._overlaps = None
         self.impacts.clear()
         self.counters = {'impacts': 0, 'located_steps': 0, 'events_capped': 0,
                          'lcp_solves': 0, 'lcp_iterations_max': 0, 'lcp_failures': 0,
@@ -714,6 +715,8 @@ class ContactSteps:
                     ) -> None:
         """Put the rows' forces (c, 3, world, on a; −force on b) in the wrench effect."""
         dyn = self.sim.dynamics
+        # The kernel work deferred so far was done with the wrenches as they were.
+        dyn.settle_effect_work()
         if rows is None:
             if self.wrenches.clear():
                 dyn.changed()
@@ -791,6 +794,9 @@ class ContactSteps:
             self._grow()
         if before is not None:
             dyn.count_effect_work_since(before)
+        # (Charged now, with the contact effect empty: its compiled wrenches are not counted
+        # as its evaluations; the other effects' work is.)
+        dyn.settle_effect_work()
         integ._kick_at = None
         if not taken:
             return 0, start

@@ -333,8 +333,13 @@ class Simulation:
             surface = {k: opts[k] for k in ('friction', 'restitution') if k in opts}
             bits = {k: opts[k] for k in ('group', 'mask') if k in opts}
             if not spec.self_collide:
-                bits = {'group': bits.get('group', 0) | bit,
-                        'mask': bits.get('mask', ALL_BITS) & ~bit}
+                group, mask = bits.get('group', 0), bits.get('mask', ALL_BITS)
+                if group & mask:
+                    raise SpecError(f'robots.{spec.name}.collisions.mask',
+                                    f'shares bits {group & mask} with the group {group}: the '
+                                    f"robot's links would meet each other, and self_collide "
+                                    f'is false')
+                bits = {'group': group | bit, 'mask': mask & ~bit}
             count: dict = {}
             for link, kind, size, xyz, rpy in spec.collisions:
                 k = count[link] = count.get(link, -1) + 1   # (the link's k-th <collision>)
