@@ -167,9 +167,10 @@ activate() {
 
 compile_kernels() {
     # numba compiles the core's kernels at their first call and caches them next to the
-    # sources: do it here, once (about 130 s), not in the node's first start or a test.
+    # sources: do it here, once (about 330 s on 2 cores, the contact steps' kernel about
+    # 200 of them), not in the node's first start or a test.
     if ! ls "$ROOT"/rigid_body_sim/core/kernels/__pycache__/*.nbi >/dev/null 2>&1; then
-        say "compiling the step kernels (numba, about 2 minutes the first time)"
+        say "compiling the step kernels (numba, about 5 minutes the first time)"
     fi
     python -m rigid_body_sim.core.warmup >&2
 }

@@ -2,7 +2,7 @@
 Compile (or load from numba's cache) every compiled kernel of the core once.
 
 numba compiles a kernel at its first call and caches the machine code next to
-the source (``__pycache__``); the first run on a machine takes about 130 s, a
+the source (``__pycache__``); the first run on a machine takes about 330 s (2 cores), a
 later one 0.4 s. ``./dev.sh`` runs ``python -m rigid_body_sim.core.warmup``
 after the set-up, so neither the node's first start nor a test pays for it.
 The scenes below take every kernel path with the argument types of real runs:
