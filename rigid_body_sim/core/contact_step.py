@@ -103,6 +103,14 @@ RATE_FLOOR = 1e-13
 #: Relative: the friction iteration ends when no impulse changes by more than this
 #: fraction of the largest (and every friction is within the cone by as much).
 FRICTION_TOLERANCE = 1e-8
+#: Relative to the rows' velocities ``w = A p + q`` (``|A| |p| + |q|``, the largest
+#: row): where the friction iteration's changes stop shrinking (twice in a row, less
+#: than halved), it also ends when the contact conditions hold at its iterate to this.
+#: Redundant contacts (four feet under a rigid body) leave the forces not unique, and
+#: the iterates then drift among the solutions without their changes ever falling
+#: below :data:`FRICTION_TOLERANCE`: by ``q``'s inconsistency across the redundant rows
+#: (the joints' velocity error, about 1e-13 of it) over ``ρ``, each iteration.
+RESIDUAL_TOLERANCE = 1e-12
 #: Most iterations of the friction boxes (each an exact box LCP, warm-started).
 FRICTION_ITERATIONS = 60
 #: The proximal regularization, relative to the Delassus operator's largest diagonal.
@@ -112,6 +120,10 @@ PROXIMAL = 1e-6
 MODEL_TOLERANCE = 1e-12
 #: Most corrections of the model per step.
 MODEL_CORRECTIONS = 2
+#: Most passes of the end's position projection: each is linearized at the positions it
+#: starts from, so a projection of ``d`` leaves ``O(d²/ρ)`` (``ρ`` the contacts' and
+#: the bodies' radii of curvature and turn), which the next pass takes out.
+PROJECTION_PASSES = 3
 #: m/s: a loaded contact's normal velocity at a step's end within this of zero is the
 #: LCP's model error (it ended the step at zero), set to zero (:meth:`ContactSteps._accept`).
 HOLD_RATE = 1e-6
@@ -301,12 +313,14 @@ class ContactSteps:
         #: The last step's rows' normal impulses: shapes a and b, points, impulses.
         self._warm: tuple = _NO_WARM
         self._overlaps = None
+        self._symmetric = True
         self.impacts.clear()
         self.counters = {'impacts': 0, 'located_steps': 0, 'events_capped': 0,
                          'lcp_solves': 0, 'lcp_iterations_max': 0, 'lcp_failures': 0,
                          'complementarity_max': 0.0, 'max_depth': 0.0,
                          'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
-                         'held_rates': 0, 'immovable_rows': 0, 'compiled_steps': 0}
+                         'held_rates': 0, 'immovable_rows': 0, 'compiled_steps': 0,
+                         'stepped_responses': 0}
 
     @property
     def record(self) -> ContactRecord:
@@ -478,7 +492,7 @@ class ContactSteps:
     def solve(self, A: np.ndarray, q: np.ndarray, mu: np.ndarray,
               start: Optional[np.ndarray] = None, normal_only: bool = False,
               equal: Optional[np.ndarray] = None,
-              sliding: Optional[np.ndarray] = None) -> np.ndarray:
+              sliding: Optional[np.ndarray] = None, symmetric: bool = True) -> np.ndarray:
         """
         Return the rows' impulses ``p`` (3c,): ``w = A p + q`` under the contact conditions.
 
@@ -490,6 +504,8 @@ class ContactSteps:
         friction opposes the slip; a sticking contact's two rows are the pyramid
         ``|λᵢ| ≤ μ λ_n``); ``equal`` (c,) bool: those
         contacts' normal rows are equalities (``w_n = 0``, ``p_n`` of either sign).
+        ``symmetric``: ``A`` is ``G M̄⁻¹ Gᵀ`` (symmetric, made so to its rounding);
+        False: a stepped response (:meth:`_step_response`), taken as it is.
         Counted; a solve that does not converge keeps its last iterate and is counted
         in ``lcp_failures``.
         """
@@ -516,7 +532,8 @@ class ContactSteps:
                 equal = equal[movable] if normal_only else equal[movable[0::3]]
             rows = rows[keep]
         A_r, q_r = A[np.ix_(rows, rows)], q[rows]
-        A_r = 0.5 * (A_r + A_r.T)   # (symmetric to rounding: G M̄⁻¹ Gᵀ)
+        if symmetric:
+            A_r = 0.5 * (A_r + A_r.T)   # (symmetric to rounding: G M̄⁻¹ Gᵀ)
         rho = PROXIMAL * float(np.max(np.diag(A_r)))
         # What the impulses' rounding is (a target inconsistent across redundant rows by
         # its rounding moves them along their null space by about this each iteration).
@@ -528,7 +545,7 @@ class ContactSteps:
             lo[::1 if normal_only else 3][equal] = -np.inf
         p[::1 if normal_only else 3] = np.maximum(p[::1 if normal_only else 3],
                                                   lo[::1 if normal_only else 3])
-        converged, it = False, 0
+        converged, it, stalled, last = False, 0, 0, np.inf
         for it in range(1, FRICTION_ITERATIONS + 1):
             if not normal_only:
                 half = mu * np.maximum(p[0::3], 0.0)
@@ -548,7 +565,13 @@ class ContactSteps:
             change = float(np.max(np.abs(new - p)))
             p = new
             scale = max(float(np.max(np.abs(p))), 1e-300)
-            if sol.converged and change <= FRICTION_TOLERANCE * scale + floor:
+            stalled = stalled + 1 if change > 0.5 * last else 0
+            last = change
+            if sol.converged and (change <= FRICTION_TOLERANCE * scale + floor or (
+                    stalled >= 2 and _residual(A_r, q_r, p, mu, normal_only, sliding, equal,
+                                               pinned)
+                    <= RESIDUAL_TOLERANCE * float(np.max(np.abs(A_r) @ np.abs(p)
+                                                         + np.abs(q_r))))):
                 converged = True
                 break
         cnt = self.counters
@@ -631,19 +654,19 @@ class ContactSteps:
             self.record = ContactRecord(state.time, rows, np.zeros((0, 3)))
             return free
         v_free = _stack(free.vel_com_world, free.ang_vel_principal)
-        Y = self.response(state, rows.G)
-        A = rows.G @ Y
+        A = self._step_response(state, rows, h, t_end, v_free)
         q = rows.G @ v_free
-        p = self.solve(A, q, rows.mu, start=self._warm_start(rows), sliding=rows.sliding)
+        p = self.solve(A, q, rows.mu, start=self._warm_start(rows), sliding=rows.sliding,
+                       symmetric=self._symmetric)
         turned = self._slipping(rows, p, A @ p + q)
         if turned is not None:
             # Contacts that stuck at the start and slip over the step: their friction
             # along their slip (Coulomb's direction), not the pyramid's corner.
             rows = turned
-            Y = self.response(state, rows.G)
-            A = rows.G @ Y
+            A = self._step_response(state, rows, h, t_end, v_free)
             q = rows.G @ v_free
-            p = self.solve(A, q, rows.mu, start=p, sliding=rows.sliding)
+            p = self.solve(A, q, rows.mu, start=p, sliding=rows.sliding,
+                           symmetric=self._symmetric)
         new = free
         force = np.zeros((len(rows), 3))
         for correction in range(MODEL_CORRECTIONS + 1):
@@ -662,10 +685,56 @@ class ContactSteps:
                 break
             self.counters['model_corrections'] += 1
             q = q + offset
-            p = self.solve(A, q, rows.mu, start=p, sliding=rows.sliding)
+            p = self.solve(A, q, rows.mu, start=p, sliding=rows.sliding,
+                           symmetric=self._symmetric)
         self._remember(rows, p)
         self.record = ContactRecord(state.time, rows, force)
         return new
+
+    def _step_response(self, state: State, rows: ContactRows, h: float, t_end: float,
+                       v_free: np.ndarray) -> np.ndarray:
+        """
+        Return the rows' Delassus operator over the step: the end velocities per impulse.
+
+        ``G M̄⁻¹ Gᵀ`` (:meth:`response`) when every force but the contacts' is constant
+        over the step, or the scene has no joints (free bodies' damping is weak over a
+        step, ``c h / m``, and the model's corrections take it, as the compiled steps
+        do). With joints and forces of the velocities or positions (servos, joint
+        damping, the bodies' damping) the step answers a held force less than the
+        masses alone would (a servo's damping flow takes ``1 − exp(−kd c h)`` of a
+        joint's rate change back within the step: half of it at ``kd c h ≈ 1``), and a
+        model built on the masses would leave the contacts' end velocities off by that
+        fraction every step (the model's corrections shrinking it only by that ratio
+        each). There each column is the step itself, taken again with a held impulse
+        on that row alone (sized to change the row's velocity by 1 mm/s: the step is
+        affine in it but for the rotations' turn, and the model's corrections take the
+        rest). It is not symmetric (the splitting's flows act joint by joint, not on
+        the mechanism's mass matrix): the solve takes it as it is (``symmetric``), a
+        P-matrix near a symmetric one, for which its active-set method has no proof of
+        termination but its cap (counted as a failure when reached).
+        """
+        A = rows.G @ self.response(state, rows.G)
+        dyn = self.sim.dynamics
+        self._symmetric = not (dyn.constrained
+                               and any(e.velocity_dependent for e in dyn.effects))
+        if self._symmetric:
+            return A
+        self.counters['stepped_responses'] += 1
+        frame = rows.frame
+        out = np.empty_like(A)
+        for r in range(len(A)):
+            size = 1e-3 / A[r, r] if A[r, r] > 0.0 else 0.0
+            force = np.zeros((len(rows), 3))
+            force[r // 3] = frame[r // 3, r % 3] * (size / h)
+            if size == 0.0:   # a row no impulse moves: the solve leaves it out
+                out[:, r] = A[:, r]
+                continue
+            self._set_forces(rows, force)
+            new = self._advance(state, h, t_end)
+            out[:, r] = rows.G @ (_stack(new.vel_com_world, new.ang_vel_principal) - v_free) \
+                / size
+        self._set_forces(None)
+        return out
 
     def _slipping(self, rows: ContactRows, p: np.ndarray, w: np.ndarray
                   ) -> Optional[ContactRows]:
@@ -843,6 +912,8 @@ class ContactSteps:
         prm[kern.P_RATE_FLOOR] = RATE_FLOOR
         prm[kern.P_MAX_EVENTS], prm[kern.P_MAX_BOUNCES] = MAX_EVENTS, MAX_BOUNCES
         prm[kern.P_MAX_LOCATION_ITERATIONS] = MAX_LOCATION_ITERATIONS
+        prm[kern.P_RESIDUAL_TOLERANCE] = RESIDUAL_TOLERANCE
+        prm[kern.P_PROJECTION_PASSES] = PROJECTION_PASSES
         self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), prm)
         self._kernel_key = (model, d.excluded, (self.location, self.rate))
         return self._kernel_args
@@ -1105,9 +1176,11 @@ class ContactSteps:
             active = np.sum(rec.force * rec.rows.contacts.normal, axis=1) > 0.0
         held = self._continuing(rec.rows, active, con, new) if active is not None \
             else np.zeros(len(con.depth), dtype=bool)
-        deep = con.depth > self.location
-        lifted = held & (con.depth < -self.location)
-        if np.any(deep) or np.any(lifted):
+        for _ in range(PROJECTION_PASSES):
+            deep = con.depth > self.location
+            lift = held & (con.depth < -self.location)
+            if not (np.any(deep) or np.any(lift)):
+                break
             if np.any(deep):
                 self.counters['max_depth'] = max(self.counters['max_depth'],
                                                  float(np.max(con.depth)))
@@ -1120,7 +1193,6 @@ class ContactSteps:
             # Lifted loaded contacts are pulled back to their surface (an equality); the
             # others pushed out (``depth ≥ 0``): held at zero too, a jammed pile's
             # contacts could leave no push that takes its depth out.
-            lift = held & (con.depth < -self.location)
             p = self.solve(A, q3, rows.mu, normal_only=True, equal=lift[select])
             dq = (Y @ p).reshape(-1, 6)
             self.counters['projections'] += 1
@@ -1187,29 +1259,39 @@ def _any_tangent(nrm: np.ndarray) -> np.ndarray:
 
 
 def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
-              normal_only: bool, sliding: Optional[np.ndarray] = None) -> float:
+              normal_only: bool, sliding: Optional[np.ndarray] = None,
+              equal: Optional[np.ndarray] = None,
+              pinned: Optional[np.ndarray] = None) -> float:
     """
     Return the contact conditions' residual at impulses ``p`` (velocity units, m/s).
 
-    Per normal row ``|min(p_n A_nn, w_n)|`` (a natural map); per friction row whose
-    impulse is inside its bound ``μ p_n``, the slip left along it (a sliding contact
-    has its ``t₁`` row alone); a friction row on its bound must slip against it.
+    Per normal row ``|min(p_n A_nn, w_n)|`` (a natural map), ``|w_n|`` for an
+    equality (``equal`` (c,)); per friction row whose impulse is inside its bound
+    ``μ p_n``, the slip left along it (a sliding contact has its ``t₁`` row alone); a
+    friction row on its bound must slip against it, and one beyond its bound counts
+    its excess times ``A_ii``. Rows ``pinned`` (held at zero) are not conditions.
     """
     if not len(q):
         return 0.0
     w = A @ p + q
     d = np.diag(A)
+    step = 1 if normal_only else 3
+    pn, wn = p[0::step], w[0::step]
+    natural = np.abs(np.minimum(pn * d[0::step], wn))
+    if equal is not None:
+        natural = np.where(equal, np.abs(wn), natural)
+    out = float(np.max(natural))
     if normal_only:
-        return float(np.max(np.abs(np.minimum(p * d, w))))
-    pn, wn = p[0::3], w[0::3]
-    out = float(np.max(np.abs(np.minimum(pn * d[0::3], wn))))
+        return out
     bound = mu * np.maximum(pn, 0.0)
     # (a bound is the previous iterate's μ p_n: within the iteration's tolerance of it)
     slack = 2.0 * (FRICTION_TOLERANCE * float(np.max(np.abs(p)))
                    + 64.0 * EPS * float(np.max(np.abs(q))) / float(np.max(d)))
     for col in (1, 2):
-        f, v = p[col::3], w[col::3]
+        f, v, dc = p[col::3], w[col::3], d[col::3]
         present = np.ones(len(f), dtype=bool) if col == 1 or sliding is None else ~sliding
+        if pinned is not None:
+            present &= ~pinned[col::3]
         inside = present & (np.abs(f) < bound - slack)
         if np.any(inside):
             out = max(out, float(np.max(np.abs(v[inside]))))
@@ -1217,4 +1299,7 @@ def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
         on = present & ~inside & (bound > 0.0)
         if np.any(on):
             out = max(out, float(np.max(np.maximum(f[on] * v[on], 0.0) / bound[on])))
+        beyond = present & (np.abs(f) > bound + slack)
+        if np.any(beyond):
+            out = max(out, float(np.max((np.abs(f[beyond]) - bound[beyond]) * dc[beyond])))
     return out

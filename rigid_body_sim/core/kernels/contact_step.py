@@ -46,7 +46,8 @@ from .so3 import quat_exp_multiply, quat_matrix
 #: Slots of the tolerances ``prm`` (the constants of :mod:`..contact_step`).
 (P_LOCATION, P_RATE, P_FRICTION_TOLERANCE, P_FRICTION_ITERATIONS, P_PROXIMAL,
  P_MODEL_TOLERANCE, P_MODEL_CORRECTIONS, P_HOLD_RATE, P_RATE_FLOOR, P_MAX_EVENTS,
- P_MAX_BOUNCES, P_MAX_LOCATION_ITERATIONS, P_WIDTH) = range(13)
+ P_MAX_BOUNCES, P_MAX_LOCATION_ITERATIONS, P_RESIDUAL_TOLERANCE, P_PROJECTION_PASSES,
+ P_WIDTH) = range(15)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
@@ -491,7 +492,7 @@ def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
         if has_equal and equal[a // step3]:
             lo[a] = -np.inf
         p[a] = max(p[a], lo[a])
-    converged, it = False, 0
+    converged, it, stalled, last = False, 0, 0, np.inf
     tol = prm[P_FRICTION_TOLERANCE]
     for it in range(1, int(prm[P_FRICTION_ITERATIONS]) + 1):
         if not normal_only:
@@ -532,16 +533,30 @@ def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
         for a in range(nr):
             scale = max(scale, abs(p[a]))
         scale = max(scale, 1e-300)
+        stalled = stalled + 1 if change > 0.5 * last else 0
+        last = change
         if ok and change <= tol * scale + floor:
             converged = True
             break
+        if ok and stalled >= 2:
+            wmax = 0.0
+            for a in range(nr):
+                wa = abs(qr[a])
+                for b in range(nr):
+                    wa += abs(Ar[a, b]) * abs(p[b])
+                wmax = max(wmax, wa)
+            if residual(Ar, qr, p, mu, normal_only, sliding, tol, equal, has_equal) \
+                    <= prm[P_RESIDUAL_TOLERANCE] * wmax:
+                converged = True
+                break
     cnt[C_SOLVES] += 1
     cnt[C_ITERATIONS_MAX] = max(cnt[C_ITERATIONS_MAX], it)
     if not converged:
         cnt[C_FAILURES] += 1
     if not has_equal:
         cnt[C_COMPLEMENTARITY] = max(cnt[C_COMPLEMENTARITY],
-                                     residual(Ar, qr, p, mu, normal_only, sliding, tol))
+                                     residual(Ar, qr, p, mu, normal_only, sliding, tol,
+                                              equal, False))
     out = np.zeros(m)
     for a in range(nr):
         out[idx[a]] = p[a]
@@ -550,7 +565,7 @@ def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
 
 @njit(cache=True)
 def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal_only: bool,
-             sliding: np.ndarray, tol: float) -> float:
+             sliding: np.ndarray, tol: float, equal: np.ndarray, has_equal: bool) -> float:
     """Return how far the contact conditions are from holding (m/s), as the Python path."""
     m = q.shape[0]
     if not m:
@@ -560,13 +575,17 @@ def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal
     for a in range(m):
         pmax, qmax, dmax = max(pmax, abs(p[a])), max(qmax, abs(q[a])), max(dmax, A[a, a])
     out = 0.0
-    if normal_only:
-        for a in range(m):
+    step = 1 if normal_only else 3
+    for k in range(m // step):
+        a = step * k
+        if has_equal and equal[k]:
+            out = max(out, abs(w[a]))
+        else:
             out = max(out, abs(min(p[a] * A[a, a], w[a])))
+    if normal_only:
         return out
     slack = 2.0 * (tol * pmax + 64.0 * EPS * qmax / dmax)
     for k in range(m // 3):
-        out = max(out, abs(min(p[3 * k] * A[3 * k, 3 * k], w[3 * k])))
         bound = mu[k] * max(p[3 * k], 0.0)
         for col in range(1, 3):
             if col == 2 and sliding[k]:
@@ -576,6 +595,8 @@ def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal
                 out = max(out, abs(v))
             elif bound > 0.0:
                 out = max(out, max(f * v, 0.0) / bound)
+            if abs(f) > bound + slack:
+                out = max(out, (abs(f) - bound) * A[3 * k + col, 3 * k + col])
     return out
 
 
@@ -1149,7 +1170,8 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
     Correct the step's end, as ``ContactSteps._settle``: ``(code, y, contacts at y)``.
 
     Depth beyond the tolerance and loaded contacts left apart are projected out
-    (positions: the smallest pushes, loaded contacts held at zero depth); the loaded
+    (positions: the smallest pushes, loaded contacts held at zero depth; up to
+    ``PROJECTION_PASSES`` linearized passes, until none is left); the loaded
     contacts' normal rates within ``HOLD_RATE`` of zero are set to zero.
     """
     prm, minv = ctx[15], ctx[16]
@@ -1165,15 +1187,17 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
         active[k] = (force[k, 0] * nr[sel[k], 0] + force[k, 1] * nr[sel[k], 1]
                      + force[k, 2] * nr[sel[k], 2]) > 0.0
     held = _continuing(ctx, r_con, sel, r_y, active, con, y)[1]
-    deep = lifted = False
-    dmax = -np.inf
-    for j in range(con[0]):
-        if con[7][j] > loc:
-            deep = True
-        if held[j] and con[7][j] < -loc:
-            lifted = True
-        dmax = max(dmax, con[7][j])
-    if deep or lifted:
+    for _ in range(int(prm[P_PROJECTION_PASSES])):
+        deep = lifted = False
+        dmax = -np.inf
+        for j in range(con[0]):
+            if con[7][j] > loc:
+                deep = True
+            if held[j] and con[7][j] < -loc:
+                lifted = True
+            dmax = max(dmax, con[7][j])
+        if not (deep or lifted):
+            break
         if deep:
             cnt[C_MAX_DEPTH] = max(cnt[C_MAX_DEPTH], dmax)
         pick = np.zeros(con[0], dtype=np.bool_)
