@@ -319,6 +319,13 @@ def sections(quick: bool, node_args: list) -> list:
             about='A sphere dropped, a box sliding to a stop, a stack of ten boxes: the '
                   "whole step's cost, the deepest penetration and each scene's error "
                   'against its closed form, ours and MuJoCo from the same state.')),
+        (None, 'contact_robots', ['--quick'] if quick else [], report.Section(
+            'Contact with robots: cost and quality',
+            f'./dev.sh python bench/contact_robots.py{q}', [T('contact_robots.md')],
+            about='URDF robots touching the ground: a quadruped standing on exact drives and '
+                  'on servos, ANYmal B standing, a gantry pushing a box; every step in '
+                  "Python (scenes with joints), the LCPs' iterations, failures and "
+                  "residual, the deepest penetration and each scene's error.")),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],

@@ -20,7 +20,11 @@ projections; ``M⁻¹`` for a free body). That is a box-constrained LCP in ``p``
 (:mod:`.complementarity`, each tangent row's box ``±μ p_n``) whose boxes depend on
 its normal forces: solved by a fixed-point iteration on the boxes (each solve exact,
 warm-started) until no impulse changes by more than :data:`FRICTION_TOLERANCE` of the
-largest. Coulomb's cone, not the pyramid: a contact sliding at the step's start has one
+largest, or, where its changes stop shrinking (redundant contacts: the iterates drift
+among equal solutions), until the conditions hold at the iterate to
+:data:`RESIDUAL_TOLERANCE`. With joints and forces of the velocities (servos,
+damping), ``A`` is the step's own response (:meth:`ContactSteps._step_response`).
+Coulomb's cone, not the pyramid: a contact sliding at the step's start has one
 friction row, along its slip (``t₁``), so its friction opposes the slip at ``μ λ_n``;
 a sticking contact has two (the pyramid), and where its friction ends on a bound with
 its point slipping, or outside the cone inside the pyramid (up to ``√2 μ λ_n`` along a
@@ -59,9 +63,10 @@ the location: :meth:`ContactSteps.tighten`).
 **Penetration** beyond the tolerance left by a step (a contact's curvature over the
 step, a spawn inside another body) is projected out at the step's end: the bodies
 move by ``M̄⁻¹ Gᵀ μ`` with ``μ ≥ 0`` the smallest pushes that zero every depth
-(the same LCP on the normal rows, positions only: velocities are untouched). Its
-largest value is reported (``max_depth``), as is the energy it may add (``m g``
-times a depth within the tolerance).
+(the same LCP on the normal rows, positions only: velocities are untouched; each
+pass linearized, up to :data:`PROJECTION_PASSES`, what they leave counted in
+``projection_left``). Its largest value is reported (``max_depth``), as is the
+energy it may add (``m g`` times a depth within the tolerance).
 
 In scenes of free bodies with the knob off, the steps run in a compiled kernel
 (:mod:`.kernels.contact_step`, :meth:`ContactSteps.compiled_steps`) that follows this
@@ -105,11 +110,13 @@ RATE_FLOOR = 1e-13
 FRICTION_TOLERANCE = 1e-8
 #: Relative to the rows' velocities ``w = A p + q`` (``|A| |p| + |q|``, the largest
 #: row): where the friction iteration's changes stop shrinking (twice in a row, less
-#: than halved), it also ends when the contact conditions hold at its iterate to this.
-#: Redundant contacts (four feet under a rigid body) leave the forces not unique, and
-#: the iterates then drift among the solutions without their changes ever falling
-#: below :data:`FRICTION_TOLERANCE`: by ``q``'s inconsistency across the redundant rows
-#: (the joints' velocity error, about 1e-13 of it) over ``ρ``, each iteration.
+#: than halved), it also ends when the contact conditions hold at its iterate to this,
+#: plus what no impulse can take out. Redundant contacts (four feet under a rigid
+#: body, a rod's tip on a hinge) leave the forces not unique, and the iterates then
+#: drift among the solutions without their changes ever falling below
+#: :data:`FRICTION_TOLERANCE`: by ``q``'s part outside ``A``'s range (the joints'
+#: velocity error across the redundant rows) over ``ρ`` each iteration; that part, the
+#: drift times ``ρ``, is the least residual any impulse leaves (twice it is allowed).
 RESIDUAL_TOLERANCE = 1e-12
 #: Most iterations of the friction boxes (each an exact box LCP, warm-started).
 FRICTION_ITERATIONS = 60
@@ -320,7 +327,7 @@ class ContactSteps:
                          'complementarity_max': 0.0, 'max_depth': 0.0,
                          'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
                          'held_rates': 0, 'immovable_rows': 0, 'compiled_steps': 0,
-                         'stepped_responses': 0}
+                         'stepped_responses': 0, 'projection_left': 0.0}
 
     @property
     def record(self) -> ContactRecord:
@@ -571,7 +578,7 @@ class ContactSteps:
                     stalled >= 2 and _residual(A_r, q_r, p, mu, normal_only, sliding, equal,
                                                pinned)
                     <= RESIDUAL_TOLERANCE * float(np.max(np.abs(A_r) @ np.abs(p)
-                                                         + np.abs(q_r))))):
+                                                         + np.abs(q_r))) + 2.0 * rho * change)):
                 converged = True
                 break
         cnt = self.counters
@@ -581,7 +588,8 @@ class ContactSteps:
             cnt['lcp_failures'] += 1
         if equal is None:
             cnt['complementarity_max'] = max(cnt['complementarity_max'],
-                                             _residual(A_r, q_r, p, mu, normal_only, sliding))
+                                             _residual(A_r, q_r, p, mu, normal_only, sliding,
+                                                       pinned=pinned))
         out = np.zeros(m)
         out[rows] = p
         return out
@@ -721,19 +729,21 @@ class ContactSteps:
             return A
         self.counters['stepped_responses'] += 1
         frame = rows.frame
-        out = np.empty_like(A)
-        for r in range(len(A)):
-            size = 1e-3 / A[r, r] if A[r, r] > 0.0 else 0.0
-            force = np.zeros((len(rows), 3))
-            force[r // 3] = frame[r // 3, r % 3] * (size / h)
-            if size == 0.0:   # a row no impulse moves: the solve leaves it out
-                out[:, r] = A[:, r]
-                continue
-            self._set_forces(rows, force)
-            new = self._advance(state, h, t_end)
-            out[:, r] = rows.G @ (_stack(new.vel_com_world, new.ang_vel_principal) - v_free) \
-                / size
-        self._set_forces(None)
+        out = A.copy()
+        # (a row no impulse moves, as the solve tells them, keeps its column: the solve
+        # leaves it out)
+        movable = np.diag(A) > 1e-12 * float(np.max(np.diag(A), initial=0.0))
+        try:
+            for r in np.flatnonzero(movable):
+                size = 1e-3 / A[r, r]
+                force = np.zeros((len(rows), 3))
+                force[r // 3] = frame[r // 3, r % 3] * (size / h)
+                self._set_forces(rows, force)
+                new = self._advance(state, h, t_end)
+                out[:, r] = rows.G @ (_stack(new.vel_com_world, new.ang_vel_principal)
+                                      - v_free) / size
+        finally:
+            self._set_forces(None)
         return out
 
     def _slipping(self, rows: ContactRows, p: np.ndarray, w: np.ndarray
@@ -1176,12 +1186,17 @@ class ContactSteps:
             active = np.sum(rec.force * rec.rows.contacts.normal, axis=1) > 0.0
         held = self._continuing(rec.rows, active, con, new) if active is not None \
             else np.zeros(len(con.depth), dtype=bool)
-        for _ in range(PROJECTION_PASSES):
+        for passes in range(PROJECTION_PASSES + 1):
             deep = con.depth > self.location
             lift = held & (con.depth < -self.location)
             if not (np.any(deep) or np.any(lift)):
                 break
-            if np.any(deep):
+            left = float(np.max(np.where(deep, con.depth, 0.0)
+                                - np.where(lift, con.depth, 0.0)))
+            if passes == PROJECTION_PASSES:   # what the passes left (counted)
+                self.counters['projection_left'] = max(self.counters['projection_left'], left)
+                break
+            if passes == 0 and np.any(deep):
                 self.counters['max_depth'] = max(self.counters['max_depth'],
                                                  float(np.max(con.depth)))
             select = held | (con.depth >= -self.location)
@@ -1194,8 +1209,12 @@ class ContactSteps:
             # others pushed out (``depth ≥ 0``): held at zero too, a jammed pile's
             # contacts could leave no push that takes its depth out.
             p = self.solve(A, q3, rows.mu, normal_only=True, equal=lift[select])
+            if not np.any(p):   # no push takes it out (a row no force moves: left, counted)
+                self.counters['projection_left'] = max(self.counters['projection_left'], left)
+                break
+            if passes == 0:
+                self.counters['projections'] += 1
             dq = (Y @ p).reshape(-1, 6)
-            self.counters['projections'] += 1
             self.counters['max_projected'] = max(self.counters['max_projected'],
                                                  float(np.max(np.abs(rows.contacts.depth))))
             quat = quat_multiply(new.quat_principal_world, exp_quat(dq[:, 3:]))

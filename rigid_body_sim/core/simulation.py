@@ -1045,7 +1045,10 @@ class Simulation:
         friction_force``, on b its opposite. ``counters`` (since the reset): impacts,
         steps with a located impact, those cut at :data:`.contact_step.MAX_EVENTS`, the
         contact LCPs solved, their most iterations, failures and largest residual (m/s),
-        the deepest penetration a step left and the projections that took it out.
+        the deepest penetration a step left and the projections that took it out (steps
+        projected, the largest depth projected, the largest depth or lift the projection's
+        passes left: ``projection_left``), the contact operators built from trial steps
+        (``stepped_responses``).
         Empty without collision shapes.
         """
         if self.contact is None:

@@ -51,11 +51,13 @@ from .so3 import quat_exp_multiply, quat_matrix
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
-            'max_depth', 'projections', 'max_projected')
+            'max_depth', 'projections', 'max_projected', 'projection_left')
 (C_SOLVES, C_ITERATIONS_MAX, C_FAILURES, C_COMPLEMENTARITY, C_CORRECTIONS, C_HELD,
- C_IMPACTS, C_LOCATED, C_CAPPED, C_MAX_DEPTH, C_PROJECTIONS, C_MAX_PROJECTED) = range(12)
+ C_IMPACTS, C_LOCATED, C_CAPPED, C_MAX_DEPTH, C_PROJECTIONS, C_MAX_PROJECTED,
+ C_PROJECTION_LEFT) = range(13)
 #: The counters that are maxima (the others are sums).
-MAXIMA = ('lcp_iterations_max', 'complementarity_max', 'max_depth', 'max_projected')
+MAXIMA = ('lcp_iterations_max', 'complementarity_max', 'max_depth', 'max_projected',
+          'projection_left')
 #: Why :func:`contact_steps` stopped: every step taken; an event (the Python path's);
 #: the detector's buffers too small (grow them and call again).
 DONE, BAIL, GROW = 0, 1, 2
@@ -546,7 +548,7 @@ def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
                     wa += abs(Ar[a, b]) * abs(p[b])
                 wmax = max(wmax, wa)
             if residual(Ar, qr, p, mu, normal_only, sliding, tol, equal, has_equal) \
-                    <= prm[P_RESIDUAL_TOLERANCE] * wmax:
+                    <= prm[P_RESIDUAL_TOLERANCE] * wmax + 2.0 * rho * change:
                 converged = True
                 break
     cnt[C_SOLVES] += 1
@@ -1171,7 +1173,8 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
 
     Depth beyond the tolerance and loaded contacts left apart are projected out
     (positions: the smallest pushes, loaded contacts held at zero depth; up to
-    ``PROJECTION_PASSES`` linearized passes, until none is left); the loaded
+    ``PROJECTION_PASSES`` linearized passes, until none is left; what they leave is
+    counted); the loaded
     contacts' normal rates within ``HOLD_RATE`` of zero are set to zero.
     """
     prm, minv = ctx[15], ctx[16]
@@ -1187,18 +1190,23 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
         active[k] = (force[k, 0] * nr[sel[k], 0] + force[k, 1] * nr[sel[k], 1]
                      + force[k, 2] * nr[sel[k], 2]) > 0.0
     held = _continuing(ctx, r_con, sel, r_y, active, con, y)[1]
-    for _ in range(int(prm[P_PROJECTION_PASSES])):
+    for pas in range(int(prm[P_PROJECTION_PASSES]) + 1):
         deep = lifted = False
-        dmax = -np.inf
+        dmax, left = -np.inf, 0.0
         for j in range(con[0]):
             if con[7][j] > loc:
                 deep = True
+                left = max(left, con[7][j])
             if held[j] and con[7][j] < -loc:
                 lifted = True
+                left = max(left, -con[7][j])
             dmax = max(dmax, con[7][j])
         if not (deep or lifted):
             break
-        if deep:
+        if pas == int(prm[P_PROJECTION_PASSES]):   # what the passes left (counted)
+            cnt[C_PROJECTION_LEFT] = max(cnt[C_PROJECTION_LEFT], left)
+            break
+        if pas == 0 and deep:
             cnt[C_MAX_DEPTH] = max(cnt[C_MAX_DEPTH], dmax)
         pick = np.zeros(con[0], dtype=np.bool_)
         for j in range(con[0]):
@@ -1218,8 +1226,16 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
         p, ok = solve_rows(A, q3, pr[4], np.zeros(3 * m), True, lift, True, pr[6], prm, cnt)
         if not ok:
             return BAIL, y, con
+        moved = False
+        for k in range(p.shape[0]):
+            if p[k] != 0.0:
+                moved = True
+        if not moved:   # no push takes it out (a row no force moves: left, counted)
+            cnt[C_PROJECTION_LEFT] = max(cnt[C_PROJECTION_LEFT], left)
+            break
+        if pas == 0:
+            cnt[C_PROJECTIONS] += 1
         dq = response(pr[8], pr[9], pr[10], pr[11], minv, p)
-        cnt[C_PROJECTIONS] += 1
         cnt[C_MAX_PROJECTED] = max(cnt[C_MAX_PROJECTED], biggest)
         y = y.copy()
         pos, quat, vel, om = state_parts(y)
@@ -1271,7 +1287,8 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
 def _merge(total: np.ndarray, cnt: np.ndarray) -> None:
     """Add a step's counters to ``total`` (the largest of the maxima)."""
     for x in range(cnt.shape[0]):
-        if x in (C_ITERATIONS_MAX, C_COMPLEMENTARITY, C_MAX_DEPTH, C_MAX_PROJECTED):
+        if x in (C_ITERATIONS_MAX, C_COMPLEMENTARITY, C_MAX_DEPTH, C_MAX_PROJECTED,
+                 C_PROJECTION_LEFT):
             total[x] = max(total[x], cnt[x])
         else:
             total[x] += cnt[x]
