@@ -180,6 +180,51 @@ def test_a_body_spawned_inside_the_ground_is_pushed_out_without_exploding():
     assert np.linalg.norm(sim.state.vel_com_world) <= 1e-14
 
 
+@pytest.mark.parametrize('compiled', [True, False], ids=['compiled', 'python'])
+def test_a_tilted_box_spawned_into_the_ground_is_projected_out_to_the_tolerance(compiled):
+    # A 0.2 m cube turned 0.3 rad about x then y, its lowest corner 1 cm into the
+    # ground. The end's projection is linearized (it turns the box about its centre by
+    # a small angle): one pass leaves the corners 2.7e-4 m off the surface, its turn's
+    # second order; the next passes take that out, so one step ends with every corner
+    # it holds on the surface to the location tolerance and nothing left.
+    from scipy.spatial.transform import Rotation
+    rot = Rotation.from_euler('xy', [0.3, 0.3])
+    corners = np.array([[x, y, z] for x in (-0.1, 0.1) for y in (-0.1, 0.1)
+                        for z in (-0.1, 0.1)])
+    low = float(np.min(rot.apply(corners)[:, 2]))
+    body = RigidBody('b', 2.0, (2.0 * 0.2 ** 2 / 6,) * 3, position_world=(0, 0, -low - 0.01),
+                     orientation_xyzw=tuple(rot.as_quat()))
+    sim = Simulation([body], [Gravity()], integrator='rkmk4', dt=1e-3,
+                     shapes=[CollisionShape('plane', None),
+                             CollisionShape('box', 'b', size=(0.2, 0.2, 0.2))])
+    sim.contact.compiled = compiled
+    sim.step()
+    cnt = sim.contact.counters
+    assert cnt['compiled_steps'] == (1 if compiled else 0)
+    assert cnt['max_depth'] == pytest.approx(0.01, rel=1e-6)
+    assert cnt['projections'] == 1 and cnt['projection_left'] == 0.0
+    assert np.max(np.abs(sim.contact.detect(sim.state).depth)) <= LOCATION_TOLERANCE
+
+
+def test_the_contact_residual_reads_equalities_pinned_rows_and_friction_beyond_its_bound():
+    # One contact, rows (n, t1, t2) with A = I: w = p + q. The residual is in m/s.
+    from rigid_body_sim.core.contact_step import _residual
+    A, mu = np.eye(3), np.array([0.5])
+    # An equality normal row counts |w_n| whatever the sign of p_n (a complementarity
+    # row with p_n < 0 would count it too, as min(p_n A_nn, w_n)).
+    p, q = np.array([-0.2, 0.0, 0.0]), np.array([0.2 + 3e-3, 0.0, 0.0])
+    assert _residual(A, q, p, mu, True, equal=np.array([True])) == pytest.approx(3e-3)
+    # Friction beyond its bound mu p_n by 0.1: its excess times A_ii (and it slips
+    # against itself: w_t = f + q_t = 0 here, so only the excess counts).
+    p, q = np.array([1.0, 0.6, 0.0]), np.array([-1.0, -0.6, 0.0])
+    assert _residual(A, q, p, mu, False) == pytest.approx(0.1)
+    # A friction row held at zero (pinned: no impulse moves it) is not a condition:
+    # its slip 0.3 counts unless it is pinned.
+    p, q = np.array([1.0, 0.0, 0.0]), np.array([-1.0, 0.0, 0.3])
+    assert _residual(A, q, p, mu, False) == pytest.approx(0.3)
+    assert _residual(A, q, p, mu, False, pinned=np.array([False, False, True])) == 0.0
+
+
 @pytest.mark.parametrize('masses', [[1.0] * 10, [1.0, 1e4], [1e4, 1.0, 1e4]],
                          ids=['ten_boxes', 'ratio_1e4_on_top', 'ratio_1e4_both_ways'])
 def test_a_stack_of_boxes_stands_still_and_the_ground_carries_it(masses):
