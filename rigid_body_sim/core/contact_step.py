@@ -542,8 +542,10 @@ class ContactSteps:
         if symmetric:
             A_r = 0.5 * (A_r + A_r.T)   # (symmetric to rounding: G M̄⁻¹ Gᵀ)
         rho = PROXIMAL * float(np.max(np.diag(A_r)))
-        # What the impulses' rounding is (a target inconsistent across redundant rows by
-        # its rounding moves them along their null space by about this each iteration).
+        # What the impulses' rounding is (of q over A's scale). A target inconsistent
+        # across redundant rows (the joints' velocity error) moves them along their null
+        # space by far more, its inconsistency over ρ each iteration: the residual exit
+        # below (RESIDUAL_TOLERANCE) takes that case.
         floor = 64.0 * EPS * float(np.max(np.abs(q_r))) / float(np.max(np.diag(A_r)))
         A_p = A_r + rho * np.eye(len(rows))
         p = np.zeros(len(rows)) if start is None else np.array(start[rows], dtype=float)
