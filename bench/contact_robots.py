@@ -163,7 +163,7 @@ def table(rows: list) -> str:
         "often a step's contact operator was built from the step's own response (servos: "
         'a trial step per row; twice in a step where contacts turn to slip). The servo '
         "quadruped's failures, residual and speed are the open case of issue 21 (LCPs "
-        'while it lands, and a foot slipping back and forth at about 1e-4 m/s at rest).')
+        'while it lands, and a foot slipping back and forth where it should rest).')
 
 
 def main(argv=None) -> int:

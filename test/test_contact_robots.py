@@ -18,8 +18,9 @@ contact conditions' residual there (the iterates drift among the solutions), and
 of its solves fails.
 
 On servos (PD gains) the same robot is not yet at rest: a period-2 oscillation of a
-foot (about 1e-4 m/s) stays, the held contact force over a step meeting a servo whose
-damping acts within it (``kd c h`` near 1). It is not tested here as done.
+foot stays (``bench/contact_robots.py`` measures it), the held contact force over a
+step meeting a servo whose damping acts within it (``kd c h`` near 1). It is not
+tested here as done.
 
 The gantry (``test/urdf/gantry_pusher.urdf``) pushes a box at a constant speed: the
 closed-form forces of a box sliding against Coulomb friction, through the robot's
