@@ -18,6 +18,7 @@ the reactions after a step; ``--skip-constraints`` skips these six),
 (the rows' LCP), ``bench/drive_efforts.py`` (its
 exact drives bounded by their efforts; the Panda's URDF from the bench requirements),
 ``bench/contact_detection.py`` (collision detection against the number of shapes),
+``bench/contact_pairs.py`` (the narrow phases by pair of kinds),
 ``bench/contact_dynamics.py`` (contact forces: cost, penetration, error) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
@@ -313,6 +314,12 @@ def sections(quick: bool, node_args: list) -> list:
             about='A pile of spheres and boxes over a ground, N shapes: our detector '
                   "(grid broad phase, narrow phases) against MuJoCo's kinematics and "
                   'collision on the same bodies.')),
+        ('skip_mujoco', 'contact_pairs', ['--quick'] if quick else [], report.Section(
+            'Narrow phases by pair of kinds, beside MuJoCo',
+            f'./dev.sh python bench/contact_pairs.py{q}', [T('contact_pairs.md')],
+            about='200 separate pairs of one kind each, resting 1e-5 m deep: the cost a '
+                  'pair of our detector (closed forms; GJK and EPA for a cylinder on a box '
+                  "or a cylinder) beside MuJoCo's, and the contacts each finds.")),
         ('skip_mujoco', 'contact_dynamics', ['--quick'] if quick else [], report.Section(
             'Contact dynamics: cost, penetration and error beside MuJoCo',
             f'./dev.sh python bench/contact_dynamics.py{q}', [T('contact_dynamics.md')],

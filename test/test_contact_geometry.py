@@ -479,7 +479,7 @@ def test_random_boxes_separate_by_their_depth_along_their_normal_and_not_by_much
 
 
 def test_pairs_without_a_narrow_phase_say_so():
-    missing = {(PLANE, PLANE), (BOX, CYLINDER), (CYLINDER, BOX), (CYLINDER, CYLINDER)}
+    missing = {(PLANE, PLANE)}   # (the world's two planes never meet)
     for a in (SPHERE, CAPSULE, BOX, CYLINDER, PLANE):
         for b in (SPHERE, CAPSULE, BOX, CYLINDER, PLANE):
             assert supported(a, b) == ((a, b) not in missing)

@@ -970,14 +970,9 @@ class Simulation:
             joint = self.joints.names[self.joints.mimics[self._mimic_names.index(name)][0]]
             raise SpecError('name', f'{name!r} makes joint {joint!r} follow its leader (a URDF '
                                     f'mimic joint): it cannot be removed')
-        if self.contact is not None:
-            # Its bodies may collide from now on: refused, changing nothing, where they
-            # could then meet as a pair of kinds with no narrow phase.
+        if self.contact is not None:   # its bodies may collide from now on
             self.dynamics.solver.constraints.spec(name)   # (an unknown name: its error)
-            try:
-                self.contact.detector.exclude(self._exclusions(self._specs_now(name)))
-            except SpecError as exc:
-                raise SpecError('name', f'{name!r} cannot be removed: {exc.problem}') from None
+            self.contact.detector.exclude(self._exclusions(self._specs_now(name)))
         spec = self.dynamics.solver.constraints.remove(name)
         self.dynamics.changed()
         if self.events is not None:   # rows may have moved

@@ -30,6 +30,9 @@ They import only one another, numba, numpy and math; never the classes of
 ``contact``
     Collision detection: the broad phase (a hashed grid) and the narrow phases of the
     primitive shapes, with their manifolds (:mod:`..shapes`).
+``convex``
+    GJK, EPA and the features of convex shapes: the pairs without a closed form (a
+    cylinder on a box or on a cylinder).
 
 :mod:`..kernel_cache` treats every module of this package as one unit.
 """

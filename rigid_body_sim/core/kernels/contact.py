@@ -29,6 +29,7 @@ import math
 from numba import njit
 import numpy as np
 
+from .convex import manifold, penetration
 from .layout import O_ORIGIN_WORLD, O_QUAT_BODY_WORLD
 from .so3 import quat_matrix
 from .views import raw
@@ -737,7 +738,39 @@ def _collide(kind_a: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kind_b
     if kind_b == CAPSULE:
         return _capsule_on(kind_a, ca, Ra, sa, cb, Rb, sb, True, margin, points, normals,
                            depths, k, w)
+    if kind_a == CYLINDER or kind_b == CYLINDER:
+        return _convex(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, margin, points, normals,
+                       depths, k, w)
     return _box_box(ca, Ra, sa, cb, Rb, sb, margin, points, normals, depths, k, w)
+
+
+@njit(cache=True)
+def _convex(kind_a: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kind_b: int,
+            cb: np.ndarray, Rb: np.ndarray, sb: np.ndarray, margin: float,
+            points: np.ndarray, normals: np.ndarray, depths: np.ndarray, k: int,
+            w: np.ndarray) -> int:
+    """
+    Emit a cylinder on a box or on a cylinder: EPA's normal and depth, then the manifold.
+
+    (:mod:`.convex`.) Two flat features facing each other (a cap or a face, a line
+    lying across the normal) give the corners of their overlap, at most
+    :data:`MANIFOLD` (:func:`_reduce`); any other pair EPA's one point.
+    """
+    result = w[0:11]
+    if not penetration(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, margin, result):
+        return k
+    cand = w[208:336].reshape((32, 4))
+    m = manifold(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, result, margin, cand)
+    n0, n1, n2 = result[0], result[1], result[2]   # (the manifold may refine it)
+    if m < 0:
+        return _emit(points, normals, depths, k, 0.5 * (result[4] + result[7]),
+                     0.5 * (result[5] + result[8]), 0.5 * (result[6] + result[9]),
+                     n0, n1, n2, result[3])
+    m = _reduce(cand, m, w[28:44].reshape((4, 4)))
+    for v in range(m):
+        k = _emit(points, normals, depths, k, cand[v, 0], cand[v, 1], cand[v, 2], n0, n1, n2,
+                  -cand[v, 3])
+    return k
 
 
 @njit(cache=True)
@@ -745,16 +778,9 @@ def supported(kind_a: int, kind_b: int) -> bool:
     """
     Tell whether :func:`collide` has a narrow phase for this pair of kinds.
 
-    Every pair but a plane on a plane, a cylinder on a box and a cylinder on a
-    cylinder (which have none yet: a scene that would need one is refused).
+    Every pair but a plane on a plane (the world's: never met).
     """
-    if kind_a == PLANE or kind_b == PLANE:
-        return kind_a != kind_b
-    if kind_a == CYLINDER:
-        return kind_b == SPHERE or kind_b == CAPSULE
-    if kind_b == CYLINDER:
-        return kind_a == SPHERE or kind_a == CAPSULE
-    return True
+    return not (kind_a == PLANE and kind_b == PLANE)
 
 
 @njit(cache=True)
