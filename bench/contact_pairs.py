@@ -34,6 +34,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from contact_detection import best  # noqa: E402, I100
 import report  # noqa: E402, I100
 
 from rigid_body_sim.core import CollisionShape, ContactDetector, RigidBody  # noqa: E402
@@ -152,17 +153,6 @@ def mujoco_model(case: tuple):
         x, y, z, w = qa
         data.qpos[adr + 3:adr + 7] = (w, x, y, z)
     return model, data
-
-
-def best(fn, reps: int, inner: int) -> float:
-    """Best over reps of the mean seconds of inner calls."""
-    times = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        for _ in range(inner):
-            fn()
-        times.append((time.perf_counter() - t0) / inner)
-    return min(times)
 
 
 def run(reps: int) -> list:

@@ -10,12 +10,11 @@ overlap of ``A`` and ``B`` (negative: their gap) is the least of ``D``'s support
 function over unit directions, and its minimizer is the normal. The expanding
 polytope algorithm (EPA) finds that least value for a body that holds the origin;
 ``D`` holds it only when the shapes overlap, so EPA runs on ``D' = (A ⊕ ε-ball) − B``
-(``ε``: :data:`INFLATE` of the shapes' size), which holds the origin whenever the gap
-is below ``ε``: its least support is the overlap plus ``ε``, with the same normal.
-GJK first tells whether ``D'`` holds the origin and gives EPA its first tetrahedron;
-a gap past ``ε`` is GJK's distance to ``D'`` plus ``ε`` (its normal along a vector at
-least that distance long), none past the margin. Inflating keeps ``D'`` a solid
-(never flat), so EPA starts and ends well conditioned even for shapes exactly
+(``ε``: the margin plus :data:`INFLATE` of the shapes' size), which holds the origin
+whenever the gap is below ``ε``: its least support is the overlap plus ``ε``, with the
+same normal. GJK first tells whether ``D'`` holds the origin (if not, the gap passes
+the margin: no contact) and gives EPA its first tetrahedron. Inflating keeps ``D'`` a
+solid (never flat), so EPA starts and ends well conditioned even for shapes exactly
 touching, where GJK's own normal would come from a vector of rounding size.
 
 Where the shapes touch along flat features (a box's face, a cylinder's cap, a
@@ -38,8 +37,11 @@ the other, and where their edges and circles cross; a disc's corners: four rim
 points, the first its deepest) are the contacts, each at the gap between the two
 features along the normal (each lifted onto its own feature's plane or line), at
 most :data:`.contact.MANIFOLD` of them (the contact module's reduction). A point on a
-flat feature is that point at its gap to the feature's plane; any other pair touches
-at one point: EPA's.
+flat feature is that point at its gap to the feature's plane; a point on a line, or two
+crossed lines, where they pass closest along the normal; two points (a rim on a rim),
+the shapes' support points along it. A cylinder's mantle on a box's corner or on a
+line along its axis takes the radial normal through it (exact where EPA's is only
+near it).
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ EPA_TOLERANCE = 1e-13
 EPA_VERTICES = 160
 #: Most GJK iterations.
 GJK_ITERATIONS = 64
-#: The inflating ball's radius as a fraction of the shapes' size (:func:`penetration`).
+#: The inflating ball's radius beyond the margin, as a fraction of the shapes' size.
 INFLATE = 1e-3
 #: Kinds, as :class:`.contact.Shape` (repeated: this module must not import contact's).
 SPHERE, CAPSULE, BOX, CYLINDER = 0, 1, 2, 3
@@ -110,7 +112,7 @@ def support(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, d0: float
     out[0] += s * hl * a0
     out[1] += s * hl * a1
     out[2] += s * hl * a2
-    if pn > 1e-300:
+    if pn > 1e-12 * norm:   # (a part of rounding size: the cap's centre is a support point)
         out[0] += r * p0 / pn
         out[1] += r * p1 / pn
         out[2] += r * p2 / pn
@@ -321,37 +323,21 @@ def penetration(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int
     (11,): the unit normal from ``b`` to ``a`` (0:3), the overlap (3; negative: a gap),
     ``a``'s surface point (4:7) and ``b``'s (7:10), and EPA's iterations (10).
 
-    GJK on ``D'`` inflated by :data:`INFLATE` of the shapes' size (``eps``): a gap past
-    ``eps`` is GJK's distance plus ``eps``, its normal along GJK's nearest point (a
-    vector at least the gap less ``eps`` long), none past the margin; a smaller gap or
-    an overlap is EPA's, from GJK's simplex.
+    GJK on ``D'`` inflated by the margin plus :data:`INFLATE` of the shapes' size:
+    a gap past that is no contact; any other pair is EPA's, from GJK's simplex (so
+    every contact's normal comes from EPA, never from a GJK vector of rounding size).
     """
     scale = max(sa[0], sa[1], sa[2], sb[0], sb[1], sb[2])
-    eps = INFLATE * scale
+    eps = margin + INFLATE * scale
     nv = EPA_VERTICES + 4
     V, PA, PB = np.empty((nv, 3)), np.empty((nv, 3)), np.empty((nv, 3))
     idx = np.zeros(4, dtype=np.int64)
     lam = np.zeros(4)
     v = np.empty(3)
-    status, m = _gjk(ka, ca, Ra, sa, kb, cb, Rb, sb, eps, max(margin - eps, 0.0), V, PA, PB,
-                     idx, lam, v)
-    if status == 0:
+    status, m = _gjk(ka, ca, Ra, sa, kb, cb, Rb, sb, eps, 0.0, V, PA, PB, idx, lam, v)
+    if status != 1:   # D' lies off the origin: the gap passes eps > margin
         return False
-    if status == 1:
-        return _epa(ka, ca, Ra, sa, kb, cb, Rb, sb, eps, margin, V, PA, PB, idx, m, result)
-    dist = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    if dist + eps > margin or dist == 0.0:
-        return False
-    for r in range(3):   # D''s point nearest the origin points from b to a
-        result[r] = v[r] / dist
-        result[4 + r] = result[7 + r] = 0.0
-    result[3] = -(dist + eps)
-    for j in range(m):
-        for r in range(3):
-            result[4 + r] += lam[j] * PA[idx[j], r]
-            result[7 + r] += lam[j] * PB[idx[j], r]
-    result[10] = 0.0
-    return True
+    return _epa(ka, ca, Ra, sa, kb, cb, Rb, sb, eps, margin, V, PA, PB, idx, m, result)
 
 
 @njit(cache=True)
@@ -528,26 +514,50 @@ def _across(F: np.ndarray, alive: np.ndarray, nf: int, p: int, q: int) -> int:
 @njit(cache=True)
 def _barycentric(p: np.ndarray, q: np.ndarray, s: np.ndarray, x0: float, x1: float, x2: float,
                  w: np.ndarray) -> None:
-    """Write the barycentric weights of the point x in the triangle (p, q, s) (its plane's)."""
-    e0, e1, e2 = q[0] - p[0], q[1] - p[1], q[2] - p[2]
-    g0, g1, g2 = s[0] - p[0], s[1] - p[1], s[2] - p[2]
-    h0, h1, h2 = x0 - p[0], x1 - p[1], x2 - p[2]
-    ee = e0 * e0 + e1 * e1 + e2 * e2
-    eg = e0 * g0 + e1 * g1 + e2 * g2
-    gg = g0 * g0 + g1 * g1 + g2 * g2
-    he = h0 * e0 + h1 * e1 + h2 * e2
-    hg = h0 * g0 + h1 * g1 + h2 * g2
-    det = ee * gg - eg * eg
-    if det <= 0.0:
+    """Write the barycentric weights of the triangle (p, q, s)'s point nearest x."""
+    # The regions of the triangle's vertices, edges and face in turn (Ericson, Real-Time
+    # Collision Detection, 5.1.5).
+    ab0, ab1, ab2 = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+    ac0, ac1, ac2 = s[0] - p[0], s[1] - p[1], s[2] - p[2]
+    ap0, ap1, ap2 = x0 - p[0], x1 - p[1], x2 - p[2]
+    d1 = ab0 * ap0 + ab1 * ap1 + ab2 * ap2
+    d2 = ac0 * ap0 + ac1 * ap1 + ac2 * ap2
+    if d1 <= 0.0 and d2 <= 0.0:
         w[0], w[1], w[2] = 1.0, 0.0, 0.0
         return
-    u = (gg * he - eg * hg) / det
-    t = (ee * hg - eg * he) / det
-    # Clamp into the triangle (the foot lies inside it up to rounding).
-    u, t = max(u, 0.0), max(t, 0.0)
-    if u + t > 1.0:
-        u, t = u / (u + t), t / (u + t)
-    w[0], w[1], w[2] = 1.0 - u - t, u, t
+    bp0, bp1, bp2 = x0 - q[0], x1 - q[1], x2 - q[2]
+    d3 = ab0 * bp0 + ab1 * bp1 + ab2 * bp2
+    d4 = ac0 * bp0 + ac1 * bp1 + ac2 * bp2
+    if d3 >= 0.0 and d4 <= d3:
+        w[0], w[1], w[2] = 0.0, 1.0, 0.0
+        return
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        w[0], w[1], w[2] = 1.0 - v, v, 0.0
+        return
+    cp0, cp1, cp2 = x0 - s[0], x1 - s[1], x2 - s[2]
+    d5 = ab0 * cp0 + ab1 * cp1 + ab2 * cp2
+    d6 = ac0 * cp0 + ac1 * cp1 + ac2 * cp2
+    if d6 >= 0.0 and d5 <= d6:
+        w[0], w[1], w[2] = 0.0, 0.0, 1.0
+        return
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        t = d2 / (d2 - d6)
+        w[0], w[1], w[2] = 1.0 - t, 0.0, t
+        return
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        w[0], w[1], w[2] = 0.0, 1.0 - t, t
+        return
+    den = va + vb + vc
+    if den <= 0.0:
+        w[0], w[1], w[2] = 1.0, 0.0, 0.0
+        return
+    v, t = vb / den, vc / den
+    w[0], w[1], w[2] = 1.0 - v - t, v, t
 
 
 @njit(cache=True)
@@ -683,11 +693,13 @@ def _region(ft: int, npts: int, pts: np.ndarray, rad: float, o: np.ndarray, t1: 
         for q in range(npts):
             p = (q + 1) % npts
             area += xy[q, 0] * xy[p, 1] - xy[p, 0] * xy[q, 1]
-        if area < 0.0:   # turn it counter-clockwise
+        if area < 0.0:   # turn it counter-clockwise (its 3-D corners with it)
             for q in range(npts // 2):
                 p = npts - 1 - q
                 for r in range(2):
                     xy[q, r], xy[p, r] = xy[p, r], xy[q, r]
+                for r in range(3):
+                    pts[q, r], pts[p, r] = pts[p, r], pts[q, r]
     return npts
 
 
@@ -831,7 +843,41 @@ def _lift(ft: int, pts: np.ndarray, normal: np.ndarray, xy: np.ndarray, x: float
 
 
 @njit(cache=True)
-def _radial(c: np.ndarray, R: np.ndarray, fo: int, po: np.ndarray, x: np.ndarray,
+def _one(xa: np.ndarray, xb: np.ndarray, n: np.ndarray, margin: float,
+         cand: np.ndarray) -> int:
+    """Write the one contact of a's point ``xa`` and b's ``xb`` (within the margin)."""
+    gap = n[0] * (xa[0] - xb[0]) + n[1] * (xa[1] - xb[1]) + n[2] * (xa[2] - xb[2])
+    if gap > margin:
+        return 0
+    for r in range(3):
+        cand[0, r] = 0.5 * (xa[r] + xb[r])
+    cand[0, 3] = gap
+    return 1
+
+
+@njit(cache=True)
+def _closest_lines(pa: np.ndarray, ua: np.ndarray, pb: np.ndarray, ub: np.ndarray,
+                   xa: np.ndarray, xb: np.ndarray) -> None:
+    """Write the closest points of the segments ``pa[0] + s ua`` and ``pb[0] + t ub``."""
+    r0, r1, r2 = pa[0, 0] - pb[0, 0], pa[0, 1] - pb[0, 1], pa[0, 2] - pb[0, 2]
+    a = ua[0] * ua[0] + ua[1] * ua[1] + ua[2] * ua[2]
+    e = ub[0] * ub[0] + ub[1] * ub[1] + ub[2] * ub[2]
+    b = ua[0] * ub[0] + ua[1] * ub[1] + ua[2] * ub[2]
+    c = ua[0] * r0 + ua[1] * r1 + ua[2] * r2
+    f = ub[0] * r0 + ub[1] * r1 + ub[2] * r2
+    den = a * e - b * b
+    s = min(max((b * f - c * e) / den, 0.0), 1.0) if den > 0.0 else 0.0
+    t = (b * s + f) / e if e > 0.0 else 0.0
+    if t < 0.0 or t > 1.0:
+        t = min(max(t, 0.0), 1.0)
+        s = min(max((b * t - c) / a, 0.0), 1.0) if a > 0.0 else 0.0
+    for r in range(3):
+        xa[r] = pa[0, r] + s * ua[r]
+        xb[r] = pb[0, r] + t * ub[r]
+
+
+@njit(cache=True)
+def _radial(c: np.ndarray, R: np.ndarray, fo: int, ko: int, po: np.ndarray, x: np.ndarray,
             margin: float, sign: float, n: np.ndarray) -> bool:
     """
     Put into ``n`` the radial direction from a cylinder's axis through the point ``x``.
@@ -849,7 +895,7 @@ def _radial(c: np.ndarray, R: np.ndarray, fo: int, po: np.ndarray, x: np.ndarray
         ea = e0 * R[0, 2] + e1 * R[1, 2] + e2 * R[2, 2]
         if le == 0.0 or math.sqrt(max(le * le - ea * ea, 0.0)) > margin:
             return False
-    elif fo != F_POINT:
+    elif fo != F_POINT or ko != BOX:   # (a rim point is no corner: its surface curves)
         return False
     x0, x1, x2 = x[0] - c[0], x[1] - c[1], x[2] - c[2]
     t = x0 * R[0, 2] + x1 * R[1, 2] + x2 * R[2, 2]
@@ -889,9 +935,10 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
     # (Another cylinder's mantle: the radial line through its axis.)
     xb = cb if kb == CYLINDER and fb == F_SEGMENT else pb[0]
     xa = ca if ka == CYLINDER and fa == F_SEGMENT else pa[0]
-    if ka == CYLINDER and fa == F_SEGMENT and _radial(ca, Ra, fb, pb, xb, margin, -1.0, n) \
+    if ka == CYLINDER and fa == F_SEGMENT \
+            and _radial(ca, Ra, fb, kb, pb, xb, margin, -1.0, n) \
             or kb == CYLINDER and fb == F_SEGMENT \
-            and _radial(cb, Rb, fa, pa, xa, margin, 1.0, n):
+            and _radial(cb, Rb, fa, ka, pa, xa, margin, 1.0, n):
         for r in range(3):
             d[r] = -n[r]
         fa, ma, ra = feature(ka, ca, Ra, sa, d, margin, pa, na)
@@ -928,15 +975,24 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
                     n[r] = sg * nf_[r]
                     d[r] = -n[r]
                 break
-    if fa == F_POINT and fb == F_POINT:
-        return -1
+    if fa == F_POINT and fb == F_POINT:   # the two support points along n (on the surfaces)
+        return _one(pa[0], pb[0], n, margin, cand)
     if fa == F_POINT or fb == F_POINT:
         # A point on a flat feature: the point itself, its gap along n to the other's
         # plane (a rim point's EPA witness lies on a chord of the rim, not on it).
         flat_a = fa == F_POLYGON or fa == F_DISC
         flat_b = fb == F_POLYGON or fb == F_DISC
-        if not (flat_a or flat_b):
-            return -1
+        if not (flat_a or flat_b):   # a point on a line: the line's point seen along n
+            xa_, xb_ = np.empty(3), np.empty(3)
+            if fa == F_POINT:
+                for r in range(3):
+                    xa_[r] = pa[0, r]
+                _onto(F_SEGMENT, pb, nb, xa_, n, xb_)
+            else:
+                for r in range(3):
+                    xb_[r] = pb[0, r]
+                _onto(F_SEGMENT, pa, na, xb_, n, xa_)
+            return _one(xa_, xb_, n, margin, cand)
         x = np.empty(3)
         if flat_b:   # a's point over b's plane
             mn = nb[0] * n[0] + nb[1] * n[1] + nb[2] * n[2]
@@ -971,7 +1027,11 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
         la = math.sqrt(ua[0] ** 2 + ua[1] ** 2 + ua[2] ** 2)
         lb = math.sqrt(ub[0] ** 2 + ub[1] ** 2 + ub[2] ** 2)
         if math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) * min(la, lb) > margin * la * lb:
-            return -1   # crossed lines (their ends' heights differ past the margin): one point
+            # Crossed lines (their ends' heights differ past the margin): one point, where
+            # they pass closest.
+            xa_, xb_ = np.empty(3), np.empty(3)
+            _closest_lines(pa, ua, pb, ub, xa_, xb_)
+            return _one(xa_, xb_, n, margin, cand)
     # The plane across n through EPA's point.
     o = np.empty(3)
     for r in range(3):
