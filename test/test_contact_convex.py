@@ -12,6 +12,14 @@ near the function's kinks), EPA's bound 1e-13 of it, and a gap past the inflatio
 flat features (a cap or a face, a lying mantle) are checked against their corners in
 closed form, to rounding; the dynamics against a cylinder rolling without slip,
 ``a = (2/3) g sin θ``.
+
+Tolerances. Depths and points of flat features: rounding of coordinates of order 1 m
+over tens of operations, about 1e-14 m, written as 1e-8 or 1e-9 of the set depth (1e-6
+to 1e-4 m) or 1e-12 m on points and normals. The rolling cylinder: its step (RKMK4)
+is exact for a constant acceleration, and the contact LCP (two points on one body)
+ends at its exact solution to rounding (complementarity 1e-18 measured), so only
+rounding over 500 steps: relative 1e-9 on the travel and on ``v = ω r``. At rest: rounding of 1000 steps of a body held
+still, 1e-13 m; its forces to the LCP's tolerance and rounding, 1e-9 of ``m g``.
 """
 
 import math
