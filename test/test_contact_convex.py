@@ -18,8 +18,9 @@ over tens of operations, about 1e-14 m, written as 1e-8 or 1e-9 of the set depth
 to 1e-4 m) or 1e-12 m on points and normals. The rolling cylinder: its step (RKMK4)
 is exact for a constant acceleration, and the contact LCP (two points on one body)
 ends at its exact solution to rounding (complementarity 1e-18 measured), so only
-rounding over 500 steps: relative 1e-9 on the travel and on ``v = ω r``. At rest: rounding of 1000 steps of a body held
-still, 1e-13 m; its forces to the LCP's tolerance and rounding, 1e-9 of ``m g``.
+rounding over 500 steps: relative 1e-9 on the travel and on ``v = ω r``. At rest:
+rounding of 1000 steps of a body held still, 1e-13 m; its forces to the LCP's
+tolerance and rounding, 1e-9 of ``m g``.
 """
 
 import math
