@@ -848,14 +848,12 @@ class ContactSteps:
         same steps as :meth:`step`, the ``k``-th (from 0) ending at ``base + (steps + k +
         1) dt`` (the simulation's clock), until one meets what the kernel gives back (a
         row no force moves, a full impact log), which :meth:`step` then takes.
-        Elsewhere (joints, the knob, ``compiled`` False, a cylinder that may meet a box
-        or a cylinder: the kernel's steps of those differ from run to run, not yet
-        understood): ``(0, start)``.
+        Elsewhere (joints, the knob, ``compiled`` False): ``(0, start)``.
         """
         sim = self.sim
         dyn = sim.dynamics
         if not self.compiled or sim.events is not None or sim._control is not None \
-                or dyn.constrained or n < 1 or self.detector.convex_pairs:
+                or dyn.constrained or n < 1:
             return 0, start
         self.tighten()
         self._set_forces(None)

@@ -232,9 +232,6 @@ class ContactDetector:
         plane = self.kind == int(Shape.PLANE)
         self._planes = np.flatnonzero(plane)
         self._solids = np.flatnonzero(~plane)
-        #: A cylinder may meet a box or a cylinder: their steps take the Python path (the
-        #: compiled steps of such scenes are not yet deterministic: issue 21's note).
-        self.convex_pairs = self._convex_pairs()
         self._solid_body = self.body[self._solids]
         self._solid_group = self.group[self._solids]
         self._solid_mask = self.mask[self._solids]
@@ -262,14 +259,6 @@ class ContactDetector:
     def exclude(self, excluded: Any) -> None:
         """Replace the excluded body pairs (a joint added or removed at run time)."""
         self.excluded = self._codes(excluded)
-        self.convex_pairs = self._convex_pairs()
-
-    def _convex_pairs(self) -> bool:
-        """Tell whether a cylinder may meet a box or a cylinder (GJK and EPA's pairs)."""
-        cylinders = np.flatnonzero(self.kind == int(Shape.CYLINDER))
-        others = np.flatnonzero((self.kind == int(Shape.CYLINDER))
-                                | (self.kind == int(Shape.BOX)))
-        return any(self._meets(i, j) for i in cylinders for j in others if i != j)
 
     def _meets(self, i: int, j: int) -> bool:
         """Tell whether rows ``i`` and ``j`` may ever be tested (bodies, filters, exclusions)."""

@@ -1028,6 +1028,10 @@ def narrow_phase(pairs: np.ndarray, kind: np.ndarray, c: np.ndarray, R: np.ndarr
             continue
         for j in range(start, min(k, owner.shape[0])):
             owner[j] = q
+    # ``ws`` counts no reference to ``w``: numba frees a local after its last use, so
+    # without this use ``w`` would be freed before the loop and the narrow phases' own
+    # arrays allocated over the scratch they are writing (runs then differ).
+    w[0] = 0.0
     return k
 
 
