@@ -26,6 +26,8 @@ A scene file::
           - {kind: box, size: [0.3, 0.2, 0.1], friction: 0.5, restitution: 0.2}
           - {kind: sphere, radius: 0.05, position_body: [0, 0, 0.1]}   # also capsule,
                                                   # cylinder: {radius:, length:} along z;
+                                                  # mesh: {mesh: part.stl (or vertices),
+                                                  # scale: [1, 1, 1]}, its convex hull;
                                                   # collide: false; group:, mask: (bits)
     ground: {height: 0.0, normal: [0, 0, 1], friction: 0.8, restitution: 0.0}
                                     # a plane (solid below); pair coefficients:
@@ -56,9 +58,10 @@ A scene file::
         limit_restitution: 0.0              # Newton's e at the bounds, or {joint: e}
         friction: true                      # Coulomb friction of <dynamics friction>
         effort_limits: true                 # exact drives bounded by <limit effort>
-        collisions: false                   # the links' <collision> boxes, cylinders and
-                                            # spheres as contact shapes (meshes: named,
-                                            # not simulated); or a mapping, which is true:
+        collisions: false                   # the links' <collision> boxes, cylinders,
+                                            # spheres and meshes (STL, OBJ: their convex
+                                            # hulls) as contact shapes (other meshes:
+                                            # named, not simulated); or a mapping (true):
                                             # {friction: 1.0, restitution: 0.0, group: 1,
                                             #  mask: ..., links: {foot: {friction: 0.9}}}
         self_collide: false                 # true: its links meet each other too (false:
@@ -92,6 +95,7 @@ import yaml
 
 from .core import Constraint, Damping, Gravity, RigidBody, Simulation, SpecError
 from .core.effects import AppliedWrenches
+from .core.hulls import FORMATS as MESH_FORMATS
 from .core.integrators import INTEGRATORS
 from .core.limits import SceneJoint
 from .core.robots import CommandGroup, RobotSpec
@@ -104,8 +108,9 @@ TOP_KEYS = ('name', 'integrator', 'dt', 'duration', 'effects', 'bodies', 'constr
 #: The ground: a plane through ``height`` along its unit ``normal`` (solid below).
 GROUND_KEYS = ('height', 'normal', 'friction', 'restitution')
 #: A body's collision shape (:class:`.core.shapes.CollisionShape`, its body implied).
-SHAPE_KEYS = ('kind', 'radius', 'length', 'size', 'position_body', 'orientation_xyzw',
-              'friction', 'restitution', 'collide', 'group', 'mask', 'name')
+SHAPE_KEYS = ('kind', 'radius', 'length', 'size', 'mesh', 'scale', 'position_body',
+              'orientation_xyzw', 'friction', 'restitution', 'collide', 'group', 'mask',
+              'name')
 GROUP_KEYS = ('name', 'joints', 'interface', 'mode', 'kp', 'kd')
 ROBOT_KEYS = ('name', 'urdf', 'xacro_args', 'prefix', 'base_pose', 'fixed_base',
               'initial_positions', 'initial_velocities', 'keep_fixed', 'limits',
@@ -242,7 +247,8 @@ def _build(data: Any, source: str) -> Scene:
                          scene_joints=scene_joints,
                          shapes=_collision_shapes(
                              ({} if data['ground'] is None else data['ground'])
-                             if 'ground' in data else None, bodies_data))
+                             if 'ground' in data else None, bodies_data,
+                             Path(source).parent))
     except SpecError as exc:
         # Map 'effects[i]...' from the core back to the scene's effect key.
         if exc.field.startswith('effects['):
@@ -367,15 +373,22 @@ def _robots(data: Any, source: str) -> list:
                                                      f'{self_collide!r}')
         collisions = []
         if collide:
-            # Each <collision> a shape on its link's body; a mesh is not one (no convex
-            # hulls yet): named in the robot's warning, never dropped silently.
+            # Each <collision> a shape on its link's body, a mesh as its convex hull; a
+            # mesh whose file is not found or not read (not STL or OBJ) is named in the
+            # robot's warning, never dropped silently.
             parsed.ignored = [x for x in parsed.ignored if not x.startswith('<collision>')]
             for c in parsed.collisions:
-                if c.shape == 'mesh':
-                    parsed.ignored.append(f'mesh <collision> of link {c.link!r} ({c.uri}: '
-                                          f'no convex hulls yet)')
-                else:
+                if c.shape != 'mesh':
                     collisions.append((c.link, c.shape, c.size, c.xyz, c.rpy))
+                elif not c.path:
+                    parsed.ignored.append(f'mesh <collision> of link {c.link!r} ({c.uri}: '
+                                          f'file not found)')
+                elif Path(c.path).suffix.lower() not in MESH_FORMATS:
+                    parsed.ignored.append(f'mesh <collision> of link {c.link!r} ({c.uri}: '
+                                          f'format not read; STL and OBJ are)')
+                else:
+                    collisions.append((c.link, 'mesh', (c.path, tuple(c.size)), c.xyz,
+                                       c.rpy))
         name = entry.get('name', parsed.name)
         if not isinstance(name, str) or not name:
             raise SpecError(f'{field}.name', f'expected a non-empty string, got {name!r}')
@@ -462,8 +475,12 @@ def _body(data: Any, field: str) -> RigidBody:
         raise exc.within(field) from None
 
 
-def _collision_shapes(ground: Any, bodies_data: list) -> list:
-    """Return the scene's collision shapes: its ``ground`` and each body's ``shapes``."""
+def _collision_shapes(ground: Any, bodies_data: list, folder: Path) -> list:
+    """
+    Return the scene's collision shapes: its ``ground`` and each body's ``shapes``.
+
+    A mesh's file name is taken from ``folder`` (the scene file's) unless absolute.
+    """
     out = []
     if ground is not None:
         g = _mapping(ground, 'ground', GROUND_KEYS)
@@ -497,7 +514,9 @@ def _collision_shapes(ground: Any, bodies_data: list) -> list:
             entry = _mapping(entry, f'{field}[{k}]', SHAPE_KEYS)
             if 'kind' not in entry:
                 raise SpecError(f'{field}[{k}].kind', 'missing (required): sphere, box, '
-                                                      'capsule or cylinder')
+                                                      'capsule, cylinder or mesh')
+            if isinstance(entry.get('mesh'), str) and not Path(entry['mesh']).is_absolute():
+                entry = {**entry, 'mesh': str(folder / entry['mesh'])}
             try:
                 out.append(CollisionShape(body=body['name'], **entry))
             except SpecError as exc:

@@ -59,6 +59,7 @@ class Collision:
     xyz: np.ndarray
     rpy: np.ndarray
     uri: str = ''          # mesh: as written
+    path: str = ''         # mesh: resolved file, '' if not found
 
 
 @dataclass
@@ -202,7 +203,7 @@ def parse_urdf(xml: str, source: str = '<urdf>') -> ParsedUrdf:
             if v is not None:
                 visuals.append(v)
         for geometry in getattr(link, 'collisions', None) or []:
-            c = _collision(link.name, geometry)
+            c = _collision(link.name, geometry, source)
             if c is not None:
                 collisions.append(c)
     joints = []
@@ -323,7 +324,7 @@ def _visual(link: str, visual: Any, source: str, colours: dict) -> Optional[Visu
     return None
 
 
-def _collision(link: str, collision: Any) -> Optional[Collision]:
+def _collision(link: str, collision: Any, source: str) -> Optional[Collision]:
     from urdf_parser_py import urdf as up
     xyz, rpy = _origin(collision.origin)
     g = collision.geometry
@@ -335,7 +336,8 @@ def _collision(link: str, collision: Any) -> Optional[Collision]:
         return Collision(link, 'sphere', (g.radius,), xyz, rpy)
     if isinstance(g, up.Mesh):
         scale = (1.0, 1.0, 1.0) if g.scale is None else tuple(g.scale)
-        return Collision(link, 'mesh', scale, xyz, rpy, uri=g.filename)
+        return Collision(link, 'mesh', scale, xyz, rpy, uri=g.filename,
+                         path=resolve_uri(g.filename, source))
     return None
 
 

@@ -914,7 +914,7 @@ class ContactSteps:
         wbuf[:len(wrench)] = wrench
         det = (d.kind, d.size, d.c_body, d.R_body, d.body, d.group, d.mask, d._solids,
                d._planes, d._solid_body, d._solid_group, d._solid_mask, d.excluded, d.live,
-               float(d.margin))
+               float(d.margin), d.hulls, d.hull_at)
         prm = np.zeros(kern.P_WIDTH)
         prm[kern.P_LOCATION], prm[kern.P_RATE] = self.location, self.rate
         prm[kern.P_FRICTION_TOLERANCE] = FRICTION_TOLERANCE

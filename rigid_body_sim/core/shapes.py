@@ -2,11 +2,12 @@
 Collision shapes of bodies and of the world, and the contacts between them (detection).
 
 A :class:`CollisionShape` is a primitive fixed to a body (or to the world): a sphere,
-a box, a capsule, a cylinder, or, for the world only, a plane (a half-space: a
-ground). Sizes follow URDF's ``<collision>`` geometry: a sphere's ``radius``; a box's
-full ``size`` along its axes; a capsule's and a cylinder's ``radius`` and ``length``
-along the shape's z axis (a capsule's length is that of its axis, the caps beyond
-it). A plane's normal is its z axis; it is solid below.
+a box, a capsule, a cylinder, a mesh (simulated as its convex hull: :mod:`.hulls`), or,
+for the world only, a plane (a half-space: a ground). Sizes follow URDF's
+``<collision>`` geometry: a sphere's ``radius``; a box's full ``size`` along its axes; a
+capsule's and a cylinder's ``radius`` and ``length`` along the shape's z axis (a
+capsule's length is that of its axis, the caps beyond it); a mesh's file (STL or OBJ)
+or vertices and its ``scale``. A plane's normal is its z axis; it is solid below.
 
 :class:`ContactDetector` finds, for the bodies' poses after a step, every pair of
 shapes within a margin of each other and their contacts (:mod:`.kernels.contact`:
@@ -17,8 +18,8 @@ tested: two shapes of one body, shapes whose filters exclude each other (``group
 and ``mask`` bits: a pair is tested when one's group meets the other's mask,
 MuJoCo's ``contype`` and ``conaffinity``), shapes with ``collide: false``, and the
 pairs of bodies the caller excludes (bodies joined by a joint). Every pair of kinds
-has a narrow phase (a cylinder on a box or on a cylinder by GJK and EPA:
-:mod:`.kernels.convex`).
+has a narrow phase (a cylinder on a box or on a cylinder, and a hull on anything, by
+GJK and EPA: :mod:`.kernels.convex`).
 
 Contact forces are not here yet: this module is detection only (issue 21's rows
 build on it).
@@ -32,6 +33,7 @@ from typing import Any, NamedTuple, Optional, Sequence
 import numpy as np
 
 from .errors import SpecError
+from .hulls import hull_record, read_vertices
 from .kernels.contact import all_bounds, broad_phase, narrow_phase, plane_pairs, Shape, \
     shape_frames
 from .rotation import quat_to_matrix
@@ -40,9 +42,11 @@ from .validate import finite_array, finite_scalar, nonnegative_scalar, positive_
 
 #: The kinds by name, and the sizes each takes (URDF's attribute names).
 KINDS = {'sphere': Shape.SPHERE, 'box': Shape.BOX, 'capsule': Shape.CAPSULE,
-         'cylinder': Shape.CYLINDER, 'plane': Shape.PLANE}
+         'cylinder': Shape.CYLINDER, 'plane': Shape.PLANE, 'mesh': Shape.HULL}
 SIZES = {'sphere': ('radius',), 'box': ('size',), 'capsule': ('radius', 'length'),
-         'cylinder': ('radius', 'length'), 'plane': ()}
+         'cylinder': ('radius', 'length'), 'plane': (), 'mesh': ('mesh', 'scale')}
+#: Sizes a kind may leave out (a mesh's scale: 1).
+OPTIONAL = ('scale',)
 #: m: contacts are reported up to this gap by default (a contact about to close).
 DEFAULT_MARGIN = 1e-3
 #: Every group bit (the default group and mask: everything meets everything).
@@ -57,7 +61,7 @@ class CollisionShape:
     Parameters
     ----------
     kind : str
-        ``'sphere'``, ``'box'``, ``'capsule'``, ``'cylinder'`` or ``'plane'``.
+        ``'sphere'``, ``'box'``, ``'capsule'``, ``'cylinder'``, ``'mesh'`` or ``'plane'``.
     body : str or None
         The body it is fixed to; None: the world (a plane must be the world's).
     radius, length : float
@@ -65,6 +69,11 @@ class CollisionShape:
         (along the shape's z axis).
     size : array_like, shape (3,)
         m, > 0: a box's full size along its x, y, z axes.
+    mesh : str or array_like, shape (N, 3)
+        A mesh's file (STL or OBJ; its units are taken as m) or its vertices (m, in the
+        shape's frame); simulated as their convex hull (:mod:`.hulls`).
+    scale : array_like, shape (3,)
+        A mesh's scale along its x, y, z axes (URDF's ``<mesh scale>``), > 0; default 1.
     position_body : array_like, shape (3,)
         m, the shape's centre in the body frame (a plane: a point on it).
     orientation_xyzw : array_like, shape (4,)
@@ -88,6 +97,8 @@ class CollisionShape:
     radius: Any = None
     length: Any = None
     size: Any = None
+    mesh: Any = None
+    scale: Any = None
     position_body: Any = (0.0, 0.0, 0.0)
     orientation_xyzw: Any = (0.0, 0.0, 0.0, 1.0)
     friction: Any = 1.0
@@ -107,12 +118,12 @@ class CollisionShape:
             raise SpecError('body', f"a plane is the world's (a ground), not body "
                                     f"{self.body!r}'s: give a box instead")
         want = SIZES[self.kind]
-        for key in ('radius', 'length', 'size'):
+        for key in ('radius', 'length', 'size', 'mesh', 'scale'):
             given = getattr(self, key) is not None
             if given and key not in want:
                 raise SpecError(key, f'a {self.kind} takes {list(want) or "no size"}, '
                                      f'not {key}')
-            if not given and key in want:
+            if not given and key in want and key not in OPTIONAL:
                 raise SpecError(key, f'a {self.kind} needs its {key} (m)')
         conv = {'position_body': finite_array(self.position_body, 'position_body', (3,)),
                 'orientation_xyzw': unit_quaternion(self.orientation_xyzw,
@@ -128,6 +139,21 @@ class CollisionShape:
             if not np.all(size > 0.0):
                 raise SpecError('size', f'must be positive, got {self.size!r}')
             conv['size'] = size
+        if self.kind == 'mesh':
+            scale = np.ones(3) if self.scale is None else finite_array(self.scale, 'scale',
+                                                                       (3,))
+            if not np.all(scale > 0.0):
+                raise SpecError('scale', f'must be positive, got {self.scale!r}')
+            conv['scale'] = scale
+            if isinstance(self.mesh, str) or hasattr(self.mesh, '__fspath__'):
+                verts = read_vertices(self.mesh, 'mesh')
+            else:
+                try:
+                    verts = np.array(self.mesh, dtype=float)
+                except (TypeError, ValueError):
+                    raise SpecError('mesh', f'expected a file name or vertices (N, 3), got '
+                                            f'{self.mesh!r}') from None
+            object.__setattr__(self, '_hull', hull_record(verts * scale, 'mesh'))
         if not 0.0 <= conv['restitution'] <= 1.0:
             raise SpecError('restitution', f'must be in [0, 1], got {self.restitution!r}')
         if not isinstance(self.collide, (bool, np.bool_)):
@@ -146,14 +172,21 @@ class CollisionShape:
         if not self.name:
             object.__setattr__(self, 'name', f'{self.body or "world"}/{self.kind}')
 
+    @property
+    def hull(self) -> Optional[np.ndarray]:
+        """Return a mesh's convex hull, packed (:func:`.hulls.hull_record`); None: a primitive."""
+        return getattr(self, '_hull', None)
+
     def dimensions(self) -> np.ndarray:
-        """Return the kernels' size (3,): radius; half extents; radius, half length; 0."""
+        """Return the kernels' size (3,): radius; half extents (a hull's about its origin)..."""
         if self.kind == 'sphere':
             return np.array([self.radius, 0.0, 0.0])
         if self.kind == 'box':
             return 0.5 * np.asarray(self.size)
         if self.kind in ('capsule', 'cylinder'):
             return np.array([self.radius, 0.5 * self.length, 0.0])
+        if self.kind == 'mesh':
+            return np.array(self.hull[:3])
         return np.zeros(3)
 
 
@@ -222,6 +255,15 @@ class ContactDetector:
         self.body = np.array([body[k] for k in live], dtype=np.int64)
         self.kind = np.array([int(KINDS[self.shapes[k].kind]) for k in live], dtype=np.int64)
         self.size = np.array([self.shapes[k].dimensions() for k in live]).reshape(m, 3)
+        # The hulls' records, one after another (their rows' starts in hull_at).
+        records, at, self.hull_at = [], 0, np.full(m, -1, dtype=np.int64)
+        for row, k in enumerate(live):
+            rec = self.shapes[k].hull
+            if rec is not None:
+                self.hull_at[row] = at
+                records.append(rec)
+                at += len(rec)
+        self.hulls = np.concatenate(records) if records else np.zeros(1)
         self.c_body = np.array([self.shapes[k].position_body for k in live]).reshape(m, 3)
         self.R_body = np.array([quat_to_matrix(self.shapes[k].orientation_xyzw)
                                 for k in live]).reshape(m, 3, 3)
@@ -308,8 +350,9 @@ class ContactDetector:
         pairs = np.concatenate([solids[self._pairs[:k]].reshape(-1, 2),
                                 self._plane_pairs[:kp]])
         while True:
-            count = narrow_phase(pairs, self.kind, c, R, self.size, self.margin,
-                                 self._points, self._normals, self._depths, self._owner)
+            count = narrow_phase(pairs, self.kind, c, R, self.size, self.hulls, self.hull_at,
+                                 self.margin, self._points, self._normals, self._depths,
+                                 self._owner)
             if count <= len(self._depths):
                 break
             cap = 2 * count

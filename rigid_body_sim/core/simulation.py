@@ -359,9 +359,11 @@ class Simulation:
                         dims = {'radius': size[0], 'length': size[1]}
                     elif kind == 'sphere':
                         dims = {'radius': size[0]}
+                    elif kind == 'mesh':   # (its file, its scale)
+                        dims = {'mesh': size[0], 'scale': size[1]}
                     else:
-                        raise SpecError('kind', f"expected 'box', 'cylinder' or 'sphere', "
-                                                f'got {kind!r}')
+                        raise SpecError('kind', f"expected 'box', 'cylinder', 'sphere' or "
+                                                f"'mesh', got {kind!r}")
                     out.append(CollisionShape(
                         kind, frame.body, position_body=frame.position + frame.rotation @ xyz,
                         orientation_xyzw=so3.matrix_to_quat(R), name=f'{spec.prefix}{link}/'

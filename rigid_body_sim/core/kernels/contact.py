@@ -6,6 +6,9 @@ Conventions. A shape is its kind (:class:`Shape`), its frame in the world (centr
 and its size (3,): a sphere's radius; a box's half extents along its axes; a capsule's
 and a cylinder's radius and the half length of its axis, the shape's z axis; a plane
 (a half-space, solid below) passes through ``c`` with its outward normal ``R[:, 2]``.
+A hull (a mesh's convex hull) takes its packed record (:func:`..hulls.hull_record`)
+where a narrow phase takes a size; its size (3,) is the half extents of a box about
+its origin that holds it (the broad phase bounds it as that box).
 
 A contact of shapes ``a`` and ``b`` is a point (3,), a unit normal (3,) from ``b`` to
 ``a`` (a pushes along ``+n``), and a depth (m): how far the surfaces overlap along the
@@ -29,10 +32,10 @@ import math
 from numba import njit
 import numpy as np
 
-from .convex import manifold, penetration
+from .convex import CANDIDATES, H_NV, H_VERTS, manifold, penetration
 from .layout import O_ORIGIN_WORLD, O_QUAT_BODY_WORLD
 from .so3 import quat_matrix
-from .views import raw
+from .views import raw, raw_slice
 
 
 class Shape(IntEnum):
@@ -43,9 +46,10 @@ class Shape(IntEnum):
     BOX = 2
     CYLINDER = 3
     PLANE = 4
+    HULL = 5
 
 
-SPHERE, CAPSULE, BOX, CYLINDER, PLANE = (int(s) for s in Shape)
+SPHERE, CAPSULE, BOX, CYLINDER, PLANE, HULL = (int(s) for s in Shape)
 #: Most points of one pair's manifold.
 MANIFOLD = 4
 #: Below this sine of the angle between two axes (or a normal and an axis) they count as
@@ -631,9 +635,44 @@ def _on_plane(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, cp: np.
     n = w[280:283]
     for i in range(3):
         n[i] = Rp[i, 2]
+    if kind == HULL:
+        return _hull_on_plane(c, R, size, cp, n, flip, margin, points, normals, depths, k,
+                              w[28:44].reshape((4, 4)))
     cand = w[288:320].reshape((8, 4))
     m = _surface_candidates(kind, c, R, size, n, cand)
     return _points_on_plane(cand, m, cp, n, flip, margin, points, normals, depths, k)
+
+
+@njit(cache=True)
+def _hull_on_plane(c: np.ndarray, R: np.ndarray, rec: np.ndarray, cp: np.ndarray,
+                   n: np.ndarray, flip: bool, margin: float, points: np.ndarray,
+                   normals: np.ndarray, depths: np.ndarray, k: int, tmp: np.ndarray) -> int:
+    """
+    Emit a hull's vertices within ``margin`` of a plane: the :data:`MANIFOLD` that span most.
+
+    (:func:`_reduce`: a hull's face on the plane has as many corners as it has, all at
+    one depth; the deepest four alone might be neighbours on one side.)
+    """
+    nv = int(rec[H_NV])
+    cand = np.empty((nv, 4))
+    m = 0
+    for i in range(nv):
+        v = rec[H_VERTS + 3 * i:]
+        for r in range(3):
+            cand[m, r] = c[r] + R[r, 0] * v[0] + R[r, 1] * v[1] + R[r, 2] * v[2]
+        gap = (n[0] * (cand[m, 0] - cp[0]) + n[1] * (cand[m, 1] - cp[1])
+               + n[2] * (cand[m, 2] - cp[2]))
+        if gap <= margin:
+            cand[m, 3] = gap
+            m += 1
+    m = _reduce(cand, m, tmp)
+    s = -1.0 if flip else 1.0
+    for i in range(m):
+        gap = cand[i, 3]
+        k = _emit(points, normals, depths, k, cand[i, 0] - 0.5 * gap * n[0],
+                  cand[i, 1] - 0.5 * gap * n[1], cand[i, 2] - 0.5 * gap * n[2],
+                  s * n[0], s * n[1], s * n[2], -gap)
+    return k
 
 
 @njit(cache=True)
@@ -700,7 +739,7 @@ def collide(kind_a: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kind_b:
 
 #: Floats of scratch a narrow phase uses (its small vectors and polygons: views into one
 #: buffer, allocated once a batch, not once a pair).
-SCRATCH = 352
+SCRATCH = 352 + 4 * CANDIDATES
 
 
 @njit(cache=True)
@@ -717,6 +756,9 @@ def _collide(kind_a: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kind_b
     if kind_a == PLANE:
         return _on_plane(kind_b, cb, Rb, sb, ca, Ra, True, margin, points, normals, depths, k,
                          w)
+    if kind_a == HULL or kind_b == HULL:
+        return _convex(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, margin, points, normals,
+                       depths, k, w)
     round_a = kind_a == SPHERE or kind_a == CAPSULE
     round_b = kind_b == SPHERE or kind_b == CAPSULE
     if round_a and round_b:
@@ -750,7 +792,7 @@ def _convex(kind_a: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kind_b:
             points: np.ndarray, normals: np.ndarray, depths: np.ndarray, k: int,
             w: np.ndarray) -> int:
     """
-    Emit a cylinder on a box or on a cylinder: EPA's normal and depth, then the manifold.
+    Emit a convex pair (a cylinder or a hull): EPA's normal and depth, then the manifold.
 
     (:mod:`.convex`.) Two flat features facing each other (a cap or a face, a line
     lying across the normal) give the corners of their overlap, at most
@@ -759,7 +801,7 @@ def _convex(kind_a: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kind_b:
     result = w[0:11]
     if not penetration(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, margin, result):
         return k
-    cand = w[208:336].reshape((32, 4))
+    cand = w[352:352 + 4 * CANDIDATES].reshape((CANDIDATES, 4))
     m = manifold(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, result, margin, cand)
     n0, n1, n2 = result[0], result[1], result[2]   # (the manifold may refine it)
     if m < 0:
@@ -800,7 +842,7 @@ def bounds(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, margin: fl
             half = size[0]
         elif kind == CAPSULE:
             half = abs(R[i, 2]) * size[1] + size[0]
-        elif kind == BOX:
+        elif kind == BOX or kind == HULL:   # (a hull: the box about its origin that holds it)
             half = abs(R[i, 0]) * size[0] + abs(R[i, 1]) * size[1] + abs(R[i, 2]) * size[2]
         else:   # a disc of radius r across axis a reaches r sqrt(1 − a_i²) along axis i
             a = R[i, 2]
@@ -1004,13 +1046,16 @@ def shape_frames(out: np.ndarray, body: np.ndarray, c_body: np.ndarray, R_body: 
 
 @njit(cache=True)
 def narrow_phase(pairs: np.ndarray, kind: np.ndarray, c: np.ndarray, R: np.ndarray,
-                 size: np.ndarray, margin: float, points: np.ndarray, normals: np.ndarray,
-                 depths: np.ndarray, owner: np.ndarray) -> int:
+                 size: np.ndarray, hulls: np.ndarray, hull_at: np.ndarray, margin: float,
+                 points: np.ndarray, normals: np.ndarray, depths: np.ndarray,
+                 owner: np.ndarray) -> int:
     """
     Write the contacts of every pair ``(a, b)`` of ``pairs`` (p, 2), one after another.
 
     Writes each contact and, in ``owner``, the row of ``pairs`` it is of; returns the
-    count, which may pass the buffers' room (then grow them and run again).
+    count, which may pass the buffers' room (then grow them and run again). ``hulls``:
+    the hulls' records one after another; ``hull_at`` (m,): where shape ``s``'s starts
+    (−1: not a hull).
     """
     k = 0
     w = np.empty(SCRATCH)
@@ -1018,11 +1063,17 @@ def narrow_phase(pairs: np.ndarray, kind: np.ndarray, c: np.ndarray, R: np.ndarr
     # and slices of these down their calls, each counted twice otherwise.
     ws, c, R, size = raw(w), raw(c), raw(R), raw(size)
     points, normals, depths = raw(points), raw(normals), raw(depths)
+    nh = hulls.shape[0]
     for q in range(pairs.shape[0]):
         a, b = pairs[q, 0], pairs[q, 1]
         start = k
-        k = _collide(kind[a], c[a], R[a], size[a], kind[b], c[b], R[b], size[b], margin,
-                     points, normals, depths, k, ws)
+        # A hull's record in place of its size (the rest of ``hulls`` from its start).
+        sa = raw_slice(size, 3 * a, (3,)) if hull_at[a] < 0 else \
+            raw_slice(hulls, hull_at[a], (nh - hull_at[a],))
+        sb = raw_slice(size, 3 * b, (3,)) if hull_at[b] < 0 else \
+            raw_slice(hulls, hull_at[b], (nh - hull_at[b],))
+        k = _collide(kind[a], c[a], R[a], sa, kind[b], c[b], R[b], sb, margin, points,
+                     normals, depths, k, ws)
         if k < 0:   # no narrow phase (the detector refuses such pairs when it is built)
             k = start
             continue

@@ -81,12 +81,13 @@ def detect(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, d
     buffer is too small.
 
     ``det``: the detector's arrays ``(kind, size, c_body, R_body, body, group, mask,
-    solids, planes, solid_body, solid_group, solid_mask, excluded, live, margin)``;
+    solids, planes, solid_body, solid_group, solid_mask, excluded, live, margin, hulls,
+    hull_at)``;
     ``buf``: its buffers ``(pairs, plane_pairs, points, normals, depths, owner, lo, hi,
     c, R)``; ``out`` (n, O_WIDTH) is overwritten with the bodies' outputs.
     """
     (kind, size, c_body, R_body, body, group, mask, solids, planes, solid_body, solid_group,
-     solid_mask, excluded, live, margin) = det
+     solid_mask, excluded, live, margin, hulls, hull_at) = det
     pairs, ppairs, points, normals, depths, owner, lo, hi, c, R = buf
     n = pos.shape[0]
     outputs(pos, quat, vel, om, frames, out)
@@ -101,7 +102,8 @@ def detect(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, d
         every[i, 0], every[i, 1] = solids[pairs[i, 0]], solids[pairs[i, 1]]
     for i in range(kp):
         every[k + i, 0], every[k + i, 1] = ppairs[i, 0], ppairs[i, 1]
-    count = narrow_phase(every, kind, c, R, size, margin, points, normals, depths, owner)
+    count = narrow_phase(every, kind, c, R, size, hulls, hull_at, margin, points, normals,
+                         depths, owner)
     if count > depths.shape[0]:
         return _no_contacts(-1)
     sa, sb = np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64)

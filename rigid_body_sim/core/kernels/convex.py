@@ -1,9 +1,10 @@
 """
-Convex pairs without a closed form here (a cylinder on a box or on a cylinder): GJK, EPA, features.
+Convex pairs without a closed form here (a cylinder or a hull on a shape): GJK, EPA, features.
 
 The shapes' conventions are :mod:`.contact`'s (kind, centre ``c``, rotation ``R``,
-size; a cylinder's axis is its z axis). Each shape is known here by its support
-point, the point farthest along a direction (:func:`support`).
+size; a cylinder's axis is its z axis). A hull (a mesh's convex hull) takes its packed
+record (:mod:`..hulls`: ``H_*`` below) in place of a size. Each shape is known here by
+its support point, the point farthest along a direction (:func:`support`).
 
 **Depth and normal.** With ``D = A − B`` (the Minkowski difference), the signed
 overlap of ``A`` and ``B`` (negative: their gap) is the least of ``D``'s support
@@ -61,7 +62,15 @@ GJK_ITERATIONS = 64
 #: The inflating ball's radius beyond the margin, as a fraction of the shapes' size.
 INFLATE = 1e-3
 #: Kinds, as :class:`.contact.Shape` (repeated: this module must not import contact's).
-SPHERE, CAPSULE, BOX, CYLINDER = 0, 1, 2, 3
+SPHERE, CAPSULE, BOX, CYLINDER, HULL = 0, 1, 2, 3, 5
+#: A hull's record (:func:`..hulls.hull_record`): its half extents about its origin
+#: (0:3), vertex count, face count, then from ``H_VERTS`` its vertices (3 each), its
+#: faces' starts, and each face (outward normal, corner count k, k vertex indices).
+H_NV, H_NF, H_VERTS = 3, 4, 6
+#: Most corners of a feature (a hull's face).
+CORNERS = 64
+#: Most corners of the overlap of two features (theirs, and where their outlines cross).
+CANDIDATES = 2 * CORNERS + 8
 #: A sine below which two directions count as parallel (:data:`.contact.PARALLEL`).
 PARALLEL = 1e-6
 #: Feature kinds.
@@ -84,6 +93,11 @@ def support(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, d0: float
             s = 1.0 if R[0, j] * d0 + R[1, j] * d1 + R[2, j] * d2 >= 0.0 else -1.0
             for i in range(3):
                 out[i] += s * size[j] * R[i, j]
+        return
+    if kind == HULL:   # its vertex highest along d (the first of a tie)
+        v = size[H_VERTS + 3 * _top(R, size, d0, d1, d2):]
+        for i in range(3):
+            out[i] += R[i, 0] * v[0] + R[i, 1] * v[1] + R[i, 2] * v[2]
         return
     norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     if kind == SPHERE:
@@ -116,6 +130,21 @@ def support(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, d0: float
         out[0] += r * p0 / pn
         out[1] += r * p1 / pn
         out[2] += r * p2 / pn
+
+
+@njit(cache=True)
+def _top(R: np.ndarray, rec: np.ndarray, d0: float, d1: float, d2: float) -> int:
+    """Return the index of a hull's vertex highest along the world direction ``d``."""
+    l0 = R[0, 0] * d0 + R[1, 0] * d1 + R[2, 0] * d2   # d in the hull's frame
+    l1 = R[0, 1] * d0 + R[1, 1] * d1 + R[2, 1] * d2
+    l2 = R[0, 2] * d0 + R[1, 2] * d1 + R[2, 2] * d2
+    best, high = 0, -math.inf
+    for i in range(int(rec[H_NV])):
+        o = H_VERTS + 3 * i
+        h = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
+        if h > high:
+            best, high = i, h
+    return best
 
 
 @njit(cache=True)
@@ -326,6 +355,9 @@ def penetration(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int
     GJK on ``D'`` inflated by the margin plus :data:`INFLATE` of the shapes' size:
     a gap past that is no contact; any other pair is EPA's, from GJK's simplex (so
     every contact's normal comes from EPA, never from a GJK vector of rounding size).
+    A sphere or a capsule on a shape that is neither: first GJK's distance between its
+    core (its centre or axis) and the other shape, exact where the core is outside
+    (:func:`_rounded`); EPA only when the core is inside.
     """
     scale = max(sa[0], sa[1], sa[2], sb[0], sb[1], sb[2])
     eps = margin + INFLATE * scale
@@ -334,10 +366,62 @@ def penetration(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int
     idx = np.zeros(4, dtype=np.int64)
     lam = np.zeros(4)
     v = np.empty(3)
+    round_a, round_b = ka == SPHERE or ka == CAPSULE, kb == SPHERE or kb == CAPSULE
+    if round_a != round_b:
+        got = _rounded(ka, ca, Ra, sa, kb, cb, Rb, sb, margin, round_a, V, PA, PB, idx, lam,
+                       v, result)
+        if got >= 0:
+            return got == 1
     status, m = _gjk(ka, ca, Ra, sa, kb, cb, Rb, sb, eps, 0.0, V, PA, PB, idx, lam, v)
     if status != 1:   # D' lies off the origin: the gap passes eps > margin
         return False
     return _epa(ka, ca, Ra, sa, kb, cb, Rb, sb, eps, margin, V, PA, PB, idx, m, result)
+
+
+@njit(cache=True)
+def _rounded(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
+             cb: np.ndarray, Rb: np.ndarray, sb: np.ndarray, margin: float, round_a: bool,
+             V: np.ndarray, PA: np.ndarray, PB: np.ndarray, idx: np.ndarray, lam: np.ndarray,
+             v: np.ndarray, result: np.ndarray) -> int:
+    """
+    :func:`penetration` of a sphere or capsule (a if ``round_a``, else b) on another shape.
+
+    GJK's nearest points of its core (radius 0) and the other shape: the normal along
+    them and the depth ``r − distance`` are exact to rounding (a polytope's nearest
+    simplex is found exactly; no curved surface is sampled). Returns 1 (``result``
+    written), 0 (the gap passes ``margin``) or −1 (the core touches or enters the
+    other shape: EPA's to resolve).
+    """
+    r = sa[0] if round_a else sb[0]
+    core = np.zeros(3)
+    core[1] = sa[1] if round_a else sb[1]   # (a capsule's half length; a sphere's 0)
+    ka_, sa_ = (ka, core) if round_a else (ka, sa)
+    kb_, sb_ = (kb, sb) if round_a else (kb, core)
+    status, m = _gjk(ka_, ca, Ra, sa_, kb_, cb, Rb, sb_, 0.0, r + margin, V, PA, PB, idx,
+                     lam, v)
+    if status == 0:
+        return 0
+    dist = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    scale = max(sa[0], sa[1], sa[2], sb[0], sb[1], sb[2])
+    if status == 1 or dist <= 1e-9 * scale:
+        return -1
+    if r - dist < -margin:
+        return 0
+    for x in range(3):   # v runs from b's nearest point to a's: the normal, b to a
+        result[x] = v[x] / dist
+    result[3] = r - dist
+    for x in range(3):
+        pa, pb = 0.0, 0.0
+        for j in range(m):
+            pa += lam[j] * PA[idx[j], x]
+            pb += lam[j] * PB[idx[j], x]
+        if round_a:
+            pa -= r * result[x]
+        else:
+            pb += r * result[x]
+        result[4 + x], result[7 + x] = pa, pb
+    result[10] = 0.0
+    return 1
 
 
 @njit(cache=True)
@@ -570,13 +654,33 @@ def feature(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, d: np.nda
     along ``d`` by at most ``tol`` (the margin: what a contact may be apart), so a
     slightly tilted face or line still touches at all its corners, each at its own gap.
     A box: its vertex, edge (2 points) or face (4 corners in order; the axis most along
-    ``d`` is never spanned). A cylinder: its rim point, its mantle line (2 points) or
+    ``d`` is never spanned). A hull: likewise (:func:`_hull_feature`). A sphere: its
+    point along ``d``; a capsule: its end's or its axis' (2 points), out by the radius.
+    A cylinder: its rim point, its mantle line (2 points) or
     its cap (a disc: its centre, and in ``pts[1]``, ``pts[2]`` two axes across the
     shape's axis, the first towards ``d``'s part across it, or the shape's x axis when
     that part is below :data:`PARALLEL`). ``normal``: a face's or a cap's outward normal.
     """
     for r in range(3):
         normal[r] = 0.0
+    if kind == HULL:
+        return _hull_feature(c, R, size, d, tol, pts, normal)
+    if kind == SPHERE:
+        for r in range(3):
+            pts[0, r] = c[r] + size[0] * d[r]
+        return F_POINT, 1, 0.0
+    if kind == CAPSULE:   # its axis' end (or the axis, lying across d), out by the radius
+        ad = R[0, 2] * d[0] + R[1, 2] * d[1] + R[2, 2] * d[2]
+        hl = size[1]
+        if abs(ad) * 2.0 * hl <= tol:
+            for r in range(3):
+                pts[0, r] = c[r] - hl * R[r, 2] + size[0] * d[r]
+                pts[1, r] = c[r] + hl * R[r, 2] + size[0] * d[r]
+            return F_SEGMENT, 2, 0.0
+        s = 1.0 if ad >= 0.0 else -1.0
+        for r in range(3):
+            pts[0, r] = c[r] + s * hl * R[r, 2] + size[0] * d[r]
+        return F_POINT, 1, 0.0
     if kind == BOX:
         most, big = 0, -1.0
         for j in range(3):
@@ -655,6 +759,60 @@ def feature(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, d: np.nda
     pts[0, 1] = c[1] + s * hl * a1 + r_ * u1
     pts[0, 2] = c[2] + s * hl * a2 + r_ * u2
     return F_POINT, 1, 0.0
+
+
+@njit(cache=True)
+def _hull_feature(c: np.ndarray, R: np.ndarray, rec: np.ndarray, d: np.ndarray, tol: float,
+                  pts: np.ndarray, normal: np.ndarray) -> tuple:
+    """
+    Return :func:`feature` of a hull (its record ``rec``).
+
+    Its face most along ``d`` if all its corners lie within ``tol`` of the top; else
+    the two vertices within it if there are two (an edge); else the top vertex.
+    """
+    nv, nf = int(rec[H_NV]), int(rec[H_NF])
+    l0 = R[0, 0] * d[0] + R[1, 0] * d[1] + R[2, 0] * d[2]   # d in the hull's frame
+    l1 = R[0, 1] * d[0] + R[1, 1] * d[1] + R[2, 1] * d[2]
+    l2 = R[0, 2] * d[0] + R[1, 2] * d[1] + R[2, 2] * d[2]
+    top = _top(R, rec, d[0], d[1], d[2])
+    o = H_VERTS + 3 * top
+    high = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
+    starts = H_VERTS + 3 * nv
+    best, most = 0, -math.inf
+    for f in range(nf):
+        o = int(rec[starts + f])
+        nd = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
+        if nd > most:
+            best, most = f, nd
+    o = int(rec[starts + best])
+    k = int(rec[o + 3])
+    flat = k <= pts.shape[0]
+    for q in range(k):
+        v = H_VERTS + 3 * int(rec[o + 4 + q])
+        if rec[v] * l0 + rec[v + 1] * l1 + rec[v + 2] * l2 < high - tol:
+            flat = False
+            break
+    if flat:
+        for q in range(k):
+            v = rec[H_VERTS + 3 * int(rec[o + 4 + q]):]
+            for r in range(3):
+                pts[q, r] = c[r] + R[r, 0] * v[0] + R[r, 1] * v[1] + R[r, 2] * v[2]
+        for r in range(3):
+            normal[r] = R[r, 0] * rec[o] + R[r, 1] * rec[o + 1] + R[r, 2] * rec[o + 2]
+        return F_POLYGON, k, 0.0
+    near, second = 0, -1
+    for i in range(nv):
+        v = H_VERTS + 3 * i
+        if rec[v] * l0 + rec[v + 1] * l1 + rec[v + 2] * l2 >= high - tol:
+            near += 1
+            if i != top:
+                second = i
+    m = 2 if near == 2 else 1
+    for q in range(m):
+        v = rec[H_VERTS + 3 * (top if q == 0 else second):]
+        for r in range(3):
+            pts[q, r] = c[r] + R[r, 0] * v[0] + R[r, 1] * v[1] + R[r, 2] * v[2]
+    return (F_SEGMENT, 2, 0.0) if m == 2 else (F_POINT, 1, 0.0)
 
 
 @njit(cache=True)
@@ -895,7 +1053,7 @@ def _radial(c: np.ndarray, R: np.ndarray, fo: int, ko: int, po: np.ndarray, x: n
         ea = e0 * R[0, 2] + e1 * R[1, 2] + e2 * R[2, 2]
         if le == 0.0 or math.sqrt(max(le * le - ea * ea, 0.0)) > margin:
             return False
-    elif fo != F_POINT or ko != BOX:   # (a rim point is no corner: its surface curves)
+    elif fo != F_POINT or ko != BOX and ko != HULL:   # (a rim point is no corner: it curves)
         return False
     x0, x1, x2 = x[0] - c[0], x[1] - c[1], x[2] - c[2]
     t = x0 * R[0, 2] + x1 * R[1, 2] + x2 * R[2, 2]
@@ -917,15 +1075,15 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
     """
     Write the contacts of two flat features facing each other: rows (x, y, z, gap).
 
-    ``result`` is :func:`penetration`'s. Returns how many rows of ``cand`` (32, 4) it
-    wrote (each within ``margin``), or −1 when the features are not both flat (one
-    contact: :func:`penetration`'s).
+    ``result`` is :func:`penetration`'s. Returns how many rows of ``cand``
+    (:data:`CANDIDATES`, 4) it wrote (each within ``margin``), or −1 when the features
+    are not both flat (one contact: :func:`penetration`'s).
     """
     n = result[0:3]
     d = np.empty(3)
     for r in range(3):
         d[r] = -n[r]
-    pa, pb = np.empty((4, 3)), np.empty((4, 3))
+    pa, pb = np.empty((CORNERS, 3)), np.empty((CORNERS, 3))
     na, nb = np.empty(3), np.empty(3)
     fa, ma, ra = feature(ka, ca, Ra, sa, d, margin, pa, na)
     fb, mb, rb = feature(kb, cb, Rb, sb, n, margin, pb, nb)
@@ -1049,12 +1207,12 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
     t2[0] = n[1] * t1[2] - n[2] * t1[1]
     t2[1] = n[2] * t1[0] - n[0] * t1[2]
     t2[2] = n[0] * t1[1] - n[1] * t1[0]
-    xa, xb = np.empty((5, 2)), np.empty((5, 2))
+    xa, xb = np.empty((CORNERS + 1, 2)), np.empty((CORNERS + 1, 2))
     ma = _region(fa, ma, pa, ra, o, t1, t2, xa)
     mb = _region(fb, mb, pb, rb, o, t1, t2, xb)
     tol = 1e-12 * scale
-    xy = np.empty((32, 2))
-    src = np.zeros(32, dtype=np.int64)   # +k: a's corner k − 1; −k: b's; 0: a crossing
+    xy = np.empty((CANDIDATES, 2))
+    src = np.zeros(CANDIDATES, dtype=np.int64)   # +k: a's corner k − 1; −k: b's; 0: a crossing
     nc = 0
     if fa == F_SEGMENT and fb == F_SEGMENT:
         # Parallel lines: the ends of their overlap along a's.

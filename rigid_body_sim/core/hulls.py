@@ -1,0 +1,167 @@
+"""
+Convex hulls of meshes for contact: read a mesh file, take its hull, pack it for the kernels.
+
+A mesh collision shape is simulated as the convex hull of its vertices (as MuJoCo
+and Bullet do): a hull is what the kernels' support-function narrow phases
+(:mod:`.kernels.convex`: GJK, EPA, features) take, and a robot's collision meshes
+are usually drawn convex for this reason. The hull is Qhull's (``scipy.spatial.
+ConvexHull``, already a dependency), its coplanar triangles merged into one face each
+(a box's hull has six four-cornered faces), so a hull's face lying on another
+face gives the corners of their overlap, as a box's does.
+
+Files: STL (binary or ASCII) and Wavefront OBJ (its ``v`` lines), read here (both
+are a list of vertices for a hull; no mesh library is needed for that). Other
+formats (COLLADA ``.dae``...) are refused with an error naming the file.
+
+The packed record (:func:`hull_record`) is one float64 array per hull, laid out as
+:mod:`.kernels.convex` reads it (``H_*``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import struct
+from typing import Any
+
+import numpy as np
+
+from .errors import SpecError
+from .kernels.convex import CORNERS, H_NF, H_NV, H_VERTS
+
+#: File name endings read (lower case).
+FORMATS = ('.stl', '.obj')
+
+
+def read_vertices(path: Any, field: str = 'mesh') -> np.ndarray:
+    """
+    Return the vertices (N, 3) of a mesh file (STL binary or ASCII, OBJ), in its units.
+
+    Raises :class:`.SpecError` naming ``field`` for a missing file, another format,
+    or a file that holds no vertex.
+    """
+    p = Path(path)
+    if p.suffix.lower() not in FORMATS:
+        raise SpecError(field, f'{str(path)!r}: mesh format {p.suffix or "(none)"!r} not '
+                               f'read (STL and OBJ are)')
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise SpecError(field, f'{str(path)!r}: {exc.strerror or exc}') from None
+    if p.suffix.lower() == '.obj':
+        verts = _obj(data)
+    else:
+        verts = _stl(data)
+    if verts is None or len(verts) == 0:
+        raise SpecError(field, f'{str(path)!r}: no vertices read (not a valid '
+                               f'{p.suffix[1:].upper()} file)')
+    return verts
+
+
+def _stl(data: bytes):
+    """Return an STL file's triangle corners (3T, 3), binary or ASCII; None if neither."""
+    if len(data) >= 84:
+        count = struct.unpack_from('<I', data, 80)[0]
+        if len(data) == 84 + 50 * count:   # binary: 50 bytes a triangle
+            rec = np.frombuffer(data, dtype=np.dtype([('n', '<f4', 3), ('v', '<f4', (3, 3)),
+                                                      ('attr', '<u2')]), count=count,
+                                offset=84)
+            return rec['v'].reshape(-1, 3).astype(np.float64)
+    try:
+        text = data.decode('ascii')
+    except UnicodeDecodeError:
+        return None
+    rows = [line.split()[1:4] for line in text.splitlines()
+            if line.strip().lower().startswith('vertex')]
+    try:
+        return np.array(rows, dtype=np.float64).reshape(-1, 3)
+    except ValueError:
+        return None
+
+
+def _obj(data: bytes):
+    """Return an OBJ file's ``v`` vertices (N, 3); None if a line does not parse."""
+    rows = []
+    for line in data.decode('utf-8', errors='replace').splitlines():
+        parts = line.split()
+        if len(parts) >= 4 and parts[0] == 'v':
+            rows.append(parts[1:4])
+    try:
+        return np.array(rows, dtype=np.float64).reshape(-1, 3)
+    except ValueError:
+        return None
+
+
+def hull_record(vertices: Any, field: str = 'mesh') -> np.ndarray:
+    """
+    Return the packed record of the convex hull of ``vertices`` (N, 3), in the shape's frame.
+
+    Layout (:mod:`.kernels.convex`): ``[0:3]`` the half extents of the box about the
+    shape's origin that holds the hull (``max |v|`` per axis: the broad phase's bounds and
+    the size scale), ``[H_NV]`` the hull's vertex count, ``[H_NF]`` its face count,
+    ``[H_VERTS:]`` the vertices, then the faces' starts (``nf`` indices into the record),
+    then
+    each face: its outward unit normal, its corner count ``k``, and its ``k`` vertex
+    indices counter-clockwise about the normal.
+
+    Raises :class:`.SpecError` naming ``field`` for non-finite vertices, a flat or
+    degenerate set (no volume), or a face of more than :data:`.convex.CORNERS` corners.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 4:
+        raise SpecError(field, f'expected at least 4 vertices (N, 3), got shape {v.shape}')
+    if not np.all(np.isfinite(v)):
+        raise SpecError(field, 'vertices must be finite')
+    try:
+        hull = ConvexHull(v)
+    except QhullError:
+        raise SpecError(field, f'the {len(v)} vertices span no volume (flat or '
+                               f'degenerate): a hull needs a solid') from None
+    size = float(np.max(np.ptp(v, axis=0)))
+    if hull.volume <= 1e-12 * size ** 3:
+        raise SpecError(field, f'the hull has no volume ({hull.volume:.3g}): a hull needs a '
+                               f'solid')
+    keep = hull.vertices
+    index = {int(i): j for j, i in enumerate(keep)}
+    hv = v[keep]
+    # Qhull's facets come triangulated: triangles of one plane share its equation (to
+    # rounding). Merge each plane's into one face.
+    faces: list = []
+    tol = 1e-9 * size
+    for simplex, eq in zip(hull.simplices, hull.equations):
+        for face in faces:
+            if abs(face[0] @ eq[:3] - 1.0) <= 1e-9 and abs(face[1] - eq[3]) <= tol:
+                face[2].update(int(i) for i in simplex)
+                break
+        else:
+            faces.append([eq[:3].copy(), float(eq[3]), {int(i) for i in simplex}])
+    out_faces = []
+    for normal, _, corners in faces:
+        idx = np.array(sorted(index[i] for i in corners))
+        if len(idx) > CORNERS:
+            raise SpecError(field, f'a hull face has {len(idx)} corners (at most {CORNERS}): '
+                                   f'simplify the mesh')
+        pts = hv[idx]
+        centre = pts.mean(axis=0)
+        u = pts[0] - centre
+        u /= np.linalg.norm(u)
+        w = np.cross(normal, u)
+        angle = np.arctan2((pts - centre) @ w, (pts - centre) @ u)
+        out_faces.append((normal / np.linalg.norm(normal), idx[np.argsort(angle)]))
+    nv, nf = len(hv), len(out_faces)
+    starts = H_VERTS + 3 * nv
+    body = sum(4 + len(idx) for _, idx in out_faces)
+    rec = np.zeros(starts + nf + body)
+    rec[0:3] = np.max(np.abs(hv), axis=0)
+    rec[H_NV], rec[H_NF] = nv, nf
+    rec[H_VERTS:H_VERTS + 3 * nv] = hv.ravel()
+    at = starts + nf
+    for f, (normal, idx) in enumerate(out_faces):
+        rec[starts + f] = at
+        rec[at:at + 3] = normal
+        rec[at + 3] = len(idx)
+        rec[at + 4:at + 4 + len(idx)] = idx
+        at += 4 + len(idx)
+    rec.setflags(write=False)
+    return rec

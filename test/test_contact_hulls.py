@@ -1,0 +1,419 @@
+"""
+Meshes as convex hulls (:mod:`.hulls`, and the hull's narrow phases in :mod:`.kernels.convex`).
+
+References. A hull's support function is the largest ``v · m`` over its vertices, so
+the signed overlap of a hull and a shape is the least over unit ``m`` of
+``h_hull(m) + h_B(−m)``: minimized here independently, as in ``test_contact_convex``
+(support functions written again in this file; the reference's own accuracy is about
+1e-10 of the size). A box's eight corners make a hull that is that box: its contacts
+with a plane, and its steps sliding and resting, must be those of the box primitive
+(their closed forms are tested in ``test_contact_dynamics``). A hexagonal prism on the
+ground has a closed-form rest: six corners on the ground, weight ``m g``.
+
+Tolerances. Depths and normals: 1e-8 of the size against the reference (its own
+accuracy 1e-10, EPA's 1e-13). A sphere's normal on a face or at a corner comes from
+GJK's nearest point of its centre, exact to rounding of O(1) coordinates: 1e-12. Hull
+against box primitive over 1000 steps: the same contacts to rounding, so states within
+1e-12 (as the compiled and Python paths: ``test_contact_compiled``). At rest: rounding
+of 1000 steps of a body held still, 1e-13 m; forces to 1e-9 of ``m g``.
+"""
+
+import itertools
+import math
+import struct
+
+import numpy as np
+import pytest
+from rigid_body_sim.core import Gravity, RigidBody, Simulation, SpecError
+from rigid_body_sim.core.hulls import hull_record, read_vertices
+from rigid_body_sim.core.kernels.contact import BOX, CAPSULE, collide, CYLINDER, HULL, SPHERE
+from rigid_body_sim.core.kernels.convex import H_NF, H_NV, H_VERTS
+from rigid_body_sim.core.shapes import CollisionShape
+from scipy.optimize import minimize
+from scipy.spatial.transform import Rotation
+
+G = 9.81
+CORNERS = np.array(list(itertools.product([-0.1, 0.1], [-0.2, 0.2], [-0.05, 0.05])))
+HALF = np.array([0.1, 0.2, 0.05])
+
+
+def _faces(rec):
+    """Return a record's faces as (normal, vertex index array)."""
+    nv, nf = int(rec[H_NV]), int(rec[H_NF])
+    out = []
+    for f in range(nf):
+        o = int(rec[H_VERTS + 3 * nv + f])
+        k = int(rec[o + 3])
+        out.append((rec[o:o + 3], rec[o + 4:o + 4 + k].astype(int)))
+    return out
+
+
+def _vertices(rec):
+    nv = int(rec[H_NV])
+    return rec[H_VERTS:H_VERTS + 3 * nv].reshape(nv, 3)
+
+
+def test_a_boxs_corners_make_a_hull_of_six_four_cornered_faces_in_order():
+    rec = hull_record(CORNERS)
+    np.testing.assert_array_equal(rec[:3], HALF)
+    assert int(rec[H_NV]) == 8
+    v = _vertices(rec)
+    faces = _faces(rec)
+    assert len(faces) == 6
+    for normal, idx in faces:
+        assert len(idx) == 4
+        axis = int(np.argmax(np.abs(normal)))
+        assert abs(normal[axis]) == pytest.approx(1.0, abs=1e-15)
+        # Every corner on the face's plane, and counter-clockwise about its normal.
+        np.testing.assert_allclose(v[idx] @ normal, HALF[axis], atol=1e-15)
+        pts = v[idx]
+        for q in range(4):
+            turn = np.cross(pts[(q + 1) % 4] - pts[q], pts[(q + 2) % 4] - pts[(q + 1) % 4])
+            assert turn @ normal > 0.0
+
+
+def test_interior_points_and_repeats_are_not_vertices():
+    pts = np.vstack([CORNERS, CORNERS, np.random.default_rng(0).uniform(-0.05, 0.05, (50, 3))])
+    rec = hull_record(pts)
+    assert int(rec[H_NV]) == 8 and int(rec[H_NF]) == 6
+
+
+@pytest.mark.parametrize('bad, words', [
+    (np.zeros((4, 3)), 'no volume'),
+    (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]), 'no volume'),
+    (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), 'at least 4'),
+    (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, np.nan]]), 'finite'),
+    ('nothing', 'expected a file name or vertices'),
+])
+def test_a_mesh_without_a_solid_hull_is_refused_naming_the_field(bad, words):
+    with pytest.raises(SpecError, match=words) as err:
+        CollisionShape('mesh', 'b', mesh=bad if not isinstance(bad, str) else [bad])
+    assert err.value.field == 'mesh'
+
+
+def test_a_meshs_scale_must_be_positive_and_scales_its_hull():
+    with pytest.raises(SpecError) as err:
+        CollisionShape('mesh', 'b', mesh=CORNERS, scale=(1, 0, 1))
+    assert err.value.field == 'scale'
+    s = CollisionShape('mesh', 'b', mesh=CORNERS, scale=(2, 1, 3))
+    np.testing.assert_array_equal(s.dimensions(), HALF * (2, 1, 3))
+    with pytest.raises(SpecError) as err:
+        CollisionShape('box', 'b', size=(1, 1, 1), scale=(1, 1, 1))
+    assert err.value.field == 'scale'
+
+
+def _triangles(rec):
+    """Return a hull's surface as triangles (T, 3, 3): each face fanned from its corner 0."""
+    v = _vertices(rec)
+    return np.array([[v[idx[0]], v[idx[q]], v[idx[q + 1]]] for _, idx in _faces(rec)
+                     for q in range(1, len(idx) - 1)])
+
+
+def test_stl_binary_and_ascii_and_obj_files_give_the_same_hull(tmp_path):
+    tri = _triangles(hull_record(CORNERS))
+    binary = bytearray(b'\0' * 80 + struct.pack('<I', len(tri)))
+    for t in tri:
+        binary += struct.pack('<12fH', 0, 0, 0, *t.ravel(), 0)
+    (tmp_path / 'b.stl').write_bytes(bytes(binary))
+    ascii_ = ['solid b'] + [line for t in tri for line in
+                            ['facet normal 0 0 0', 'outer loop',
+                             *(f'vertex {x:.17g} {y:.17g} {z:.17g}' for x, y, z in t),
+                             'endloop', 'endfacet']] + ['endsolid b']
+    (tmp_path / 'a.STL').write_text('\n'.join(ascii_))
+    (tmp_path / 'o.obj').write_text('# a box\n' + ''.join(f'v {x:.17g} {y:.17g} {z:.17g}\n'
+                                                          for x, y, z in CORNERS)
+                                    + 'f 1 2 3\n')
+    want = hull_record(CORNERS)
+    for name in ('b.stl', 'a.STL', 'o.obj'):
+        got = CollisionShape('mesh', 'b', mesh=str(tmp_path / name)).hull
+        # (binary STL holds float32: 0.2 to 1.5e-8)
+        np.testing.assert_allclose(np.sort(_vertices(got), axis=0),
+                                   np.sort(_vertices(want), axis=0), rtol=0, atol=2e-8)
+    (tmp_path / 'x.dae').write_text('<COLLADA/>')
+    for name, words in (('x.dae', "format '.dae' not read"), ('none.stl', 'No such file')):
+        with pytest.raises(SpecError, match=words) as err:
+            read_vertices(tmp_path / name)
+        assert err.value.field == 'mesh'
+    (tmp_path / 'empty.stl').write_text('solid nothing\nendsolid nothing\n')
+    with pytest.raises(SpecError, match='no vertices'):
+        read_vertices(tmp_path / 'empty.stl')
+
+
+# -- narrow phases against an independent support-function minimum --------------------------
+
+def _support_value(shape, m):
+    """Return the support function h(m) of a shape, from its definition."""
+    kind, c, R, size = shape
+    if kind == HULL:
+        return m @ c + np.max(_vertices(size) @ (R.T @ m))
+    if kind == BOX:
+        return m @ c + sum(size[j] * abs(R[:, j] @ m) for j in range(3))
+    if kind == SPHERE:
+        return m @ c + size[0] * np.linalg.norm(m)
+    a = R[:, 2]
+    if kind == CAPSULE:
+        return m @ c + size[1] * abs(a @ m) + size[0] * np.linalg.norm(m)
+    return m @ c + size[1] * abs(a @ m) + size[0] * np.linalg.norm(np.cross(a, m))
+
+
+def _reference_overlap(a, b, rng):
+    """Return the least over unit m of h_a(m) + h_b(−m): many starts, then Nelder–Mead."""
+    def f(m):
+        return _support_value(a, m) + _support_value(b, -m)
+
+    def g(x):
+        return f(np.array([math.sin(x[0]) * math.cos(x[1]), math.sin(x[0]) * math.sin(x[1]),
+                           math.cos(x[0])]))
+    starts = sorted(((f(v), tuple(v)) for v in
+                     (u / np.linalg.norm(u) for u in rng.normal(size=(400, 3)))))
+    best = math.inf
+    for _, v in starts[:4]:
+        x = np.array([math.acos(max(-1.0, min(1.0, v[2]))), math.atan2(v[1], v[0])])
+        for _ in range(3):
+            res = minimize(g, x, method='Nelder-Mead',
+                           options={'xatol': 1e-14, 'fatol': 1e-17, 'maxiter': 2000})
+            x = res.x + rng.normal(size=2) * 1e-7
+        best = min(best, res.fun)
+    return best
+
+
+def _axes(shape):
+    """Return a polytope's face normals and edge directions in the world (a box's: its axes)."""
+    kind, c, R, size = shape
+    if kind == BOX:
+        return R.T, R.T
+    if kind != HULL:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    v = _vertices(size)
+    normals, edges = [], []
+    for normal, idx in _faces(size):
+        normals.append(R @ normal)
+        edges.extend(R @ (v[idx[(q + 1) % len(idx)]] - v[idx[q]]) for q in range(len(idx)))
+    return np.array(normals), np.array(edges)
+
+
+def _separating_axes_minimum(a, b):
+    """
+    Return the least support sum over the separating axes of two polytopes (inf if not both).
+
+    Where they overlap, the least over all unit m is attained at one of them: a face
+    normal of either, or a cross product of an edge of each (the faces of A − B).
+    """
+    if a[0] not in (BOX, HULL) or b[0] not in (BOX, HULL):
+        return math.inf
+    (na, ea), (nb, eb) = _axes(a), _axes(b)
+    cand = list(na) + list(nb)
+    for e in ea:
+        for f in eb:
+            x = np.cross(e, f)
+            if np.linalg.norm(x) > 1e-9 * np.linalg.norm(e) * np.linalg.norm(f):
+                cand.append(x / np.linalg.norm(x))
+    return min(min(_support_value(a, m) + _support_value(b, -m),
+                   _support_value(a, -m) + _support_value(b, m)) for m in cand)
+
+
+def _collide(a, b, margin=1e-3):
+    points, normals, depths = np.zeros((16, 3)), np.zeros((16, 3)), np.zeros(16)
+    k = collide(a[0], np.asarray(a[1], float), np.asarray(a[2], float), np.asarray(a[3], float),
+                b[0], np.asarray(b[1], float), np.asarray(b[2], float), np.asarray(b[3], float),
+                margin, points, normals, depths, 0)
+    assert 0 <= k <= 16
+    return points[:k], normals[:k], depths[:k]
+
+
+def _prism(n=6, r=0.1, hl=0.08):
+    """Return an n-sided prism's corners about its z axis (radius r, half height hl)."""
+    ang = 2 * math.pi * np.arange(n) / n
+    ring = np.c_[r * np.cos(ang), r * np.sin(ang)]
+    return np.vstack([np.c_[ring, np.full(n, -hl)], np.c_[ring, np.full(n, hl)]])
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_hull_depths_and_normals_match_the_support_function_minimum(seed):
+    # A random hull (a box's corners or a prism's, or random points) against every kind,
+    # placed along a random direction at a target overlap (bisection), 5e-4 m apart to
+    # 0.02 m deep.
+    rng = np.random.default_rng(seed)
+    hulls = [hull_record(CORNERS), hull_record(_prism()),
+             hull_record(rng.normal(size=(30, 3)) * 0.1)]
+    others = [(SPHERE, np.array([0.08, 0, 0])), (CAPSULE, np.array([0.05, 0.12, 0])),
+              (BOX, np.array([0.1, 0.15, 0.07])), (CYLINDER, np.array([0.08, 0.1, 0])),
+              (HULL, hull_record(_prism(5, 0.12, 0.05)))]
+    for trial in range(10):
+        rec = hulls[trial % 3]
+        kb, sb = others[trial % 5]
+        b = (kb, np.zeros(3), Rotation.random(random_state=rng.integers(1 << 30)).as_matrix(),
+             sb)
+        Ra = Rotation.random(random_state=rng.integers(1 << 30)).as_matrix()
+        u = rng.normal(size=3)
+        u /= np.linalg.norm(u)
+        target = [-5e-4, 0.0, 1e-6, 1e-3, 0.02][rng.integers(5)]
+        lo, hi = 0.0, 2.0
+        for _ in range(60):
+            t = 0.5 * (lo + hi)
+            _, _, depths = _collide((HULL, t * u, Ra, rec), b)
+            if len(depths) and depths.max() > target:
+                lo = t
+            else:
+                hi = t
+        a = (HULL, t * u, Ra, rec)
+        scale = max(np.max(rec[:3]), np.max(sb[:3]))
+        _, normals, depths = _collide(a, b)
+        reference = min(_reference_overlap(a, b, rng), _separating_axes_minimum(a, b))
+        assert len(depths) > 0
+        # The depth is the support sum along the normal (so at least the true least), and
+        # no more than the least the reference found (Nelder–Mead stalls on a polytope
+        # pair's kinks: the separating axes give their overlap exactly).
+        n = normals[0]
+        assert _support_value(a, -n) + _support_value(b, n) == \
+            pytest.approx(depths.max(), abs=1e-12 * scale), (trial, kb)
+        assert depths.max() <= reference + 1e-8 * scale, (trial, kb)
+        if kb not in (BOX, HULL):   # (a curved shape: Nelder–Mead's minimum is sharp)
+            assert depths.max() == pytest.approx(reference, abs=1e-8 * scale), (trial, kb)
+        # Swapping a and b: the same depth, the normal flipped.
+        _, normals2, depths2 = _collide(b, a)
+        assert depths2.max() == pytest.approx(depths.max(), abs=1e-10 * scale)
+        np.testing.assert_allclose(normals2[0], -n, atol=1e-6)
+
+
+def test_a_sphere_on_a_hulls_face_and_corner_takes_the_exact_normal():
+    rec = hull_record(CORNERS)
+    R = Rotation.from_euler('xyz', [0.3, -0.2, 0.7]).as_matrix()
+    # Over the top face's inside, 1e-4 deep: the face normal, depth exact.
+    centre = R @ np.array([0.03, -0.05, 0.05 + 0.08 - 1e-4])
+    points, normals, depths = _collide((SPHERE, centre, np.eye(3), np.array([0.08, 0, 0])),
+                                       (HULL, np.zeros(3), R, rec))
+    assert len(depths) == 1
+    np.testing.assert_allclose(normals[0], R[:, 2], atol=1e-14)
+    assert depths[0] == pytest.approx(1e-4, abs=1e-14)
+    # Beyond a corner, 2e-4 apart: the normal along corner → centre.
+    corner = R @ np.array([0.1, 0.2, 0.05])
+    out = R @ np.array([1.0, 2.0, 0.5]) / math.sqrt(5.25)
+    centre = corner + (0.08 + 2e-4) * out
+    points, normals, depths = _collide((HULL, np.zeros(3), R, rec),
+                                       (SPHERE, centre, np.eye(3), np.array([0.08, 0, 0])))
+    assert len(depths) == 1
+    np.testing.assert_allclose(normals[0], -out, atol=1e-12)   # (b to a: sphere to hull)
+    assert depths[0] == pytest.approx(-2e-4, abs=1e-12)
+    np.testing.assert_allclose(points[0], corner + 1e-4 * out, atol=1e-12)
+
+
+def test_a_prism_on_a_box_touches_at_the_corners_of_their_overlap():
+    # A hexagonal prism 1e-5 deep in a box's top face, half over its edge at x = 0: the
+    # overlap is the hexagon cut at x = 0; its corners are the contacts (four kept: the
+    # deepest-first reduction), each 1e-5 deep, all with x ≥ 0 and on the hexagon.
+    rec = hull_record(_prism())
+    box = (BOX, np.array([-0.5, 0.0, -0.5]), np.eye(3), np.array([0.5, 0.5, 0.5]))
+    points, normals, depths = _collide((HULL, np.array([0.02, 0.0, 0.08 - 1e-5]),
+                                        np.eye(3), rec), box)
+    assert len(depths) == 4
+    np.testing.assert_allclose(normals, np.tile([0, 0, 1.0], (4, 1)), atol=0)
+    np.testing.assert_allclose(depths, 1e-5, atol=1e-15)
+    assert np.all(points[:, 0] >= 0.02 - 0.1 - 1e-15) and np.all(points[:, 0] <= 1e-15)
+    np.testing.assert_allclose(points[:, 2], -5e-6, atol=1e-15)
+
+
+# -- dynamics -------------------------------------------------------------------------------
+
+def _cube_body(name, velocity=(0.0, 0.0, 0.0)):
+    mass = 2.0
+    inertia = mass * (0.2 ** 2 + 0.2 ** 2) / 12
+    return RigidBody(name, mass, (inertia,) * 3, position_world=(0, 0, 0.1),
+                     linear_velocity_world=velocity)
+
+
+@pytest.mark.parametrize('velocity', [(0.0, 0.0, 0.0), (1.0, 0.3, 0.0)])
+def test_a_box_hull_rests_and_slides_as_the_box(velocity):
+    cube = np.array(list(itertools.product([-0.1, 0.1], repeat=3)))
+    sims = []
+    for shape in (CollisionShape('box', 'b', size=(0.2,) * 3, friction=0.5),
+                  CollisionShape('mesh', 'b', mesh=cube, friction=0.5)):
+        sims.append(Simulation([_cube_body('b', velocity)], [Gravity()], integrator='rkmk4',
+                               dt=1e-3, shapes=[CollisionShape('plane', None, friction=0.5),
+                                                shape]))
+    for k in range(1000):
+        for sim in sims:
+            sim.step()
+    box, hull = sims
+    np.testing.assert_allclose(hull.state.y, box.state.y, rtol=0, atol=1e-12)
+    assert hull.contact.counters['compiled_steps'] == 1000
+    if velocity[0] == 0.0:   # at rest: still, its weight on four corners
+        assert np.max(np.abs(hull.state.pos_com_world[0] - (0, 0, 0.1))) <= 1e-13
+    else:   # it slid and stopped (the box's closed form: test_contact_dynamics)
+        assert np.linalg.norm(hull.state.vel_com_world[0]) <= 1e-12
+        assert np.linalg.norm(hull.state.pos_com_world[0, :2]) > 0.05
+    rep = hull.contacts()
+    assert len(rep['normal_force']) == 4
+    assert np.sum(rep['normal_force']) == pytest.approx(2.0 * G, rel=1e-9)
+
+
+def test_a_hexagonal_prism_stands_on_the_ground_carrying_its_weight():
+    mass, r, hl = 3.0, 0.1, 0.08
+    body = RigidBody('p', mass, (0.01, 0.01, 0.015), position_world=(0.3, -0.2, hl))
+    sim = Simulation([body], [Gravity()], integrator='rkmk4', dt=1e-3,
+                     shapes=[CollisionShape('plane', None, friction=0.8),
+                             CollisionShape('mesh', 'p', mesh=_prism(6, r, hl), friction=0.8)])
+    p0 = sim.state.pos_com_world.copy()
+    sim.step(1000)
+    assert np.max(np.abs(sim.state.pos_com_world - p0)) <= 1e-13
+    rep = sim.contacts()
+    # Four of its six bottom corners (the reduction keeps those spanning the most).
+    assert len(rep['normal_force']) == 4
+    assert np.sum(rep['normal_force']) == pytest.approx(mass * G, rel=1e-9)
+    spread = rep['point'][:, :2] - (0.3, -0.2)
+    np.testing.assert_allclose(np.linalg.norm(spread, axis=1), r, atol=1e-15)
+    assert sim.contact.counters['lcp_failures'] == 0
+
+
+STL_URDF = """<robot name="block">
+  <link name="block">
+    <inertial><mass value="2"/>
+      <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><mesh filename="block.stl" scale="0.5 0.5 0.5"/></geometry>
+    </collision>
+    <collision><origin xyz="0 0 0.3"/>
+      <geometry><mesh filename="package://nowhere/block.dae"/></geometry></collision>
+  </link>
+</robot>
+"""
+
+
+def test_a_urdf_links_stl_collision_is_its_hull_and_rests_on_the_ground(tmp_path):
+    # The link's STL (a 0.4 m cube, scaled by 0.5: 0.2 m) is simulated; the .dae that
+    # cannot be found is named in the warning.
+    from rigid_body_sim.scene import load_scene
+    tri = _triangles(hull_record(CORNERS * (2, 1, 4)))   # 0.4 m cube
+    binary = bytearray(b'\0' * 80 + struct.pack('<I', len(tri)))
+    for t in tri:
+        binary += struct.pack('<12fH', 0, 0, 0, *t.ravel(), 0)
+    (tmp_path / 'block.stl').write_bytes(bytes(binary))
+    (tmp_path / 'block.urdf').write_text(STL_URDF)
+    (tmp_path / 'scene.yaml').write_text(
+        'dt: 0.001\nintegrator: rkmk4\neffects: {gravity: {}}\nground: {}\n'
+        'robots: [{urdf: block.urdf, collisions: true,\n'
+        '          base_pose: {xyz: [0, 0, 0.1]}}]\n')
+    scene = load_scene(tmp_path / 'scene.yaml')
+    assert any("mesh <collision> of link 'block' (package://nowhere/block.dae: file not "
+               'found)' in w for w in scene.warnings)
+    sim = scene.simulation
+    shapes = sim.contact.detector.shapes
+    assert [s.kind for s in shapes] == ['plane', 'mesh']
+    np.testing.assert_allclose(shapes[1].dimensions(), 0.1, atol=1e-8)   # (float32 file)
+    p0 = sim.state.pos_com_world.copy()
+    sim.step(500)
+    assert np.max(np.abs(sim.state.pos_com_world - p0)) <= 1e-7   # (its float32 corners)
+    assert np.sum(sim.contacts()['normal_force']) == pytest.approx(2.0 * G, rel=1e-9)
+
+
+def test_a_scene_bodys_mesh_shape_from_a_file_beside_the_scene(tmp_path):
+    from rigid_body_sim.scene import load_scene
+    (tmp_path / 'part.obj').write_text(''.join(f'v {x:.17g} {y:.17g} {z:.17g}\n'
+                                               for x, y, z in CORNERS))
+    (tmp_path / 'scene.yaml').write_text(
+        'dt: 0.001\nintegrator: rkmk4\neffects: {gravity: {}}\nground: {}\n'
+        'bodies:\n  - {name: part, mass: 1.0, inertia: [0.01, 0.01, 0.01],\n'
+        '     position_world: [0, 0, 0.05], shapes: [{kind: mesh, mesh: part.obj}]}\n')
+    sim = load_scene(tmp_path / 'scene.yaml').simulation
+    sim.step(200)
+    assert sim.pose('part')[0][2] == pytest.approx(0.05, abs=1e-12)
+    assert len(sim.contacts()['normal_force']) == 4
