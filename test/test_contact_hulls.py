@@ -25,7 +25,7 @@ import struct
 import numpy as np
 import pytest
 from rigid_body_sim.core import Gravity, RigidBody, Simulation, SpecError
-from rigid_body_sim.core.hulls import hull_record, read_vertices
+from rigid_body_sim.core.hulls import hull_record, hull_triangles, read_vertices
 from rigid_body_sim.core.kernels.contact import BOX, CAPSULE, collide, CYLINDER, HULL, SPHERE
 from rigid_body_sim.core.kernels.convex import H_NF, H_NV, H_VERTS
 from rigid_body_sim.core.shapes import CollisionShape
@@ -102,15 +102,8 @@ def test_a_meshs_scale_must_be_positive_and_scales_its_hull():
     assert err.value.field == 'scale'
 
 
-def _triangles(rec):
-    """Return a hull's surface as triangles (T, 3, 3): each face fanned from its corner 0."""
-    v = _vertices(rec)
-    return np.array([[v[idx[0]], v[idx[q]], v[idx[q + 1]]] for _, idx in _faces(rec)
-                     for q in range(1, len(idx) - 1)])
-
-
 def test_stl_binary_and_ascii_and_obj_files_give_the_same_hull(tmp_path):
-    tri = _triangles(hull_record(CORNERS))
+    tri = hull_triangles(hull_record(CORNERS))
     binary = bytearray(b'\0' * 80 + struct.pack('<I', len(tri)))
     for t in tri:
         binary += struct.pack('<12fH', 0, 0, 0, *t.ravel(), 0)
@@ -382,7 +375,7 @@ def test_a_urdf_links_stl_collision_is_its_hull_and_rests_on_the_ground(tmp_path
     # The link's STL (a 0.4 m cube, scaled by 0.5: 0.2 m) is simulated; the .dae that
     # cannot be found is named in the warning.
     from rigid_body_sim.scene import load_scene
-    tri = _triangles(hull_record(CORNERS * (2, 1, 4)))   # 0.4 m cube
+    tri = hull_triangles(hull_record(CORNERS * (2, 1, 4)))   # 0.4 m cube
     binary = bytearray(b'\0' * 80 + struct.pack('<I', len(tri)))
     for t in tri:
         binary += struct.pack('<12fH', 0, 0, 0, *t.ravel(), 0)

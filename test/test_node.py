@@ -972,6 +972,9 @@ ground: {height: -1.0}
 bodies:
   - {name: ball, mass: 1.0, inertia: {sphere: 0.1}, position_world: [0.0, 0.0, 0.3],
      shapes: [{kind: sphere, radius: 0.1}]}
+  - {name: wedge, mass: 1.0, inertia: [0.01, 0.01, 0.01], position_world: [-1.0, 0.0, 0.3],
+     shapes: [{kind: mesh, mesh: [[0, 0, 0], [0.2, 0, 0], [0, 0.2, 0], [0, 0, 0.2],
+                                   [0.05, 0.05, 0.05]]}]}
   - {name: rod, mass: 1.0, inertia: {box: [0.1, 0.1, 0.5]}, position_world: [1.0, 0.0, 0.3],
      orientation_xyzw: [0.0, 0.7071067811865476, 0.0, 0.7071067811865476],
      shapes: [{kind: capsule, radius: 0.05, length: 0.4}]}
@@ -983,9 +986,10 @@ robots:
 @pytest.mark.parametrize('on', [True, False])
 def test_collision_markers_draw_every_collision_shape_on_request(ros, tmp_path, on):
     # collision_markers: ~/markers draws the scene's collision shapes where the core has
-    # them: a sphere, a capsule (its cylinder and two end spheres), a URDF <collision>
-    # box posed by its link, the ground as a slab whose top is the plane. Off (the
-    # default): none.
+    # them: a sphere, a capsule (its cylinder and two end spheres), a mesh's hull (a
+    # tetrahedron: four triangles; its inner vertex is not the hull's), a URDF
+    # <collision> box posed by its link, the ground as a slab whose top is the plane.
+    # Off (the default): none.
     from visualization_msgs.msg import Marker, MarkerArray
     (tmp_path / 'cube.urdf').write_text(CUBE_URDF)
     scene = _scene(tmp_path, SHAPES_SCENE)
@@ -1026,6 +1030,10 @@ def test_collision_markers_draw_every_collision_shape_on_request(ros, tmp_path, 
         if name == 'cube/collision0':   # the URDF box, sides as written, posed by its link
             assert got.type == Marker.CUBE
             assert [got.scale.x, got.scale.y, got.scale.z] == [0.1, 0.2, 0.3]
+        elif name == 'wedge/mesh':
+            assert got.type == Marker.TRIANGLE_LIST and len(got.points) == 12
+            corners = {(p.x, p.y, p.z) for p in got.points}
+            assert corners == {(0, 0, 0), (0.2, 0, 0), (0, 0.2, 0), (0, 0, 0.2)}
         elif name == 'rod/capsule':
             assert got.type == Marker.CYLINDER and got.scale.z == 0.4
             ends = [drawn[m + 2 * k + e] for e in (0, 1)]

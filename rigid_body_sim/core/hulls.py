@@ -91,6 +91,18 @@ def _obj(data: bytes):
         return None
 
 
+def hull_triangles(rec: np.ndarray) -> np.ndarray:
+    """Return a packed hull's surface as triangles (T, 3, 3): each face fanned from corner 0."""
+    nv, nf = int(rec[H_NV]), int(rec[H_NF])
+    v = rec[H_VERTS:H_VERTS + 3 * nv].reshape(nv, 3)
+    out = []
+    for f in range(nf):
+        o = int(rec[H_VERTS + 3 * nv + f])
+        idx = rec[o + 4:o + 4 + int(rec[o + 3])].astype(int)
+        out.extend([v[idx[0]], v[idx[q]], v[idx[q + 1]]] for q in range(1, len(idx) - 1))
+    return np.array(out).reshape(-1, 3, 3)
+
+
 def hull_record(vertices: Any, field: str = 'mesh') -> np.ndarray:
     """
     Return the packed record of the convex hull of ``vertices`` (N, 3), in the shape's frame.

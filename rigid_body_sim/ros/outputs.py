@@ -31,6 +31,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from . import conversions as conv
 from ..core import rotation as so3
 from ..core import Simulation
+from ..core.hulls import hull_triangles
 from ..core.robots import rpy_matrix
 
 #: m: diameter of the sphere that marks a joint.
@@ -309,8 +310,9 @@ class Outputs:
 
         Sphere, box and cylinder as themselves; a capsule as its cylinder (id ``k``)
         and its two end spheres (ids ``m + 2k``, ``m + 2k + 1``, ``m`` the shapes'
-        count); a plane as a 20 m square slab 1 mm thick whose top is the plane. Shape
-        ``k`` of the detector's shapes that collide has id ``k``.
+        count); a mesh as the convex hull that is simulated (a triangle list: each face
+        fanned from its first corner); a plane as a 20 m square slab 1 mm thick whose
+        top is the plane. Shape ``k`` of the detector's shapes that collide has id ``k``.
         """
         sim = self.sim
         det = sim.contact.detector
@@ -323,7 +325,7 @@ class Outputs:
             shape = det.shapes[s]
             c, rot = centre[k], R[k]
             quat = so3.matrix_to_quat(rot)
-            ends = ()
+            ends, points = (), []
             if shape.kind == 'sphere':
                 kind, scale = Marker.SPHERE, [2 * shape.radius] * 3
             elif shape.kind == 'box':
@@ -334,13 +336,17 @@ class Outputs:
                 if shape.kind == 'capsule':
                     half = 0.5 * shape.length * rot[:, 2]
                     ends = (c + half, c - half)
+            elif shape.kind == 'mesh':
+                kind, scale = Marker.TRIANGLE_LIST, [1.0, 1.0, 1.0]
+                points = [conv.point(p) for p in hull_triangles(shape.hull).reshape(-1, 3)]
             else:   # a plane: its normal is its z axis
                 kind, scale = Marker.CUBE, [PLANE_MARKER_SIDE, PLANE_MARKER_SIDE,
                                             PLANE_MARKER_THICKNESS]
                 c = c - 0.5 * PLANE_MARKER_THICKNESS * rot[:, 2]
             out.append(Marker(header=header, ns='collisions', id=k, type=kind,
                               action=Marker.ADD, pose=conv.pose(c, quat),
-                              scale=conv.vector3(scale), color=grey, text=shape.name))
+                              scale=conv.vector3(scale), color=grey, text=shape.name,
+                              points=points))
             for e, end in enumerate(ends):
                 out.append(Marker(header=header, ns='collisions', id=m + 2 * k + e,
                                   type=Marker.SPHERE, action=Marker.ADD,
