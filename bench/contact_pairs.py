@@ -9,7 +9,10 @@ poses per kind, each pair turned about the vertical at random (seeded) and tilte
 * ``standing``: a cylinder on its cap (on a box's face, or on a cylinder's cap);
 * ``lying``: a cylinder on its side (on a box's face, or across a lying cylinder);
 * the reference pairs of closed-form narrow phases: a box on a box, a capsule lying
-  on a box, a cylinder standing on the ground (a plane).
+  on a box, a cylinder standing on the ground (a plane);
+* a mesh: the hull of a cube's eight corners (the same cube as the boxes: ours
+  :mod:`rigid_body_sim.core.hulls`, MuJoCo's mesh geom) on a box, on the ground and on
+  another such hull.
 
 Timed side by side in one run, best of the repetitions: ours,
 :meth:`.shapes.ContactDetector.detect` (broad phase included) over the 200 pairs,
@@ -56,14 +59,18 @@ CASES = [('box on box', 'box', False, 'box', False),
          ('cylinder standing on box', 'cylinder', False, 'box', False),
          ('cylinder lying on box', 'cylinder', True, 'box', False),
          ('cylinder standing on cylinder', 'cylinder', False, 'cylinder', False),
-         ('cylinder lying across cylinder', 'cylinder', True, 'cylinder', True)]
+         ('cylinder lying across cylinder', 'cylinder', True, 'cylinder', True),
+         ('hull (a cube) on box', 'hull', False, 'box', False),
+         ('hull (a cube) on plane', 'hull', False, 'plane', False),
+         ('hull (a cube) on hull (a cube)', 'hull', False, 'hull', False)]
+#: A hull's vertices: the corners of the boxes' cube.
+CUBE = np.array([[x, y, z] for x in (-HL, HL) for y in (-HL, HL) for z in (-HL, HL)])
 
 
 def _lowest(kind: str, rot: Rotation) -> float:
     """Return how far the lowest point lies below the centre of a shape turned by rot."""
-    if kind == 'box':
-        corners = np.array([[x, y, z] for x in (-HL, HL) for y in (-HL, HL) for z in (-HL, HL)])
-        return float(-np.min(rot.apply(corners)[:, 2]))
+    if kind in ('box', 'hull'):
+        return float(-np.min(rot.apply(CUBE)[:, 2]))
     axis = rot.apply([0, 0, 1.0])
     across = R_CYL * np.sqrt(max(1.0 - axis[2] ** 2, 0.0))
     if kind == 'capsule':
@@ -101,6 +108,8 @@ def _shape(kind: str, body, name: str, quat=None, pos=None) -> CollisionShape:
         return CollisionShape('box', body, size=(2 * HL,) * 3, name=name, **extra)
     if kind == 'plane':
         return CollisionShape('plane', None, name=name)
+    if kind == 'hull':
+        return CollisionShape('mesh', body, mesh=CUBE, name=name, **extra)
     return CollisionShape(kind, body, radius=R_CYL, length=2 * HL, name=name, **extra)
 
 
@@ -129,6 +138,8 @@ def _geom(kind: str, quat=None, pos=None) -> str:
         return f'<geom type="box" size="{HL} {HL} {HL}"{where}/>'
     if kind == 'plane':
         return '<geom type="plane" size="0 0 1"/>'
+    if kind == 'hull':
+        return f'<geom type="mesh" mesh="cube"{where}/>'
     return f'<geom type="{kind}" size="{R_CYL} {HL}"{where}/>'
 
 
@@ -143,8 +154,10 @@ def mujoco_model(case: tuple):
             world.append(_geom(kb, qb, cb))
     if kb == 'plane':
         world.append(_geom('plane'))
+    cube = ' '.join(f'{x!r}' for x in CUBE.ravel().tolist())
     xml = (f'<mujoco><default><geom margin="{MARGIN}"/></default><size memory="1G"/>'
-           '<worldbody>' + ''.join(world) + ''.join(bodies) + '</worldbody></mujoco>')
+           f'<asset><mesh name="cube" vertex="{cube}"/></asset><worldbody>'
+           + ''.join(world) + ''.join(bodies) + '</worldbody></mujoco>')
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
     for i, (ca, qa, _, _) in enumerate(ps):

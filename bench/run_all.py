@@ -19,6 +19,7 @@ the reactions after a step; ``--skip-constraints`` skips these six),
 exact drives bounded by their efforts; the Panda's URDF from the bench requirements),
 ``bench/contact_detection.py`` (collision detection against the number of shapes),
 ``bench/contact_pairs.py`` (the narrow phases by pair of kinds),
+``bench/contact_panda.py`` (the Panda pushing a box),
 ``bench/contact_dynamics.py`` (contact forces: cost, penetration, error) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
@@ -319,7 +320,8 @@ def sections(quick: bool, node_args: list) -> list:
             f'./dev.sh python bench/contact_pairs.py{q}', [T('contact_pairs.md')],
             about='200 separate pairs of one kind each, resting 1e-5 m deep: the cost a '
                   'pair of our detector (closed forms; GJK and EPA for a cylinder on a box '
-                  "or a cylinder) beside MuJoCo's, and the contacts each finds.")),
+                  "or a cylinder, and for a mesh's hull) beside MuJoCo's, and the contacts "
+                  'each finds.')),
         ('skip_mujoco', 'contact_dynamics', ['--quick'] if quick else [], report.Section(
             'Contact dynamics: cost, penetration and error beside MuJoCo',
             f'./dev.sh python bench/contact_dynamics.py{q}', [T('contact_dynamics.md')],
@@ -333,6 +335,13 @@ def sections(quick: bool, node_args: list) -> list:
                   'on servos, ANYmal B standing, a gantry pushing a box; every step in '
                   "Python (scenes with joints), the LCPs' iterations, failures and "
                   "residual, the deepest penetration and each scene's error.")),
+        ('skip_mujoco', 'contact_panda', ['--quick'] if quick else [], report.Section(
+            'The Panda pushing a box, beside MuJoCo',
+            f'./dev.sh python bench/contact_panda.py{q}', [T('contact_panda.md')],
+            about="The Panda's URDF with its collision meshes (convex hulls) turning about "
+                  'its base and pushing a box along the ground, with the pusher '
+                  "frictionless and at μ 0.5: the step's cost, the box's travel and speed, "
+                  'the penetrations, and our LCPs, beside MuJoCo on servos.')),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],
