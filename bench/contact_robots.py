@@ -8,7 +8,7 @@ a ground of friction 0.8 (the gantry's 0.4):
 * **quadruped, exact drives**: ``test/urdf/quadruped.urdf`` (17.5 kg, four legs of a hip
   and a knee, ball feet) standing, its joints held by exact position drives;
 * **quadruped, servos**: the same on PD servos (kp 500 N m/rad, kd 10 N m s/rad): the case
-  still open (a foot's period-2 slip, LCP failures while it lands; issue 21's note);
+  still open (a foot's period-2 slip; issue 21's note);
 * **ANYmal B, exact drives**: ``anymal_b_simple_description`` from example-robot-data
   (bench/requirements.txt; its URDF's collision boxes, cylinders and spheres; only the
   feet reach the ground), standing (HFE ±0.4, KFE ∓0.8), its base dropped 3 mm;
@@ -162,8 +162,9 @@ def table(rows: list) -> str:
         '\n\nEvery step in Python (scenes with joints). "stepped operators a step": how '
         "often a step's contact operator was built from the step's own response (servos: "
         'a trial step per row; twice in a step where contacts turn to slip). The servo '
-        "quadruped's failures, residual and speed are the open case of issue 21 (LCPs "
-        'while it lands, and a foot slipping back and forth where it should rest).')
+        "quadruped's speed is the open case of issue 21 (a foot slipping back and forth "
+        'where it should rest); its LCPs are solved (the fixed point, or Lemke pivoting '
+        'where the fixed point drifts).')
 
 
 def main(argv=None) -> int:

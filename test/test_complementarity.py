@@ -12,7 +12,8 @@ import itertools
 import numpy as np
 import pytest
 from rigid_body_sim.core.complementarity import (AT_LOWER, AT_UPPER, check_problem, DIRECT_LIMIT,
-                                                 FREE, residual, solve, solve_direct, solve_pgs)
+                                                 FREE, lemke, residual, solve, solve_direct,
+                                                 solve_pgs)
 
 EPS = np.finfo(float).eps
 
@@ -192,3 +193,44 @@ def test_a_target_past_its_bound_by_less_than_an_ulp_still_blocks():
                        start=np.array([1.0, 0.0]))
     assert sol.converged and np.array_equal(sol.f, [0.0, 0.0])
     assert list(sol.state) == [AT_LOWER, AT_LOWER] and sol.residual == 0.0
+
+
+def _lcp_residual(M, q, z):
+    """Return max |min(z, M z + q)|: zero at a solution of the LCP."""
+    return float(np.max(np.abs(np.minimum(z, M @ z + q)), initial=0.0))
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_lemke_solves_lcps_of_positive_semidefinite_matrices_with_a_solution(seed):
+    # Positive definite: always a unique solution. Semidefinite of half rank (redundant
+    # rows): q made from a chosen solution z*, w* (complementary), so one exists.
+    # Complementarity to rounding of the pivots over O(1) data: 1e-10.
+    rng = np.random.default_rng(seed)
+    for trial in range(40):
+        n = int(rng.integers(1, 16))
+        if trial % 2 == 0:
+            B = rng.normal(size=(n, n))
+            M = B @ B.T + 1e-2 * np.eye(n)
+            q = rng.normal(size=n)
+        else:
+            B = rng.normal(size=(n, max(1, n // 2)))
+            M = B @ B.T
+            z_star = np.where(rng.random(n) < 0.5, rng.random(n), 0.0)
+            w_star = np.where(z_star > 0.0, 0.0, rng.random(n))
+            q = w_star - M @ z_star
+        z, ok = lemke(M, q)
+        assert ok
+        assert np.all(z >= 0.0)
+        assert _lcp_residual(M, q, z) <= 1e-10, (trial, n)
+
+
+def test_lemke_ends_on_a_ray_when_the_lcp_has_no_solution():
+    # w = 0 z − 1 < 0 for every z: no solution; and a semidefinite M with q outside its
+    # feasible cone (M = [[1, −1], [−1, 1]], q = (−1, −1): w₁ + w₂ = −2 always).
+    for M, q in ((np.zeros((1, 1)), np.array([-1.0])),
+                 (np.array([[1.0, -1.0], [-1.0, 1.0]]), np.array([-1.0, -1.0]))):
+        z, ok = lemke(M, q)
+        assert not ok
+    # q ≥ 0: z = 0 at once.
+    z, ok = lemke(np.eye(3), np.ones(3))
+    assert ok and np.all(z == 0.0)

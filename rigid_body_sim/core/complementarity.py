@@ -222,3 +222,75 @@ def solve(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     exact = solve_direct(S, q, lo, hi, rough.f)
     return exact._replace(iterations=rough.iterations + exact.iterations,
                           method='pgs+direct')
+
+
+def lemke(M: np.ndarray, q: np.ndarray, max_pivots: Optional[int] = None) -> tuple:
+    """
+    Solve the LCP ``w = M z + q ≥ 0, z ≥ 0, zᵀw = 0`` by Lemke's complementary pivoting.
+
+    Returns ``(z, ok)``. The covering vector is all ones; ties in the ratio test are
+    broken lexicographically (by the rows of the basis' inverse over the pivot
+    column), so degenerate problems (redundant contacts) do not cycle. Lemke's method
+    ends at a solution for the copositive-plus matrices of frictional contact in the
+    pyramid form (Stewart & Trinkle, Int. J. Numer. Methods Eng. 39, 1996), or on a
+    secondary ray (``ok`` False) when it finds none; the cap (default ``50 n``) guards
+    rounding. The pivots' rounding is then taken out: the basic ``z`` solve their rows'
+    ``w = 0`` again in one least-squares solve, kept if no worse.
+    """
+    M, q = np.asarray(M, dtype=float), np.asarray(q, dtype=float)
+    n = len(q)
+    if n == 0 or np.all(q >= 0.0):
+        return np.zeros(n), True
+    # Tableau [I | −M | −e | q] over the variables w (0..n−1), z (n..2n−1), z0 (2n).
+    T = np.hstack([np.eye(n), -M, -np.ones((n, 1)), q[:, None]])
+    basis = np.arange(n)
+    tol = 1e-12 * max(1.0, float(np.max(np.abs(M), initial=0.0)))
+    entering = 2 * n
+    row = int(np.argmin(q))
+    cap = 50 * n if max_pivots is None else max_pivots
+    for _ in range(cap):
+        _pivot(T, row, entering)
+        leaving = basis[row]
+        basis[row] = entering
+        if leaving == 2 * n:   # z0 left: a complementary solution
+            break
+        entering = leaving + n if leaving < n else leaving - n
+        col = T[:, entering]
+        rows = np.flatnonzero(col > tol)
+        if not len(rows):
+            return np.zeros(n), False   # a secondary ray
+        ratios = T[rows, -1] / col[rows]
+        best = rows[ratios <= ratios.min() + tol * max(1.0, abs(ratios.min()))]
+        # Lexicographic tie-break on the basis' inverse (the w columns), row over pivot.
+        for j in range(n):
+            if len(best) == 1:
+                break
+            key = T[best, j] / col[best]
+            best = best[key <= key.min() + tol]
+        row = int(best[0])
+    else:
+        return np.zeros(n), False
+    z = np.zeros(2 * n + 1)
+    z[basis] = T[:, -1]
+    z = np.maximum(z[n:2 * n], 0.0)
+    support = np.sort(basis[(basis >= n) & (basis < 2 * n)] - n)
+    if len(support):
+        again = np.zeros(n)
+        again[support] = np.linalg.lstsq(M[np.ix_(support, support)], -q[support],
+                                         rcond=None)[0]
+        again = np.maximum(again, 0.0)
+        if _lcp_error(M, q, again) <= _lcp_error(M, q, z):
+            z = again
+    return z, True
+
+
+def _lcp_error(M: np.ndarray, q: np.ndarray, z: np.ndarray) -> float:
+    """Return the natural-map residual ``max |min(z, M z + q)|`` of an LCP."""
+    return float(np.max(np.abs(np.minimum(z, M @ z + q)), initial=0.0))
+
+
+def _pivot(T: np.ndarray, row: int, col: int) -> None:
+    """Gauss–Jordan pivot of the tableau ``T`` on ``(row, col)``, in place."""
+    T[row] /= T[row, col]
+    others = np.arange(T.shape[0]) != row
+    T[others] -= np.outer(T[others, col], T[row])

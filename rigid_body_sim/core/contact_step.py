@@ -87,7 +87,7 @@ from typing import Any, NamedTuple, Optional
 import numpy as np
 
 from .bodies import State
-from .complementarity import solve_direct
+from .complementarity import lemke, solve_direct
 from .dynamics import STEPS
 from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
 from .kernels import contact_step as kern
@@ -118,6 +118,13 @@ FRICTION_TOLERANCE = 1e-8
 #: velocity error across the redundant rows) over ``ρ`` each iteration; that part, the
 #: drift times ``ρ``, is the least residual any impulse leaves (twice it is allowed).
 RESIDUAL_TOLERANCE = 1e-12
+#: The residual, relative as :data:`RESIDUAL_TOLERANCE`, a pivoted solve (:func:`_pyramid`)
+#: must reach: its pivots and its final least-squares solve on a support made singular by
+#: redundant contacts lose digits to that support's conditioning (measured: 1e-12 of the
+#: scale on the Panda pushing a box), where the fixed point's exact solves lose none.
+PIVOT_TOLERANCE = 1e-10
+#: The diagonal :func:`_pyramid` adds to the rows' operator, relative to its largest.
+PIVOT_REGULARIZATION = 1e-12
 #: Most iterations of the friction boxes (each an exact box LCP, warm-started).
 FRICTION_ITERATIONS = 60
 #: The proximal regularization, relative to the Delassus operator's largest diagonal.
@@ -327,7 +334,8 @@ class ContactSteps:
                          'complementarity_max': 0.0, 'max_depth': 0.0,
                          'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
                          'held_rates': 0, 'immovable_rows': 0, 'compiled_steps': 0,
-                         'stepped_responses': 0, 'projection_left': 0.0}
+                         'stepped_responses': 0, 'projection_left': 0.0,
+                         'lcp_pivoted': 0}
 
     @property
     def record(self) -> ContactRecord:
@@ -513,8 +521,12 @@ class ContactSteps:
         contacts' normal rows are equalities (``w_n = 0``, ``p_n`` of either sign).
         ``symmetric``: ``A`` is ``G M̄⁻¹ Gᵀ`` (symmetric, made so to its rounding);
         False: a stepped response (:meth:`_step_response`), taken as it is.
-        Counted; a solve that does not converge keeps its last iterate and is counted
-        in ``lcp_failures``.
+        Counted. A fixed point that does not converge (redundant contacts whose load
+        sharing is not unique, and friction bounds that move with it: the iterate drifts
+        along the operator's null space) is solved again as the pyramid LCP by Lemke's
+        pivoting (:func:`_pyramid`: exact, no iteration on the boxes; counted in
+        ``lcp_pivoted``) when its rows have no equalities; if that fails too, the last
+        iterate is kept and counted in ``lcp_failures``.
         """
         m = len(q)
         if not m:
@@ -584,6 +596,13 @@ class ContactSteps:
                 converged = True
                 break
         cnt = self.counters
+        if not converged and not normal_only and equal is None:
+            pivoted, ok = _pyramid(A_r, q_r, mu, sliding, pinned)
+            scale = float(np.max(np.abs(A_r) @ np.abs(pivoted) + np.abs(q_r)))
+            if ok and _residual(A_r, q_r, pivoted, mu, False, sliding, None, pinned) <= \
+                    PIVOT_TOLERANCE * scale:
+                p, converged = pivoted, True
+                cnt['lcp_pivoted'] += 1
         cnt['lcp_solves'] += 1
         cnt['lcp_iterations_max'] = max(cnt['lcp_iterations_max'], it)
         if not converged:
@@ -1279,6 +1298,45 @@ def _any_tangent(nrm: np.ndarray) -> np.ndarray:
     return t / np.linalg.norm(t, axis=1)[:, None]
 
 
+def _pyramid(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.ndarray],
+             pinned: np.ndarray) -> tuple:
+    """
+    Solve the contact rows ``w = A p + q`` (normal, t₁, t₂ per contact) by Lemke's method.
+
+    The friction box ``|p_t| ≤ μ p_n`` of each row (a sliding contact's ``t₁`` alone,
+    pinned rows held at zero) in Stewart and Trinkle's form: ``p_t = p⁺ − p⁻`` with
+    ``w_t + β ≥ 0 ⊥ p⁺ ≥ 0``, ``−w_t + β ≥ 0 ⊥ p⁻ ≥ 0`` and ``μ p_n − p⁺ − p⁻ ≥ 0 ⊥ β ≥
+    0``: one LCP in ``(p_n, p⁺, p⁻, β)``, its boxes exact in it (no fixed point on
+    them). ``A`` takes :data:`PIVOT_REGULARIZATION` of its largest diagonal on its
+    diagonal (a compliance that moves ``w`` by that fraction of ``A p``): redundant
+    contacts otherwise leave the pivoting degenerate enough to end on a ray. Returns
+    ``(p, ok)``.
+    """
+    A = A + PIVOT_REGULARIZATION * float(np.max(np.diag(A))) * np.eye(len(q))
+    c = len(q) // 3
+    normal = np.arange(0, 3 * c, 3)
+    one_row = np.zeros(c, dtype=bool) if sliding is None else sliding   # (t₁ alone)
+    rows = [3 * k + col for k in range(c) for col in (1, 2)
+            if not pinned[3 * k + col] and not (col == 2 and one_row[k])]
+    f = np.array(rows, dtype=int)
+    r = len(f)
+    own = f // 3
+    Ann, Anf, Afn, Aff = (A[np.ix_(normal, normal)], A[np.ix_(normal, f)],
+                          A[np.ix_(f, normal)], A[np.ix_(f, f)])
+    U = np.zeros((r, c))
+    U[np.arange(r), own] = mu[own]
+    eye, zero = np.eye(r), np.zeros
+    M = np.block([[Ann, Anf, -Anf, zero((c, r))],
+                  [Afn, Aff, -Aff, eye],
+                  [-Afn, -Aff, Aff, eye],
+                  [U, -eye, -eye, zero((r, r))]])
+    z, ok = lemke(M, np.concatenate([q[normal], q[f], -q[f], np.zeros(r)]))
+    p = np.zeros(3 * c)
+    p[normal] = z[:c]
+    p[f] = z[c:c + r] - z[c + r:c + 2 * r]
+    return p, ok
+
+
 def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
               normal_only: bool, sliding: Optional[np.ndarray] = None,
               equal: Optional[np.ndarray] = None,
@@ -1288,9 +1346,12 @@ def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
 
     Per normal row ``|min(p_n A_nn, w_n)|`` (a natural map), ``|w_n|`` for an
     equality (``equal`` (c,)); per friction row whose impulse is inside its bound
-    ``μ p_n``, the slip left along it (a sliding contact has its ``t₁`` row alone); a
-    friction row on its bound must slip against it, and one beyond its bound counts
-    its excess times ``A_ii``. Rows ``pinned`` (held at zero) are not conditions.
+    ``μ p_n``, the slip left along it or, if less, how far its force lies from the
+    bound that would oppose that slip, times ``A_ii`` (the natural map of the box: a
+    force a hair inside its bound while slipping is off by that hair, not by its
+    slip; a sliding contact has its ``t₁`` row alone); a friction row on its bound
+    must slip against it, and one beyond its bound counts its excess times ``A_ii``.
+    Rows ``pinned`` (held at zero) are not conditions.
     """
     if not len(q):
         return 0.0
@@ -1315,7 +1376,9 @@ def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
             present &= ~pinned[col::3]
         inside = present & (np.abs(f) < bound - slack)
         if np.any(inside):
-            out = max(out, float(np.max(np.abs(v[inside]))))
+            # (the bound opposing the slip: −bound for v > 0, +bound for v < 0)
+            gap = np.where(v > 0.0, bound + f, bound - f)
+            out = max(out, float(np.max(np.minimum(np.abs(v), gap * dc)[inside])))
         # On its bound the row's force opposes its slip (or there is none).
         on = present & ~inside & (bound > 0.0)
         if np.any(on):

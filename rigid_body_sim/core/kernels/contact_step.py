@@ -595,8 +595,9 @@ def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal
             if col == 2 and sliding[k]:
                 continue
             f, v = p[3 * k + col], w[3 * k + col]
-            if abs(f) < bound - slack:
-                out = max(out, abs(v))
+            if abs(f) < bound - slack:   # (the natural map: its slip, or its force's gap)
+                gap = bound + f if v > 0.0 else bound - f
+                out = max(out, min(abs(v), gap * A[3 * k + col, 3 * k + col]))
             elif bound > 0.0:
                 out = max(out, max(f * v, 0.0) / bound)
             if abs(f) > bound + slack:
