@@ -259,7 +259,7 @@ def lemke(M: np.ndarray, q: np.ndarray, max_pivots: Optional[int] = None) -> tup
         rows = np.flatnonzero(col > tol)
         if not len(rows):
             return np.zeros(n), False   # a secondary ray
-        ratios = T[rows, -1] / col[rows]
+        ratios = np.maximum(T[rows, -1], 0.0) / col[rows]   # (a rounding-negative b: 0)
         best = rows[ratios <= ratios.min() + tol * max(1.0, abs(ratios.min()))]
         # Lexicographic tie-break on the basis' inverse (the w columns), row over pivot.
         for j in range(n):

@@ -123,8 +123,10 @@ RESIDUAL_TOLERANCE = 1e-12
 #: redundant contacts lose digits to that support's conditioning (measured: 1e-12 of the
 #: scale on the Panda pushing a box), where the fixed point's exact solves lose none.
 PIVOT_TOLERANCE = 1e-10
-#: The diagonal :func:`_pyramid` adds to the rows' operator, relative to its largest.
-PIVOT_REGULARIZATION = 1e-12
+#: The diagonals :func:`_pyramid` adds to the rows' operator, relative to its largest:
+#: the first, and the second where the first ends on a ray (both within
+#: :data:`PIVOT_TOLERANCE` of ``A p``).
+PIVOT_REGULARIZATIONS = (1e-12, 1e-10)
 #: Most iterations of the friction boxes (each an exact box LCP, warm-started).
 FRICTION_ITERATIONS = 60
 #: The proximal regularization, relative to the Delassus operator's largest diagonal.
@@ -597,12 +599,14 @@ class ContactSteps:
                 break
         cnt = self.counters
         if not converged and not normal_only and equal is None:
-            pivoted, ok = _pyramid(A_r, q_r, mu, sliding, pinned)
-            scale = float(np.max(np.abs(A_r) @ np.abs(pivoted) + np.abs(q_r)))
-            if ok and _residual(A_r, q_r, pivoted, mu, False, sliding, None, pinned) <= \
-                    PIVOT_TOLERANCE * scale:
-                p, converged = pivoted, True
-                cnt['lcp_pivoted'] += 1
+            for regularization in PIVOT_REGULARIZATIONS:
+                pivoted, ok = _pyramid(A_r, q_r, mu, sliding, pinned, regularization)
+                scale = float(np.max(np.abs(A_r) @ np.abs(pivoted) + np.abs(q_r)))
+                if ok and _residual(A_r, q_r, pivoted, mu, False, sliding, None, pinned) \
+                        <= PIVOT_TOLERANCE * scale:
+                    p, converged = pivoted, True
+                    cnt['lcp_pivoted'] += 1
+                    break
         cnt['lcp_solves'] += 1
         cnt['lcp_iterations_max'] = max(cnt['lcp_iterations_max'], it)
         if not converged:
@@ -1299,7 +1303,7 @@ def _any_tangent(nrm: np.ndarray) -> np.ndarray:
 
 
 def _pyramid(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.ndarray],
-             pinned: np.ndarray) -> tuple:
+             pinned: np.ndarray, regularization: float) -> tuple:
     """
     Solve the contact rows ``w = A p + q`` (normal, t₁, t₂ per contact) by Lemke's method.
 
@@ -1307,12 +1311,12 @@ def _pyramid(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.
     pinned rows held at zero) in Stewart and Trinkle's form: ``p_t = p⁺ − p⁻`` with
     ``w_t + β ≥ 0 ⊥ p⁺ ≥ 0``, ``−w_t + β ≥ 0 ⊥ p⁻ ≥ 0`` and ``μ p_n − p⁺ − p⁻ ≥ 0 ⊥ β ≥
     0``: one LCP in ``(p_n, p⁺, p⁻, β)``, its boxes exact in it (no fixed point on
-    them). ``A`` takes :data:`PIVOT_REGULARIZATION` of its largest diagonal on its
-    diagonal (a compliance that moves ``w`` by that fraction of ``A p``): redundant
-    contacts otherwise leave the pivoting degenerate enough to end on a ray. Returns
+    them). ``A`` takes ``regularization`` of its largest diagonal on its diagonal (a
+    compliance that moves ``w`` by that fraction of ``A p``): redundant contacts
+    otherwise leave the pivoting degenerate enough to end on a ray. Returns
     ``(p, ok)``.
     """
-    A = A + PIVOT_REGULARIZATION * float(np.max(np.diag(A))) * np.eye(len(q))
+    A = A + regularization * float(np.max(np.diag(A))) * np.eye(len(q))
     c = len(q) // 3
     normal = np.arange(0, 3 * c, 3)
     one_row = np.zeros(c, dtype=bool) if sliding is None else sliding   # (t₁ alone)
