@@ -26,8 +26,9 @@ import numpy as np
 import pytest
 from rigid_body_sim.core import Gravity, RigidBody, Simulation, SpecError
 from rigid_body_sim.core.hulls import hull_record, hull_triangles, read_vertices
-from rigid_body_sim.core.kernels.contact import BOX, CAPSULE, collide, CYLINDER, HULL, SPHERE
-from rigid_body_sim.core.kernels.convex import H_NF, H_NV, H_VERTS
+from rigid_body_sim.core.kernels.contact import BOX, CAPSULE, collide, CYLINDER, HULL, PLANE, \
+    SPHERE
+from rigid_body_sim.core.kernels.convex import CORNERS as CORNERS_MOST, H_NF, H_NV, H_VERTS
 from rigid_body_sim.core.shapes import CollisionShape
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
@@ -72,6 +73,38 @@ def test_a_boxs_corners_make_a_hull_of_six_four_cornered_faces_in_order():
             assert turn @ normal > 0.0
 
 
+def test_a_rotated_float32_mesh_keeps_its_faces_whole():
+    # A cube whose faces are 5 x 5 grids, turned and stored as float32 (as a binary STL
+    # of a CAD part holds it): its faces are coplanar only to float32's rounding (6e-8
+    # of its size), and merged within 1e-6 of it: 6 faces of 4 corners, 8 vertices (the
+    # grid's inner points none), and on a box it rests on its 4 corners.
+    g = np.linspace(-0.1, 0.1, 5)
+    grid = np.array([p for p in itertools.product(g, repeat=3) if np.max(np.abs(p)) == 0.1])
+    for seed in range(5):
+        R = Rotation.random(random_state=seed).as_matrix()
+        rec = hull_record((grid @ R.T).astype(np.float32))
+        assert int(rec[H_NV]) == 8 and int(rec[H_NF]) == 6
+        assert all(len(idx) == 4 for _, idx in _faces(rec))
+        box = (BOX, np.array([0.0, 0.0, -0.5]), np.eye(3), np.array([1.0, 1.0, 0.5]))
+        low = -np.min((_vertices(rec) @ R)[:, 2])   # (turned back: its face down)
+        points, normals, depths = _collide((HULL, np.array([0, 0, low - 1e-5]), R.T, rec),
+                                           box)
+        assert len(depths) == 4
+        np.testing.assert_allclose(depths, 1e-5, atol=1e-7)   # (float32 corners: 1e-8)
+
+
+def test_a_face_of_more_corners_than_the_kernels_take_keeps_them_evenly():
+    # A 100-sided prism: its caps keep 64 of their corners (a polygon inside the cap),
+    # its sides are 100 faces of 4; it stands on the ground on 4 of its cap's corners.
+    rec = hull_record(_prism(100, 0.1, 0.05))
+    caps = [idx for normal, idx in _faces(rec) if abs(normal[2]) > 0.5]
+    assert [len(idx) for idx in caps] == [CORNERS_MOST] * 2
+    assert int(rec[H_NF]) == 102
+    ground = (PLANE, np.zeros(3), np.eye(3), np.zeros(3))
+    _, _, depths = _collide((HULL, np.array([0, 0, 0.05 - 1e-5]), np.eye(3), rec), ground)
+    assert len(depths) == 4
+
+
 def test_interior_points_and_repeats_are_not_vertices():
     pts = np.vstack([CORNERS, CORNERS, np.random.default_rng(0).uniform(-0.05, 0.05, (50, 3))])
     rec = hull_record(pts)
@@ -91,12 +124,16 @@ def test_a_mesh_without_a_solid_hull_is_refused_naming_the_field(bad, words):
     assert err.value.field == 'mesh'
 
 
-def test_a_meshs_scale_must_be_positive_and_scales_its_hull():
+def test_a_meshs_scale_must_be_non_zero_and_scales_its_hull():
     with pytest.raises(SpecError) as err:
         CollisionShape('mesh', 'b', mesh=CORNERS, scale=(1, 0, 1))
     assert err.value.field == 'scale'
     s = CollisionShape('mesh', 'b', mesh=CORNERS, scale=(2, 1, 3))
     np.testing.assert_array_equal(s.dimensions(), HALF * (2, 1, 3))
+    # A negative scale mirrors it (URDF's mirrored parts): its hull, mirrored.
+    shifted = CORNERS + (0.3, 0, 0)
+    s = CollisionShape('mesh', 'b', mesh=shifted, scale=(-1, 1, 1))
+    np.testing.assert_allclose(np.sort(_vertices(s.hull)[:, 0]), np.sort(-shifted[:, 0]))
     with pytest.raises(SpecError) as err:
         CollisionShape('box', 'b', size=(1, 1, 1), scale=(1, 1, 1))
     assert err.value.field == 'scale'
@@ -108,6 +145,7 @@ def test_stl_binary_and_ascii_and_obj_files_give_the_same_hull(tmp_path):
     for t in tri:
         binary += struct.pack('<12fH', 0, 0, 0, *t.ravel(), 0)
     (tmp_path / 'b.stl').write_bytes(bytes(binary))
+    (tmp_path / 'padded.stl').write_bytes(bytes(binary) + b'\0\0')   # (trailing bytes)
     ascii_ = ['solid b'] + [line for t in tri for line in
                             ['facet normal 0 0 0', 'outer loop',
                              *(f'vertex {x:.17g} {y:.17g} {z:.17g}' for x, y, z in t),
@@ -117,7 +155,7 @@ def test_stl_binary_and_ascii_and_obj_files_give_the_same_hull(tmp_path):
                                                           for x, y, z in CORNERS)
                                     + 'f 1 2 3\n')
     want = hull_record(CORNERS)
-    for name in ('b.stl', 'a.STL', 'o.obj'):
+    for name in ('b.stl', 'padded.stl', 'a.STL', 'o.obj'):
         got = CollisionShape('mesh', 'b', mesh=str(tmp_path / name)).hull
         # (binary STL holds float32: 0.2 to 1.5e-8)
         np.testing.assert_allclose(np.sort(_vertices(got), axis=0),
@@ -410,3 +448,75 @@ def test_a_scene_bodys_mesh_shape_from_a_file_beside_the_scene(tmp_path):
     sim.step(200)
     assert sim.pose('part')[0][2] == pytest.approx(0.05, abs=1e-12)
     assert len(sim.contacts()['normal_force']) == 4
+
+
+def test_thin_plates_crossing_edge_to_edge_touch_where_they_cross():
+    # A 1 x 1 x 0.001 plate and a 0.6 x 0.6 x 0.001 one crossing at A's top edge, B's
+    # big face 30° from the normal: B's part within the margin of its top is its thin
+    # side (a strip), not its big face. 1e-4 deep: the contacts' deepest is 1e-4, all on
+    # both surfaces (the points of the strip over A's face); the box primitive agrees.
+    s30, c30 = 0.5, math.sqrt(3) / 2
+    n = -np.array([c30, 0.0, s30])
+    t, y = np.array([-s30, 0.0, c30]), np.array([0.0, 1.0, 0.0])
+    m2, m1 = c30 * n + s30 * y, 0.5 * n - c30 * y
+    RB = np.c_[-t, m1, m2]
+    plate_a = hull_record(np.array(list(itertools.product([-0.5, 0.5], [-0.5, 0.5],
+                                                          [-0.0005, 0.0005]))))
+    half_b = np.array([0.3, 0.3, 0.0005])
+    plate_b = hull_record(np.array(list(itertools.product(*[[-h, h] for h in half_b]))))
+    centre = np.array([0.5, 0.0, 0.0005]) + 1e-4 * n - 0.0005 * m2 - 0.3 * m1
+    a = (HULL, np.zeros(3), np.eye(3), plate_a)
+    for b in ((HULL, centre, RB, plate_b), (BOX, centre, RB, half_b)):
+        points, normals, depths = _collide(a, b)
+        assert len(depths) >= 2
+        assert depths.max() == pytest.approx(1e-4, abs=1e-12)
+        np.testing.assert_allclose(normals, np.tile(n, (len(depths), 1)), atol=1e-12)
+
+
+def test_a_sphere_on_a_plates_edge_touches_at_its_own_point():
+    # A sphere 1e-4 deep on the long edge of the 1 x 1 x 0.001 plate, from 60° above it:
+    # its one contact lies at the sphere's own point (y = 0), not at a far corner.
+    plate = hull_record(np.array(list(itertools.product([-0.5, 0.5], [-0.5, 0.5],
+                                                        [-0.0005, 0.0005]))))
+    u = np.array([0.5, 0.0, math.sqrt(3) / 2])
+    edge = np.array([0.5, 0.0, 0.0005])
+    centre = edge + (0.05 - 1e-4) * u
+    points, normals, depths = _collide((SPHERE, centre, np.eye(3), np.array([0.05, 0, 0])),
+                                       (HULL, np.zeros(3), np.eye(3), plate))
+    assert len(depths) == 1
+    np.testing.assert_allclose(normals[0], u, atol=1e-12)
+    assert depths[0] == pytest.approx(1e-4, abs=1e-12)
+    np.testing.assert_allclose(points[0], edge - 0.5e-4 * u, atol=1e-12)   # (midway)
+
+
+def test_a_sphere_whose_centre_is_inside_a_hull_is_pushed_out_by_its_nearest_face():
+    # Its centre 1.4e-4 inside the cube's corner along the diagonal: the depth is r plus
+    # the centre's distance to its nearest face (all three equal: 1.4e-4 / √3), as the
+    # box primitive has it; EPA on the centre (a point) and the hull (no curved part).
+    r = 0.02
+    rec = hull_record(np.array(list(itertools.product([-0.1, 0.1], repeat=3))))
+    centre = np.full(3, 0.1) - 1.4e-4 / math.sqrt(3)
+    sphere = (SPHERE, centre, np.eye(3), np.array([r, 0, 0]))
+    want = r + 1.4e-4 / math.sqrt(3)
+    box = (BOX, np.zeros(3), np.eye(3), np.full(3, 0.1))
+    for b in ((HULL, np.zeros(3), np.eye(3), rec), box):
+        _, normals, depths = _collide(sphere, b)
+        assert depths.max() == pytest.approx(want, abs=1e-12)
+        assert np.max(np.abs(normals[0])) == pytest.approx(1.0, abs=1e-12)   # (a face's)
+
+
+def test_a_slightly_tilted_cube_hull_touches_a_box_at_the_corners_within_the_margin():
+    # Tilted by (0.003, 0.0028, 0) rad, its lowest corner 2e-5 deep: three corners lie
+    # within the 1e-3 margin (the fourth 1.14e-3 up), and the hull finds those three, as
+    # the box primitive does.
+    R = Rotation.from_rotvec([0.003, 0.0028, 0.0]).as_matrix()
+    cube = np.array(list(itertools.product([-0.1, 0.1], repeat=3)))
+    low = -np.min((cube @ R.T)[:, 2])
+    ground = (BOX, np.array([0.0, 0.0, -0.5]), np.eye(3), np.array([1.0, 1.0, 0.5]))
+    got = []
+    for a in ((HULL, np.array([0, 0, low - 2e-5]), R, hull_record(cube)),
+              (BOX, np.array([0, 0, low - 2e-5]), R, np.full(3, 0.1))):
+        points, normals, depths = _collide(a, ground)
+        got.append(np.sort(depths))
+    assert len(got[0]) == 3
+    np.testing.assert_allclose(got[0], got[1], atol=1e-12)

@@ -29,7 +29,11 @@ friction row, along its slip (``t₁``), so its friction opposes the slip at ``�
 a sticking contact has two (the pyramid), and where its friction ends on a bound with
 its point slipping, or outside the cone inside the pyramid (up to ``√2 μ λ_n`` along a
 diagonal), it is turned to slide, along its slip or against its friction, and the
-problem solved again (:meth:`ContactSteps._slipping`). A Delassus operator made
+problem solved again (:meth:`ContactSteps._slipping`); where none turns and the
+operator is the step's own (servos), a sliding contact that stopped within the step
+(its one row inside its bound) sticks, two rows, solved again. Where the fixed point
+drifts (below), Lemke's pivoting on the pyramid
+LCP solves the rows (:func:`_pyramid`). A Delassus operator made
 singular by redundant contacts (a box flat on the ground: four normals on three
 freedoms) is regularized proximally (each solve adds ``ρ (p − p_k)``, ``ρ``
 :data:`PROXIMAL` of its diagonal, and the iteration takes it out: the forces solve the
@@ -781,7 +785,12 @@ class ContactSteps:
         the rate tolerance slips: its ``t₁`` is turned along that slip and it becomes
         a sliding contact (one friction row, ``|λ₁| ≤ μ λ_n``). So does one whose
         friction left Coulomb's cone inside the pyramid (a push along the pyramid's
-        diagonal, up to ``√2 μ λ_n``): it slips against its friction.
+        diagonal, up to ``√2 μ λ_n``): it slips against its friction. Where none
+        turns and the operator is the step's own (servos), a sliding contact whose one
+        row ends inside its bound stopped along its slip within the step, and sticks
+        (both rows): with its one row nothing would hold it across its slip, and a foot
+        under a servo slipped back and forth. (Free bodies keep its one row for that
+        step, as the compiled steps do; it sticks from the next, slower than the rate.)
         """
         c = len(rows)
         if not c:
@@ -801,6 +810,14 @@ class ContactSteps:
                         -friction / np.maximum(size, 1e-300)[:, None] * self.rate * 2.0, slip)
         speed = np.linalg.norm(slip, axis=1)
         turn = ~rows.sliding & (bound > 0.0) & ((on & (speed > self.rate)) | beyond)
+        # Under a stepped operator (servos), a sliding contact whose one row ends inside
+        # its bound stopped along its slip within the step: it sticks, both rows (else
+        # nothing holds it across its slip).
+        stop = rows.sliding & (bound > 0.0) & (np.abs(p[1::3]) < bound - slack)
+        if not self._symmetric and np.any(stop) and not np.any(turn):
+            return ContactRows(rows.state, rows.contacts, rows.frame, rows.lever_a,
+                               rows.lever_b, rows.mu, rows.restitution, rows.G,
+                               rows.sliding & ~stop, rows.vn)
         if not np.any(turn):
             return None
         frame, sliding = rows.frame.copy(), rows.sliding.copy()

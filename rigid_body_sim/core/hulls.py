@@ -61,7 +61,10 @@ def _stl(data: bytes):
     """Return an STL file's triangle corners (3T, 3), binary or ASCII; None if neither."""
     if len(data) >= 84:
         count = struct.unpack_from('<I', data, 80)[0]
-        if len(data) == 84 + 50 * count:   # binary: 50 bytes a triangle
+        # Binary: 50 bytes a triangle after an 84-byte head; bytes beyond are padding
+        # (an ASCII file begins 'solid', as some binary heads do: those by their size).
+        if count > 0 and (len(data) == 84 + 50 * count or len(data) > 84 + 50 * count
+                          and data[:5].lower() != b'solid'):
             rec = np.frombuffer(data, dtype=np.dtype([('n', '<f4', 3), ('v', '<f4', (3, 3)),
                                                       ('attr', '<u2')]), count=count,
                                 offset=84)
@@ -103,6 +106,31 @@ def hull_triangles(rec: np.ndarray) -> np.ndarray:
     return np.array(out).reshape(-1, 3, 3)
 
 
+#: Qhull's merging of coplanar facets, relative to the vertices' size (float32's rounding
+#: of coordinates is 6e-8 of it: 1e-6 with room; a face bent by less is one face).
+MERGE = 1e-6
+
+
+def _outline(xy: np.ndarray) -> np.ndarray:
+    """Return the indices of the 2-D convex outline of ``xy`` (k, 2), counter-clockwise."""
+    order = np.lexsort((xy[:, 1], xy[:, 0]))
+    span = float(np.max(np.ptp(xy, axis=0), initial=0.0))
+
+    def chain(seq):
+        out: list = []
+        for i in seq:
+            while len(out) >= 2:
+                a, b = xy[out[-2]], xy[out[-1]]
+                turn = (b[0] - a[0]) * (xy[i][1] - a[1]) - (b[1] - a[1]) * (xy[i][0] - a[0])
+                if turn > 1e-9 * span * span:
+                    break
+                out.pop()
+            out.append(i)
+        return out
+    lower, upper = chain(order), chain(order[::-1])
+    return np.array(lower[:-1] + upper[:-1], dtype=int)
+
+
 def hull_record(vertices: Any, field: str = 'mesh') -> np.ndarray:
     """
     Return the packed record of the convex hull of ``vertices`` (N, 3), in the shape's frame.
@@ -115,8 +143,14 @@ def hull_record(vertices: Any, field: str = 'mesh') -> np.ndarray:
     each face: its outward unit normal, its corner count ``k``, and its ``k`` vertex
     indices counter-clockwise about the normal.
 
-    Raises :class:`.SpecError` naming ``field`` for non-finite vertices, a flat or
-    degenerate set (no volume), or a face of more than :data:`.convex.CORNERS` corners.
+    Coplanar triangles are merged within the rounding of the file's numbers (float32
+    in binary STL: 1e-6 of the size), and a face's corners are its merged points' 2-D
+    convex outline (a point inside a face or on an edge is no corner). A face of more
+    than :data:`.convex.CORNERS` corners keeps that many of them, evenly spaced (a
+    polygon inside it: the contacts' region a little smaller than the face).
+
+    Raises :class:`.SpecError` naming ``field`` for non-finite vertices or a flat or
+    degenerate set (no volume).
     """
     from scipy.spatial import ConvexHull, QhullError
 
@@ -125,42 +159,43 @@ def hull_record(vertices: Any, field: str = 'mesh') -> np.ndarray:
         raise SpecError(field, f'expected at least 4 vertices (N, 3), got shape {v.shape}')
     if not np.all(np.isfinite(v)):
         raise SpecError(field, 'vertices must be finite')
+    size = float(np.max(np.ptp(v, axis=0)))
     try:
-        hull = ConvexHull(v)
-    except QhullError:
+        # On coordinates scaled to the set's size, Qhull merges facets whose centrums lie
+        # within MERGE of their neighbours (C-n): coplanar to the numbers' rounding
+        # (float32 from a binary STL: 6e-8 of the size), a point inside a face is no
+        # vertex. Its merged facets come triangulated (Qt), each triangle with the
+        # facet's own equation.
+        hull = ConvexHull(v / size if size > 0.0 else v, qhull_options=f'Qt C-{MERGE!r}')
+    except (QhullError, ValueError):
         raise SpecError(field, f'the {len(v)} vertices span no volume (flat or '
                                f'degenerate): a hull needs a solid') from None
-    size = float(np.max(np.ptp(v, axis=0)))
-    if hull.volume <= 1e-12 * size ** 3:
-        raise SpecError(field, f'the hull has no volume ({hull.volume:.3g}): a hull needs a '
-                               f'solid')
+    if hull.volume <= 1e-12:
+        raise SpecError(field, f'the hull has no volume ({hull.volume * size ** 3:.3g}): a '
+                               f'hull needs a solid')
     keep = hull.vertices
-    index = {int(i): j for j, i in enumerate(keep)}
+    index = np.full(len(v), -1)
+    index[keep] = np.arange(len(keep))
     hv = v[keep]
-    # Qhull's facets come triangulated: triangles of one plane share its equation (to
-    # rounding). Merge each plane's into one face.
-    faces: list = []
-    tol = 1e-9 * size
-    for simplex, eq in zip(hull.simplices, hull.equations):
-        for face in faces:
-            if abs(face[0] @ eq[:3] - 1.0) <= 1e-9 and abs(face[1] - eq[3]) <= tol:
-                face[2].update(int(i) for i in simplex)
-                break
-        else:
-            faces.append([eq[:3].copy(), float(eq[3]), {int(i) for i in simplex}])
+    _, facet = np.unique(hull.equations, axis=0, return_inverse=True)
+    facet = facet.ravel()
+    by_facet = np.argsort(facet, kind='stable')
+    starts = np.flatnonzero(np.r_[True, np.diff(facet[by_facet]) != 0, True])
     out_faces = []
-    for normal, _, corners in faces:
-        idx = np.array(sorted(index[i] for i in corners))
-        if len(idx) > CORNERS:
-            raise SpecError(field, f'a hull face has {len(idx)} corners (at most {CORNERS}): '
-                                   f'simplify the mesh')
+    for a, b in zip(starts[:-1], starts[1:]):
+        tris = hull.simplices[by_facet[a:b]]
+        normal = hull.equations[by_facet[a], :3]
+        normal = normal / np.linalg.norm(normal)
+        idx = index[np.unique(tris)]
         pts = hv[idx]
         centre = pts.mean(axis=0)
-        u = pts[0] - centre
+        u = pts[np.argmax(np.linalg.norm(pts - centre, axis=1))] - centre
         u /= np.linalg.norm(u)
         w = np.cross(normal, u)
-        angle = np.arctan2((pts - centre) @ w, (pts - centre) @ u)
-        out_faces.append((normal / np.linalg.norm(normal), idx[np.argsort(angle)]))
+        idx = idx[_outline(np.c_[(pts - centre) @ u, (pts - centre) @ w])]   # (CCW)
+        if len(idx) > CORNERS:
+            idx = idx[np.linspace(0, len(idx), CORNERS, endpoint=False).astype(int)]
+        out_faces.append((normal, idx))
     nv, nf = len(hv), len(out_faces)
     starts = H_VERTS + 3 * nv
     body = sum(4 + len(idx) for _, idx in out_faces)

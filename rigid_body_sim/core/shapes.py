@@ -73,7 +73,8 @@ class CollisionShape:
         A mesh's file (STL or OBJ; its units are taken as m) or its vertices (m, in the
         shape's frame); simulated as their convex hull (:mod:`.hulls`).
     scale : array_like, shape (3,)
-        A mesh's scale along its x, y, z axes (URDF's ``<mesh scale>``), > 0; default 1.
+        A mesh's scale along its x, y, z axes (URDF's ``<mesh scale>``), non-zero (a
+        negative one mirrors it); default 1.
     position_body : array_like, shape (3,)
         m, the shape's centre in the body frame (a plane: a point on it).
     orientation_xyzw : array_like, shape (4,)
@@ -142,8 +143,8 @@ class CollisionShape:
         if self.kind == 'mesh':
             scale = np.ones(3) if self.scale is None else finite_array(self.scale, 'scale',
                                                                        (3,))
-            if not np.all(scale > 0.0):
-                raise SpecError('scale', f'must be positive, got {self.scale!r}')
+            if not np.all(scale != 0.0):   # (negative: mirrored, as URDF allows)
+                raise SpecError('scale', f'must be non-zero, got {self.scale!r}')
             conv['scale'] = scale
             if isinstance(self.mesh, str) or hasattr(self.mesh, '__fspath__'):
                 verts = read_vertices(self.mesh, 'mesh')

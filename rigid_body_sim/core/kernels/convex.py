@@ -61,6 +61,9 @@ EPA_VERTICES = 160
 GJK_ITERATIONS = 64
 #: The inflating ball's radius beyond the margin, as a fraction of the shapes' size.
 INFLATE = 1e-3
+#: The inflating ball's radius for a sphere's or capsule's core inside a hull (its EPA:
+#: :func:`_rounded`), as a fraction of the shapes' size: the depth's error at most.
+CORE_INFLATE = 1e-9
 #: Kinds, as :class:`.contact.Shape` (repeated: this module must not import contact's).
 SPHERE, CAPSULE, BOX, CYLINDER, HULL = 0, 1, 2, 3, 5
 #: A hull's record (:func:`..hulls.hull_record`): its half extents about its origin
@@ -388,9 +391,10 @@ def _rounded(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
 
     GJK's nearest points of its core (radius 0) and the other shape: the normal along
     them and the depth ``r − distance`` are exact to rounding (a polytope's nearest
-    simplex is found exactly; no curved surface is sampled). Returns 1 (``result``
-    written), 0 (the gap passes ``margin``) or −1 (the core touches or enters the
-    other shape: EPA's to resolve).
+    simplex is found exactly; no curved surface is sampled), the normal's error about
+    1e-17 m over the distance. Where the core touches or enters the other shape, EPA
+    on the core and that shape, the radius added. Returns 1 (``result`` written), 0
+    (the gap passes ``margin``) or −1 (neither resolved it: EPA on the whole shapes).
     """
     r = sa[0] if round_a else sb[0]
     core = np.zeros(3)
@@ -404,7 +408,23 @@ def _rounded(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
     dist = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     scale = max(sa[0], sa[1], sa[2], sb[0], sb[1], sb[2])
     if status == 1 or dist <= 1e-9 * scale:
-        return -1
+        # The core touches or enters: EPA on the core and the other shape (no curved
+        # surface in the pair when the other is a hull), then out by the radius. Its
+        # ball of CORE_INFLATE of the size keeps GJK's simplex a solid where the core
+        # only touches; EPA's polytope of that small ball is within it of the ball.
+        eps = CORE_INFLATE * scale
+        status, m = _gjk(ka_, ca, Ra, sa_, kb_, cb, Rb, sb_, eps, 0.0, V, PA, PB, idx, lam,
+                         v)
+        if status != 1 or not _epa(ka_, ca, Ra, sa_, kb_, cb, Rb, sb_, eps, margin + r, V,
+                                   PA, PB, idx, m, result):
+            return -1
+        result[3] += r
+        for x in range(3):
+            if round_a:
+                result[4 + x] -= r * result[x]
+            else:
+                result[7 + x] += r * result[x]
+        return 1
     if r - dist < -margin:
         return 0
     for x in range(3):   # v runs from b's nearest point to a's: the normal, b to a
@@ -767,8 +787,11 @@ def _hull_feature(c: np.ndarray, R: np.ndarray, rec: np.ndarray, d: np.ndarray, 
     """
     Return :func:`feature` of a hull (its record ``rec``).
 
-    Its face most along ``d`` if all its corners lie within ``tol`` of the top; else
-    the two vertices within it if there are two (an edge); else the top vertex.
+    The part of the hull within ``tol`` of its top along ``d``, seen through its faces:
+    of the faces with three or more corners within it, the one most along ``d``, by
+    those corners (a face tilted past ``tol`` over its width keeps the corners that
+    touch, in order: a convex polygon still); else of the faces with two, the most
+    along ``d``, by those two (an edge); else the top vertex.
     """
     nv, nf = int(rec[H_NV]), int(rec[H_NF])
     l0 = R[0, 0] * d[0] + R[1, 0] * d[1] + R[2, 0] * d[2]   # d in the hull's frame
@@ -778,41 +801,37 @@ def _hull_feature(c: np.ndarray, R: np.ndarray, rec: np.ndarray, d: np.ndarray, 
     o = H_VERTS + 3 * top
     high = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
     starts = H_VERTS + 3 * nv
-    best, most = 0, -math.inf
+    best, best_near, most = -1, 0, -math.inf
     for f in range(nf):
         o = int(rec[starts + f])
+        near = 0
+        for q in range(int(rec[o + 3])):
+            v = H_VERTS + 3 * int(rec[o + 4 + q])
+            if rec[v] * l0 + rec[v + 1] * l1 + rec[v + 2] * l2 >= high - tol:
+                near += 1
+        near = min(near, 3)   # (three or more: a patch; two: an edge)
         nd = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
-        if nd > most:
-            best, most = f, nd
+        if near >= 2 and (near > best_near or near == best_near and nd > most):
+            best, best_near, most = f, near, nd
+    if best < 0:
+        for r in range(3):
+            pts[0, r] = (c[r] + R[r, 0] * rec[H_VERTS + 3 * top]
+                         + R[r, 1] * rec[H_VERTS + 3 * top + 1]
+                         + R[r, 2] * rec[H_VERTS + 3 * top + 2])
+        return F_POINT, 1, 0.0
     o = int(rec[starts + best])
-    k = int(rec[o + 3])
-    flat = k <= pts.shape[0]
-    for q in range(k):
-        v = H_VERTS + 3 * int(rec[o + 4 + q])
-        if rec[v] * l0 + rec[v + 1] * l1 + rec[v + 2] * l2 < high - tol:
-            flat = False
-            break
-    if flat:
-        for q in range(k):
-            v = rec[H_VERTS + 3 * int(rec[o + 4 + q]):]
+    m = 0
+    for q in range(int(rec[o + 3])):
+        v = rec[H_VERTS + 3 * int(rec[o + 4 + q]):]
+        if v[0] * l0 + v[1] * l1 + v[2] * l2 >= high - tol and m < pts.shape[0]:
             for r in range(3):
-                pts[q, r] = c[r] + R[r, 0] * v[0] + R[r, 1] * v[1] + R[r, 2] * v[2]
-        for r in range(3):
-            normal[r] = R[r, 0] * rec[o] + R[r, 1] * rec[o + 1] + R[r, 2] * rec[o + 2]
-        return F_POLYGON, k, 0.0
-    near, second = 0, -1
-    for i in range(nv):
-        v = H_VERTS + 3 * i
-        if rec[v] * l0 + rec[v + 1] * l1 + rec[v + 2] * l2 >= high - tol:
-            near += 1
-            if i != top:
-                second = i
-    m = 2 if near == 2 else 1
-    for q in range(m):
-        v = rec[H_VERTS + 3 * (top if q == 0 else second):]
-        for r in range(3):
-            pts[q, r] = c[r] + R[r, 0] * v[0] + R[r, 1] * v[1] + R[r, 2] * v[2]
-    return (F_SEGMENT, 2, 0.0) if m == 2 else (F_POINT, 1, 0.0)
+                pts[m, r] = c[r] + R[r, 0] * v[0] + R[r, 1] * v[1] + R[r, 2] * v[2]
+            m += 1
+    if m == 2:
+        return F_SEGMENT, 2, 0.0
+    for r in range(3):
+        normal[r] = R[r, 0] * rec[o] + R[r, 1] * rec[o + 1] + R[r, 2] * rec[o + 2]
+    return F_POLYGON, m, 0.0
 
 
 @njit(cache=True)
@@ -1001,6 +1020,32 @@ def _lift(ft: int, pts: np.ndarray, normal: np.ndarray, xy: np.ndarray, x: float
 
 
 @njit(cache=True)
+def _over(ft: int, pts: np.ndarray, m: int, rad: float, nf: np.ndarray, p: np.ndarray,
+          t: float, n: np.ndarray, tol: float) -> bool:
+    """Tell whether ``p + t n`` (on a flat feature's plane) lies on the feature, within tol."""
+    x0, x1, x2 = p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]
+    if ft == F_DISC:
+        return math.sqrt((x0 - pts[0, 0]) ** 2 + (x1 - pts[0, 1]) ** 2
+                         + (x2 - pts[0, 2]) ** 2) <= rad + tol
+    sign = 0.0   # (either order round the normal: every turn the same way)
+    for q in range(m):
+        a, b = pts[q], pts[(q + 1) % m]
+        e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        f0, f1, f2 = x0 - a[0], x1 - a[1], x2 - a[2]
+        turn = (nf[0] * (e1 * f2 - e2 * f1) + nf[1] * (e2 * f0 - e0 * f2)
+                + nf[2] * (e0 * f1 - e1 * f0))
+        le = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if abs(turn) <= tol * le:
+            continue
+        s = 1.0 if turn > 0.0 else -1.0
+        if sign == 0.0:
+            sign = s
+        elif s != sign:
+            return False
+    return True
+
+
+@njit(cache=True)
 def _one(xa: np.ndarray, xb: np.ndarray, n: np.ndarray, margin: float,
          cand: np.ndarray) -> int:
     """Write the one contact of a's point ``xa`` and b's ``xb`` (within the margin)."""
@@ -1159,6 +1204,7 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
             for r in range(3):
                 x[r] = pa[0, r] + 0.5 * t * n[r]
             gap = -t
+            over = _over(fb, pb, mb, rb, nb, pa[0], t, n, margin)
         else:   # b's point under a's plane
             mn = na[0] * n[0] + na[1] * n[1] + na[2] * n[2]
             t = (na[0] * (pa[0, 0] - pb[0, 0]) + na[1] * (pa[0, 1] - pb[0, 1])
@@ -1166,6 +1212,9 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
             for r in range(3):
                 x[r] = pb[0, r] + 0.5 * t * n[r]
             gap = t
+            over = _over(fa, pa, ma, ra, na, pb[0], t, n, margin)
+        if not over:   # its foot off the feature: not this pair's point (GJK's or EPA's)
+            return -1
         if gap > margin:
             return 0
         for r in range(3):
