@@ -82,10 +82,12 @@ def _on_both_surfaces(a, b, points, normals, depths, tol):
         assert abs(_signed_distance(b, p + 0.5 * d * n)) <= tol
 
 
-def _reference_overlap(a, b, rng):
+def _reference_overlap(a, b, rng, support=None):
     """Return the least over unit m of h_a(m) + h_b(−m): many starts, then Nelder–Mead."""
+    support = support or _support_value
+
     def f(m):
-        return _support_value(a, m) + _support_value(b, -m)
+        return support(a, m) + support(b, -m)
 
     def g(x):
         return f(np.array([math.sin(x[0]) * math.cos(x[1]), math.sin(x[0]) * math.sin(x[1]),

@@ -30,8 +30,8 @@ from rigid_body_sim.core.kernels.contact import BOX, CAPSULE, collide, CYLINDER,
     SPHERE
 from rigid_body_sim.core.kernels.convex import CORNERS as CORNERS_MOST, H_NF, H_NV, H_VERTS
 from rigid_body_sim.core.shapes import CollisionShape
-from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
+from test_contact_convex import _reference_overlap
 
 G = 9.81
 CORNERS = np.array(list(itertools.product([-0.1, 0.1], [-0.2, 0.2], [-0.05, 0.05])))
@@ -187,27 +187,6 @@ def _support_value(shape, m):
     return m @ c + size[1] * abs(a @ m) + size[0] * np.linalg.norm(np.cross(a, m))
 
 
-def _reference_overlap(a, b, rng):
-    """Return the least over unit m of h_a(m) + h_b(−m): many starts, then Nelder–Mead."""
-    def f(m):
-        return _support_value(a, m) + _support_value(b, -m)
-
-    def g(x):
-        return f(np.array([math.sin(x[0]) * math.cos(x[1]), math.sin(x[0]) * math.sin(x[1]),
-                           math.cos(x[0])]))
-    starts = sorted(((f(v), tuple(v)) for v in
-                     (u / np.linalg.norm(u) for u in rng.normal(size=(400, 3)))))
-    best = math.inf
-    for _, v in starts[:4]:
-        x = np.array([math.acos(max(-1.0, min(1.0, v[2]))), math.atan2(v[1], v[0])])
-        for _ in range(3):
-            res = minimize(g, x, method='Nelder-Mead',
-                           options={'xatol': 1e-14, 'fatol': 1e-17, 'maxiter': 2000})
-            x = res.x + rng.normal(size=2) * 1e-7
-        best = min(best, res.fun)
-    return best
-
-
 def _axes(shape):
     """Return a polytope's face normals and edge directions in the world (a box's: its axes)."""
     kind, c, R, size = shape
@@ -290,7 +269,8 @@ def test_hull_depths_and_normals_match_the_support_function_minimum(seed):
         a = (HULL, t * u, Ra, rec)
         scale = max(np.max(rec[:3]), np.max(sb[:3]))
         _, normals, depths = _collide(a, b)
-        reference = min(_reference_overlap(a, b, rng), _separating_axes_minimum(a, b))
+        reference = min(_reference_overlap(a, b, rng, _support_value),
+                        _separating_axes_minimum(a, b))
         assert len(depths) > 0
         # The depth is the support sum along the normal (so at least the true least), and
         # no more than the least the reference found (Nelder–Mead stalls on a polytope
