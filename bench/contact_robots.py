@@ -162,7 +162,7 @@ def table(rows: list) -> str:
         '\n\nEvery step in Python (scenes with joints). "stepped operators a step": how '
         "often a step's contact operator was built from the step's own response (servos: "
         'a trial step per row; twice in a step where contacts turn to slip or stick). The '
-        'servo quadruped is still settling at the end (its servos\' modes decay about as '
+        "servo quadruped is still settling at the end (its servos' modes decay about as "
         'e^{-4.5 t}: 1.4e-9 m/s at 4 s, test_contact_robots); its LCPs are solved (the '
         'fixed point, or Lemke pivoting where the fixed point drifts).')
 
