@@ -500,3 +500,18 @@ def test_a_slightly_tilted_cube_hull_touches_a_box_at_the_corners_within_the_mar
         got.append(np.sort(depths))
     assert len(got[0]) == 3
     np.testing.assert_allclose(got[0], got[1], atol=1e-12)
+
+
+def test_a_tilted_hundred_gon_touches_at_its_lowest_vertex_though_its_cap_keeps_64():
+    # A 100-sided prism's caps keep 64 of their corners; tilted 0.3 rad towards the
+    # vertex at 3.6° (one the bottom cap leaves out), that vertex is the lowest: its
+    # contact must still be the deepest, at the set depth, through the side faces at it.
+    rec = hull_record(_prism(100, 0.1, 0.05))
+    phi = math.radians(3.6)
+    R = Rotation.from_rotvec(0.3 * np.array([-math.sin(phi), math.cos(phi), 0.0])).as_matrix()
+    low = -np.min((_vertices(rec) @ R.T)[:, 2])
+    ground = (BOX, np.array([0.0, 0.0, -0.5]), np.eye(3), np.array([1.0, 1.0, 0.5]))
+    points, normals, depths = _collide((HULL, np.array([0, 0, low - 1e-5]), R, rec), ground)
+    assert depths.max() == pytest.approx(1e-5, abs=1e-15)
+    lowest = (_vertices(rec) @ R.T)[np.argmin((_vertices(rec) @ R.T)[:, 2])]
+    np.testing.assert_allclose(points[np.argmax(depths)][:2], lowest[:2], atol=1e-15)

@@ -787,11 +787,12 @@ def _hull_feature(c: np.ndarray, R: np.ndarray, rec: np.ndarray, d: np.ndarray, 
     """
     Return :func:`feature` of a hull (its record ``rec``).
 
-    The part of the hull within ``tol`` of its top along ``d``, seen through its faces:
-    of the faces with three or more corners within it, the one most along ``d``, by
-    those corners (a face tilted past ``tol`` over its width keeps the corners that
-    touch, in order: a convex polygon still); else of the faces with two, the most
-    along ``d``, by those two (an edge); else the top vertex.
+    The part of the hull within ``tol`` of its top along ``d``, seen through the faces
+    at its top vertex: of those with three or more corners within it, the one most
+    along ``d``, by those corners (a face tilted past ``tol`` over its width keeps the
+    corners that touch, in order: a convex polygon still); else of those with two, the
+    most along ``d``, by those two (an edge); else the top vertex. (A face elsewhere may
+    lie more along ``d`` and still not hold the deepest point.)
     """
     nv, nf = int(rec[H_NV]), int(rec[H_NF])
     l0 = R[0, 0] * d[0] + R[1, 0] * d[1] + R[2, 0] * d[2]   # d in the hull's frame
@@ -804,11 +805,15 @@ def _hull_feature(c: np.ndarray, R: np.ndarray, rec: np.ndarray, d: np.ndarray, 
     best, best_near, most = -1, 0, -math.inf
     for f in range(nf):
         o = int(rec[starts + f])
-        near = 0
+        near, at_top = 0, False
         for q in range(int(rec[o + 3])):
-            v = H_VERTS + 3 * int(rec[o + 4 + q])
+            i = int(rec[o + 4 + q])
+            at_top = at_top or i == top
+            v = H_VERTS + 3 * i
             if rec[v] * l0 + rec[v + 1] * l1 + rec[v + 2] * l2 >= high - tol:
                 near += 1
+        if not at_top:
+            continue
         near = min(near, 3)   # (three or more: a patch; two: an edge)
         nd = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
         if near >= 2 and (near > best_near or near == best_near and nd > most):
