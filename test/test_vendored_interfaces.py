@@ -4,7 +4,10 @@ The standard interface packages the node needs beyond the wheels' (vendor/) are 
 ``vendor/tf2_msgs`` stands in for ``tf2_msgs`` where the environment has none (the PyPI
 wheels); dev.sh builds it only then. These tests hold for whichever ``tf2_msgs`` the
 environment has: the message must be the standard one, field for field and by type hash,
-or RViz and tf2 would not match our /tf publishers.
+or RViz and tf2 would not match our /tf publishers. ``vendor/simulation_interfaces`` stands
+in for the ROS simulator interface (release 1.0.0, as Jazzy carries it) alike: every one of
+its types must have the standard's type hash, or clients of the standard would not match
+our services.
 """
 
 import json
@@ -106,3 +109,41 @@ def test_the_node_executable_sees_tf2_msgs():
                           timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == 'tf2_msgs.msg._tf_message'
+
+
+#: The standard's own type hashes: test/data/simulation_interfaces_1.0.0_hashes.json (how
+#: they were obtained is written in it: the upstream 1.0.0 package's build).
+SIMULATION_HASHES = json.loads(
+    (Path(__file__).parent / 'data' / 'simulation_interfaces_1.0.0_hashes.json').read_text()
+)['hashes']
+
+
+def test_simulation_interfaces_are_release_1_0_0_by_every_type_hash():
+    # Every message, service (request, response, event) and action type (goal, result,
+    # feedback and the action's own services and messages) of the package the environment
+    # has, vendored or not, against the standard release's: 92 types.
+    try:
+        share = Path(packages.get_package_share_directory('simulation_interfaces'))
+    except packages.PackageNotFoundError:
+        pytest.fail('simulation_interfaces is not installed: ./dev.sh setup builds '
+                    'vendor/simulation_interfaces where the environment has none')
+    found = {}
+    for description in sorted(share.glob('*/*.json')):
+        for entry in json.loads(description.read_text())['type_hashes']:
+            if entry['type_name'].startswith('simulation_interfaces/'):
+                found[entry['type_name']] = entry['hash_string']
+    assert len(SIMULATION_HASHES) == 92
+    assert found == SIMULATION_HASHES
+
+
+def test_simulation_interfaces_fields_are_the_standards():
+    from simulation_interfaces.msg import EntityState, Result, SimulatorFeatures
+    from simulation_interfaces.srv import SpawnEntity, StepSimulation
+    assert Result.get_fields_and_field_types() == {'result': 'uint8', 'error_message': 'string'}
+    assert (Result.RESULT_OK, Result.RESULT_NOT_FOUND, Result.RESULT_INCORRECT_STATE) == (1, 2, 3)
+    assert EntityState.get_fields_and_field_types() == {
+        'header': 'std_msgs/Header', 'pose': 'geometry_msgs/Pose',
+        'twist': 'geometry_msgs/Twist', 'acceleration': 'geometry_msgs/Accel'}
+    assert SimulatorFeatures.STEP_SIMULATION_ACTION == 33
+    assert StepSimulation.Request().steps == 1   # (the standard's default)
+    assert SpawnEntity.Response.INVALID_POSE == 109
