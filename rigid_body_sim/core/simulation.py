@@ -828,6 +828,82 @@ class Simulation:
         # (after the drives' targets: the projection onto Φ̇ = −ωΦ must see them)
         self._reconcile_velocities()
 
+    def place(self, bodies: Sequence[str], reference: str, position: Any,
+              orientation_xyzw: Any, linear_velocity_world: Any = (0.0, 0.0, 0.0),
+              angular_velocity_world: Any = (0.0, 0.0, 0.0)) -> None:
+        """
+        Move ``bodies`` as one rigid whole so ``reference`` (one of them) has a pose and twist.
+
+        Between steps (a teleport): ``reference``'s origin goes to ``position`` (m,
+        world) with its frame at ``orientation_xyzw`` (normalized), the others keep their
+        pose relative to it, and the whole moves rigidly with the twist of
+        ``reference``'s origin (``linear_velocity_world`` m/s, ``angular_velocity_world``
+        rad/s): the bodies' motion relative to each other (a robot's joint rates) is
+        stopped. Every value is checked before anything changes.
+
+        Raises
+        ------
+        SpecError
+            A non-finite value, a zero quaternion, an unknown body, or a body joined by a
+            constraint to one outside ``bodies`` or to the world (moving them would break
+            it: the constraint is named).
+
+        """
+        names = list(bodies)
+        index = [self.bodies.lookup(name, 'bodies') for name in names]
+        if reference not in names:
+            raise SpecError('reference', f'{reference!r} is not one of the bodies moved '
+                                         f'{names}')
+        values = {}
+        for field, value, size in (('position', position, 3),
+                                   ('orientation_xyzw', orientation_xyzw, 4),
+                                   ('linear_velocity_world', linear_velocity_world, 3),
+                                   ('angular_velocity_world', angular_velocity_world, 3)):
+            try:
+                a = np.array(value, dtype=float).reshape(size)
+            except (TypeError, ValueError):
+                raise SpecError(field, f'expected {size} numbers, got {value!r}') from None
+            if not np.all(np.isfinite(a)):
+                raise SpecError(field, f'must be finite, got {a.tolist()}')
+            values[field] = a
+        q = values['orientation_xyzw']
+        norm = float(np.linalg.norm(q))
+        if not norm > 1e-6:
+            raise SpecError('orientation_xyzw', f'not a rotation: its norm is {norm:.3g}')
+        group = set(names)
+        for name in self.dynamics.solver.constraints.names:
+            spec = self.dynamics.solver.constraints.spec(name)
+            ends = {spec.body_a, spec.body_b} - {None}
+            if ends & group and not ends <= group or (ends & group and spec.body_b is None):
+                other = spec.body_b if spec.body_a in group else spec.body_a
+                raise SpecError('bodies', f'constraint {name!r} joins {sorted(ends & group)} '
+                                          f'to {other or "the world"!r}: moving them alone '
+                                          f'would break it')
+        pos, quat, vel, omega, _, _ = (a.copy() for a in self.bodies.outputs(self.state))
+        r = index[names.index(reference)]
+        R_old = so3.quat_to_matrix(quat[r])
+        R_new = so3.quat_to_matrix(q / norm)
+        turn = R_new @ R_old.T
+        rel = pos[index] - pos[r]
+        pos[index] = values['position'] + rel @ turn.T
+        quat[index] = so3.quat_normalize(so3.quat_multiply(
+            np.tile(so3.matrix_to_quat(turn), (len(index), 1)), quat[index]))
+        w = values['angular_velocity_world']
+        vel[index] = values['linear_velocity_world'] + np.cross(
+            w, pos[index] - values['position'])
+        omega[index] = w
+        moved = self.bodies.state_from_origins(self.time, pos, quat, vel, omega)
+        # The other bodies keep their state bit for bit (not recomputed from their origins).
+        parts = [old.copy() for old in self.state.parts]
+        for whole, piece in zip(parts, moved.parts):
+            whole[index] = piece[index]
+        self.state = State(self.time, *parts)
+        self.dynamics.changed()
+        if len(self.joints):
+            self.joints.track(self._outputs_now())
+        if self.events is not None:
+            self.events.from_state()
+
     def set_joint_efforts(self, efforts: dict, duration: Optional[float] = None) -> None:
         """
         Command joint efforts (N m or N), held until replaced, or for ``duration`` s.
