@@ -123,3 +123,36 @@ def test_a_placement_refused_names_its_field_and_changes_nothing(bodies, referen
         sim.place(bodies, reference, **args)
     assert err.value.field == field and words in str(err.value)
     assert np.array_equal(sim.state.y, before)
+
+
+def test_accelerations_are_the_closed_forms_free_and_on_a_hinge():
+    # Free: Euler's equations I ω̇ = −ω × I ω in the body frame (inertia diag(0.1, 0.2,
+    # 0.3)), and the origin at r from the centre: g + α × r + ω × (ω × r).
+    sim = _two_bodies()
+    acc, alpha = sim.accelerations()
+    w_body = sim.twist('a', frame='body')[1]
+    inertia = np.array([0.1, 0.2, 0.3])
+    R = so3.quat_to_matrix(sim.pose('a')[1])
+    expected_alpha = R @ (-np.cross(w_body, inertia * w_body) / inertia)
+    w = R @ w_body
+    r = sim.pose('a')[0] - sim.state.pos_com_world[0]
+    np.testing.assert_allclose(alpha[0], expected_alpha, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(acc[1], [0.0, 0.0, -G], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(acc[0], [0.0, 0.0, -G] + np.cross(expected_alpha, r)
+                               + np.cross(w, np.cross(w, r)), rtol=0, atol=1e-13)
+    # A uniform sphere of radius ρ on a hinge at distance L
+    # from its centre, released at rest at angle θ: θ̈ = −m g L sin θ / (I + m L²), and its
+    # origin (the centre) accelerates at θ̈ L tangentially.
+    m, rho, L, theta = 2.0, 0.1, 0.5, 0.7
+    inertia = 0.4 * m * rho * rho
+    centre = (L * math.sin(theta), 0.0, -L * math.cos(theta))
+    sim = Simulation([RigidBody('s', m, (inertia,) * 3, position_world=centre)], [Gravity()],
+                     constraints=[Constraint('hinge', 'hinge', 's', None,
+                                             anchor_world=(0.0, 0.0, 0.0),
+                                             axis_world=(0.0, 1.0, 0.0))])
+    acc, alpha = sim.accelerations()
+    theta_dd = -m * G * L * math.sin(theta) / (inertia + m * L * L)
+    # x = L sin θ, z = −L cos θ: a turn about +y decreases θ, so α_y = −θ̈.
+    np.testing.assert_allclose(alpha[0], [0.0, -theta_dd, 0.0], rtol=1e-12, atol=1e-14)
+    tangent = np.array([math.cos(theta), 0.0, math.sin(theta)])
+    np.testing.assert_allclose(acc[0], theta_dd * L * tangent, rtol=1e-12, atol=1e-13)

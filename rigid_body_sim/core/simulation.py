@@ -1225,6 +1225,30 @@ class Simulation:
             return out[4].copy(), out[5].copy()
         raise SpecError('frame', f"must be 'world' or 'body', got {frame!r}")
 
+    def accelerations(self) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Accelerations now: of each body origin (n, 3, m/s²) and angular (n, 3, rad/s²), world.
+
+        From the equations of motion at the current state: every effect (the contact
+        forces as the last step held them) and the constraints' multipliers there.
+        """
+        dyn, s = self.dynamics, self.state
+        pos, quat, vel, om = s.parts
+        acc, om_dot = dyn.accelerations(s.time, pos, quat, vel, om)
+        if dyn.constrained:
+            lam = dyn.solver.multipliers(dyn, s)
+            f = dyn.solver.constraints.evaluate(pos, quat, vel, om).jacobian.rmatvec(lam)
+            acc = acc - dyn.bodies.inv_mass[:, None] * f[:, :3]
+            om_dot = om_dot - f[:, 3:] / dyn.bodies.moments
+        R = so3.quat_to_matrix(quat)
+        alpha = np.einsum('nij,nj->ni', R, om_dot)
+        omega = np.einsum('nij,nj->ni', R, om)
+        # The origin sits at r = −R_wb c from the centre of mass (c: the COM in the body
+        # frame): a_o = a_c + α × r + ω × (ω × r).
+        origin, _, _, _, _, _ = self.bodies.outputs(s)
+        r = origin - pos
+        return acc + np.cross(alpha, r) + np.cross(omega, np.cross(omega, r)), alpha
+
     def diagnostics(self) -> Diagnostics:
         """Energies, world-frame momenta, orthonormality and constraint violation now."""
         d = diagnose(self.bodies, self.dynamics.effects, self.state)
