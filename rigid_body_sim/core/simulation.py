@@ -174,6 +174,8 @@ class Simulation:
             if len(drives.rows_of):
                 effects.append(drives)   # only where a joint is damped or servoed
         shapes = list(shapes) + self._robot_shapes()
+        #: Every collision shape of the scene and its robots (colliding or not).
+        self.shapes: tuple = tuple(shapes)
         detector = self._contact_detector(shapes, constraints)
         contact_wrenches = None
         if detector is not None:

@@ -13,12 +13,13 @@ from array import array
 from typing import Sequence
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import (Point, Pose, PoseStamped, Quaternion, Transform,
+from geometry_msgs.msg import (Accel, Point, Pose, PoseStamped, Quaternion, Transform,
                                TransformStamped, Twist, TwistStamped, Vector3, Wrench,
                                WrenchStamped)
 import numpy as np
 from rigid_body_sim_interfaces.msg import BodyStates, Contacts
 from sensor_msgs.msg import JointState
+from simulation_interfaces.msg import EntityState
 from std_msgs.msg import Float64MultiArray, Header
 
 NANOSECONDS = 1_000_000_000
@@ -203,3 +204,23 @@ def transform_arrays(msg: TransformStamped) -> tuple:
     t, r = msg.transform.translation, msg.transform.rotation
     return (msg.header.frame_id, msg.child_frame_id, np.array([t.x, t.y, t.z]),
             np.array([r.x, r.y, r.z, r.w]))
+
+
+def entity_state(header: Header, position: np.ndarray, quat_xyzw: np.ndarray,
+                 velocity: np.ndarray, omega: np.ndarray, acceleration: np.ndarray,
+                 alpha: np.ndarray) -> EntityState:
+    """Return a ``simulation_interfaces/EntityState``: a frame's pose, twist, accelerations."""
+    return EntityState(header=header, pose=pose(position, quat_xyzw),
+                       twist=Twist(linear=vector3(velocity), angular=vector3(omega)),
+                       acceleration=Accel(linear=vector3(acceleration), angular=vector3(alpha)))
+
+
+def pose_arrays(msg: Pose) -> tuple[np.ndarray, np.ndarray]:
+    """Return a Pose's position (3,) and (x, y, z, w) quaternion (4,)."""
+    q = msg.orientation
+    return array3(msg.position), np.array([q.x, q.y, q.z, q.w], dtype=float)
+
+
+def twist_arrays(msg: Twist) -> tuple[np.ndarray, np.ndarray]:
+    """Return a Twist's linear (3,) and angular (3,) parts."""
+    return array3(msg.linear), array3(msg.angular)

@@ -65,6 +65,7 @@ from .outputs import body_topic, constraint_topic, CONTACTS_TOPIC, group_topic, 
 from .pacing import Pacer, WindowStats
 from .session import Due, Session
 from .settings import BY_NAME, PARAMETERS, Settings
+from .standard import StandardInterface
 from .stopping import Stop, StopRequested
 from ..cli import default_scene_path
 from ..core import DivergenceError, SpecError
@@ -143,6 +144,7 @@ class SimNode(Node):
         self._audience_expires = 0.0
         self._last_logged: dict = {}   # Rejection -> monotonic time of its last log line
         self._last_reply = -np.inf     # monotonic time of the last service reply
+        self.max_steps = MAX_STEPS_PER_REQUEST
 
         self._make_interfaces()
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -215,6 +217,8 @@ class SimNode(Node):
             # recorded run holds its resets and constraint changes, as the runner's bags do.
             service.configure_introspection(self.get_clock(), qos_profile_services_default,
                                             ServiceIntrospectionState.CONTENTS)
+        #: The ROS simulator interface (simulation_interfaces): services and an action.
+        self.standard = StandardInterface(self)
 
     def _make_robot_interfaces(self) -> None:
         """joint_states, ~/joint_commands, <group>/commands (joints), robot_description, tf."""
@@ -251,7 +255,7 @@ class SimNode(Node):
         its own.
         """
         def serve(request, response):
-            self._last_reply = time.monotonic()   # (set before the reply goes out)
+            self.note_reply()
             try:
                 return handler(request, response)
             except Exception as exc:  # noqa: B902 - no request may stop the node
@@ -274,6 +278,21 @@ class SimNode(Node):
                         pass
                 return reply
         return serve
+
+    def note_reply(self) -> None:
+        """Note that a reply goes out now (the node lingers for it when it stops)."""
+        self._last_reply = time.monotonic()   # (set before the reply goes out)
+
+    def internal_error(self, name: str, exc: Exception, trace: str) -> None:
+        """Count and log a request's unexpected error (its reply says so; the node runs on)."""
+        for action in (lambda: self.session.totals.reject(Rejection.INTERNAL_ERROR.value),
+                       lambda: self.get_logger().error(f'{name}: internal error: {exc!r}\n'
+                                                       + trace),
+                       self._sync_constraint_publishers):
+            try:
+                action()
+            except Exception:  # noqa: B902 - the error path must not fail
+                pass
 
     def _sync_constraint_publishers(self) -> None:
         """One ``~/constraints/<C>/wrench`` publisher per constraint present."""
@@ -342,13 +361,8 @@ class SimNode(Node):
     # -- services -------------------------------------------------------------------------
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response):
-        self.session.reset()
-        self._sync_constraint_publishers()
-        now = time.perf_counter()
-        self._pacer.restart(now)
-        self._new_window(now)
-        self._publish_clock()
-        self._publish_now()
+        self.reset(state=True, clock=self.settings.reset_time)
+        self.standard.stopped = False
         response.success = True
         response.message = (f'reset to the initial state of the scene, stamped t = '
                             f'{self.session.seconds():.9g} s; applied wrenches cleared, '
@@ -358,6 +372,24 @@ class SimNode(Node):
         self.get_logger().info(response.message)
         return response
 
+    def reset(self, state: bool, clock: bool) -> None:
+        """
+        Reset the scene (``state``: bodies, joints, constraints, wrenches) and/or the clock.
+
+        ``clock``: the published clock restarts at 0. Then publish. ``~/reset``, the
+        standard's ``reset_simulation`` and its STOPPED share it.
+        """
+        if state:
+            self.session.reset(time=clock)
+            self._sync_constraint_publishers()
+        elif clock:
+            self.session.restart_clock()
+        now = time.perf_counter()
+        self._pacer.restart(now)
+        self._new_window(now)
+        self._publish_clock()
+        self._publish_now()
+
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response):
         diverged = self.session.diverged
         if not request.data and diverged:
@@ -366,14 +398,20 @@ class SimNode(Node):
                                             f'cannot resume after a divergence '
                                             f'({diverged}); call ~/reset')
             return response
-        was = self._paused
-        self._paused = bool(request.data)
-        if was and not self._paused:
-            self._pacer.restart(time.perf_counter())
+        self.set_paused(bool(request.data))
+        if not self._paused:
+            self.standard.stopped = False
         response.success = True
         response.message = f'{"paused" if self._paused else "running"} at t = ' \
                            f'{self.session.seconds():.9g} s'
         return response
+
+    def set_paused(self, paused: bool) -> None:
+        """Pause or play (the pacing restarts from now on playing)."""
+        was = self._paused
+        self._paused = paused
+        if was and not paused:
+            self._pacer.restart(time.perf_counter())
 
     def _on_step(self, request: Step.Request, response: Step.Response):
         session = self.session
@@ -385,18 +423,37 @@ class SimNode(Node):
                                              '(~/pause true)')
         elif session.diverged:
             problem = (Rejection.DIVERGED, f'{session.diverged}; call ~/reset')
-        elif request.steps > MAX_STEPS_PER_REQUEST:
-            problem = (Rejection.BAD_STEP, f'steps: at most {MAX_STEPS_PER_REQUEST} per '
+        elif request.steps > self.max_steps:
+            problem = (Rejection.BAD_STEP, f'steps: at most {self.max_steps} per '
                                            f'request, got {request.steps}')
         if problem:
             response.success = False
             response.message = self._reject(problem[0], '~/step', problem[1])
             return response
+        done, failure = self.take_steps(request.steps)
+        if done:
+            self.standard.stopped = False
+        response.time = session.stamp()
+        response.step_count = session.step_count
+        response.success = failure is None
+        response.message = failure or f'{request.steps} steps to t = ' \
+                                      f'{session.seconds():.9g} s'
+        return response
+
+    def take_steps(self, steps: int) -> tuple:
+        """
+        Take ``steps`` steps now (paused: no pacing) and publish the state after them.
+
+        Returns ``(done, failure)``: the steps taken, and why they stopped early (None:
+        they did not). A divergence or an internal error pauses the simulation and is
+        named; so is a shutdown asked for meanwhile.
+        """
+        session = self.session
         due = None   # (0 steps: the current state is published)
         done, failure = 0, None
-        for _ in range(request.steps):
+        for _ in range(steps):
             if not self._running:   # (SIGTERM or SIGINT ends a long request)
-                failure = f'stopped after {done} of {request.steps} steps: the node is ' \
+                failure = f'stopped after {done} of {steps} steps: the node is ' \
                           f'shutting down'
                 break
             try:
@@ -408,19 +465,14 @@ class SimNode(Node):
                 self.get_logger().error(f'paused: {session.diverged}\n'
                                         + traceback.format_exc())
             if session.diverged:
-                failure = f'stopped after {done} of {request.steps} steps: ' \
+                failure = f'stopped after {done} of {steps} steps: ' \
                           f'{session.diverged}; call ~/reset'
                 break
             done += 1
         # The state after the last step: what that step did not publish.
         self._publish_now(state=not (due and due.state), joints=not (due and due.joints),
                           tf=not (due and due.tf))
-        response.time = session.stamp()
-        response.step_count = session.step_count
-        response.success = failure is None
-        response.message = failure or f'{request.steps} steps to t = ' \
-                                      f'{session.seconds():.9g} s'
-        return response
+        return done, failure
 
     def _on_add_constraint(self, request: AddConstraint.Request,
                            response: AddConstraint.Response):
@@ -531,6 +583,10 @@ class SimNode(Node):
 
     def _publish_clock(self) -> None:
         self._clock_pub.publish(Clock(clock=self.session.stamp()))
+
+    def publish_now(self) -> None:
+        """Publish the current state where subscribed (a state set between steps)."""
+        self._publish_now()
 
     def _publish_now(self, state: bool = True, joints: bool = True, tf: bool = True) -> None:
         """Publish the current state (where subscribed): bodies, joints, tf."""
@@ -820,6 +876,7 @@ class SimNode(Node):
     def _spin(self, timeout: float) -> None:
         """Serve ready callbacks (one); learn what a spin costs from the non-blocking ones."""
         t0 = time.perf_counter()
+        self.standard.wake()   # (a running action takes its next step at this spin)
         try:
             self.executor_.spin_once(timeout_sec=timeout)
         except Exception as exc:  # noqa: B902 - a message or parameter callback's bug

@@ -247,9 +247,13 @@ class Session:
             commands, self.pending_commands = self.pending_commands, {}
             self.sim.command_joints(commands)   # (held until the next command per joint)
 
-    def reset(self) -> None:
-        """Back to the scene's initial state; time runs on unless ``reset_time``."""
-        if self.settings.reset_time:
+    def reset(self, time: Optional[bool] = None) -> None:
+        """
+        Back to the scene's initial state; time runs on unless ``time`` (default: ``reset_time``).
+
+        ``time``: the published clock restarts at 0 too.
+        """
+        if self.settings.reset_time if time is None else time:
             self.offset_ns = 0
         else:   # the initial state is stamped one step after the last state
             self.offset_ns = self.now_ns() + int(round(self.sim.dt * conv.NANOSECONDS))
@@ -330,6 +334,10 @@ class Session:
         return rows
 
     # -- stepping -------------------------------------------------------------------------
+
+    def restart_clock(self) -> None:
+        """Restart the published clock at 0 now, the simulation where it is."""
+        self.offset_ns = -int(round(self.sim.time * conv.NANOSECONDS))
 
     def advance(self) -> Due:
         """

@@ -1,0 +1,211 @@
+"""
+The scene's entities as the ROS simulator interface sees them (``simulation_interfaces``).
+
+ROS-free (the node's :mod:`.standard` turns these into messages). An entity is
+
+- each body of the scene that is not a robot's link: category ``OBJECT``, its state
+  its body frame's (origin and axes);
+- each robot: category ``ROBOT``, its state its base link's (the URDF's root link's
+  frame), its bounds those of all its links' shapes about that frame.
+
+States are in the world frame: pose; twist of the frame's origin (linear) and
+angular velocity; accelerations of both from the equations of motion now
+(:meth:`~rigid_body_sim.core.Simulation.accelerations`). Setting a state moves the
+entity as one rigid whole (:meth:`~rigid_body_sim.core.Simulation.place`): a robot
+keeps its joint positions and its joints stop; a robot fixed to the world, or a body
+held by a constraint to another entity or the world, is refused.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+import re
+from typing import Optional
+
+import numpy as np
+
+from ..core import rotation as so3
+from ..core import Simulation, SpecError
+
+#: The standard's categories (simulation_interfaces/msg/EntityCategory).
+OBJECT, ROBOT = 0, 1
+
+
+class EntityError(Exception):
+    """A request about entities refused: ``code`` says why (a Result code), the message how."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass(frozen=True)
+class Entity:
+    """One entity: its name, category, bodies, and its frame (on ``body`` at ``p``, ``R``)."""
+
+    name: str
+    category: int
+    bodies: tuple          # the bodies it moves as a whole (a robot's links' bodies)
+    body: Optional[str]    # the body its frame is fixed to (None: the world)
+    position: np.ndarray   # its frame's origin on that body (body frame; world: world)
+    rotation: np.ndarray   # its frame's axes on that body
+    description: str
+
+
+class Entities:
+    """The entities of a simulation (see the module docstring)."""
+
+    def __init__(self, sim: Simulation) -> None:
+        self.sim = sim
+        robot_bodies = {b.name for model in sim.robots for b in model.bodies}
+        out = {}
+        for name in sim.bodies.names:
+            if name not in robot_bodies:
+                out[name] = Entity(name, OBJECT, (name,), name, np.zeros(3), np.eye(3),
+                                   f'rigid body {name!r}')
+        for model in sim.robots:
+            spec = model.spec
+            children = {j.child for j in spec.joints}
+            root = next(link.name for link in spec.links if link.name not in children)
+            frame = model.links[root]
+            fixed = ' fixed to the world' if frame.body is None else ''
+            out[spec.name] = Entity(
+                spec.name, ROBOT, tuple(b.name for b in model.bodies), frame.body,
+                np.array(frame.position, dtype=float), np.array(frame.rotation, dtype=float),
+                f'robot {spec.name!r} ({spec.source or "URDF"}): {len(model.bodies)} bodies, '
+                f'{len(model.joints)} joints, base link {spec.prefix + root!r}{fixed}')
+        self.by_name = out
+
+    def names(self) -> list:
+        """Return every entity's name, in the scene's order (bodies, then robots)."""
+        return list(self.by_name)
+
+    def get(self, name: str) -> Entity:
+        """Return the entity called ``name``; EntityError NOT_FOUND naming the known ones."""
+        try:
+            return self.by_name[name]
+        except (KeyError, TypeError):
+            raise EntityError('NOT_FOUND', f'no entity {name!r}; entities: '
+                                           f'{self.names()}') from None
+
+    def select(self, pattern: str, categories: list) -> list:
+        """
+        Return the names that ``pattern`` and ``categories`` select.
+
+        ``pattern``: a regular expression searched in the name (empty: all);
+        ``categories``: the entity's must be one of them (empty: any). Raises
+        EntityError OPERATION_FAILED for a pattern that is not a regular expression.
+        """
+        try:
+            rx = re.compile(pattern) if pattern else None
+        except re.error as exc:
+            raise EntityError('OPERATION_FAILED', f'filters.filter: {pattern!r} is not a '
+                                                  f'regular expression ({exc})') from None
+        return [name for name, e in self.by_name.items()
+                if (rx is None or rx.search(name)) and (not categories
+                                                        or e.category in categories)]
+
+    # -- states ---------------------------------------------------------------------------
+
+    def state(self, name: str) -> tuple:
+        """
+        Return ``(position, quat_xyzw, velocity, omega, acceleration, alpha)``, world frame.
+
+        Of the entity's frame: its origin's position, velocity and acceleration, its
+        orientation, angular velocity and angular acceleration.
+        """
+        e = self.get(name)
+        if e.body is None:   # (a robot fixed to the world: its base link does not move)
+            zero = np.zeros(3)
+            return (e.position.copy(), so3.matrix_to_quat(e.rotation), zero, zero.copy(),
+                    zero.copy(), zero.copy())
+        sim = self.sim
+        i = sim.bodies.lookup(e.body)
+        pos, quat = sim.pose(e.body)
+        vel, omega = sim.twist(e.body)
+        acc, alpha = sim.accelerations()
+        R = so3.quat_to_matrix(quat)
+        r = R @ e.position
+        return (pos + r, so3.matrix_to_quat(R @ e.rotation), vel + np.cross(omega, r), omega,
+                acc[i] + np.cross(alpha[i], r) + np.cross(omega, np.cross(omega, r)),
+                alpha[i])
+
+    def set_state(self, name: str, position: np.ndarray, quat_xyzw: np.ndarray,
+                  velocity: np.ndarray, omega: np.ndarray) -> None:
+        """
+        Move the entity rigidly to a pose of its frame and its twist (see the module doc).
+
+        Raises EntityError: NOT_FOUND; OPERATION_FAILED for a robot fixed to the world,
+        a value that is not finite, a zero quaternion, or a constraint it would break.
+        """
+        e = self.get(name)
+        if e.body is None:
+            raise EntityError('OPERATION_FAILED', f'{name!r} is fixed to the world (its base '
+                                                  f'link is welded to it): it cannot be moved')
+        q = np.asarray(quat_xyzw, dtype=float)
+        norm = float(np.linalg.norm(q))
+        if not (math.isfinite(norm) and norm > 1e-6):
+            raise EntityError('OPERATION_FAILED', f'state.pose.orientation: not a rotation '
+                                                  f'(norm {norm:.3g})')
+        R_frame = so3.quat_to_matrix(q / norm)
+        # The body's frame from the entity's: R_body = R_frame Rᵀ, origin at p − R_body r.
+        R_body = R_frame @ e.rotation.T
+        r = R_body @ e.position
+        try:
+            self.sim.place(e.bodies, e.body, np.asarray(position, dtype=float) - r,
+                           so3.matrix_to_quat(R_body),
+                           np.asarray(velocity, dtype=float) - np.cross(omega, r), omega)
+        except SpecError as exc:
+            raise EntityError('OPERATION_FAILED', str(exc)) from None
+
+    # -- bounds ---------------------------------------------------------------------------
+
+    def bounds(self, name: str) -> Optional[tuple]:
+        """
+        Return ``(lower, upper)`` (3,) each: the box around the entity's shapes in its frame.
+
+        Axis-aligned in the entity's frame (its base link's for a robot, at the current
+        configuration), from each shape's support function (exact for boxes, spheres,
+        capsules and cylinders; a mesh by the box of its hull about its origin); None
+        when the entity has no shape.
+        """
+        e = self.get(name)
+        sim = self.sim
+        shapes = [s for s in sim.shapes if s.body in e.bodies and s.kind != 'plane']
+        if not shapes:
+            return None
+        if e.body is None:
+            p_frame, R_frame = e.position, e.rotation
+        else:
+            pos, quat = sim.pose(e.body)
+            R_b = so3.quat_to_matrix(quat)
+            p_frame, R_frame = pos + R_b @ e.position, R_b @ e.rotation
+        lower, upper = np.full(3, np.inf), np.full(3, -np.inf)
+        for s in shapes:
+            pos, quat = sim.pose(s.body)
+            R_b = so3.quat_to_matrix(quat)
+            c = pos + R_b @ np.asarray(s.position_body, dtype=float)
+            R_s = R_b @ so3.quat_to_matrix(np.asarray(s.orientation_xyzw, dtype=float))
+            for k in range(3):
+                d = R_frame[:, k]   # the frame's k-th axis, world
+                centre = float(d @ (c - p_frame))
+                reach = _support(s, R_s.T @ d)
+                lower[k] = min(lower[k], centre - reach)
+                upper[k] = max(upper[k], centre + reach)
+        return lower, upper
+
+
+def _support(shape, d: np.ndarray) -> float:
+    """Return how far ``shape`` reaches from its centre along unit ``d`` (its own axes)."""
+    kind = shape.kind
+    if kind == 'sphere':
+        return float(shape.radius)
+    if kind in ('box', 'mesh'):
+        return float(np.abs(d) @ shape.dimensions())
+    half = 0.5 * float(shape.length)
+    axial = abs(float(d[2]))
+    if kind == 'capsule':
+        return half * axial + float(shape.radius)
+    # a cylinder: its end disc's rim reaches r √(1 − d_z²) across the axis
+    return half * axial + float(shape.radius) * math.sqrt(max(0.0, 1.0 - axial * axial))

@@ -1,0 +1,387 @@
+"""
+The ROS simulator interface (``simulation_interfaces`` 1.0.0) on the node.
+
+Services and the action live under the node's namespace with relative names, as Gazebo
+serves them (``/get_simulation_state`` for a node in ``/``); each request gets a
+reply whose ``result`` says what happened, and a refused request changes nothing.
+
+- ``get_simulator_features``: exactly what works (:data:`FEATURES`).
+- ``get_simulation_state`` / ``set_simulation_state``: STOPPED (paused at the scene's
+  start: a reset of everything, time included), PLAYING, PAUSED, QUITTING (the node
+  replies, then shuts down). A stopped simulation may be played or paused (the state
+  message's own rule); asking for the state it is in answers ALREADY_IN_TARGET_STATE;
+  playing a diverged simulation STATE_TRANSITION_ERROR (reset it first); a state that
+  does not exist INCORRECT_TRANSITION.
+- ``reset_simulation``: SCOPE_TIME restarts the published clock at 0 with the bodies
+  where they are; SCOPE_STATE puts the scene back to its start (bodies, joints,
+  constraints, applied wrenches; as ``~/reset``) with the clock running on; both, or
+  SCOPE_ALL / SCOPE_DEFAULT, do both; SCOPE_SPAWNED removes spawned entities (there are
+  none: spawning is not yet served). The play state is kept.
+- ``step_simulation`` and the ``simulate_steps`` action (feedback after every step,
+  cancellable between steps): while paused (or stopped) only; while playing they answer
+  RESULT_INCORRECT_STATE (the Result message's own example; the two files' comments
+  say OPERATION_FAILED).
+- ``get_entities`` / ``get_entities_states`` (a regular expression searched in the
+  name, and categories; tags and bounds filters are not supported), ``get_entity_state``,
+  ``set_entity_state`` (world frame: an empty ``frame_id`` or the node's
+  ``world_frame``; the acceleration given is ignored: it follows from the forces),
+  ``get_entity_info``, ``get_entity_bounds`` (a box about the entity's frame from its
+  shapes): see :mod:`.entities` for what an entity is. An unknown entity answers
+  RESULT_NOT_FOUND.
+- ``spawn_entity``, ``delete_entity``, ``set_entity_info``, ``get_named_poses``,
+  ``get_named_pose_bounds``, ``get_spawnables``: served, answering
+  RESULT_FEATURE_UNSUPPORTED (not in the features).
+
+Our own ``~/reset``, ``~/pause`` and ``~/step`` share these implementations.
+"""
+
+from __future__ import annotations
+
+import math
+import traceback
+from typing import Any
+
+import numpy as np
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.qos import qos_profile_services_default
+from rclpy.service_introspection import ServiceIntrospectionState
+from rclpy.task import Future
+from simulation_interfaces.action import SimulateSteps
+from simulation_interfaces.msg import Bounds, EntityInfo, Result, SimulationState, \
+    SimulatorFeatures
+from simulation_interfaces.srv import DeleteEntity, GetEntities, GetEntitiesStates, \
+    GetEntityBounds, GetEntityInfo, GetEntityState, GetNamedPoseBounds, GetNamedPoses, \
+    GetSimulationState, GetSimulatorFeatures, GetSpawnables, ResetSimulation, SetEntityInfo, \
+    SetEntityState, SetSimulationState, SpawnEntity, StepSimulation
+from std_msgs.msg import Header
+
+from . import conversions as conv
+from .entities import Entities, EntityError
+
+F = SimulatorFeatures
+#: What this node implements of the standard (GetSimulatorFeatures).
+FEATURES = (F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES, F.ENTITY_STATE_GETTING,
+            F.ENTITY_STATE_SETTING, F.ENTITY_INFO_GETTING, F.SIMULATION_RESET,
+            F.SIMULATION_RESET_TIME, F.SIMULATION_RESET_STATE, F.SIMULATION_STATE_GETTING,
+            F.SIMULATION_STATE_SETTING, F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE,
+            F.STEP_SIMULATION_MULTIPLE, F.STEP_SIMULATION_ACTION)
+CUSTOM_INFO = ('rigid_body_sim: exact multipliers (joints, limits, contact), every '
+               "service of simulation_interfaces 1.0.0 answers; entities are the scene's "
+               "bodies and robots (a robot's state is its base link's); see docs/node.md")
+S = SimulationState
+STATE_NAMES = {S.STATE_STOPPED: 'STOPPED', S.STATE_PLAYING: 'PLAYING',
+               S.STATE_PAUSED: 'PAUSED', S.STATE_QUITTING: 'QUITTING'}
+R = ResetSimulation.Request
+#: The scope bits the standard defines (SCOPE_ALL sets every bit).
+SCOPE_BITS = R.SCOPE_TIME | R.SCOPE_STATE | R.SCOPE_SPAWNED
+CODES = {'NOT_FOUND': Result.RESULT_NOT_FOUND,
+         'OPERATION_FAILED': Result.RESULT_OPERATION_FAILED,
+         'INCORRECT_STATE': Result.RESULT_INCORRECT_STATE,
+         'FEATURE_UNSUPPORTED': Result.RESULT_FEATURE_UNSUPPORTED}
+
+
+def result(code: int = Result.RESULT_OK, message: str = '') -> Result:
+    """Return a Result of ``code`` and ``message``."""
+    return Result(result=code, error_message=message)
+
+
+class StandardInterface:
+    """
+    The services and the action of ``simulation_interfaces`` on a :class:`.node.SimNode`.
+
+    The node keeps the play state (``_paused``); this adds STOPPED (paused at the start,
+    until a step, a play or a state set) and QUITTING.
+    """
+
+    def __init__(self, node: Any) -> None:
+        self.node = node
+        self.entities = Entities(node.sim)
+        self.stopped = False
+        self.quitting = False
+        self._wake: list = []   # futures of running actions, woken between loop turns
+        for srv_type, name, handler in (
+                (GetSimulatorFeatures, 'get_simulator_features', self._features),
+                (GetSimulationState, 'get_simulation_state', self._get_state),
+                (SetSimulationState, 'set_simulation_state', self._set_state),
+                (ResetSimulation, 'reset_simulation', self._reset),
+                (StepSimulation, 'step_simulation', self._step),
+                (GetEntities, 'get_entities', self._get_entities),
+                (GetEntitiesStates, 'get_entities_states', self._get_entities_states),
+                (GetEntityState, 'get_entity_state', self._get_entity_state),
+                (SetEntityState, 'set_entity_state', self._set_entity_state),
+                (GetEntityInfo, 'get_entity_info', self._get_entity_info),
+                (GetEntityBounds, 'get_entity_bounds', self._get_entity_bounds),
+                (SpawnEntity, 'spawn_entity', self._unsupported('spawning')),
+                (DeleteEntity, 'delete_entity', self._unsupported('deleting entities')),
+                (SetEntityInfo, 'set_entity_info', self._unsupported('setting entity info')),
+                (GetNamedPoses, 'get_named_poses', self._unsupported('named poses')),
+                (GetNamedPoseBounds, 'get_named_pose_bounds',
+                 self._unsupported('named poses')),
+                (GetSpawnables, 'get_spawnables', self._unsupported('spawnables'))):
+            service = node.create_service(srv_type, name, self._guarded(name, handler,
+                                                                        srv_type))
+            service.configure_introspection(node.get_clock(), qos_profile_services_default,
+                                            ServiceIntrospectionState.CONTENTS)
+        self.action = ActionServer(node, SimulateSteps, 'simulate_steps',
+                                   execute_callback=self._simulate,
+                                   goal_callback=lambda goal: GoalResponse.ACCEPT,
+                                   cancel_callback=lambda handle: CancelResponse.ACCEPT)
+
+    # -- plumbing -------------------------------------------------------------------------
+
+    def _guarded(self, name: str, handler, srv_type):
+        """Wrap a handler: an unexpected error is a RESULT_OPERATION_FAILED reply, not a crash."""
+        def serve(request, response):
+            self.node.note_reply()
+            try:
+                return handler(request, response)
+            except Exception as exc:  # noqa: B902 - no request may stop the node
+                reply = srv_type.Response()
+                if hasattr(reply, 'result'):
+                    reply.result = result(Result.RESULT_OPERATION_FAILED,
+                                          f'internal error: {exc!r} (the node runs on; '
+                                          f'please report it)')
+                self.node.internal_error(name, exc, traceback.format_exc())
+                return reply
+        return serve
+
+    def _unsupported(self, what: str):
+        def handler(request, response):
+            response.result = result(Result.RESULT_FEATURE_UNSUPPORTED,
+                                     f'{what} is not supported by rigid_body_sim yet; see '
+                                     f'get_simulator_features')
+            return response
+        return handler
+
+    def wake(self) -> None:
+        """Let running actions take their next step (called by the node between loop turns)."""
+        wake, self._wake = self._wake, []
+        for future in wake:
+            future.set_result(None)
+
+    def header(self) -> Header:
+        """Return a header at the published time in the world frame."""
+        return Header(stamp=self.node.session.stamp(),
+                      frame_id=self.node.settings.world_frame)
+
+    def state(self) -> int:
+        """Return the SimulationState now."""
+        if self.quitting:
+            return S.STATE_QUITTING
+        if self.stopped:
+            return S.STATE_STOPPED
+        return S.STATE_PAUSED if self.node._paused else S.STATE_PLAYING
+
+    # -- the simulation -------------------------------------------------------------------
+
+    def _features(self, request, response):
+        response.features = SimulatorFeatures(features=list(FEATURES), spawn_formats=[],
+                                              custom_info=CUSTOM_INFO)
+        return response
+
+    def _get_state(self, request, response):
+        response.state = SimulationState(state=self.state())
+        response.result = result()
+        return response
+
+    def _set_state(self, request, response):
+        target, now = request.state.state, self.state()
+        Set = SetSimulationState.Response
+        if target not in STATE_NAMES:
+            response.result = result(Set.INCORRECT_TRANSITION,
+                                     f'state.state: no state {target}; states: '
+                                     f'{sorted(STATE_NAMES.items())}')
+            return response
+        if target == now:
+            response.result = result(Set.ALREADY_IN_TARGET_STATE,
+                                     f'already {STATE_NAMES[now]}')
+            return response
+        node = self.node
+        if target == S.STATE_QUITTING:
+            self.quitting = True
+            node._paused = True
+            node.stop()   # (the loop ends; the node lingers for this reply to go out)
+            response.result = result(message='quitting')
+            return response
+        if target == S.STATE_PLAYING:
+            if node.session.diverged:
+                response.result = result(Set.STATE_TRANSITION_ERROR,
+                                         f'cannot play: {node.session.diverged}; reset it '
+                                         f'(reset_simulation)')
+                return response
+            node.set_paused(False)
+        elif target == S.STATE_PAUSED:
+            node.set_paused(True)
+        else:   # STOPPED: pause and reset everything, the clock to 0
+            node.set_paused(True)
+            node.reset(state=True, clock=True)
+            self.stopped = True
+            response.result = result(message="stopped: paused at the scene's start, t = 0")
+            return response
+        self.stopped = False
+        response.result = result(message=f'{STATE_NAMES[now]} -> {STATE_NAMES[target]}')
+        return response
+
+    def _reset(self, request, response):
+        scope = request.scope
+        if scope in (R.SCOPE_DEFAULT, R.SCOPE_ALL):
+            scope = SCOPE_BITS
+        if scope & ~SCOPE_BITS:
+            response.result = result(Result.RESULT_OPERATION_FAILED,
+                                     f'scope: {request.scope} sets bits the standard does not '
+                                     f'define (TIME 1, STATE 2, SPAWNED 4, ALL 255)')
+            return response
+        done = []
+        if scope & (R.SCOPE_STATE | R.SCOPE_TIME):
+            self.node.reset(state=bool(scope & R.SCOPE_STATE),
+                            clock=bool(scope & R.SCOPE_TIME))
+            done += [what for bit, what in ((R.SCOPE_STATE, "the scene's start state"),
+                                            (R.SCOPE_TIME, 'the clock to 0')) if scope & bit]
+        if scope & R.SCOPE_SPAWNED:
+            done.append('no spawned entity to remove')
+        self.stopped = False
+        response.result = result(message='reset: ' + ', '.join(done)
+                                 + f'; t = {self.node.session.seconds():.9g} s')
+        return response
+
+    def _step(self, request, response):
+        problem = self.step_problem(request.steps)
+        if problem:
+            response.result = result(*problem)
+            return response
+        done, failure = self.node.take_steps(request.steps)
+        self.stopped = self.stopped and done == 0
+        response.result = result(Result.RESULT_OPERATION_FAILED, failure) if failure else \
+            result(message=f'{done} steps to t = {self.node.session.seconds():.9g} s')
+        return response
+
+    def step_problem(self, steps: int):
+        """Return ``(code, message)`` when steps cannot be taken now (None: they can)."""
+        node = self.node
+        if not node._paused:
+            return (Result.RESULT_INCORRECT_STATE, 'the simulation is playing: pause it first '
+                                                   '(set_simulation_state PAUSED)')
+        if node.session.diverged:
+            return (Result.RESULT_OPERATION_FAILED, f'{node.session.diverged}; reset it '
+                                                    f'(reset_simulation)')
+        if steps > node.max_steps:
+            return (Result.RESULT_OPERATION_FAILED, f'steps: at most {node.max_steps} per '
+                                                    f'request, got {steps}')
+        return None
+
+    async def _simulate(self, goal_handle):
+        """Take the goal's steps one a loop turn, with feedback; end on a cancel or a problem."""
+        steps = goal_handle.request.steps
+        out = SimulateSteps.Result()
+        done = 0
+        problem = self.step_problem(steps)
+        while problem is None and done < steps:
+            if goal_handle.is_cancel_requested:
+                goal_handle.canceled()
+                out.result = result(message=f'canceled after {done} of {steps} steps')
+                return out
+            taken, failure = self.node.take_steps(1)
+            done += taken
+            self.stopped = self.stopped and done == 0
+            if failure:
+                problem = (Result.RESULT_OPERATION_FAILED,
+                           f'after {done} of {steps} steps: {failure}')
+                break
+            goal_handle.publish_feedback(SimulateSteps.Feedback(completed_steps=done,
+                                                                remaining_steps=steps - done))
+            if done < steps:
+                future = Future()
+                self._wake.append(future)
+                await future   # (the node serves other requests, and cancels, meanwhile)
+                problem = self.step_problem(steps - done)
+        if problem is not None:
+            goal_handle.abort()
+            out.result = result(*problem)
+            return out
+        goal_handle.succeed()
+        out.result = result(message=f'{done} steps to t = {self.node.session.seconds():.9g} s')
+        return out
+
+    # -- entities -------------------------------------------------------------------------
+
+    def _selected(self, filters) -> list:
+        if filters.tags.tags:
+            raise EntityError('FEATURE_UNSUPPORTED', 'filters.tags: entities have no tags here')
+        if filters.bounds.type != Bounds.TYPE_EMPTY or filters.bounds.points:
+            raise EntityError('FEATURE_UNSUPPORTED', 'filters.bounds: filtering by bounds is '
+                                                     'not supported')
+        return self.entities.select(filters.filter, [c.category for c in filters.categories])
+
+    def _entity_call(self, handler):
+        """Run ``handler()``; an EntityError becomes the reply's result (nothing changed)."""
+        try:
+            return handler(), result()
+        except EntityError as exc:
+            return None, result(CODES[exc.code], str(exc))
+
+    def _get_entities(self, request, response):
+        names, response.result = self._entity_call(lambda: self._selected(request.filters))
+        response.entities = names or []
+        return response
+
+    def _get_entities_states(self, request, response):
+        names, response.result = self._entity_call(lambda: self._selected(request.filters))
+        response.entities = names or []
+        header = self.header()
+        response.states = [conv.entity_state(header, *self.entities.state(n))
+                           for n in response.entities]
+        return response
+
+    def _get_entity_state(self, request, response):
+        state, response.result = self._entity_call(lambda: self.entities.state(request.entity))
+        if state is not None:
+            response.state = conv.entity_state(self.header(), *state)
+        return response
+
+    def _set_entity_state(self, request, response):
+        _, response.result = self._entity_call(lambda: self.entities.get(request.entity))
+        if response.result.result != Result.RESULT_OK:
+            return response
+        frame = request.state.header.frame_id
+        world = self.node.settings.world_frame
+        if frame not in ('', world):
+            response.result = result(Result.RESULT_OPERATION_FAILED,
+                                     f'state.header.frame_id: {frame!r}: states are set in '
+                                     f"the world frame ('' or {world!r})")
+            return response
+        position, quat = conv.pose_arrays(request.state.pose)
+        velocity, omega = conv.twist_arrays(request.state.twist)
+        values = np.concatenate([position, quat, velocity, omega])
+        if not np.all(np.isfinite(values)):
+            response.result = result(Result.RESULT_OPERATION_FAILED,
+                                     'state: pose and twist must be finite')
+            return response
+        _, response.result = self._entity_call(lambda: self.entities.set_state(
+            request.entity, position, quat, velocity, omega))
+        if response.result.result == Result.RESULT_OK:
+            self.stopped = False
+            self.node.publish_now()
+            acc = request.state.acceleration
+            if any(not math.isclose(getattr(v, a), 0.0) for v in (acc.linear, acc.angular)
+                   for a in 'xyz'):
+                response.result.error_message = ('acceleration ignored: it follows from the '
+                                                 'forces')
+        return response
+
+    def _get_entity_info(self, request, response):
+        entity, response.result = self._entity_call(lambda: self.entities.get(request.entity))
+        if entity is not None:
+            response.info = EntityInfo(description=entity.description, tags=[])
+            response.info.category.category = entity.category
+        return response
+
+    def _get_entity_bounds(self, request, response):
+        box, response.result = self._entity_call(lambda: self.entities.bounds(request.entity))
+        if response.result.result == Result.RESULT_OK:
+            if box is None:
+                response.bounds = Bounds(type=Bounds.TYPE_EMPTY, points=[])
+            else:   # (the standard's order: the upper corner, then the lower)
+                lower, upper = box
+                response.bounds = Bounds(type=Bounds.TYPE_BOX,
+                                         points=[conv.vector3(upper), conv.vector3(lower)])
+        return response
