@@ -1,0 +1,281 @@
+"""
+The ROS simulator interface (``simulation_interfaces`` 1.0.0) on the node, through DDS.
+
+The node runs in its own process on the test's domain; this process calls its services
+and its action. References: the features advertised are exactly those served; the state
+machine's transitions and its error codes; steps counted on the published clock (one
+``dt`` each); entity states against the closed form of free flight; a state set read
+back to rounding and flown from; bounds from the shapes' sizes; every refusal answered
+with the standard's code and nothing changed (the state read again is bit for bit the
+same).
+"""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.action import ActionClient
+from rigid_body_sim.ros.conversions import pose_arrays, time_seconds, twist_arrays
+from simulation_interfaces.action import SimulateSteps
+from simulation_interfaces.msg import Bounds, EntityCategory, EntityFilters, EntityState, \
+    Result, SimulationState, SimulatorFeatures
+from simulation_interfaces.srv import DeleteEntity, GetEntities, GetEntitiesStates, \
+    GetEntityBounds, GetEntityInfo, GetEntityState, GetNamedPoses, GetSimulationState, \
+    GetSimulatorFeatures, ResetSimulation, SetEntityState, SetSimulationState, SpawnEntity, \
+    StepSimulation
+
+G, DT = 9.81, 1e-3
+URDF = Path(__file__).parent / 'urdf' / 'quadruped.urdf'
+OK, NOT_FOUND, INCORRECT_STATE, FAILED, UNSUPPORTED = (
+    Result.RESULT_OK, Result.RESULT_NOT_FOUND, Result.RESULT_INCORRECT_STATE,
+    Result.RESULT_OPERATION_FAILED, Result.RESULT_FEATURE_UNSUPPORTED)
+STOPPED, PLAYING, PAUSED, QUITTING = (S := SimulationState).STATE_STOPPED, S.STATE_PLAYING, \
+    S.STATE_PAUSED, S.STATE_QUITTING
+
+SCENE = f"""
+name: standard
+integrator: lie_poisson2
+dt: {DT}
+effects:
+  gravity: {{g_world: [0.0, 0.0, -{G}]}}
+bodies:
+  - name: ball
+    mass: 0.5
+    inertia: {{sphere: 0.1}}
+    position_world: [0.0, 0.0, 50.0]
+    linear_velocity_world: [1.0, 0.0, 2.0]
+    shapes: [{{kind: sphere, radius: 0.1}}]
+  - name: brick
+    mass: 1.0
+    inertia: [0.1, 0.2, 0.3]
+    position_world: [5.0, 0.0, 50.0]
+    shapes: [{{kind: box, size: [0.2, 0.4, 0.6]}}]
+  - {{name: bob, mass: 1.0, inertia: [0.01, 0.01, 0.01], position_world: [-5.0, 0.0, 50.0]}}
+constraints:
+  - {{name: pin, type: ball, body_a: bob, anchor_world: [-5.0, 0.0, 51.0]}}
+robots:
+  - {{urdf: {URDF}, name: dog, base_pose: {{xyz: [10.0, 0.0, 50.0]}}}}
+"""
+
+
+def _start(ros, tmp_path, paused=True):
+    path = tmp_path / 'scene.yaml'
+    path.write_text(SCENE)
+    return ros.start({'scene': str(path), 'start_paused': paused})
+
+
+def _call(ros, node, srv_type, name, **fields):
+    return ros.client.call(srv_type, name, srv_type.Request(**fields), node=node)
+
+
+def _state(ros, node, entity):
+    reply = _call(ros, node, GetEntityState, 'get_entity_state', entity=entity)
+    assert reply.result.result == OK, reply.result.error_message
+    s = reply.state
+    return (time_seconds(s.header.stamp), *pose_arrays(s.pose), *twist_arrays(s.twist),
+            *twist_arrays(s.acceleration))
+
+
+def _set_state(ros, node, value):
+    return _call(ros, node, SetSimulationState, 'set_simulation_state',
+                 state=SimulationState(state=value)).result
+
+
+def _sim_state(ros, node):
+    return _call(ros, node, GetSimulationState, 'get_simulation_state').state.state
+
+
+def _simulate(ros, node, steps, cancel_after=None):
+    """Run the action; return (status, result, completed feedback, remaining feedback)."""
+    client = ros.client
+    action = getattr(client, '_simulate', None) or ActionClient(client.node, SimulateSteps,
+                                                                'simulate_steps')
+    client._simulate = action
+    client.wait_for(action.server_is_ready, 'the simulate_steps action', node=node)
+    feedback = []
+    sent = action.send_goal_async(SimulateSteps.Goal(steps=steps),
+                                  feedback_callback=lambda m: feedback.append(m.feedback))
+    client.wait_for(sent.done, 'the goal accepted', node=node)
+    handle = sent.result()
+    if cancel_after is not None:
+        client.wait_for(lambda: len(feedback) >= cancel_after, 'feedback', node=node)
+        cancel = handle.cancel_goal_async()
+        client.wait_for(cancel.done, 'the cancel answered', node=node)
+    done = handle.get_result_async()
+    client.wait_for(done.done, 'the action result', node=node)
+    out = done.result()
+    return (out.status, out.result.result.result, [f.completed_steps for f in feedback],
+            [f.remaining_steps for f in feedback])
+
+
+def _same(a, b):
+    return all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a, b))
+
+
+def test_features_states_resets_and_steps_answer_as_the_standard_says(ros, tmp_path):
+    node = _start(ros, tmp_path, paused=False)
+    features = _call(ros, node, GetSimulatorFeatures, 'get_simulator_features').features
+    F = SimulatorFeatures
+    assert sorted(features.features) == sorted([
+        F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES, F.ENTITY_STATE_GETTING, F.ENTITY_STATE_SETTING,
+        F.ENTITY_INFO_GETTING, F.SIMULATION_RESET, F.SIMULATION_RESET_TIME,
+        F.SIMULATION_RESET_STATE, F.SIMULATION_STATE_GETTING, F.SIMULATION_STATE_SETTING,
+        F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE, F.STEP_SIMULATION_MULTIPLE,
+        F.STEP_SIMULATION_ACTION])
+    assert list(features.spawn_formats) == []   # (spawning is not served yet)
+    # Playing: stepping is refused (INCORRECT_STATE), by the service and the action.
+    assert _sim_state(ros, node) == PLAYING
+    assert _call(ros, node, StepSimulation, 'step_simulation').result.result == INCORRECT_STATE
+    status, code, fb, _ = _simulate(ros, node, 3)
+    assert (status, code, fb) == (6, INCORRECT_STATE, [])   # ABORTED
+    # Pause; pausing again answers ALREADY_IN_TARGET_STATE.
+    assert _set_state(ros, node, PAUSED).result == OK
+    codes = SetSimulationState.Response
+    assert _set_state(ros, node, PAUSED).result == codes.ALREADY_IN_TARGET_STATE
+    assert _set_state(ros, node, 7).result == codes.INCORRECT_TRANSITION
+    t0 = _state(ros, node, 'ball')[0]
+    # Each step is one dt on the published clock: the service (default one step, then 3) ...
+    assert _call(ros, node, StepSimulation, 'step_simulation').result.result == OK
+    assert _call(ros, node, StepSimulation, 'step_simulation', steps=3).result.result == OK
+    assert _state(ros, node, 'ball')[0] == pytest.approx(t0 + 4 * DT, abs=1e-9)
+    # ... and the action, with feedback after every step.
+    status, code, completed, remaining = _simulate(ros, node, 5)
+    assert (status, code, completed, remaining) == (4, OK, [1, 2, 3, 4, 5], [4, 3, 2, 1, 0])
+    assert _state(ros, node, 'ball')[0] == pytest.approx(t0 + 9 * DT, abs=1e-9)
+    # Cancelled between steps: it stops there, the clock shows the steps it took.
+    status, code, completed, _ = _simulate(ros, node, 1_000_000, cancel_after=2)
+    assert status == 5 and code == OK   # CANCELED
+    t1 = _state(ros, node, 'ball')[0]
+    assert 2 <= round((t1 - t0) / DT) - 9 == completed[-1] < 1_000_000
+    # Reset scopes. TIME: the clock to 0, the bodies where they are.
+    before = _state(ros, node, 'ball')
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_TIME).result.result == OK
+    after = _state(ros, node, 'ball')
+    assert after[0] == 0.0 and _same(after[1:5], before[1:5])
+    # STATE: the scene's start, the clock running on (one step after the last state).
+    assert _call(ros, node, StepSimulation, 'step_simulation', steps=10).result.result == OK
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_STATE).result.result == OK
+    start = _state(ros, node, 'ball')
+    assert start[0] == pytest.approx(11 * DT, abs=1e-9)
+    np.testing.assert_array_equal(start[1], [0.0, 0.0, 50.0])
+    np.testing.assert_array_equal(start[3], [1.0, 0.0, 2.0])
+    # Bits the standard does not define: refused, nothing changed; SPAWNED: nothing spawned.
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=8).result.result == FAILED
+    assert _same(_state(ros, node, 'ball'), start)
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_SPAWNED).result.result == OK
+    # ALL: both; the play state is kept (paused).
+    assert _call(ros, node, StepSimulation, 'step_simulation', steps=5).result.result == OK
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_ALL).result.result == OK
+    assert _state(ros, node, 'ball')[0] == 0.0 and _sim_state(ros, node) == PAUSED
+    # STOPPED: paused at the start, t = 0; a step leaves it (PAUSED); it may be paused.
+    assert _call(ros, node, StepSimulation, 'step_simulation', steps=5).result.result == OK
+    assert _set_state(ros, node, STOPPED).result == OK
+    assert _sim_state(ros, node) == STOPPED
+    stopped = _state(ros, node, 'ball')
+    assert stopped[0] == 0.0 and _same(stopped[1:], _state(ros, node, 'ball')[1:])
+    np.testing.assert_array_equal(stopped[1], [0.0, 0.0, 50.0])
+    assert _call(ros, node, StepSimulation, 'step_simulation').result.result == OK
+    assert _sim_state(ros, node) == PAUSED
+    assert _set_state(ros, node, STOPPED).result == OK
+    assert _set_state(ros, node, PAUSED).result == OK and _sim_state(ros, node) == PAUSED
+    # What is not served answers FEATURE_UNSUPPORTED.
+    for srv_type, name in ((SpawnEntity, 'spawn_entity'), (DeleteEntity, 'delete_entity'),
+                           (GetNamedPoses, 'get_named_poses')):
+        assert _call(ros, node, srv_type, name).result.result == UNSUPPORTED
+    # Play, then quit: the node replies and exits cleanly.
+    assert _set_state(ros, node, PLAYING).result == OK and _sim_state(ros, node) == PLAYING
+    assert _set_state(ros, node, QUITTING).result == OK
+    assert node.proc.wait(timeout=30) == 0
+
+
+def test_entities_states_info_and_bounds_from_the_scene(ros, tmp_path):
+    node = _start(ros, tmp_path)
+    reply = _call(ros, node, GetEntities, 'get_entities')
+    assert reply.result.result == OK and list(reply.entities) == ['ball', 'brick', 'bob', 'dog']
+    robots = EntityFilters(categories=[EntityCategory(category=EntityCategory.CATEGORY_ROBOT)])
+    assert list(_call(ros, node, GetEntities, 'get_entities', filters=robots).entities) == \
+        ['dog']
+    assert list(_call(ros, node, GetEntities, 'get_entities',
+                      filters=EntityFilters(filter='^b')).entities) == ['ball', 'brick', 'bob']
+    bad = _call(ros, node, GetEntities, 'get_entities', filters=EntityFilters(filter='('))
+    assert bad.result.result == FAILED and 'regular expression' in bad.result.error_message
+    tags = EntityFilters()
+    tags.tags.tags = ['red']
+    assert _call(ros, node, GetEntities, 'get_entities',
+                 filters=tags).result.result == UNSUPPORTED
+    # Free flight: p0 + v0 t − g t²/2 (exact in lie_poisson2 to rounding), a = −g.
+    assert _call(ros, node, StepSimulation, 'step_simulation', steps=200).result.result == OK
+    t, p, q, v, w, a, alpha = _state(ros, node, 'ball')
+    assert t == pytest.approx(0.2, abs=1e-9)
+    np.testing.assert_allclose(p, [0.2, 0.0, 50.0 + 2.0 * 0.2 - 0.5 * G * 0.04], rtol=0,
+                               atol=1e-12)
+    np.testing.assert_allclose(v, [1.0, 0.0, 2.0 - G * 0.2], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a, [0.0, 0.0, -G], rtol=0, atol=1e-12)
+    every = _call(ros, node, GetEntitiesStates, 'get_entities_states')
+    assert list(every.entities) == ['ball', 'brick', 'bob', 'dog']
+    assert pose_arrays(every.states[0].pose)[0].tolist() == p.tolist()
+    # A state set is read back, and flown from.
+    target = EntityState()
+    target.pose.position.x, target.pose.position.y, target.pose.position.z = 1.0, 2.0, 30.0
+    target.pose.orientation.z, target.pose.orientation.w = math.sin(0.3), math.cos(0.3)
+    target.twist.linear.x, target.twist.angular.z = -1.0, 4.0
+    assert _call(ros, node, SetEntityState, 'set_entity_state', entity='ball',
+                 state=target).result.result == OK
+    _, p, q, v, w, _, _ = _state(ros, node, 'ball')
+    np.testing.assert_allclose(p, [1.0, 2.0, 30.0], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(q, [0.0, 0.0, math.sin(0.3), math.cos(0.3)], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(v, [-1.0, 0.0, 0.0], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(w, [0.0, 0.0, 4.0], rtol=0, atol=1e-14)
+    assert _call(ros, node, StepSimulation, 'step_simulation', steps=100).result.result == OK
+    np.testing.assert_allclose(_state(ros, node, 'ball')[1],
+                               [0.9, 2.0, 30.0 - 0.5 * G * 0.01], rtol=0, atol=1e-12)
+    # The robot's state is its base link's; set, it moves as a whole.
+    target.twist.angular.z = 0.0
+    assert _call(ros, node, SetEntityState, 'set_entity_state', entity='dog',
+                 state=target).result.result == OK
+    _, p, q, v, _, _, _ = _state(ros, node, 'dog')
+    np.testing.assert_allclose(p, [1.0, 2.0, 30.0], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(v, [-1.0, 0.0, 0.0], rtol=0, atol=1e-13)
+    # Refusals, each changing nothing.
+    before = [_state(ros, node, e) for e in ('ball', 'bob')]
+    assert _call(ros, node, SetEntityState, 'set_entity_state', entity='nobody',
+                 state=target).result.result == NOT_FOUND
+    target.header.frame_id = 'elsewhere'
+    assert _call(ros, node, SetEntityState, 'set_entity_state', entity='ball',
+                 state=target).result.result == FAILED
+    target.header.frame_id = ''
+    target.pose.position.z = math.nan
+    assert _call(ros, node, SetEntityState, 'set_entity_state', entity='ball',
+                 state=target).result.result == FAILED
+    target.pose.position.z = 30.0
+    pinned = _call(ros, node, SetEntityState, 'set_entity_state', entity='bob', state=target)
+    assert pinned.result.result == FAILED and "'pin'" in pinned.result.error_message
+    after = [_state(ros, node, e) for e in ('ball', 'bob')]
+    assert all(_same(a, b) for a, b in zip(before, after))
+    assert _call(ros, node, GetEntityState, 'get_entity_state',
+                 entity='nobody').result.result == NOT_FOUND
+    # Info: categories and descriptions.
+    info = _call(ros, node, GetEntityInfo, 'get_entity_info', entity='dog')
+    assert info.result.result == OK and info.info.category.category == 1
+    assert 'robot' in info.info.description
+    assert _call(ros, node, GetEntityInfo, 'get_entity_info',
+                 entity='ball').info.category.category == 0
+    assert _call(ros, node, GetEntityInfo, 'get_entity_info',
+                 entity='x').result.result == NOT_FOUND
+    # Bounds about the entity's frame: the box's half sizes, the sphere's radius; none for
+    # a body without shapes. (The standard's order: the upper corner first.)
+    bounds = _call(ros, node, GetEntityBounds, 'get_entity_bounds', entity='brick').bounds
+    assert bounds.type == Bounds.TYPE_BOX
+    np.testing.assert_allclose([[c.x, c.y, c.z] for c in bounds.points],
+                               [[0.1, 0.2, 0.3], [-0.1, -0.2, -0.3]], rtol=0, atol=1e-15)
+    bounds = _call(ros, node, GetEntityBounds, 'get_entity_bounds', entity='ball').bounds
+    np.testing.assert_allclose([[c.x, c.y, c.z] for c in bounds.points],
+                               [[0.1] * 3, [-0.1] * 3], rtol=0, atol=1e-15)
+    assert _call(ros, node, GetEntityBounds, 'get_entity_bounds',
+                 entity='bob').bounds.type == Bounds.TYPE_EMPTY
