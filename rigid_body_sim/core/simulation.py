@@ -19,6 +19,7 @@ as given); the core works in principal frames internally (see
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 import math
 from typing import Any, Optional, Sequence
@@ -32,7 +33,7 @@ from .constraints import Constraint, ConstraintSet, JointType
 from .contact_step import ContactSteps, ContactWrenches
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
-from .effects import AppliedWrenches, Effect
+from .effects import AppliedWrenches, Damping, Effect
 from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .joint_events import JointEvents
@@ -127,6 +128,11 @@ class Simulation:
                  scene_joints: Sequence[SceneJoint] = (),
                  shapes: Sequence[CollisionShape] = ()) -> None:
         self.dt = positive_scalar(dt, 'dt')
+        #: What the scene was built of, for a spawn or a removal (:meth:`add_body`).
+        self._built = dict(effects=list(effects), constraint_time_constant=constraint_time_constant,
+                           tolerance_budget=tolerance_budget, shapes=list(shapes))
+        #: Bodies added at run time (:meth:`add_body`), in order.
+        self._spawned: list = []
         bodies, constraints = list(bodies), list(constraints)
         self.robots = []
         taken = {b.name: 'a body of the scene' for b in bodies if isinstance(b, RigidBody)}
@@ -600,6 +606,8 @@ class Simulation:
 
     def reset(self) -> None:
         """Back to the initial state; applied wrenches return to the scene's own."""
+        #: Constraints added at run time: ``{name: (spec, the state it was anchored at)}``.
+        self._added: dict = {}
         self.dynamics.discard_effect_work()   # the counters restart from zero
         self.state: State = self.bodies.initial_state(self._specs)
         if self._control is not None:
@@ -830,6 +838,188 @@ class Simulation:
         # (after the drives' targets: the projection onto Φ̇ = −ωΦ must see them)
         self._reconcile_velocities()
 
+    # -- bodies added and removed at run time ---------------------------------------------
+
+    def add_body(self, body: RigidBody, shapes: Sequence[CollisionShape] = (),
+                 allow_overlap: bool = False) -> None:
+        """
+        Add a free body and its collision shapes between steps (a spawn).
+
+        The body starts from its own initial conditions (``position_world``, ...); the
+        others go on from where they are, bit for bit, with their constraints (those
+        added at run time too, anchored as they were), applied wrenches, the time, the
+        step and the accuracy knob. The simulation is rebuilt around it (its compiled
+        kernels re-plan; the work counters and the contacts' warm start restart). A
+        reset (:meth:`reset`) puts it back where it was spawned;
+        :meth:`remove_spawned` removes every spawned body.
+
+        Raises
+        ------
+        SpecError
+            Not a RigidBody, a name taken, a shape on another body or invalid, the new
+            body's shapes overlapping another's deeper than the contacts' tolerance
+            (``allow_overlap`` False), or a scene with joints (robots or scene joints:
+            not yet). Nothing changes then.
+
+        """
+        if not isinstance(body, RigidBody):
+            raise SpecError('body', f'expected a RigidBody, got {body!r}')
+        self._no_joints('spawning a body')
+        if body.name in self.bodies.index:
+            raise SpecError('body.name', f'{body.name!r} is taken; bodies: '
+                                         f'{list(self.bodies.names)}')
+        shapes = list(shapes)
+        for i, shape in enumerate(shapes):
+            if not isinstance(shape, CollisionShape) or shape.body != body.name:
+                raise SpecError(f'shapes[{i}]', f'expected a CollisionShape on body '
+                                                f'{body.name!r}, got {shape!r}')
+        new = self._rebuilt(self._specs + [body], self._built['shapes'] + shapes, ())
+        if not allow_overlap and new.contact is not None and shapes:
+            con = new.contact.detect(new.state)
+            mine = new.bodies.index[body.name]
+            deep = (con.depth > new.contact.location) & ((con.body_a == mine)
+                                                         | (con.body_b == mine))
+            if np.any(deep):
+                k = int(np.argmax(np.where(deep, con.depth, -np.inf)))
+                names = [s.name for s in new.contact.detector.shapes]
+                raise SpecError('body.position_world', f'{body.name!r} would overlap: '
+                                                       f'{names[con.shape_a[k]]!r} and '
+                                                       f'{names[con.shape_b[k]]!r} by '
+                                                       f'{con.depth[k]:.3g} m')
+        new._spawned = self._spawned + [body.name]
+        self._adopt(new)
+
+    def remove_body(self, name: str) -> list:
+        """
+        Remove a body, its shapes and the constraints that hold it, between steps.
+
+        Returns the names of the constraints removed with it (the scene's and those
+        added at run time). Effects naming it forget it (a damping's list, the applied
+        wrenches on it). The others go on bit for bit, as for :meth:`add_body`.
+
+        Raises
+        ------
+        SpecError
+            An unknown body, a robot's link, or a scene with joints (not yet).
+
+        """
+        self.bodies.lookup(name, 'name')
+        self._no_joints('removing a body')
+        present = self.dynamics.solver.constraints.names
+        gone = [c for c in present if name in (self.dynamics.solver.constraints.spec(c).body_a,
+                                               self.dynamics.solver.constraints.spec(c).body_b)]
+        new = self._rebuilt([b for b in self._specs if b.name != name],
+                            [s for s in self._built['shapes'] if s.body != name], (name,))
+        new._spawned = [b for b in self._spawned if b != name]
+        self._adopt(new)
+        return gone
+
+    def remove_spawned(self) -> list:
+        """Remove every body added at run time (:meth:`add_body`); return their names."""
+        names = list(self._spawned)
+        if names:
+            self._no_joints('removing bodies')
+            new = self._rebuilt([b for b in self._specs if b.name not in names],
+                                [s for s in self._built['shapes'] if s.body not in names],
+                                tuple(names))
+            self._adopt(new)
+        return names
+
+    @property
+    def spawned(self) -> list:
+        """Return the names of the bodies added at run time, in order."""
+        return list(self._spawned)
+
+    def _no_joints(self, what: str) -> None:
+        if len(self.joints) or self.robots:
+            raise SpecError('scene', f'{what} in a scene with joints (robots or scene joints) '
+                                     f'is not supported yet')
+
+    def _rebuilt(self, bodies: list, shapes: list, removed: tuple) -> 'Simulation':
+        """
+        Return a simulation of ``bodies`` and ``shapes`` that goes on from this one's state.
+
+        ``removed``: bodies gone (their constraints, wrenches and damping go with them).
+        This one is not changed (its effects are copied before they are bound anew).
+        """
+        gone = set(removed)
+        effects = []
+        for effect in self._built['effects']:
+            effect = copy.deepcopy(effect)
+            if isinstance(effect, Damping) and effect.body_names is not None:
+                effect.body_names = [b for b in effect.body_names if b not in gone]
+            if isinstance(effect, AppliedWrenches):
+                effect._pending = [e for e in effect._pending if e.get('body') not in gone]
+            effects.append(effect)
+        def touches(c: Any) -> bool:
+            return isinstance(c, Constraint) and (c.body_a in gone or c.body_b in gone)
+
+        control = self._control
+        new = Simulation(bodies, effects, self.integrator_name, self.dt,
+                         [c for c in self._initial_constraints if not touches(c)],
+                         self._built['constraint_time_constant'],
+                         None if control is None else control.tolerance,
+                         self._built['tolerance_budget'], shapes=shapes)
+        # Its state: this one's, body by body (bit for bit), at this time and step count.
+        index = [new.bodies.index.get(name, -1) for name in self.bodies.names]
+        parts = [p.copy() for p in new.state.parts]
+        for old, new_i in enumerate(index):
+            if new_i >= 0:
+                for whole, part in zip(parts, self.state.parts):
+                    whole[new_i] = part[old]
+        new.state = State(self.state.time, *parts)
+        new._steps, new._time_base = self._steps, self._time_base
+        # Constraints: the scene's removed at run time stay removed; those added at run
+        # time are anchored anew where they were (their positions then, mapped).
+        solver = new.dynamics.solver
+        for name in list(solver.constraints.names):
+            if name not in self.dynamics.solver.constraints.names:
+                solver.constraints.remove(name)
+        for name, (spec, at) in self._added.items():
+            if touches(spec):
+                continue
+            then = [p.copy() for p in new.state.parts]
+            for old, new_i in enumerate(index):
+                if new_i >= 0:
+                    for whole, part in zip(then, at.parts):
+                        whole[new_i] = part[old]
+            anchored = State(at.time, *then)
+            solver.constraints.add(spec, anchored)
+            new._added[name] = (spec, anchored)
+        new.dynamics.changed()
+        if new.contact is not None:
+            new.contact.detector.exclude(new._exclusions(new._specs_now()))
+        # Applied wrenches (the scene's tables and the one applied through the API), on
+        # the same bodies.
+        old_tables = [e for e in self.dynamics.effects if isinstance(e, AppliedWrenches)]
+        new_tables = [e for e in new.dynamics.effects if isinstance(e, AppliedWrenches)]
+        for k, table in enumerate(old_tables):
+            if k >= len(new_tables):
+                added = AppliedWrenches()
+                added.bind(new.bodies)
+                new.dynamics.add_effect(added)
+                new_tables.append(added)
+                new._wrenches = new._wrenches or added
+            rows = [(index[row[0]],) + tuple(row[1:]) for row in table.snapshot()
+                    if index[row[0]] >= 0]
+            new_tables[k].restore(rows)
+        if new.contact is not None and self.contact is not None:
+            # The contacts' warm start (the last step's normal impulses, by shape pair and
+            # point): the next step's friction fixed point starts where it would have.
+            where = {s.name: k for k, s in enumerate(new.contact.detector.shapes)}
+            shapes_then = [s.name for s in self.contact.detector.shapes]
+            sa, sb, pt, pn = self.contact._warm
+            a = np.array([where.get(shapes_then[k], -1) for k in sa], dtype=np.int64)
+            b = np.array([where.get(shapes_then[k], -1) for k in sb], dtype=np.int64)
+            keep = (a >= 0) & (b >= 0)
+            new.contact._warm = (a[keep], b[keep], pt[keep], pn[keep])
+        new.dynamics.changed()
+        return new
+
+    def _adopt(self, new: 'Simulation') -> None:
+        """Become ``new``: its parts refer to it, so the two share one attribute dictionary."""
+        self.__dict__ = new.__dict__
+
     def place(self, bodies: Sequence[str], reference: str, position: Any,
               orientation_xyzw: Any, linear_velocity_world: Any = (0.0, 0.0, 0.0),
               angular_velocity_world: Any = (0.0, 0.0, 0.0)) -> None:
@@ -1026,6 +1216,8 @@ class Simulation:
             self.events.rows_changed()
         if self.contact is not None:   # bodies joined now never collide (only fewer pairs)
             self.contact.detector.exclude(self._exclusions(self._specs_now()))
+        # (with the positions it was anchored at: a spawn rebuilds it bit for bit)
+        self._added[constraint.name] = (constraint, self.state)
         self._reconcile_velocities()
 
     def _reconcile_velocities(self) -> None:
@@ -1054,6 +1246,7 @@ class Simulation:
             self.dynamics.solver.constraints.spec(name)   # (an unknown name: its error)
             self.contact.detector.exclude(self._exclusions(self._specs_now(name)))
         spec = self.dynamics.solver.constraints.remove(name)
+        self._added.pop(name, None)
         self.dynamics.changed()
         if self.events is not None:   # rows may have moved
             self.events.rows_changed()

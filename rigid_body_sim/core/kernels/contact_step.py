@@ -865,7 +865,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     while True:
         h = dt if first else t_end - t
         if not first and h <= 4.0 * EPS * abs(t_end):
-            code, new, con_new = _accept(ctx, state, record, cnt)
+            code, new, con_new = _accept(ctx, state, record, cnt, con)
             break
         first = False
         touching = _make_rows(ctx, state, con, _where(con[7] >= -loc))
@@ -901,13 +901,13 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         else:
             cnt[C_CAPPED] += 1
         if hit_depth == -np.inf:
-            code, new, con_new = _accept(ctx, trial, record, cnt)
+            code, new, con_new = _accept(ctx, trial, record, cnt, con_trial)
             break
         code, located, tau = _locate(ctx, state, con, rows_, ov, h, hit_depth, nw, fl)
         if code != DONE:
             return grow if code == GROW else fail
         if tau <= 0.0:
-            code, new, con_new = _accept(ctx, trial, record, cnt)
+            code, new, con_new = _accept(ctx, trial, record, cnt, con_trial)
             break
         cnt[C_LOCATED] += 1
         state, t = located, t + tau
@@ -1170,9 +1170,11 @@ def _new_depth(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y:
 
 
 @njit(cache=True)
-def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
+def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tuple) -> tuple:
     """
     Correct the step's end, as ``ContactSteps._settle``: ``(code, y, contacts at y)``.
+
+    ``con``: the contacts at ``y`` (the trial's, found by :func:`_held`; not found again).
 
     Depth beyond the tolerance and loaded contacts left apart are projected out
     (positions: the smallest pushes, loaded contacts held at zero depth; up to
@@ -1184,9 +1186,6 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray) -> tuple:
     loc = prm[P_LOCATION]
     sel, force, r_con, r_y, _ = record
     c = sel.shape[0]
-    con = _detect_ctx(ctx, y)
-    if con[0] < 0:
-        return GROW, y, con
     active = np.zeros(c, dtype=np.bool_)
     nr = r_con[6]
     for k in range(c):
