@@ -94,9 +94,18 @@ def test_the_live_graph_is_the_one_the_readme_documents(ros):
     node = ros.start({'start_paused': True})
     graph = ros.client.node
     sim = load_scene(CONFIG / 'default_scene.yaml').simulation
-    services = {}
+    services, actions = {}, {}
     for name, typ in _readme_table('### Services').items():
-        services[f'{NODE}/{name[2:]}'] = typ.replace('/', '/srv/')
+        full = f'{NODE}/{name[2:]}' if name.startswith('~/') else f'/{name}'
+        if typ.endswith('/SimulateSteps'):   # (an action: its services and topics, below)
+            actions[full] = typ.replace('/', '/action/')
+        else:
+            services[full] = typ.replace('/', '/srv/')
+    introspected = dict(services)
+    for full, typ in actions.items():
+        services.update({f'{full}/_action/send_goal': f'{typ}_SendGoal',
+                         f'{full}/_action/get_result': f'{typ}_GetResult',
+                         f'{full}/_action/cancel_goal': 'action_msgs/srv/CancelGoal'})
     topics = {}
     for name, typ in _readme_table('### Topics').items():
         full = name if name.startswith('/') else f'{NODE}/{name[2:]}'
@@ -107,6 +116,9 @@ def test_the_live_graph_is_the_one_the_readme_documents(ros):
             topics.update({full.replace('/C/', f'/{c}/'): typ for c in sim.constraint_names})
         elif '<service>' not in full:   # (service events: below)
             topics[full] = typ
+    for full, typ in actions.items():
+        topics.update({f'{full}/_action/feedback': f'{typ}_FeedbackMessage',
+                       f'{full}/_action/status': 'action_msgs/msg/GoalStatusArray'})
 
     def live_services():
         found = dict(graph.get_service_names_and_types_by_node('rigid_body_sim', '/'))
@@ -127,7 +139,7 @@ def test_the_live_graph_is_the_one_the_readme_documents(ros):
     assert live_topics() == topics
     # Every service's calls are published (introspection), as recorded bags need them.
     pubs = dict(graph.get_publisher_names_and_types_by_node('rigid_body_sim', '/'))
-    for name, typ in services.items():
+    for name, typ in introspected.items():
         assert pubs[f'{name}/_service_event'] == [f'{typ}_Event']
 
 

@@ -279,3 +279,49 @@ def test_entities_states_info_and_bounds_from_the_scene(ros, tmp_path):
                                [[0.1] * 3, [-0.1] * 3], rtol=0, atol=1e-15)
     assert _call(ros, node, GetEntityBounds, 'get_entity_bounds',
                  entity='bob').bounds.type == Bounds.TYPE_EMPTY
+
+
+def _goal(ros, node, steps):
+    """Send a goal; return (handle, feedback list) once accepted or rejected."""
+    client = ros.client
+    action = getattr(client, '_simulate', None) or ActionClient(client.node, SimulateSteps,
+                                                                'simulate_steps')
+    client._simulate = action
+    client.wait_for(action.server_is_ready, 'the simulate_steps action', node=node)
+    feedback = []
+    sent = action.send_goal_async(SimulateSteps.Goal(steps=steps),
+                                  feedback_callback=lambda m: feedback.append(m.feedback))
+    client.wait_for(sent.done, 'the goal answered', node=node)
+    return sent.result(), feedback
+
+
+def _outcome(ros, node, handle):
+    done = handle.get_result_async()
+    ros.client.wait_for(done.done, 'the action result', node=node)
+    return done.result().status, done.result().result.result.result
+
+
+def test_a_running_action_is_alone_and_ends_on_a_reset_and_on_quitting(ros, tmp_path):
+    node = _start(ros, tmp_path)
+    first, feedback = _goal(ros, node, 1_000_000)
+    assert first.accepted
+    ros.client.wait_for(lambda: len(feedback) >= 1, 'feedback', node=node)
+    second, _ = _goal(ros, node, 5)
+    assert not second.accepted   # (one goal at a time)
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_ALL).result.result == OK
+    assert _outcome(ros, node, first) == (6, FAILED)   # ABORTED: the simulation was reset
+    assert _sim_state(ros, node) == PAUSED and _state(ros, node, 'ball')[0] == 0.0
+    # STOPPED stays STOPPED through a reset of everything (paused at the start, t = 0).
+    assert _set_state(ros, node, STOPPED).result == OK
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_ALL).result.result == OK
+    assert _sim_state(ros, node) == STOPPED
+    # Quitting while a goal runs: the goal is answered, then the node exits cleanly.
+    running, feedback = _goal(ros, node, 1_000_000)
+    result = running.get_result_async()   # (asked for at once, as clients do)
+    ros.client.wait_for(lambda: len(feedback) >= 1, 'feedback', node=node)
+    assert _set_state(ros, node, QUITTING).result == OK
+    ros.client.wait_for(result.done, 'the action result', node=node)
+    assert (result.result().status, result.result().result.result.result) == (6, FAILED)
+    assert node.proc.wait(timeout=30) == 0

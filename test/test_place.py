@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rigid_body_sim.core import Constraint, Gravity, RigidBody, Simulation, SpecError
+from rigid_body_sim.core import CollisionShape, Constraint, Gravity, RigidBody, Simulation, \
+    SpecError
 from rigid_body_sim.core import rotation as so3
 from rigid_body_sim.scene import scene_from_dict
 
@@ -156,3 +157,22 @@ def test_accelerations_are_the_closed_forms_free_and_on_a_hinge():
     np.testing.assert_allclose(alpha[0], [0.0, -theta_dd, 0.0], rtol=1e-12, atol=1e-14)
     tangent = np.array([math.cos(theta), 0.0, math.sin(theta)])
     np.testing.assert_allclose(acc[0], theta_dd * L * tangent, rtol=1e-12, atol=1e-13)
+
+
+def test_accelerations_of_a_box_resting_on_the_ground_are_zero_both_paths():
+    # The ground's forces as the last step held them carry the weight: a = 0 to rounding
+    # (the compiled steps keep them in their record; the Python path in the effect).
+    for compiled in (True, False):
+        sim = Simulation([RigidBody('box', 2.0, (0.1, 0.1, 0.1), position_world=(0, 0, 0.1))],
+                         [Gravity()], integrator='rkmk4',
+                         shapes=[CollisionShape('plane', None, friction=0.5),
+                                 CollisionShape('box', 'box', size=(0.2, 0.2, 0.2))])
+        sim.contact.compiled = compiled
+        sim.step(20)
+        acc, alpha = sim.accelerations()
+        np.testing.assert_allclose(acc, 0.0, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(alpha, 0.0, rtol=0, atol=1e-12)
+        # Lifted off the ground by a teleport, it falls freely: the forces no longer apply.
+        sim.place(['box'], 'box', (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0))
+        np.testing.assert_allclose(sim.accelerations()[0], [[0.0, 0.0, -G]], rtol=0,
+                                   atol=1e-14)

@@ -30,7 +30,7 @@ from . import rotation as so3
 from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, ConstraintSet, JointType
-from .contact_step import ContactSteps, ContactWrenches
+from .contact_step import ContactRecord, ContactSteps, ContactWrenches
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Damping, Effect
@@ -1090,6 +1090,9 @@ class Simulation:
         for whole, piece in zip(parts, moved.parts):
             whole[index] = piece[index]
         self.state = State(self.time, *parts)
+        if self.contact is not None:   # (the last step's contact forces no longer apply)
+            self.contact._set_forces(None)
+            self.contact.record = ContactRecord(self.time)
         self.dynamics.changed()
         if len(self.joints):
             self.joints.track(self._outputs_now())
@@ -1424,17 +1427,29 @@ class Simulation:
         """
         Accelerations now: of each body origin (n, 3, m/s²) and angular (n, 3, rad/s²), world.
 
-        From the equations of motion at the current state: every effect (the contact
-        forces as the last step held them) and the constraints' multipliers there.
+        From the equations of motion at the current state: every effect, the contact
+        forces as the last step held them (none after a reset or a :meth:`place`), and
+        the constraints' multipliers with them.
         """
         dyn, s = self.dynamics, self.state
         pos, quat, vel, om = s.parts
-        acc, om_dot = dyn.accelerations(s.time, pos, quat, vel, om)
-        if dyn.constrained:
-            lam = dyn.solver.multipliers(dyn, s)
-            f = dyn.solver.constraints.evaluate(pos, quat, vel, om).jacobian.rmatvec(lam)
-            acc = acc - dyn.bodies.inv_mass[:, None] * f[:, :3]
-            om_dot = om_dot - f[:, 3:] / dyn.bodies.moments
+        contact, lent = self.contact, False
+        if contact is not None and not len(contact.wrenches):
+            # The compiled steps leave the forces in their record only: lent for this.
+            rec = contact.record
+            if rec.rows is not None and len(rec.rows) and np.any(rec.force):
+                contact._set_forces(rec.rows, rec.force)
+                lent = True
+        try:
+            acc, om_dot = dyn.accelerations(s.time, pos, quat, vel, om)
+            if dyn.constrained:
+                lam = dyn.solver.multipliers(dyn, s)
+                f = dyn.solver.constraints.evaluate(pos, quat, vel, om).jacobian.rmatvec(lam)
+                acc = acc - dyn.bodies.inv_mass[:, None] * f[:, :3]
+                om_dot = om_dot - f[:, 3:] / dyn.bodies.moments
+        finally:
+            if lent:
+                contact._set_forces(None)
         R = so3.quat_to_matrix(quat)
         alpha = np.einsum('nij,nj->ni', R, om_dot)
         omega = np.einsum('nij,nj->ni', R, om)

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..core import rotation as so3
 from ..core import Simulation, SpecError
+from ..core.hulls import H_NV, H_VERTS
 
 #: The standard's categories (simulation_interfaces/msg/EntityCategory).
 OBJECT, ROBOT = 0, 1
@@ -70,8 +71,11 @@ class Entities:
             root = next(link.name for link in spec.links if link.name not in children)
             frame = model.links[root]
             fixed = ' fixed to the world' if frame.body is None else ''
-            out[spec.name] = Entity(
-                spec.name, ROBOT, tuple(b.name for b in model.bodies), frame.body,
+            name = spec.name
+            while name in out:   # (a scene body of the robot's name keeps it)
+                name += '_robot'
+            out[name] = Entity(
+                name, ROBOT, tuple(b.name for b in model.bodies), frame.body,
                 np.array(frame.position, dtype=float), np.array(frame.rotation, dtype=float),
                 f'robot {spec.name!r} ({spec.source or "URDF"}): {len(model.bodies)} bodies, '
                 f'{len(model.joints)} joints, base link {spec.prefix + root!r}{fixed}')
@@ -80,6 +84,11 @@ class Entities:
     def names(self) -> list:
         """Return every entity's name, in the scene's order (bodies, then robots)."""
         return list(self.by_name)
+
+    def states(self, names: list) -> list:
+        """Return :meth:`state` of each of ``names`` (the accelerations found once)."""
+        acc = self.sim.accelerations() if names else None
+        return [self.state(name, acc) for name in names]
 
     def get(self, name: str) -> Entity:
         """Return the entity called ``name``; EntityError NOT_FOUND naming the known ones."""
@@ -108,12 +117,13 @@ class Entities:
 
     # -- states ---------------------------------------------------------------------------
 
-    def state(self, name: str) -> tuple:
+    def state(self, name: str, accelerations: Optional[tuple] = None) -> tuple:
         """
         Return ``(position, quat_xyzw, velocity, omega, acceleration, alpha)``, world frame.
 
         Of the entity's frame: its origin's position, velocity and acceleration, its
-        orientation, angular velocity and angular acceleration.
+        orientation, angular velocity and angular acceleration. ``accelerations``:
+        :meth:`~rigid_body_sim.core.Simulation.accelerations` now, when known.
         """
         e = self.get(name)
         if e.body is None:   # (a robot fixed to the world: its base link does not move)
@@ -124,7 +134,7 @@ class Entities:
         i = sim.bodies.lookup(e.body)
         pos, quat = sim.pose(e.body)
         vel, omega = sim.twist(e.body)
-        acc, alpha = sim.accelerations()
+        acc, alpha = sim.accelerations() if accelerations is None else accelerations
         R = so3.quat_to_matrix(quat)
         r = R @ e.position
         return (pos + r, so3.matrix_to_quat(R @ e.rotation), vel + np.cross(omega, r), omega,
@@ -190,19 +200,23 @@ class Entities:
             for k in range(3):
                 d = R_frame[:, k]   # the frame's k-th axis, world
                 centre = float(d @ (c - p_frame))
-                reach = _support(s, R_s.T @ d)
-                lower[k] = min(lower[k], centre - reach)
-                upper[k] = max(upper[k], centre + reach)
+                local = R_s.T @ d
+                upper[k] = max(upper[k], centre + _support(s, local))
+                lower[k] = min(lower[k], centre - _support(s, -local))
         return lower, upper
 
 
 def _support(shape, d: np.ndarray) -> float:
-    """Return how far ``shape`` reaches from its centre along unit ``d`` (its own axes)."""
+    """Return how far ``shape`` reaches from its origin along unit ``d`` (its own axes)."""
     kind = shape.kind
     if kind == 'sphere':
         return float(shape.radius)
-    if kind in ('box', 'mesh'):
+    if kind == 'box':
         return float(np.abs(d) @ shape.dimensions())
+    if kind == 'mesh':   # (its hull's vertices, in the shape's frame)
+        rec = shape.hull
+        nv = int(rec[H_NV])
+        return float(np.max(rec[H_VERTS:H_VERTS + 3 * nv].reshape(nv, 3) @ d))
     half = 0.5 * float(shape.length)
     axial = abs(float(d[2]))
     if kind == 'capsule':

@@ -384,6 +384,8 @@ class SimNode(Node):
             self._sync_constraint_publishers()
         elif clock:
             self.session.restart_clock()
+        if clock:   # (a new epoch of stamps: its first /tf goes out even at a stamp seen)
+            self._tf_stamp_ns = None
         now = time.perf_counter()
         self._pacer.restart(now)
         self._new_window(now)
@@ -440,13 +442,14 @@ class SimNode(Node):
                                       f'{session.seconds():.9g} s'
         return response
 
-    def take_steps(self, steps: int) -> tuple:
+    def take_steps(self, steps: int, publish: bool = True) -> tuple:
         """
         Take ``steps`` steps now (paused: no pacing) and publish the state after them.
 
         Returns ``(done, failure)``: the steps taken, and why they stopped early (None:
         they did not). A divergence or an internal error pauses the simulation and is
-        named; so is a shutdown asked for meanwhile.
+        named; so is a shutdown asked for meanwhile. ``publish`` False: only the outputs
+        due on the way are published (the caller publishes the state when it pauses).
         """
         session = self.session
         due = None   # (0 steps: the current state is published)
@@ -469,9 +472,9 @@ class SimNode(Node):
                           f'{session.diverged}; call ~/reset'
                 break
             done += 1
-        # The state after the last step: what that step did not publish.
-        self._publish_now(state=not (due and due.state), joints=not (due and due.joints),
-                          tf=not (due and due.tf))
+        if publish:   # the state after the last step: what that step did not publish
+            self._publish_now(state=not (due and due.state), joints=not (due and due.joints),
+                              tf=not (due and due.tf))
         return done, failure
 
     def _on_add_constraint(self, request: AddConstraint.Request,
@@ -876,7 +879,8 @@ class SimNode(Node):
     def _spin(self, timeout: float) -> None:
         """Serve ready callbacks (one); learn what a spin costs from the non-blocking ones."""
         t0 = time.perf_counter()
-        self.standard.wake()   # (a running action takes its next step at this spin)
+        if self.standard.wake():   # (a running action goes on at this spin: no waiting)
+            timeout = 0.0
         try:
             self.executor_.spin_once(timeout_sec=timeout)
         except Exception as exc:  # noqa: B902 - a message or parameter callback's bug
@@ -919,6 +923,7 @@ def main(args: Optional[list] = None, stop: Optional[Stop] = None) -> int:
         stop.on_stop(node.stop)   # from here on a signal stops the loop
         node.run()
         node.get_logger().info('shutting down')
+        node.standard.finish()   # (a running simulate_steps goal gets its answer)
         node.linger()
         return 0
     except StopRequested:

@@ -38,6 +38,7 @@ Our own ``~/reset``, ``~/pause`` and ``~/step`` share these implementations.
 from __future__ import annotations
 
 import math
+import time
 import traceback
 from typing import Any
 
@@ -71,6 +72,8 @@ CUSTOM_INFO = ('rigid_body_sim: exact multipliers (joints, limits, contact), eve
 S = SimulationState
 STATE_NAMES = {S.STATE_STOPPED: 'STOPPED', S.STATE_PLAYING: 'PLAYING',
                S.STATE_PAUSED: 'PAUSED', S.STATE_QUITTING: 'QUITTING'}
+#: s of wall time a running action steps in one loop turn before the node serves requests.
+ACTION_SLICE = 0.01
 R = ResetSimulation.Request
 #: The scope bits the standard defines (SCOPE_ALL sets every bit).
 SCOPE_BITS = R.SCOPE_TIME | R.SCOPE_STATE | R.SCOPE_SPAWNED
@@ -99,6 +102,9 @@ class StandardInterface:
         self.stopped = False
         self.quitting = False
         self._wake: list = []   # futures of running actions, woken between loop turns
+        #: Counts resets, STOPPED and QUITTING: a running action ends when it changes.
+        self.generation = 0
+        self._running_goal = None
         for srv_type, name, handler in (
                 (GetSimulatorFeatures, 'get_simulator_features', self._features),
                 (GetSimulationState, 'get_simulation_state', self._get_state),
@@ -122,9 +128,12 @@ class StandardInterface:
                                                                         srv_type))
             service.configure_introspection(node.get_clock(), qos_profile_services_default,
                                             ServiceIntrospectionState.CONTENTS)
+        # One goal at a time: a second is rejected while one runs (their steps would
+        # interleave on one clock).
         self.action = ActionServer(node, SimulateSteps, 'simulate_steps',
                                    execute_callback=self._simulate,
-                                   goal_callback=lambda goal: GoalResponse.ACCEPT,
+                                   goal_callback=lambda goal: GoalResponse.REJECT
+                                   if self._running_goal is not None else GoalResponse.ACCEPT,
                                    cancel_callback=lambda handle: CancelResponse.ACCEPT)
 
     # -- plumbing -------------------------------------------------------------------------
@@ -153,11 +162,30 @@ class StandardInterface:
             return response
         return handler
 
-    def wake(self) -> None:
-        """Let running actions take their next step (called by the node between loop turns)."""
+    def wake(self) -> bool:
+        """Let a running action go on (the node calls it between loop turns); tell if one does."""
         wake, self._wake = self._wake, []
         for future in wake:
             future.set_result(None)
+        return bool(wake)
+
+    def finish(self, grace: float = 0.25) -> None:
+        """
+        Let a running action end and answer before the node shuts down (QUITTING, a signal).
+
+        Its goal is aborted (the generation changes), then requests are served for
+        ``grace`` s more (a client asking for the result now).
+        """
+        if self._running_goal is None:
+            return
+        self.generation += 1
+        end = time.monotonic() + 1.0
+        while self._running_goal is not None and time.monotonic() < end:
+            self.wake()
+            self.node.executor_.spin_once(timeout_sec=0.05)
+        end = time.monotonic() + grace
+        while time.monotonic() < end:
+            self.node.executor_.spin_once(timeout_sec=0.05)
 
     def header(self) -> Header:
         """Return a header at the published time in the world frame."""
@@ -199,6 +227,7 @@ class StandardInterface:
         node = self.node
         if target == S.STATE_QUITTING:
             self.quitting = True
+            self.generation += 1
             node._paused = True
             node.stop()   # (the loop ends; the node lingers for this reply to go out)
             response.result = result(message='quitting')
@@ -215,6 +244,7 @@ class StandardInterface:
         else:   # STOPPED: pause and reset everything, the clock to 0
             node.set_paused(True)
             node.reset(state=True, clock=True)
+            self.generation += 1
             self.stopped = True
             response.result = result(message="stopped: paused at the scene's start, t = 0")
             return response
@@ -239,7 +269,10 @@ class StandardInterface:
                                             (R.SCOPE_TIME, 'the clock to 0')) if scope & bit]
         if scope & R.SCOPE_SPAWNED:
             done.append('no spawned entity to remove')
-        self.stopped = False
+        self.generation += 1
+        # Still STOPPED (paused at the start, t = 0) unless the state alone was reset
+        # (its clock runs on).
+        self.stopped = self.stopped and not (scope & R.SCOPE_STATE and not scope & R.SCOPE_TIME)
         response.result = result(message='reset: ' + ', '.join(done)
                                  + f'; t = {self.node.session.seconds():.9g} s')
         return response
@@ -270,17 +303,30 @@ class StandardInterface:
         return None
 
     async def _simulate(self, goal_handle):
-        """Take the goal's steps one a loop turn, with feedback; end on a cancel or a problem."""
+        """
+        Take the goal's steps with feedback after each; end on a cancel or a problem.
+
+        Steps are taken for up to :data:`ACTION_SLICE` s of wall time a loop turn; between
+        turns the node serves other requests (a cancel, a reset, a play).
+        """
+        self._running_goal = goal_handle
+        try:
+            return await self._run_goal(goal_handle)
+        finally:
+            self._running_goal = None
+
+    async def _run_goal(self, goal_handle):
         steps = goal_handle.request.steps
         out = SimulateSteps.Result()
-        done = 0
+        done, generation = 0, self.generation
         problem = self.step_problem(steps)
+        turn = time.perf_counter()
         while problem is None and done < steps:
             if goal_handle.is_cancel_requested:
                 goal_handle.canceled()
                 out.result = result(message=f'canceled after {done} of {steps} steps')
                 return out
-            taken, failure = self.node.take_steps(1)
+            taken, failure = self.node.take_steps(1, publish=False)
             done += taken
             self.stopped = self.stopped and done == 0
             if failure:
@@ -289,11 +335,18 @@ class StandardInterface:
                 break
             goal_handle.publish_feedback(SimulateSteps.Feedback(completed_steps=done,
                                                                 remaining_steps=steps - done))
-            if done < steps:
+            if done < steps and time.perf_counter() - turn >= ACTION_SLICE:
+                self.node.publish_now()   # (the state where it pauses for a turn)
                 future = Future()
                 self._wake.append(future)
                 await future   # (the node serves other requests, and cancels, meanwhile)
+                turn = time.perf_counter()
                 problem = self.step_problem(steps - done)
+            if problem is None and self.generation != generation:
+                problem = (Result.RESULT_OPERATION_FAILED,
+                           f'after {done} of {steps} steps: the simulation was reset, '
+                           f'stopped or is quitting')
+        self.node.publish_now()   # (the state after its last step)
         if problem is not None:
             goal_handle.abort()
             out.result = result(*problem)
@@ -328,8 +381,8 @@ class StandardInterface:
         names, response.result = self._entity_call(lambda: self._selected(request.filters))
         response.entities = names or []
         header = self.header()
-        response.states = [conv.entity_state(header, *self.entities.state(n))
-                           for n in response.entities]
+        response.states = [conv.entity_state(header, *state)
+                           for state in self.entities.states(response.entities)]
         return response
 
     def _get_entity_state(self, request, response):
