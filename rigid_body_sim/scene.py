@@ -453,6 +453,27 @@ def _check_surface(values: dict, field: str) -> None:
         raise exc.within(field) from None
 
 
+def body_from_dict(data: Any, folder: Union[str, Path] = '.', field: str = 'body') -> tuple:
+    """
+    Return ``(RigidBody, shapes, marker)`` of one body in the scene format (``bodies:``).
+
+    Its ``shapes`` (mesh files relative to ``folder``) and its marker shape (the
+    ``inertia: {box|sphere|cylinder: ...}`` it gives, or None), as a scene builds them:
+    what a spawn in that format adds. Errors name ``field``.
+    """
+    body = _body(data, field)
+    try:
+        shapes = _collision_shapes(None, [data], Path(folder))
+    except SpecError as exc:
+        raise SpecError(exc.field.replace('bodies[0]', field, 1), exc.problem) from None
+    inertia, marker = data['inertia'], None
+    if isinstance(inertia, dict) and len(inertia) == 1 and \
+            next(iter(inertia)) in ('box', 'sphere', 'cylinder'):
+        kind, dims = next(iter(inertia.items()))
+        marker = (kind, [float(d) for d in np.atleast_1d(dims)])
+    return body, shapes, marker
+
+
 def _body(data: Any, field: str) -> RigidBody:
     data = _mapping(data, field, BODY_KEYS)
     for key in ('name', 'mass', 'inertia'):

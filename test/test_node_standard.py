@@ -118,12 +118,13 @@ def test_features_states_resets_and_steps_answer_as_the_standard_says(ros, tmp_p
     features = _call(ros, node, GetSimulatorFeatures, 'get_simulator_features').features
     F = SimulatorFeatures
     assert sorted(features.features) == sorted([
+        F.SPAWNING, F.DELETING, F.SPAWNING_RESOURCE_STRING,
         F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES, F.ENTITY_STATE_GETTING, F.ENTITY_STATE_SETTING,
         F.ENTITY_INFO_GETTING, F.SIMULATION_RESET, F.SIMULATION_RESET_TIME,
-        F.SIMULATION_RESET_STATE, F.SIMULATION_STATE_GETTING, F.SIMULATION_STATE_SETTING,
-        F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE, F.STEP_SIMULATION_MULTIPLE,
-        F.STEP_SIMULATION_ACTION])
-    assert list(features.spawn_formats) == []   # (spawning is not served yet)
+        F.SIMULATION_RESET_STATE, F.SIMULATION_RESET_SPAWNED, F.SIMULATION_STATE_GETTING,
+        F.SIMULATION_STATE_SETTING, F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE,
+        F.STEP_SIMULATION_MULTIPLE, F.STEP_SIMULATION_ACTION])
+    assert list(features.spawn_formats) == ['yaml']
     # Playing: stepping is refused (INCORRECT_STATE), by the service and the action.
     assert _sim_state(ros, node) == PLAYING
     assert _call(ros, node, StepSimulation, 'step_simulation').result.result == INCORRECT_STATE
@@ -185,9 +186,7 @@ def test_features_states_resets_and_steps_answer_as_the_standard_says(ros, tmp_p
     assert _set_state(ros, node, STOPPED).result == OK
     assert _set_state(ros, node, PAUSED).result == OK and _sim_state(ros, node) == PAUSED
     # What is not served answers FEATURE_UNSUPPORTED.
-    for srv_type, name in ((SpawnEntity, 'spawn_entity'), (DeleteEntity, 'delete_entity'),
-                           (GetNamedPoses, 'get_named_poses')):
-        assert _call(ros, node, srv_type, name).result.result == UNSUPPORTED
+    assert _call(ros, node, GetNamedPoses, 'get_named_poses').result.result == UNSUPPORTED
     # Play, then quit: the node replies and exits cleanly.
     assert _set_state(ros, node, PLAYING).result == OK and _sim_state(ros, node) == PLAYING
     assert _set_state(ros, node, QUITTING).result == OK

@@ -46,7 +46,8 @@ def _same(x, y):
 
 
 def _close(x, y):
-    """Positions to 1e-10 m, velocities to 1e-8 m/s (and rad, rad/s): the solvers' restart.
+    """
+    Positions to 1e-10 m, velocities to 1e-8 m/s (and rad, rad/s): the solvers' restart.
 
     A restarted fixed point may end 1e-8 of an impulse (~m g dt) apart: 1e-10 m/s a
     step, 3e-11 m over 300 steps of 1 ms; measured: 1e-17.
@@ -166,7 +167,25 @@ def test_a_scene_with_joints_refuses_spawning_for_now(tmp_path):
     urdf.write_text('<robot name="r"><link name="base"><inertial><mass value="1"/>'
                     '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
                     '</link></robot>')
-    sim = scene_from_dict({'dt': 1e-3, 'robots': [{'urdf': str(urdf)}]}, str(tmp_path / 's.yaml')).simulation
+    sim = scene_from_dict({'dt': 1e-3, 'robots': [{'urdf': str(urdf)}]},
+                          str(tmp_path / 's.yaml')).simulation
     with pytest.raises(SpecError) as err:
         sim.add_body(RigidBody('c', 1.0, (0.1,) * 3))
     assert 'not supported yet' in str(err.value)
+
+
+def test_reset_scene_brings_back_the_scene_as_built():
+    sim = _scene()
+    sim.step(10)
+    sim.add_body(RigidBody('c', 1.0, (0.1,) * 3, position_world=(7.0, 0.0, 2.0)))
+    assert sim.remove_body('b') == ['pin']
+    assert sim.scene_changed
+    sim.set_step(5e-4)
+    sim.reset_scene()
+    assert sim.bodies.names == ['a', 'b', 'box'] and sim.constraint_names == ['pin']
+    assert sim.spawned == [] and not sim.scene_changed and sim.dt == 5e-4 and sim.time == 0.0
+    fresh = _scene()
+    fresh.set_step(5e-4)
+    sim.step(100)
+    fresh.step(100)
+    assert np.array_equal(sim.state.y, fresh.state.y)

@@ -129,8 +129,16 @@ class Simulation:
                  shapes: Sequence[CollisionShape] = ()) -> None:
         self.dt = positive_scalar(dt, 'dt')
         #: What the scene was built of, for a spawn or a removal (:meth:`add_body`).
-        self._built = dict(effects=list(effects), constraint_time_constant=constraint_time_constant,
-                           tolerance_budget=tolerance_budget, shapes=list(shapes))
+        self._built = {'effects': list(effects), 'shapes': list(shapes),
+                       'constraint_time_constant': constraint_time_constant,
+                       'tolerance_budget': tolerance_budget}
+        #: What the scene was first built of (:meth:`reset_scene`).
+        self._origin = {'bodies': list(bodies), 'effects': list(effects),
+                        'constraints': list(constraints),
+                        'constraint_time_constant': constraint_time_constant,
+                        'tolerance_budget': tolerance_budget, 'robots': list(robots),
+                        'command_groups': list(command_groups),
+                        'scene_joints': list(scene_joints), 'shapes': list(shapes)}
         #: Bodies added at run time (:meth:`add_body`), in order.
         self._spawned: list = []
         bodies, constraints = list(bodies), list(constraints)
@@ -887,6 +895,7 @@ class Simulation:
                                                        f'{names[con.shape_b[k]]!r} by '
                                                        f'{con.depth[k]:.3g} m')
         new._spawned = self._spawned + [body.name]
+        new._origin = self._origin
         self._adopt(new)
 
     def remove_body(self, name: str) -> list:
@@ -911,6 +920,7 @@ class Simulation:
         new = self._rebuilt([b for b in self._specs if b.name != name],
                             [s for s in self._built['shapes'] if s.body != name], (name,))
         new._spawned = [b for b in self._spawned if b != name]
+        new._origin = self._origin
         self._adopt(new)
         return gone
 
@@ -922,8 +932,33 @@ class Simulation:
             new = self._rebuilt([b for b in self._specs if b.name not in names],
                                 [s for s in self._built['shapes'] if s.body not in names],
                                 tuple(names))
+            new._origin = self._origin
             self._adopt(new)
         return names
+
+    @property
+    def scene_changed(self) -> bool:
+        """Tell whether bodies were added or removed since the scene was built."""
+        return [b.name for b in self._specs] != [b.name for b in self._origin['bodies']] \
+            or bool(self._spawned)
+
+    def reset_scene(self) -> None:
+        """
+        Back to the scene as it was built: bodies spawned since removed, removed ones back.
+
+        The step, the integrator and the accuracy knob stay as they are now. Without a
+        change of bodies it is :meth:`reset`.
+        """
+        if not self.scene_changed:
+            self.reset()
+            return
+        origin = dict(self._origin)
+        origin['effects'] = [copy.deepcopy(e) for e in origin['effects']]
+        control = self._control
+        new = Simulation(integrator=self.integrator_name, dt=self.dt,
+                         tolerance=None if control is None else control.tolerance, **origin)
+        new._origin = self._origin
+        self._adopt(new)
 
     @property
     def spawned(self) -> list:
@@ -951,6 +986,7 @@ class Simulation:
             if isinstance(effect, AppliedWrenches):
                 effect._pending = [e for e in effect._pending if e.get('body') not in gone]
             effects.append(effect)
+
         def touches(c: Any) -> bool:
             return isinstance(c, Constraint) and (c.body_a in gone or c.body_b in gone)
 

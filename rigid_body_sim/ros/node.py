@@ -188,14 +188,7 @@ class SimNode(Node):
         self._wrench_subs = {}
         if s.per_body_topics:
             for name in self.sim.bodies.names:
-                for kind, msg_type in (('pose', PoseStamped), ('twist', TwistStamped)):
-                    topic = body_topic(name, kind)
-                    self._pubs[topic] = self.create_publisher(msg_type, topic, 10,
-                                                              event_callbacks=QUIET_PUB)
-                self._wrench_subs[name] = self.create_subscription(
-                    WrenchStamped, body_topic(name, 'wrench'),
-                    lambda msg, body=name: self._on_wrench(body, msg), QoSProfile(depth=10),
-                    event_callbacks=QUIET_SUB)
+                self._make_body_topics(name)
         for topic, msg_type in ((STATES_TOPIC, BodyStates), (METRICS_TOPIC, Metrics),
                                 (MARKERS_TOPIC, MarkerArray)):
             self._pubs[topic] = self.create_publisher(msg_type, topic, 10)
@@ -219,6 +212,17 @@ class SimNode(Node):
                                             ServiceIntrospectionState.CONTENTS)
         #: The ROS simulator interface (simulation_interfaces): services and an action.
         self.standard = StandardInterface(self)
+
+    def _make_body_topics(self, name: str) -> None:
+        """``~/bodies/<name>/pose`` and ``twist`` out, ``wrench`` in."""
+        for kind, msg_type in (('pose', PoseStamped), ('twist', TwistStamped)):
+            topic = body_topic(name, kind)
+            self._pubs[topic] = self.create_publisher(msg_type, topic, 10,
+                                                      event_callbacks=QUIET_PUB)
+        self._wrench_subs[name] = self.create_subscription(
+            WrenchStamped, body_topic(name, 'wrench'),
+            lambda msg, body=name: self._on_wrench(body, msg), QoSProfile(depth=10),
+            event_callbacks=QUIET_SUB)
 
     def _make_robot_interfaces(self) -> None:
         """joint_states, ~/joint_commands, <group>/commands (joints), robot_description, tf."""
@@ -339,6 +343,8 @@ class SimNode(Node):
         return self._rejected(cause, where, message)
 
     def _on_wrench(self, body: str, msg: WrenchStamped) -> None:
+        if body not in self.sim.bodies.index:   # (a message for a body deleted meanwhile)
+            return
         force, torque = conv.wrench_arrays(msg)
         try:
             self.session.queue_wrench(body, force, torque, msg.header.frame_id)
@@ -361,7 +367,7 @@ class SimNode(Node):
     # -- services -------------------------------------------------------------------------
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response):
-        self.reset(state=True, clock=self.settings.reset_time)
+        self.reset(state=True, clock=self.settings.reset_time, scene=True)
         self.standard.stopped = False
         response.success = True
         response.message = (f'reset to the initial state of the scene, stamped t = '
@@ -372,16 +378,18 @@ class SimNode(Node):
         self.get_logger().info(response.message)
         return response
 
-    def reset(self, state: bool, clock: bool) -> None:
+    def reset(self, state: bool, clock: bool, scene: bool = False) -> None:
         """
         Reset the scene (``state``: bodies, joints, constraints, wrenches) and/or the clock.
 
-        ``clock``: the published clock restarts at 0. Then publish. ``~/reset``, the
+        ``clock``: the published clock restarts at 0. ``scene``: the scene as loaded
+        (spawned bodies removed, deleted ones back). Then publish. ``~/reset``, the
         standard's ``reset_simulation`` and its STOPPED share it.
         """
         if state:
-            self.session.reset(time=clock)
-            self._sync_constraint_publishers()
+            before = list(self.sim.bodies.names)
+            self.session.reset(time=clock, scene=scene)
+            self.bodies_changed(before)
         elif clock:
             self.session.restart_clock()
         if clock:   # (a new epoch of stamps: its first /tf goes out even at a stamp seen)
@@ -391,6 +399,28 @@ class SimNode(Node):
         self._new_window(now)
         self._publish_clock()
         self._publish_now()
+
+    def bodies_changed(self, before: list, markers: Optional[dict] = None) -> None:
+        """
+        Follow a change of bodies from ``before`` (names): topics, outputs, entities.
+
+        Each body added gets its ``~/bodies/<B>/{pose,twist,wrench}``, each removed one
+        loses them; the constraints' reaction publishers follow the constraints.
+        """
+        now = list(self.sim.bodies.names)
+        if now != before:
+            self.session.bodies_changed(markers)
+            if self.settings.per_body_topics:
+                for name in set(before) - set(now):
+                    for kind in ('pose', 'twist'):
+                        self.destroy_publisher(self._pubs.pop(body_topic(name, kind)))
+                    self.destroy_subscription(self._wrench_subs.pop(name))
+                for name in now:
+                    if name not in self._wrench_subs:
+                        self._make_body_topics(name)
+            self.standard.entities_changed()
+            self._audience_expires = 0.0
+        self._sync_constraint_publishers()
 
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response):
         diverged = self.session.diverged

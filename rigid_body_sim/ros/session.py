@@ -247,17 +247,21 @@ class Session:
             commands, self.pending_commands = self.pending_commands, {}
             self.sim.command_joints(commands)   # (held until the next command per joint)
 
-    def reset(self, time: Optional[bool] = None) -> None:
+    def reset(self, time: Optional[bool] = None, scene: bool = False) -> None:
         """
-        Back to the scene's initial state; time runs on unless ``time`` (default: ``reset_time``).
+        Back to the initial state; time runs on unless ``time`` (default: ``reset_time``).
 
-        ``time``: the published clock restarts at 0 too.
+        ``time``: the published clock restarts at 0 too. ``scene``: the scene as it was
+        loaded (bodies spawned since removed, removed ones back); else the bodies there
+        now, spawned ones where they were spawned. The caller follows a change of bodies
+        (:meth:`bodies_changed`).
         """
         if self.settings.reset_time if time is None else time:
             self.offset_ns = 0
         else:   # the initial state is stamped one step after the last state
             self.offset_ns = self.now_ns() + int(round(self.sim.dt * conv.NANOSECONDS))
-        self.sim.reset()   # keeps dt and the integrator; clears joint commands, counters
+        # (both keep dt and the integrator; clear joint commands, counters)
+        self.sim.reset_scene() if scene else self.sim.reset()
         self.pending.clear()
         self.pending_commands.clear()
         self.diverged = None
@@ -334,6 +338,22 @@ class Session:
         return rows
 
     # -- stepping -------------------------------------------------------------------------
+
+    def bodies_changed(self, markers: Optional[dict] = None) -> None:
+        """
+        Follow bodies added or removed (a spawn, a deletion, a scene reset).
+
+        ``markers``: ``{body: (shape, dims)}`` of bodies added (their marker shapes).
+        The outputs are rebuilt for the bodies there now; inputs queued for bodies gone
+        are dropped.
+        """
+        names = set(self.sim.bodies.names)
+        shapes = {b: m for b, m in {**self.outputs.shapes, **(markers or {})}.items()
+                  if b in names}
+        collision = self.outputs.collision_markers
+        self.outputs = Outputs(self.sim, shapes, self.settings.world_frame, self.scene.robots)
+        self.outputs.collision_markers = collision
+        self.pending = {b: v for b, v in self.pending.items() if b in names}
 
     def restart_clock(self) -> None:
         """Restart the published clock at 0 now, the simulation where it is."""

@@ -38,6 +38,7 @@ Our own ``~/reset``, ``~/pause`` and ``~/step`` share these implementations.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 import time
 import traceback
 from typing import Any
@@ -55,20 +56,31 @@ from simulation_interfaces.srv import DeleteEntity, GetEntities, GetEntitiesStat
     GetSimulationState, GetSimulatorFeatures, GetSpawnables, ResetSimulation, SetEntityInfo, \
     SetEntityState, SetSimulationState, SpawnEntity, StepSimulation
 from std_msgs.msg import Header
+import yaml
 
 from . import conversions as conv
-from .entities import Entities, EntityError
+from .entities import Entities, EntityError, ROBOT
+from .inputs import check_name_token
+from .outputs import body_topic
+from ..core import SpecError
+from ..scene import body_from_dict
 
 F = SimulatorFeatures
 #: What this node implements of the standard (GetSimulatorFeatures).
-FEATURES = (F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES, F.ENTITY_STATE_GETTING,
+FEATURES = (F.SPAWNING, F.DELETING, F.SPAWNING_RESOURCE_STRING,
+            F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES, F.ENTITY_STATE_GETTING,
             F.ENTITY_STATE_SETTING, F.ENTITY_INFO_GETTING, F.SIMULATION_RESET,
-            F.SIMULATION_RESET_TIME, F.SIMULATION_RESET_STATE, F.SIMULATION_STATE_GETTING,
+            F.SIMULATION_RESET_TIME, F.SIMULATION_RESET_STATE, F.SIMULATION_RESET_SPAWNED,
+            F.SIMULATION_STATE_GETTING,
             F.SIMULATION_STATE_SETTING, F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE,
             F.STEP_SIMULATION_MULTIPLE, F.STEP_SIMULATION_ACTION)
 CUSTOM_INFO = ('rigid_body_sim: exact multipliers (joints, limits, contact), every '
                "service of simulation_interfaces 1.0.0 answers; entities are the scene's "
-               "bodies and robots (a robot's state is its base link's); see docs/node.md")
+               "bodies and robots (a robot's state is its base link's); spawn format "
+               "'yaml': one body as a scene's bodies: entry (shapes included; URDF robots "
+               'not yet); see docs/node.md')
+#: What spawn_entity takes: one body in the scene format (a scene's ``bodies:`` entry).
+SPAWN_FORMATS = ['yaml']
 S = SimulationState
 STATE_NAMES = {S.STATE_STOPPED: 'STOPPED', S.STATE_PLAYING: 'PLAYING',
                S.STATE_PAUSED: 'PAUSED', S.STATE_QUITTING: 'QUITTING'}
@@ -117,8 +129,8 @@ class StandardInterface:
                 (SetEntityState, 'set_entity_state', self._set_entity_state),
                 (GetEntityInfo, 'get_entity_info', self._get_entity_info),
                 (GetEntityBounds, 'get_entity_bounds', self._get_entity_bounds),
-                (SpawnEntity, 'spawn_entity', self._unsupported('spawning')),
-                (DeleteEntity, 'delete_entity', self._unsupported('deleting entities')),
+                (SpawnEntity, 'spawn_entity', self._spawn),
+                (DeleteEntity, 'delete_entity', self._delete),
                 (SetEntityInfo, 'set_entity_info', self._unsupported('setting entity info')),
                 (GetNamedPoses, 'get_named_poses', self._unsupported('named poses')),
                 (GetNamedPoseBounds, 'get_named_pose_bounds',
@@ -203,7 +215,8 @@ class StandardInterface:
     # -- the simulation -------------------------------------------------------------------
 
     def _features(self, request, response):
-        response.features = SimulatorFeatures(features=list(FEATURES), spawn_formats=[],
+        response.features = SimulatorFeatures(features=list(FEATURES),
+                                              spawn_formats=list(SPAWN_FORMATS),
                                               custom_info=CUSTOM_INFO)
         return response
 
@@ -243,7 +256,7 @@ class StandardInterface:
             node.set_paused(True)
         else:   # STOPPED: pause and reset everything, the clock to 0
             node.set_paused(True)
-            node.reset(state=True, clock=True)
+            node.reset(state=True, clock=True, scene=True)
             self.generation += 1
             self.stopped = True
             response.result = result(message="stopped: paused at the scene's start, t = 0")
@@ -262,13 +275,20 @@ class StandardInterface:
                                      f'define (TIME 1, STATE 2, SPAWNED 4, ALL 255)')
             return response
         done = []
+        node = self.node
+        if scope & R.SCOPE_SPAWNED and scope != SCOPE_BITS:
+            before = list(node.sim.bodies.names)
+            gone = node.sim.remove_spawned()
+            node.bodies_changed(before)
+            done.append(f'spawned entities removed: {gone}')
         if scope & (R.SCOPE_STATE | R.SCOPE_TIME):
-            self.node.reset(state=bool(scope & R.SCOPE_STATE),
-                            clock=bool(scope & R.SCOPE_TIME))
+            # Every bit: the scene as loaded (deleted bodies back, spawned ones gone).
+            node.reset(state=bool(scope & R.SCOPE_STATE), clock=bool(scope & R.SCOPE_TIME),
+                       scene=scope == SCOPE_BITS)
             done += [what for bit, what in ((R.SCOPE_STATE, "the scene's start state"),
                                             (R.SCOPE_TIME, 'the clock to 0')) if scope & bit]
-        if scope & R.SCOPE_SPAWNED:
-            done.append('no spawned entity to remove')
+            if scope == SCOPE_BITS:
+                done.append('the scene as loaded')
         self.generation += 1
         # Still STOPPED (paused at the start, t = 0) unless the state alone was reset
         # (its clock runs on).
@@ -354,6 +374,131 @@ class StandardInterface:
         goal_handle.succeed()
         out.result = result(message=f'{done} steps to t = {self.node.session.seconds():.9g} s')
         return out
+
+    # -- spawning and deleting -----------------------------------------------------------
+
+    def entities_changed(self) -> None:
+        """Follow bodies added or removed."""
+        self.entities = Entities(self.node.sim)
+
+    def _spawn(self, request, response):
+        """One body in the scene format, from ``resource_string`` or a file at ``uri``."""
+        Sp = SpawnEntity.Response
+        try:
+            body, shapes, marker = self._spawned_body(request)
+        except EntityError as exc:
+            response.result = result(getattr(Sp, exc.code, CODES.get(exc.code)), str(exc))
+            return response
+        node = self.node
+        before = list(node.sim.bodies.names)
+        try:
+            node.sim.add_body(body, shapes)
+        except SpecError as exc:
+            code = Sp.INVALID_POSE if 'would overlap' in exc.problem else (
+                Result.RESULT_FEATURE_UNSUPPORTED if exc.field == 'scene'
+                else Sp.RESOURCE_PARSE_ERROR)
+            response.result = result(code, str(exc))
+            return response
+        node.bodies_changed(before, {body.name: marker} if marker else None)
+        self.stopped = False
+        node.publish_now()
+        response.entity_name = body.name
+        response.result = result(message=f'spawned {body.name!r} ({len(shapes)} shapes) at '
+                                         f't = {node.session.seconds():.9g} s')
+        return response
+
+    def _spawned_body(self, request) -> tuple:
+        """Return ``(RigidBody, shapes, marker)`` of a spawn request, or EntityError (a code)."""
+        text, folder = request.resource_string, Path('.')
+        if not text and not request.uri:
+            raise EntityError('NO_RESOURCE', 'uri and resource_string are both empty')
+        if request.entity_namespace:
+            raise EntityError('FEATURE_UNSUPPORTED', 'entity_namespace: entities are not '
+                                                     'put in namespaces here (leave it empty)')
+        if not text:
+            path = Path(request.uri[len('file://'):] if request.uri.startswith('file://')
+                        else request.uri)
+            if path.suffix.lower() not in ('.yaml', '.yml'):
+                raise EntityError('UNSUPPORTED_FORMAT', f'uri: {request.uri!r}: formats: '
+                                                        f'{SPAWN_FORMATS} (.yaml, .yml)')
+            try:
+                text = path.read_text()
+            except (OSError, UnicodeDecodeError) as exc:
+                raise EntityError('RESOURCE_PARSE_ERROR', f'uri: {exc}') from None
+            folder = path.parent
+        if text.lstrip().startswith('<'):
+            raise EntityError('UNSUPPORTED_FORMAT', f'resource: XML (URDF, SDFormat) is not '
+                                                    f'spawned yet; formats: {SPAWN_FORMATS}')
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise EntityError('RESOURCE_PARSE_ERROR', f'resource: not YAML: {exc}') from None
+        if not isinstance(data, dict):
+            raise EntityError('RESOURCE_PARSE_ERROR', f'resource: expected one body as a '
+                                                      f"mapping (a scene's bodies: entry), got "
+                                                      f'{data!r}'[:300])
+        data = dict(data)
+        name = request.name or data.get('name') or ''
+        node = self.node
+        try:
+            check_name_token(name, 'name', node.session.full_topic(body_topic(name, 'wrench')))
+        except SpecError as exc:
+            raise EntityError('NAME_INVALID', str(exc)) from None
+        taken = set(self.entities.names()) | set(node.sim.bodies.names)
+        if name in taken:
+            if not request.allow_renaming:
+                raise EntityError('NAME_NOT_UNIQUE', f'name: {name!r} is taken (allow_renaming '
+                                                     f'gives it a free one)')
+            base, k = name, 1
+            while name in taken:
+                name, k = f'{base}_{k}', k + 1
+        data['name'] = name
+        pose = request.initial_pose
+        if pose.header.frame_id not in ('', node.settings.world_frame):
+            raise EntityError('INVALID_POSE', f'initial_pose.header.frame_id: '
+                                              f'{pose.header.frame_id!r}: poses are in the '
+                                              f"world frame ('' or "
+                                              f'{node.settings.world_frame!r})')
+        position, quat = conv.pose_arrays(pose.pose)
+        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(quat))) or \
+                not 1e-6 < float(np.linalg.norm(quat)):
+            raise EntityError('INVALID_POSE', 'initial_pose: not finite, or not a rotation')
+        if np.any(position) or not np.array_equal(quat, [0.0, 0.0, 0.0, 1.0]) \
+                or pose.header.frame_id:
+            # (the message's default, the identity at the origin, leaves the resource's)
+            data['position_world'] = position.tolist()
+            data['orientation_xyzw'] = (quat / np.linalg.norm(quat)).tolist()
+            data.pop('orientation_rpy', None)
+        try:
+            return body_from_dict(data, folder, 'resource')
+        except SpecError as exc:
+            missing = 'mesh' in exc.field and ('No such file' in exc.problem
+                                               or 'not found' in exc.problem)
+            raise EntityError('MISSING_ASSETS' if missing else 'RESOURCE_PARSE_ERROR',
+                              str(exc)) from None
+
+    def _delete(self, request, response):
+        """Remove an entity: a body with its shapes and the constraints that hold it."""
+        _, response.result = self._entity_call(lambda: self.entities.get(request.entity))
+        if response.result.result != Result.RESULT_OK:
+            return response
+        entity = self.entities.get(request.entity)
+        node = self.node
+        if entity.category == ROBOT:
+            response.result = result(Result.RESULT_FEATURE_UNSUPPORTED,
+                                     'deleting a robot is not supported yet')
+            return response
+        before = list(node.sim.bodies.names)
+        try:
+            gone = node.sim.remove_body(entity.body)
+        except SpecError as exc:
+            response.result = result(Result.RESULT_OPERATION_FAILED, str(exc))
+            return response
+        node.bodies_changed(before)
+        node.publish_now()
+        response.result = result(message=f'deleted {request.entity!r} and its constraints '
+                                         f'{gone} at t = {node.session.seconds():.9g} s')
+        return response
 
     # -- entities -------------------------------------------------------------------------
 
