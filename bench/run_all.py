@@ -20,6 +20,7 @@ exact drives bounded by their efforts; the Panda's URDF from the bench requireme
 ``bench/contact_detection.py`` (collision detection against the number of shapes),
 ``bench/contact_pairs.py`` (the narrow phases by pair of kinds),
 ``bench/contact_panda.py`` (the Panda pushing a box),
+``bench/spawn.py`` (spawning and deleting against scene size),
 ``bench/contact_dynamics.py`` (contact forces: cost, penetration, error) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
@@ -342,6 +343,11 @@ def sections(quick: bool, node_args: list) -> list:
                   'its base and pushing a box along the ground, with the pusher '
                   "frictionless and at μ 0.5: the step's cost, the box's travel and speed, "
                   'the penetrations, and our LCPs, beside MuJoCo on servos.')),
+        (None, 'spawn', ['--quick'] if quick else [], report.Section(
+            'Spawning and deleting: cost against scene size',
+            f'./dev.sh python bench/spawn.py{q}', [T('spawn.md')],
+            about='Spheres resting on the ground, N of them: what `Simulation.add_body` and '
+                  '`remove_body` cost beside a step of the same scene.')),
         ('skip_mujoco', 'accuracy_study', ['--quick'] if quick else [], report.Section(
             'What accuracy costs, beside MuJoCo', './dev.sh python bench/accuracy_study.py',
             [],

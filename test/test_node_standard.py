@@ -324,3 +324,102 @@ def test_a_running_action_is_alone_and_ends_on_a_reset_and_on_quitting(ros, tmp_
     ros.client.wait_for(result.done, 'the action result', node=node)
     assert (result.result().status, result.result().result.result.result) == (6, FAILED)
     assert node.proc.wait(timeout=30) == 0
+
+
+SPAWN_SCENE = f"""
+name: spawning
+integrator: lie_poisson2
+dt: {DT}
+effects:
+  gravity: {{g_world: [0.0, 0.0, -{G}]}}
+bodies:
+  - name: brick
+    mass: 1.0
+    inertia: [0.1, 0.2, 0.3]
+    position_world: [5.0, 0.0, 50.0]
+    shapes: [{{kind: box, size: [0.2, 0.4, 0.6]}}]
+  - {{name: bob, mass: 1.0, inertia: [0.01, 0.01, 0.01], position_world: [-5.0, 0.0, 50.0]}}
+constraints:
+  - {{name: pin, type: ball, body_a: bob, anchor_world: [-5.0, 0.0, 51.0]}}
+"""
+CRATE = ('{name: crate, mass: 2.0, inertia: {box: [0.2, 0.2, 0.2]}, '
+         'shapes: [{kind: box, size: [0.2, 0.2, 0.2]}]}')
+
+
+def _spawn(ros, node, resource=CRATE, name='', x=0.0, y=3.0, z=20.0, **fields):
+    request = SpawnEntity.Request(name=name, resource_string=resource, **fields)
+    request.initial_pose.pose.position.x = x
+    request.initial_pose.pose.position.y = y
+    request.initial_pose.pose.position.z = z
+    return ros.client.call(SpawnEntity, 'spawn_entity', request, node=node)
+
+
+def _entities(ros, node):
+    return list(_call(ros, node, GetEntities, 'get_entities').entities)
+
+
+def _topics(ros):
+    return {n for n, _ in ros.client.node.get_topic_names_and_types()}
+
+
+def test_bodies_spawned_and_deleted_at_run_time(ros, tmp_path):
+    path = tmp_path / 'scene.yaml'
+    path.write_text(SPAWN_SCENE)
+    node = ros.start({'scene': str(path), 'start_paused': True})
+    codes = SpawnEntity.Response
+    assert _entities(ros, node) == ['brick', 'bob']
+    reply = _spawn(ros, node)
+    assert reply.result.result == OK and reply.entity_name == 'crate'
+    assert _entities(ros, node) == ['brick', 'bob', 'crate']
+    pose_topic = '/rigid_body_sim/bodies/crate/pose'
+    ros.client.wait_for(lambda: pose_topic in _topics(ros), pose_topic, node=node)
+    # It falls from its initial pose: z0 − g t²/2 (lie_poisson2: exact to rounding).
+    t0 = _state(ros, node, 'crate')[0]
+    assert _call(ros, node, StepSimulation, 'step_simulation', steps=100).result.result == OK
+    t, p = _state(ros, node, 'crate')[:2]
+    assert t == pytest.approx(t0 + 0.1, abs=1e-9)
+    np.testing.assert_allclose(p, [0.0, 3.0, 20.0 - 0.5 * G * 0.01], rtol=0, atol=1e-12)
+    # Names: taken (refused, or renamed when allowed).
+    assert _spawn(ros, node, x=9.0).result.result == codes.NAME_NOT_UNIQUE
+    renamed = _spawn(ros, node, x=9.0, allow_renaming=True)
+    assert renamed.result.result == OK and renamed.entity_name == 'crate_1'
+    # Refusals, each with the standard's code, changing nothing.
+    before = (_entities(ros, node), _state(ros, node, 'crate'), _state(ros, node, 'brick'))
+    missing_mesh = ('{name: m, mass: 1.0, inertia: [0.1, 0.1, 0.1], shapes: [{kind: mesh, '
+                    f'mesh: {tmp_path / "absent.stl"}}}]}}')
+    for fields, code in (
+            ({'name': 'a b'}, codes.NAME_INVALID),
+            ({'resource': ''}, codes.NO_RESOURCE),
+            ({'resource': '<robot name="r"/>'}, codes.UNSUPPORTED_FORMAT),
+            ({'resource': '', 'uri': str(tmp_path / 'r.urdf')}, codes.UNSUPPORTED_FORMAT),
+            ({'resource': 'name: [unclosed'}, codes.RESOURCE_PARSE_ERROR),
+            ({'resource': '{name: n, inertia: [1, 1, 1]}'}, codes.RESOURCE_PARSE_ERROR),
+            ({'resource': missing_mesh}, codes.MISSING_ASSETS),
+            ({'name': 'c2', 'x': 5.0, 'y': 0.0, 'z': 50.2}, codes.INVALID_POSE),   # in brick
+            ({'name': 'c3', 'z': math.nan}, codes.INVALID_POSE)):
+        reply = _spawn(ros, node, **fields)
+        assert reply.result.result == code, (fields, reply.result.error_message)
+    assert before[0] == _entities(ros, node)
+    assert _same(before[1], _state(ros, node, 'crate'))
+    assert _same(before[2], _state(ros, node, 'brick'))
+    # A spawn from a file (its format by its suffix).
+    (tmp_path / 'crate.yaml').write_text(CRATE)
+    from_file = _spawn(ros, node, resource='', uri=f'file://{tmp_path / "crate.yaml"}',
+                       name='filed', x=-9.0)
+    assert from_file.result.result == OK and from_file.entity_name == 'filed'
+    # Deleting: its constraints named, its topics gone; an unknown one NOT_FOUND.
+    deleted = _call(ros, node, DeleteEntity, 'delete_entity', entity='bob')
+    assert deleted.result.result == OK and "['pin']" in deleted.result.error_message
+    assert 'bob' not in _entities(ros, node)
+    ros.client.wait_for(lambda: '/rigid_body_sim/bodies/bob/pose' not in _topics(ros),
+                        "bob's topics gone", node=node)
+    assert _call(ros, node, DeleteEntity, 'delete_entity',
+                 entity='bob').result.result == NOT_FOUND
+    # Resets: SPAWNED removes what was spawned; ALL brings the scene back as loaded.
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_SPAWNED).result.result == OK
+    assert _entities(ros, node) == ['brick']
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_ALL).result.result == OK
+    assert _entities(ros, node) == ['brick', 'bob']
+    np.testing.assert_array_equal(_state(ros, node, 'bob')[1], [-5.0, 0.0, 50.0])

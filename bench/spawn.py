@@ -1,0 +1,97 @@
+"""
+Spawning and deleting at run time (issue 22): their cost against scene size.
+
+Scenes of N free spheres (0.05 m, 1 kg) resting on a ground in a square grid, gravity,
+``rkmk4``, ``dt`` 1 ms, N = 10, 100, 1000. Per scene: the mean wall time of
+``Simulation.add_body`` (a sphere with its shape dropped above the grid) and of
+``Simulation.remove_body`` (that sphere), each over several repetitions, beside the cost
+of one step of the same scene (``step(100)`` per call), and how many steps a spawn costs.
+A spawn rebuilds the simulation around the new body (the scene's arrays, the detector,
+the kernels' plans) and carries the running state over; its cost grows with N.
+
+Run: ``./dev.sh python bench/spawn.py [--quick]`` (``--quick``: 3 repetitions, else 7).
+Prints the table and writes ``bench/out/spawn.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+import sys
+import time
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import report  # noqa: E402, I100
+
+from rigid_body_sim.core import CollisionShape, Gravity, RigidBody, Simulation  # noqa: E402
+
+OUT = Path(__file__).resolve().parent / 'out'
+R = 0.05
+
+
+def scene(n: int) -> Simulation:
+    """Return N spheres resting on the ground in a grid 0.15 m apart."""
+    side = math.ceil(math.sqrt(n))
+    bodies = [RigidBody(f's{k}', 1.0, (0.4 * R * R,) * 3,
+                        position_world=(0.15 * (k % side), 0.15 * (k // side), R))
+              for k in range(n)]
+    shapes = [CollisionShape('plane', None, friction=0.5)] + [
+        CollisionShape('sphere', b.name, radius=R, friction=0.5) for b in bodies]
+    return Simulation(bodies, [Gravity()], integrator='rkmk4', dt=1e-3, shapes=shapes)
+
+
+def run(sizes: list, repeats: int) -> list:
+    """Return ``[(N, step s, spawn s, delete s)]``."""
+    rows = []
+    for n in sizes:
+        sim = scene(n)
+        sim.step(100)   # (settled; the kernels loaded)
+        t0 = time.perf_counter()
+        sim.step(100)
+        step = (time.perf_counter() - t0) / 100
+        spawn = delete = 0.0
+        for k in range(repeats):
+            body = RigidBody(f'new{k}', 1.0, (0.4 * R * R,) * 3, position_world=(-1.0, -1.0, 1.0))
+            t0 = time.perf_counter()
+            sim.add_body(body, [CollisionShape('sphere', body.name, radius=R)])
+            spawn += time.perf_counter() - t0
+            sim.step(10)
+            t0 = time.perf_counter()
+            sim.remove_body(body.name)
+            delete += time.perf_counter() - t0
+            sim.step(10)
+        rows.append((n, step, spawn / repeats, delete / repeats))
+        print(f'N = {n}: step {step * 1e6:.0f} us, spawn {spawn / repeats * 1e3:.1f} ms, '
+              f'delete {delete / repeats * 1e3:.1f} ms', flush=True)
+    return rows
+
+
+def table(rows: list) -> str:
+    """Return the markdown table."""
+    lines = ['| bodies N | step, us | spawn, ms | delete, ms | a spawn costs (steps) |',
+             '|---|---|---|---|---|']
+    for n, step, spawn, delete in rows:
+        lines.append(f'| {n} | {step * 1e6:.0f} | {spawn * 1e3:.1f} | {delete * 1e3:.1f} | '
+                     f'{spawn / step:.0f} |')
+    return '\n'.join(lines) + (
+        "\n\nA spawn or a deletion rebuilds the simulation around the change (the scene's "
+        "arrays, the contact detector, the kernels' plans; the compiled kernels themselves "
+        'are cached) and carries the running state over, body by body: its cost grows '
+        'with N, where re-planning only what changed would not (not done).')
+
+
+def main(argv=None) -> int:
+    """Run the benchmark; print and write ``bench/out/spawn.md``."""
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--quick', action='store_true', help='3 repetitions (7 without)')
+    args = p.parse_args(argv)
+    t0 = time.perf_counter()
+    rows = run([10, 100, 1000], 3 if args.quick else 7)
+    report.write_page(OUT, 'spawn', 'Spawning and deleting: cost against scene size',
+                      args.quick, table(rows), t0)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
