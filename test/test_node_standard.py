@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from rclpy.action import ActionClient
 from rigid_body_sim.ros.conversions import pose_arrays, time_seconds, twist_arrays
+from rigid_body_sim.ros.inputs import MAX_TOPIC_LENGTH
 from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import Bounds, EntityCategory, EntityFilters, EntityState, \
     Result, SimulationState, SimulatorFeatures
@@ -383,6 +384,24 @@ def test_bodies_spawned_and_deleted_at_run_time(ros, tmp_path):
     assert _spawn(ros, node, x=9.0).result.result == codes.NAME_NOT_UNIQUE
     renamed = _spawn(ros, node, x=9.0, allow_renaming=True)
     assert renamed.result.result == OK and renamed.entity_name == 'crate_1'
+    # Renaming keeps names tokens (no '__'); an empty name is generated; too long a name
+    # (once numbered) is refused; a uri, when given, wins over resource_string.
+    under = _spawn(ros, node, resource=CRATE.replace('crate', 'box_'), x=12.0)
+    assert under.entity_name == 'box_'
+    again = _spawn(ros, node, resource=CRATE.replace('crate', 'box_'), x=14.0,
+                   allow_renaming=True)
+    assert again.result.result == OK and again.entity_name == 'box_1'
+    nameless = _spawn(ros, node, resource=CRATE.replace('name: crate, ', ''), x=16.0,
+                      allow_renaming=True)
+    assert nameless.result.result == OK and nameless.entity_name == 'entity_1'
+    # (the longest a name may be: its wrench topic at ROS's length limit)
+    long = 'x' * (MAX_TOPIC_LENGTH - len('/rigid_body_sim/bodies//wrench'))
+    assert _spawn(ros, node, name=long, x=18.0).result.result == OK
+    assert _spawn(ros, node, name=long, x=20.0,
+                  allow_renaming=True).result.result == codes.NAME_INVALID
+    (tmp_path / 'other.yaml').write_text(CRATE.replace('crate', 'from_uri'))
+    both = _spawn(ros, node, uri=str(tmp_path / 'other.yaml'), x=22.0)
+    assert both.result.result == OK and both.entity_name == 'from_uri'
     # Refusals, each with the standard's code, changing nothing.
     before = (_entities(ros, node), _state(ros, node, 'crate'), _state(ros, node, 'brick'))
     missing_mesh = ('{name: m, mass: 1.0, inertia: [0.1, 0.1, 0.1], shapes: [{kind: mesh, '
@@ -418,7 +437,7 @@ def test_bodies_spawned_and_deleted_at_run_time(ros, tmp_path):
     # Resets: SPAWNED removes what was spawned; ALL brings the scene back as loaded.
     assert _call(ros, node, ResetSimulation, 'reset_simulation',
                  scope=ResetSimulation.Request.SCOPE_SPAWNED).result.result == OK
-    assert _entities(ros, node) == ['brick']
+    assert _entities(ros, node) == ['brick']   # (spawned ones gone, bob still deleted)
     assert _call(ros, node, ResetSimulation, 'reset_simulation',
                  scope=ResetSimulation.Request.SCOPE_ALL).result.result == OK
     assert _entities(ros, node) == ['brick', 'bob']

@@ -189,3 +189,25 @@ def test_reset_scene_brings_back_the_scene_as_built():
     sim.step(100)
     fresh.step(100)
     assert np.array_equal(sim.state.y, fresh.state.y)
+
+
+def test_a_spawn_keeps_the_knob_a_reused_constraint_name_and_the_contact_forces():
+    # The accuracy knob's budget and estimator (and its state) go on; a scene constraint
+    # removed and added anew under its name is there once; the last step's contact forces
+    # still carry a resting box (its acceleration reads 0, not −g: to the friction fixed
+    # point's tolerance, 1e-8 of its impulse, 1e-7 m/s² here).
+    sim, ref = _scene(), _scene()
+    for s in (sim, ref):
+        s.set_tolerance(1e-9, budget=4, estimator='doubling')
+        s.step(10)
+    sim.remove_constraint('pin')
+    sim.add_constraint(Constraint('pin', 'ball', 'b', None, anchor_world=(1.0, 0.0, 2.0)))
+    assert np.max(np.abs(sim.accelerations()[0][2])) <= 1e-7   # (the box at rest)
+    sim.add_body(RigidBody('c', 1.0, (0.1,) * 3, position_world=(50.0, 0.0, 5.0)))
+    assert sim.constraint_names.count('pin') == 1
+    np.testing.assert_allclose(sim.accelerations()[0][2], 0.0, rtol=0, atol=1e-7)
+    report = sim.accuracy()
+    assert (report.tolerance, report.budget) == (1e-9, 4)
+    assert sim._control.estimator == 'doubling'
+    sim.reset_scene()
+    assert (sim.accuracy().tolerance, sim.accuracy().budget) == (1e-9, 4)

@@ -30,7 +30,7 @@ from . import rotation as so3
 from .accuracy import AccuracyReport, DEFAULT_BUDGET, ErrorControl
 from .bodies import BodySet, RigidBody, State
 from .constraints import Constraint, ConstraintSet, JointType
-from .contact_step import ContactRecord, ContactSteps, ContactWrenches
+from .contact_step import ContactRecord, ContactRows, ContactSteps, ContactWrenches
 from .diagnostics import diagnose, Diagnostics
 from .dynamics import Dynamics
 from .effects import AppliedWrenches, Damping, Effect
@@ -958,6 +958,9 @@ class Simulation:
         new = Simulation(integrator=self.integrator_name, dt=self.dt,
                          tolerance=None if control is None else control.tolerance, **origin)
         new._origin = self._origin
+        if control is not None:   # (its budget and estimator as now; its state afresh)
+            new._control = copy.deepcopy(control)
+            new._control.reset()
         self._adopt(new)
 
     @property
@@ -1005,6 +1008,7 @@ class Simulation:
                     whole[new_i] = part[old]
         new.state = State(self.state.time, *parts)
         new._steps, new._time_base = self._steps, self._time_base
+        new._control = copy.deepcopy(self._control)   # (its budget, estimator and state)
         # Constraints: the scene's removed at run time stay removed; those added at run
         # time are anchored anew where they were (their positions then, mapped).
         solver = new.dynamics.solver
@@ -1012,6 +1016,8 @@ class Simulation:
             if name not in self.dynamics.solver.constraints.names:
                 solver.constraints.remove(name)
         for name, (spec, at) in self._added.items():
+            if name in solver.constraints.names:   # (a scene's removed and added anew)
+                solver.constraints.remove(name)
             if touches(spec):
                 continue
             then = [p.copy() for p in new.state.parts]
@@ -1049,8 +1055,45 @@ class Simulation:
             b = np.array([where.get(shapes_then[k], -1) for k in sb], dtype=np.int64)
             keep = (a >= 0) & (b >= 0)
             new.contact._warm = (a[keep], b[keep], pt[keep], pn[keep])
+            rec = self.contact.record
+            if rec.rows is not None and len(rec.rows):
+                new.contact.record = self._record_in(new, rec, index, where)
         new.dynamics.changed()
         return new
+
+    def _record_in(self, new: 'Simulation', rec: ContactRecord, index: list,
+                   where: dict) -> ContactRecord:
+        """
+        Return the last step's contact record in ``new``'s bodies and shapes.
+
+        What reads the contact forces between steps (:meth:`accelerations`,
+        :meth:`contacts`) reads them across a spawn; contacts of bodies or shapes gone
+        are dropped.
+        """
+        rows = rec.rows
+        n_new = len(new.bodies.names)
+        to_new = np.append(np.array(index, dtype=int), n_new)   # (the world last)
+        names = [s.name for s in self.contact.detector.shapes]
+        con = rows.contacts
+        sa = np.array([where.get(names[k], -1) for k in con.shape_a], dtype=np.int64)
+        sb = np.array([where.get(names[k], -1) for k in con.shape_b], dtype=np.int64)
+        ba, bb = to_new[con.body_a], to_new[con.body_b]
+        keep = (sa >= 0) & (sb >= 0) & (ba >= 0) & (bb >= 0)
+        rows = rows.subset(keep)
+        G = np.zeros((len(rows.G), 6 * n_new))
+        for old, i in enumerate(index):
+            if i >= 0:
+                G[:, 6 * i:6 * i + 6] = rows.G[:, 6 * old:6 * old + 6]
+        parts = [p.copy() for p in new.state.parts]
+        for old, i in enumerate(index):
+            if i >= 0:
+                for whole, part in zip(parts, rows.state.parts):
+                    whole[i] = part[old]
+        contacts = rows.contacts._replace(shape_a=sa[keep], shape_b=sb[keep], body_a=ba[keep],
+                                          body_b=bb[keep])
+        moved = ContactRows(State(rows.state.time, *parts), contacts, rows.frame, rows.lever_a,
+                            rows.lever_b, rows.mu, rows.restitution, G, rows.sliding, rows.vn)
+        return ContactRecord(rec.time, moved, rec.force[keep])
 
     def _adopt(self, new: 'Simulation') -> None:
         """Become ``new``: its parts refer to it, so the two share one attribute dictionary."""

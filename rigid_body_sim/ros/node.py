@@ -389,7 +389,7 @@ class SimNode(Node):
         if state:
             before = list(self.sim.bodies.names)
             self.session.reset(time=clock, scene=scene)
-            self.bodies_changed(before)
+            self.bodies_changed(before, scene=scene)
         elif clock:
             self.session.restart_clock()
         if clock:   # (a new epoch of stamps: its first /tf goes out even at a stamp seen)
@@ -400,16 +400,18 @@ class SimNode(Node):
         self._publish_clock()
         self._publish_now()
 
-    def bodies_changed(self, before: list, markers: Optional[dict] = None) -> None:
+    def bodies_changed(self, before: list, markers: Optional[dict] = None,
+                       scene: bool = False) -> None:
         """
         Follow a change of bodies from ``before`` (names): topics, outputs, entities.
 
         Each body added gets its ``~/bodies/<B>/{pose,twist,wrench}``, each removed one
         loses them; the constraints' reaction publishers follow the constraints.
+        ``scene``: the scene as loaded is back (followed even with the same names).
         """
         now = list(self.sim.bodies.names)
-        if now != before:
-            self.session.bodies_changed(markers)
+        if now != before or scene:
+            self.session.bodies_changed(markers, scene=scene)
             if self.settings.per_body_topics:
                 for name in set(before) - set(now):
                     for kind in ('pose', 'twist'):

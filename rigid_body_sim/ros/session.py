@@ -339,17 +339,19 @@ class Session:
 
     # -- stepping -------------------------------------------------------------------------
 
-    def bodies_changed(self, markers: Optional[dict] = None) -> None:
+    def bodies_changed(self, markers: Optional[dict] = None, scene: bool = False) -> None:
         """
         Follow bodies added or removed (a spawn, a deletion, a scene reset).
 
-        ``markers``: ``{body: (shape, dims)}`` of bodies added (their marker shapes).
-        The outputs are rebuilt for the bodies there now; inputs queued for bodies gone
-        are dropped.
+        ``markers``: ``{body: (shape, dims)}`` of bodies added (their marker shapes);
+        ``scene``: the scene as loaded is back (its own marker shapes). The outputs are
+        rebuilt for the bodies there now; inputs queued for bodies gone are dropped.
         """
         names = set(self.sim.bodies.names)
-        shapes = {b: m for b, m in {**self.outputs.shapes, **(markers or {})}.items()
-                  if b in names}
+        now = dict(self.scene.shapes)
+        if not scene:
+            now.update(self.outputs.shapes)
+        shapes = {b: m for b, m in {**now, **(markers or {})}.items() if b in names}
         collision = self.outputs.collision_markers
         self.outputs = Outputs(self.sim, shapes, self.settings.world_frame, self.scene.robots)
         self.outputs.collision_markers = collision

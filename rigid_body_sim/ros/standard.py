@@ -280,6 +280,7 @@ class StandardInterface:
             before = list(node.sim.bodies.names)
             gone = node.sim.remove_spawned()
             node.bodies_changed(before)
+            node.publish_now()
             done.append(f'spawned entities removed: {gone}')
         if scope & (R.SCOPE_STATE | R.SCOPE_TIME):
             # Every bit: the scene as loaded (deleted bodies back, spawned ones gone).
@@ -399,7 +400,12 @@ class StandardInterface:
                 else Sp.RESOURCE_PARSE_ERROR)
             response.result = result(code, str(exc))
             return response
-        node.bodies_changed(before, {body.name: marker} if marker else None)
+        try:
+            node.bodies_changed(before, {body.name: marker} if marker else None)
+        except BaseException:   # (its topics failed: it goes again, nothing else changed)
+            node.sim.remove_body(body.name)
+            node.bodies_changed(before + [body.name])
+            raise
         self.stopped = False
         node.publish_now()
         response.entity_name = body.name
@@ -415,7 +421,7 @@ class StandardInterface:
         if request.entity_namespace:
             raise EntityError('FEATURE_UNSUPPORTED', 'entity_namespace: entities are not '
                                                      'put in namespaces here (leave it empty)')
-        if not text:
+        if request.uri:   # (the standard: a uri, when given, wins over resource_string)
             path = Path(request.uri[len('file://'):] if request.uri.startswith('file://')
                         else request.uri)
             if path.suffix.lower() not in ('.yaml', '.yml'):
@@ -440,18 +446,24 @@ class StandardInterface:
         data = dict(data)
         name = request.name or data.get('name') or ''
         node = self.node
-        try:
+        taken = set(self.entities.names()) | set(node.sim.bodies.names)
+        if not isinstance(name, str) or not name or name in taken:
+            if not request.allow_renaming:
+                raise EntityError('NAME_NOT_UNIQUE' if name else 'NAME_INVALID',
+                                  f'name: {name!r} is taken (allow_renaming gives it a free '
+                                  f'one)' if name else 'name: empty, in the request and the '
+                                                       'resource (allow_renaming generates one)')
+            # A free name: the given one (or 'entity') and a number, kept a name token.
+            base = name if isinstance(name, str) and name else 'entity'
+            base = base if base.endswith('_') else base + '_'
+            k = 1
+            while f'{base}{k}' in taken:
+                k += 1
+            name = f'{base}{k}'
+        try:   # (the name, renamed or not, must make valid topics)
             check_name_token(name, 'name', node.session.full_topic(body_topic(name, 'wrench')))
         except SpecError as exc:
             raise EntityError('NAME_INVALID', str(exc)) from None
-        taken = set(self.entities.names()) | set(node.sim.bodies.names)
-        if name in taken:
-            if not request.allow_renaming:
-                raise EntityError('NAME_NOT_UNIQUE', f'name: {name!r} is taken (allow_renaming '
-                                                     f'gives it a free one)')
-            base, k = name, 1
-            while name in taken:
-                name, k = f'{base}_{k}', k + 1
         data['name'] = name
         pose = request.initial_pose
         if pose.header.frame_id not in ('', node.settings.world_frame):
@@ -492,7 +504,8 @@ class StandardInterface:
         try:
             gone = node.sim.remove_body(entity.body)
         except SpecError as exc:
-            response.result = result(Result.RESULT_OPERATION_FAILED, str(exc))
+            response.result = result(Result.RESULT_FEATURE_UNSUPPORTED if exc.field == 'scene'
+                                     else Result.RESULT_OPERATION_FAILED, str(exc))
             return response
         node.bodies_changed(before)
         node.publish_now()
