@@ -211,3 +211,22 @@ def test_a_spawn_keeps_the_knob_a_reused_constraint_name_and_the_contact_forces(
     assert sim._control.estimator == 'doubling'
     sim.reset_scene()
     assert (sim.accuracy().tolerance, sim.accuracy().budget) == (1e-9, 4)
+
+
+def test_the_compiled_steps_contact_record_goes_on_across_a_spawn():
+    # A box resting on the ground, every step compiled (its record kept lazily): after a
+    # spawn the ground still carries it (acceleration 0 to the fixed point's tolerance)
+    # and its four contacts are still reported.
+    sim = Simulation([RigidBody('box', 1.0, (0.02 / 6,) * 3, position_world=(0, 0, 0.1))],
+                     [Gravity()], integrator='rkmk4',
+                     shapes=[CollisionShape('plane', None, friction=0.5),
+                             CollisionShape('box', 'box', size=(0.2, 0.2, 0.2))])
+    sim.step(20)
+    assert sim.contact.counters['compiled_steps'] == 20
+    sim.add_body(RigidBody('c', 1.0, (0.1,) * 3, position_world=(5.0, 0.0, 3.0)),
+                 [CollisionShape('sphere', 'c', radius=0.1)])
+    acc = sim.accelerations()[0]
+    np.testing.assert_allclose(acc[0], 0.0, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(acc[1], [0.0, 0.0, -G], rtol=0, atol=1e-12)
+    report = sim.contacts()
+    assert len(report['depth']) == 4 and set(report['body_a']) == {'box'}

@@ -515,6 +515,32 @@ class ContactSteps:
               equal: Optional[np.ndarray] = None,
               sliding: Optional[np.ndarray] = None, symmetric: bool = True) -> np.ndarray:
         """
+        Return the rows' impulses ``p`` (3c,): :meth:`solve_island` on each island.
+
+        The contacts fall into islands, the connected parts of the graph whose edges are
+        the non-zero 3 × 3 blocks of ``A`` (contacts moved by one impulse through a body
+        they share, or a joint): the LCP is block diagonal over them, and each is solved
+        on its own (:func:`islands`; the compiled path alike). Objects resting apart on
+        the ground cost each their own small solve, not one of all their rows together.
+        """
+        groups = islands(A)
+        if len(groups) <= 1:
+            return self.solve_island(A, q, mu, start, normal_only, equal, sliding, symmetric)
+        out = np.zeros(len(q))
+        for idx in groups:
+            rows = (3 * idx[:, None] + np.arange(3)).ravel()
+            out[rows] = self.solve_island(
+                A[np.ix_(rows, rows)], q[rows], mu[idx], None if start is None else start[rows],
+                normal_only, None if equal is None else equal[idx],
+                None if sliding is None else sliding[idx], symmetric)
+        return out
+
+    def solve_island(self, A: np.ndarray, q: np.ndarray, mu: np.ndarray,
+                     start: Optional[np.ndarray] = None, normal_only: bool = False,
+                     equal: Optional[np.ndarray] = None,
+                     sliding: Optional[np.ndarray] = None, symmetric: bool = True
+                     ) -> np.ndarray:
+        """
         Return the rows' impulses ``p`` (3c,): ``w = A p + q`` under the contact conditions.
 
         Normal rows ``p_n ≥ 0 ⊥ w_n ≥ 0``; tangent rows within the cone ``μ p_n``
@@ -1284,6 +1310,35 @@ class ContactSteps:
 
 _NO_WARM = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3)),
             np.zeros(0))
+
+
+def islands(A: np.ndarray) -> list:
+    """
+    Return the contacts' islands: index arrays, each ascending, ordered by their first.
+
+    Contacts ``k`` and ``l`` are joined when ``A``'s block (rows ``3k..3k+2``, columns
+    ``3l..3l+2``) or its transpose has a non-zero; islands are the connected parts
+    (:func:`.kernels.contact_step.islands` finds the same).
+    """
+    c = len(A) // 3
+    if c <= 1:
+        return [np.arange(c)]
+    block = np.any(A.reshape(c, 3, c, 3) != 0.0, axis=(1, 3))
+    block |= block.T
+    label = np.full(c, -1)
+    count = 0
+    for k in range(c):
+        if label[k] >= 0:
+            continue
+        label[k] = count
+        todo = [k]
+        while todo:
+            j = todo.pop()
+            for n in np.flatnonzero(block[j] & (label < 0)):
+                label[n] = count
+                todo.append(int(n))
+        count += 1
+    return [np.flatnonzero(label == g) for g in range(count)]
 
 
 def _jacobian(frame: np.ndarray, a: np.ndarray, b: np.ndarray, lever_a: np.ndarray,

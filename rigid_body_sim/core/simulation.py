@@ -1055,11 +1055,35 @@ class Simulation:
             b = np.array([where.get(shapes_then[k], -1) for k in sb], dtype=np.int64)
             keep = (a >= 0) & (b >= 0)
             new.contact._warm = (a[keep], b[keep], pt[keep], pn[keep])
-            rec = self.contact.record
-            if rec.rows is not None and len(rec.rows):
-                new.contact.record = self._record_in(new, rec, index, where)
+            lazy = self.contact._lazy
+            if lazy is not None:   # (the compiled steps': remapped as it is, built when read)
+                new.contact._lazy = self._lazy_in(new, lazy, index, where)
+            else:
+                rec = self.contact.record
+                if rec.rows is not None and len(rec.rows):
+                    new.contact.record = self._record_in(new, rec, index, where)
         new.dynamics.changed()
         return new
+
+    def _lazy_in(self, new: 'Simulation', lazy: tuple, index: list, where: dict) -> tuple:
+        """Return the compiled steps' record ``(state, contacts, sel, force)`` in ``new``'s."""
+        state, con, sel, force = lazy
+        to_new = np.append(np.array(index, dtype=int), len(new.bodies.names))
+        names = [s.name for s in self.contact.detector.shapes]
+        sa = np.array([where.get(names[k], -1) for k in con.shape_a], dtype=np.int64)
+        sb = np.array([where.get(names[k], -1) for k in con.shape_b], dtype=np.int64)
+        ba, bb = to_new[con.body_a], to_new[con.body_b]
+        good = (sa >= 0) & (sb >= 0) & (ba >= 0) & (bb >= 0)
+        renumber = np.cumsum(good) - 1
+        keep = good[sel]
+        parts = [p.copy() for p in new.state.parts]
+        for old, i in enumerate(index):
+            if i >= 0:
+                for whole, part in zip(parts, state.parts):
+                    whole[i] = part[old]
+        contacts = con._replace(shape_a=sa, shape_b=sb, body_a=ba, body_b=bb)
+        contacts = type(con)(*(part[good] for part in contacts))
+        return (State(state.time, *parts), contacts, renumber[sel[keep]], force[keep])
 
     def _record_in(self, new: 'Simulation', rec: ContactRecord, index: list,
                    where: dict) -> ContactRecord:

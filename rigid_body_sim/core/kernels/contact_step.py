@@ -450,11 +450,82 @@ def spd_solve(S: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def islands(A: np.ndarray) -> tuple:
+    """
+    Return ``(label, count)``: each contact's island, as :func:`..contact_step.islands`.
+
+    Contacts joined by a non-zero of ``A``'s 3 × 3 blocks (either way); islands numbered
+    by their first contact.
+    """
+    c = A.shape[0] // 3
+    parent = np.arange(c)
+    for k in range(c):
+        for j in range(k + 1, c):
+            joined = False
+            for a in range(3):
+                for b in range(3):
+                    if A[3 * k + a, 3 * j + b] != 0.0 or A[3 * j + b, 3 * k + a] != 0.0:
+                        joined = True
+                        break
+                if joined:
+                    break
+            if joined:
+                rk, rj = k, j
+                while parent[rk] != rk:
+                    rk = parent[rk]
+                while parent[rj] != rj:
+                    rj = parent[rj]
+                if rk != rj:
+                    parent[max(rk, rj)] = min(rk, rj)
+    label = np.full(c, -1, dtype=np.int64)
+    count = 0
+    for k in range(c):
+        r = k
+        while parent[r] != r:
+            r = parent[r]
+        if label[r] < 0:
+            label[r] = count
+            count += 1
+        label[k] = label[r]
+    return label, count
+
+
+@njit(cache=True)
 def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
                normal_only: bool, equal: np.ndarray, has_equal: bool, sliding: np.ndarray,
                prm: np.ndarray, cnt: np.ndarray) -> tuple:
+    """Return ``(p, ok)``: :func:`solve_island` on each island (``ContactSteps.solve``)."""
+    label, count = islands(A)
+    if count <= 1:
+        return solve_island(A, q, mu, start, normal_only, equal, has_equal, sliding, prm, cnt)
+    m = q.shape[0]
+    out = np.zeros(m)
+    for g in range(count):
+        idx = _where(label == g)
+        n = idx.shape[0]
+        rows = np.empty(3 * n, dtype=np.int64)
+        for x in range(n):
+            for a in range(3):
+                rows[3 * x + a] = 3 * idx[x] + a
+        Ag = np.empty((3 * n, 3 * n))
+        for x in range(3 * n):
+            for y in range(3 * n):
+                Ag[x, y] = A[rows[x], rows[y]]
+        p, ok = solve_island(Ag, q[rows], mu[idx], start[rows], normal_only, equal[idx],
+                             has_equal, sliding[idx], prm, cnt)
+        if not ok:
+            return np.zeros(m), False
+        for x in range(3 * n):
+            out[rows[x]] = p[x]
+    return out, True
+
+
+@njit(cache=True)
+def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
+                 normal_only: bool, equal: np.ndarray, has_equal: bool, sliding: np.ndarray,
+                 prm: np.ndarray, cnt: np.ndarray) -> tuple:
     """
-    Return ``(p, ok)``: the rows' impulses as :meth:`..contact_step.ContactSteps.solve`.
+    Return ``(p, ok)``: the rows' impulses as :meth:`..contact_step.ContactSteps.solve_island`.
 
     ``start`` (3c,) the warm start; ``equal`` (c,): the contacts whose normal row is
     an equality (the projections; ``has_equal`` False: none, and the residual is
