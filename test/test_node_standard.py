@@ -87,8 +87,8 @@ def _sim_state(ros, node):
     return _call(ros, node, GetSimulationState, 'get_simulation_state').state.state
 
 
-def _simulate(ros, node, steps, cancel_after=None):
-    """Run the action; return (status, result, completed feedback, remaining feedback)."""
+def _goal(ros, node, steps):
+    """Send a goal; return (handle, feedback list) once accepted or rejected."""
     client = ros.client
     action = getattr(client, '_simulate', None) or ActionClient(client.node, SimulateSteps,
                                                                 'simulate_steps')
@@ -97,16 +97,25 @@ def _simulate(ros, node, steps, cancel_after=None):
     feedback = []
     sent = action.send_goal_async(SimulateSteps.Goal(steps=steps),
                                   feedback_callback=lambda m: feedback.append(m.feedback))
-    client.wait_for(sent.done, 'the goal accepted', node=node)
-    handle = sent.result()
-    if cancel_after is not None:
-        client.wait_for(lambda: len(feedback) >= cancel_after, 'feedback', node=node)
-        cancel = handle.cancel_goal_async()
-        client.wait_for(cancel.done, 'the cancel answered', node=node)
+    client.wait_for(sent.done, 'the goal answered', node=node)
+    return sent.result(), feedback
+
+
+def _outcome(ros, node, handle):
     done = handle.get_result_async()
-    client.wait_for(done.done, 'the action result', node=node)
-    out = done.result()
-    return (out.status, out.result.result.result, [f.completed_steps for f in feedback],
+    ros.client.wait_for(done.done, 'the action result', node=node)
+    return done.result().status, done.result().result.result.result
+
+
+def _simulate(ros, node, steps, cancel_after=None):
+    """Run the action; return (status, result, completed feedback, remaining feedback)."""
+    handle, feedback = _goal(ros, node, steps)
+    if cancel_after is not None:
+        ros.client.wait_for(lambda: len(feedback) >= cancel_after, 'feedback', node=node)
+        cancel = handle.cancel_goal_async()
+        ros.client.wait_for(cancel.done, 'the cancel answered', node=node)
+    status, code = _outcome(ros, node, handle)
+    return (status, code, [f.completed_steps for f in feedback],
             [f.remaining_steps for f in feedback])
 
 
@@ -279,26 +288,6 @@ def test_entities_states_info_and_bounds_from_the_scene(ros, tmp_path):
                                [[0.1] * 3, [-0.1] * 3], rtol=0, atol=1e-15)
     assert _call(ros, node, GetEntityBounds, 'get_entity_bounds',
                  entity='bob').bounds.type == Bounds.TYPE_EMPTY
-
-
-def _goal(ros, node, steps):
-    """Send a goal; return (handle, feedback list) once accepted or rejected."""
-    client = ros.client
-    action = getattr(client, '_simulate', None) or ActionClient(client.node, SimulateSteps,
-                                                                'simulate_steps')
-    client._simulate = action
-    client.wait_for(action.server_is_ready, 'the simulate_steps action', node=node)
-    feedback = []
-    sent = action.send_goal_async(SimulateSteps.Goal(steps=steps),
-                                  feedback_callback=lambda m: feedback.append(m.feedback))
-    client.wait_for(sent.done, 'the goal answered', node=node)
-    return sent.result(), feedback
-
-
-def _outcome(ros, node, handle):
-    done = handle.get_result_async()
-    ros.client.wait_for(done.done, 'the action result', node=node)
-    return done.result().status, done.result().result.result.result
 
 
 def test_a_running_action_is_alone_and_ends_on_a_reset_and_on_quitting(ros, tmp_path):
