@@ -25,6 +25,7 @@ from simulation_interfaces.srv import DeleteEntity, GetEntities, GetEntitiesStat
     GetEntityBounds, GetEntityInfo, GetEntityState, GetNamedPoses, GetSimulationState, \
     GetSimulatorFeatures, ResetSimulation, SetEntityState, SetSimulationState, SpawnEntity, \
     StepSimulation
+import yaml
 
 G, DT = 9.81, 1e-3
 URDF = Path(__file__).parent / 'urdf' / 'quadruped.urdf'
@@ -316,22 +317,12 @@ def test_a_running_action_is_alone_and_ends_on_a_reset_and_on_quitting(ros, tmp_
     assert node.proc.wait(timeout=30) == 0
 
 
-SPAWN_SCENE = f"""
-name: spawning
-integrator: lie_poisson2
-dt: {DT}
-effects:
-  gravity: {{g_world: [0.0, 0.0, -{G}]}}
-bodies:
-  - name: brick
-    mass: 1.0
-    inertia: [0.1, 0.2, 0.3]
-    position_world: [5.0, 0.0, 50.0]
-    shapes: [{{kind: box, size: [0.2, 0.4, 0.6]}}]
-  - {{name: bob, mass: 1.0, inertia: [0.01, 0.01, 0.01], position_world: [-5.0, 0.0, 50.0]}}
-constraints:
-  - {{name: pin, type: ball, body_a: bob, anchor_world: [-5.0, 0.0, 51.0]}}
-"""
+#: The scene above without its robot (spawning into a scene with joints is refused) and
+#: without the ball.
+SPAWN_SCENE = yaml.safe_dump({**{k: v for k, v in yaml.safe_load(SCENE).items() if k != 'robots'},
+                              'name': 'spawning',
+                              'bodies': [b for b in yaml.safe_load(SCENE)['bodies']
+                                         if b['name'] != 'ball']})
 CRATE = ('{name: crate, mass: 2.0, inertia: {box: [0.2, 0.2, 0.2]}, '
          'shapes: [{kind: box, size: [0.2, 0.2, 0.2]}]}')
 
