@@ -304,106 +304,126 @@ def _robots(data: Any, source: str) -> list:
     """Return the scene's robots as (RobotSpec, ParsedUrdf) pairs."""
     if not isinstance(data, list):
         raise SpecError('robots', f'expected a list of robots, got {data!r}')
-    out = []
     folder = Path(source).parent
-    for i, entry in enumerate(data):
-        field = f'robots[{i}]'
-        entry = _mapping(entry, field, ROBOT_KEYS)
+    return [_robot(entry, f'robots[{i}]', folder) for i, entry in enumerate(data)]
+
+
+def robot_from_dict(data: Any, folder: Union[str, Path] = '.', field: str = 'robot',
+                    text: Optional[str] = None) -> tuple:
+    """
+    Return ``(RobotSpec, ParsedUrdf, [CommandGroup])`` of one robot entry (a spawn).
+
+    ``data``: a scene's ``robots:`` entry (files relative to ``folder``), with its own
+    ``command_groups`` (joint names as given: the caller prefixes them); ``text``:
+    the URDF itself (then ``urdf`` names it only). Errors name the field under ``field``.
+    """
+    data = dict(_mapping(data, field, ROBOT_KEYS + ('command_groups',)))
+    groups = _groups(data.pop('command_groups', None) or [])
+    spec, parsed = _robot(data, field, Path(folder), text)
+    return spec, parsed, groups
+
+
+def _robot(entry: Any, field: str, folder: Path, text: Optional[str] = None) -> tuple:
+    """Return one robot entry as ``(RobotSpec, ParsedUrdf)`` (``text``: its URDF, given)."""
+    entry = _mapping(entry, field, ROBOT_KEYS)
+    if text is None:
         if 'urdf' not in entry:
             raise SpecError(f'{field}.urdf', 'missing (required): a .urdf or .xacro file')
         if not isinstance(entry['urdf'], str):
             raise SpecError(f'{field}.urdf', f'expected a file name, got {entry["urdf"]!r}')
         path = Path(entry['urdf'])
         path = path if path.is_absolute() else folder / path
-        try:
-            parsed = parse_urdf(read_robot_xml(path, entry.get('xacro_args')), str(path))
-        except UrdfError as exc:
-            raise SpecError(f'{field}.urdf', str(exc)) from None
-        base = _mapping(entry.get('base_pose') or {}, f'{field}.base_pose',
-                        ('xyz', 'rpy', 'quat_xyzw'))
-        if 'rpy' in base and 'quat_xyzw' in base:
-            raise SpecError(f'{field}.base_pose', 'give rpy or quat_xyzw, not both')
-        xyz = finite_array(base.get('xyz', [0.0, 0.0, 0.0]), f'{field}.base_pose.xyz', (3,))
-        if 'rpy' in base:
-            rpy = finite_array(base['rpy'], f'{field}.base_pose.rpy', (3,))
-            quat = Rotation.from_euler('xyz', rpy).as_quat()
-        else:
-            quat = finite_array(base.get('quat_xyzw', [0.0, 0.0, 0.0, 1.0]),
-                                f'{field}.base_pose.quat_xyzw', (4,))
-            if not np.linalg.norm(quat) > 0.0:
-                raise SpecError(f'{field}.base_pose.quat_xyzw', 'a zero quaternion')
-        fixed = entry.get('fixed_base', False)
-        if not isinstance(fixed, bool):
-            raise SpecError(f'{field}.fixed_base', f'expected true or false, got {fixed!r}')
-        prefix = entry.get('prefix', '')
-        if not isinstance(prefix, str):
-            raise SpecError(f'{field}.prefix', f'expected a string, got {prefix!r}')
-        keep = entry.get('keep_fixed') or []
-        if not isinstance(keep, list) or not all(isinstance(k, str) for k in keep):
-            raise SpecError(f'{field}.keep_fixed', f'expected a list of joint names, '
-                                                   f'got {keep!r}')
-        limits = entry.get('limits', True)
-        if not isinstance(limits, bool):
-            raise SpecError(f'{field}.limits', f'expected true or false, got {limits!r}')
-        friction = entry.get('friction', True)
-        if not isinstance(friction, bool):
-            raise SpecError(f'{field}.friction', f'expected true or false, got {friction!r}')
-        efforts = entry.get('effort_limits', True)
-        if not isinstance(efforts, bool):
-            raise SpecError(f'{field}.effort_limits', f'expected true or false, got {efforts!r}')
-        collide = entry.get('collisions', False)
-        options: dict = {}
-        if isinstance(collide, dict):
-            options = _collision_options(collide, f'{field}.collisions',
-                                         {link.name for link in parsed.links})
-            collide = True
-            group, mask = options.get('group', 0), options.get('mask', ALL_BITS)
-            if not entry.get('self_collide', False) and group & mask:
-                raise SpecError(f'{field}.collisions.mask',
-                                f'shares bits {group & mask} with the group {group}: the '
-                                f"robot's links would meet each other, and self_collide is "
-                                f"false; give a mask without the group's bits")
-        elif not isinstance(collide, bool):
-            raise SpecError(f'{field}.collisions', f'expected true, false or a mapping '
-                                                   f'{{friction, restitution, group, mask, '
-                                                   f'links}}, got {collide!r}')
-        self_collide = entry.get('self_collide', False)
-        if not isinstance(self_collide, bool):
-            raise SpecError(f'{field}.self_collide', f'expected true or false, got '
-                                                     f'{self_collide!r}')
-        collisions = []
-        if collide:
-            # Each <collision> a shape on its link's body, a mesh as its convex hull; a
-            # mesh whose file is not found or not read (not STL or OBJ) is named in the
-            # robot's warning, never dropped silently.
-            parsed.ignored = [x for x in parsed.ignored if not x.startswith('<collision>')]
-            for c in parsed.collisions:
-                if c.shape != 'mesh':
-                    collisions.append((c.link, c.shape, c.size, c.xyz, c.rpy))
-                elif not c.path:
-                    parsed.ignored.append(f'mesh <collision> of link {c.link!r} ({c.uri}: '
-                                          f'file not found)')
-                elif Path(c.path).suffix.lower() not in MESH_FORMATS:
-                    parsed.ignored.append(f'mesh <collision> of link {c.link!r} ({c.uri}: '
-                                          f'format not read; STL and OBJ are)')
-                else:
-                    collisions.append((c.link, 'mesh', (c.path, tuple(c.size)), c.xyz,
-                                       c.rpy))
-        name = entry.get('name', parsed.name)
-        if not isinstance(name, str) or not name:
-            raise SpecError(f'{field}.name', f'expected a non-empty string, got {name!r}')
-        spec = RobotSpec(name=name, links=parsed.links, joints=parsed.joints, base_xyz=xyz,
-                         base_quat_xyzw=quat, fixed_base=fixed,
-                         initial_positions=entry.get('initial_positions') or {},
-                         initial_velocities=entry.get('initial_velocities') or {},
-                         keep_fixed=tuple(keep), prefix=prefix, source=str(path),
-                         enforce_limits=limits,
-                         limit_restitution=entry.get('limit_restitution', 0.0),
-                         enforce_friction=friction, enforce_efforts=efforts,
-                         collisions=tuple(collisions), self_collide=self_collide,
-                         collision_options=options)
-        out.append((spec, parsed))
-    return out
+    else:
+        path = Path(entry.get('urdf') or '<urdf>')
+    try:
+        parsed = parse_urdf(read_robot_xml(path, entry.get('xacro_args')) if text is None
+                            else text, str(path))
+    except UrdfError as exc:
+        raise SpecError(f'{field}.urdf', str(exc)) from None
+    base = _mapping(entry.get('base_pose') or {}, f'{field}.base_pose',
+                    ('xyz', 'rpy', 'quat_xyzw'))
+    if 'rpy' in base and 'quat_xyzw' in base:
+        raise SpecError(f'{field}.base_pose', 'give rpy or quat_xyzw, not both')
+    xyz = finite_array(base.get('xyz', [0.0, 0.0, 0.0]), f'{field}.base_pose.xyz', (3,))
+    if 'rpy' in base:
+        rpy = finite_array(base['rpy'], f'{field}.base_pose.rpy', (3,))
+        quat = Rotation.from_euler('xyz', rpy).as_quat()
+    else:
+        quat = finite_array(base.get('quat_xyzw', [0.0, 0.0, 0.0, 1.0]),
+                            f'{field}.base_pose.quat_xyzw', (4,))
+        if not np.linalg.norm(quat) > 0.0:
+            raise SpecError(f'{field}.base_pose.quat_xyzw', 'a zero quaternion')
+    fixed = entry.get('fixed_base', False)
+    if not isinstance(fixed, bool):
+        raise SpecError(f'{field}.fixed_base', f'expected true or false, got {fixed!r}')
+    prefix = entry.get('prefix', '')
+    if not isinstance(prefix, str):
+        raise SpecError(f'{field}.prefix', f'expected a string, got {prefix!r}')
+    keep = entry.get('keep_fixed') or []
+    if not isinstance(keep, list) or not all(isinstance(k, str) for k in keep):
+        raise SpecError(f'{field}.keep_fixed', f'expected a list of joint names, '
+                                               f'got {keep!r}')
+    limits = entry.get('limits', True)
+    if not isinstance(limits, bool):
+        raise SpecError(f'{field}.limits', f'expected true or false, got {limits!r}')
+    friction = entry.get('friction', True)
+    if not isinstance(friction, bool):
+        raise SpecError(f'{field}.friction', f'expected true or false, got {friction!r}')
+    efforts = entry.get('effort_limits', True)
+    if not isinstance(efforts, bool):
+        raise SpecError(f'{field}.effort_limits', f'expected true or false, got {efforts!r}')
+    collide = entry.get('collisions', False)
+    options: dict = {}
+    if isinstance(collide, dict):
+        options = _collision_options(collide, f'{field}.collisions',
+                                     {link.name for link in parsed.links})
+        collide = True
+        group, mask = options.get('group', 0), options.get('mask', ALL_BITS)
+        if not entry.get('self_collide', False) and group & mask:
+            raise SpecError(f'{field}.collisions.mask',
+                            f'shares bits {group & mask} with the group {group}: the '
+                            f"robot's links would meet each other, and self_collide is "
+                            f"false; give a mask without the group's bits")
+    elif not isinstance(collide, bool):
+        raise SpecError(f'{field}.collisions', f'expected true, false or a mapping '
+                                               f'{{friction, restitution, group, mask, '
+                                               f'links}}, got {collide!r}')
+    self_collide = entry.get('self_collide', False)
+    if not isinstance(self_collide, bool):
+        raise SpecError(f'{field}.self_collide', f'expected true or false, got '
+                                                 f'{self_collide!r}')
+    collisions = []
+    if collide:
+        # Each <collision> a shape on its link's body, a mesh as its convex hull; a
+        # mesh whose file is not found or not read (not STL or OBJ) is named in the
+        # robot's warning, never dropped silently.
+        parsed.ignored = [x for x in parsed.ignored if not x.startswith('<collision>')]
+        for c in parsed.collisions:
+            if c.shape != 'mesh':
+                collisions.append((c.link, c.shape, c.size, c.xyz, c.rpy))
+            elif not c.path:
+                parsed.ignored.append(f'mesh <collision> of link {c.link!r} ({c.uri}: '
+                                      f'file not found)')
+            elif Path(c.path).suffix.lower() not in MESH_FORMATS:
+                parsed.ignored.append(f'mesh <collision> of link {c.link!r} ({c.uri}: '
+                                      f'format not read; STL and OBJ are)')
+            else:
+                collisions.append((c.link, 'mesh', (c.path, tuple(c.size)), c.xyz,
+                                   c.rpy))
+    name = entry.get('name', parsed.name)
+    if not isinstance(name, str) or not name:
+        raise SpecError(f'{field}.name', f'expected a non-empty string, got {name!r}')
+    spec = RobotSpec(name=name, links=parsed.links, joints=parsed.joints, base_xyz=xyz,
+                     base_quat_xyzw=quat, fixed_base=fixed,
+                     initial_positions=entry.get('initial_positions') or {},
+                     initial_velocities=entry.get('initial_velocities') or {},
+                     keep_fixed=tuple(keep), prefix=prefix, source=str(path),
+                     enforce_limits=limits,
+                     limit_restitution=entry.get('limit_restitution', 0.0),
+                     enforce_friction=friction, enforce_efforts=efforts,
+                     collisions=tuple(collisions), self_collide=self_collide,
+                     collision_options=options)
+    return spec, parsed
 
 
 #: What a robot's ``collisions:`` mapping may set, for all its shapes or a link's.

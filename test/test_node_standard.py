@@ -18,6 +18,7 @@ import pytest
 from rclpy.action import ActionClient
 from rigid_body_sim.ros.conversions import pose_arrays, time_seconds, twist_arrays
 from rigid_body_sim.ros.inputs import MAX_TOPIC_LENGTH
+from sensor_msgs.msg import JointState
 from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import Bounds, EntityCategory, EntityFilters, EntityState, \
     Result, SimulationState, SimulatorFeatures
@@ -25,6 +26,7 @@ from simulation_interfaces.srv import DeleteEntity, GetEntities, GetEntitiesStat
     GetEntityBounds, GetEntityInfo, GetEntityState, GetNamedPoses, GetSimulationState, \
     GetSimulatorFeatures, ResetSimulation, SetEntityState, SetSimulationState, SpawnEntity, \
     StepSimulation
+from std_msgs.msg import Float64MultiArray
 import yaml
 
 G, DT = 9.81, 1e-3
@@ -135,7 +137,7 @@ def test_features_states_resets_and_steps_answer_as_the_standard_says(ros, tmp_p
         F.SIMULATION_RESET_STATE, F.SIMULATION_RESET_SPAWNED, F.SIMULATION_STATE_GETTING,
         F.SIMULATION_STATE_SETTING, F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE,
         F.STEP_SIMULATION_MULTIPLE, F.STEP_SIMULATION_ACTION])
-    assert list(features.spawn_formats) == ['yaml']
+    assert list(features.spawn_formats) == ['urdf', 'xacro', 'yaml']
     # Playing: stepping is refused (INCORRECT_STATE), by the service and the action.
     assert _sim_state(ros, node) == PLAYING
     assert _call(ros, node, StepSimulation, 'step_simulation').result.result == INCORRECT_STATE
@@ -317,8 +319,7 @@ def test_a_running_action_is_alone_and_ends_on_a_reset_and_on_quitting(ros, tmp_
     assert node.proc.wait(timeout=30) == 0
 
 
-#: The scene above without its robot (spawning into a scene with joints is refused) and
-#: without the ball.
+#: The scene above without its robot and without the ball.
 SPAWN_SCENE = yaml.safe_dump({**{k: v for k, v in yaml.safe_load(SCENE).items() if k != 'robots'},
                               'name': 'spawning',
                               'bodies': [b for b in yaml.safe_load(SCENE)['bodies']
@@ -389,8 +390,9 @@ def test_bodies_spawned_and_deleted_at_run_time(ros, tmp_path):
     for fields, code in (
             ({'name': 'a b'}, codes.NAME_INVALID),
             ({'resource': ''}, codes.NO_RESOURCE),
-            ({'resource': '<robot name="r"/>'}, codes.UNSUPPORTED_FORMAT),
-            ({'resource': '', 'uri': str(tmp_path / 'r.urdf')}, codes.UNSUPPORTED_FORMAT),
+            ({'resource': '<sdf version="1.9"/>'}, codes.UNSUPPORTED_FORMAT),
+            ({'resource': '', 'uri': str(tmp_path / 'r.sdf')}, codes.UNSUPPORTED_FORMAT),
+            ({'resource': '<robot name="r"/>'}, codes.RESOURCE_PARSE_ERROR),
             ({'resource': 'name: [unclosed'}, codes.RESOURCE_PARSE_ERROR),
             ({'resource': '{name: n, inertia: [1, 1, 1]}'}, codes.RESOURCE_PARSE_ERROR),
             ({'resource': missing_mesh}, codes.MISSING_ASSETS),
@@ -422,3 +424,64 @@ def test_bodies_spawned_and_deleted_at_run_time(ros, tmp_path):
                  scope=ResetSimulation.Request.SCOPE_ALL).result.result == OK
     assert _entities(ros, node) == ['brick', 'bob']
     np.testing.assert_array_equal(_state(ros, node, 'bob')[1], [-5.0, 0.0, 50.0])
+
+
+ARM = Path(__file__).resolve().parent.parent / 'config' / 'servo_arm.urdf'
+
+
+def test_robots_spawned_into_a_running_node_take_joint_commands_and_are_deleted(
+        ros, tmp_path):
+    # The node plays; two arms are spawned, one from a URDF file (its joints take
+    # efforts), one from our YAML robot entry with an exact position drive group; the
+    # group's commands on <group>/commands bring its joints to their targets (the
+    # drive's row: the error decays as exp(-t / 0.05 s), within 1e-3 rad after 0.35 s).
+    path = tmp_path / 'scene.yaml'
+    path.write_text(SPAWN_SCENE)
+    node = ros.start({'scene': str(path), 'start_paused': False})
+    codes = SpawnEntity.Response
+    states = ros.client.subscribe(JointState, '/joint_states')
+    plain = _spawn(ros, node, resource='', uri=str(ARM), x=0.0, y=-5.0, z=0.0)
+    assert plain.result.result == OK, plain.result.error_message
+    assert plain.entity_name == 'servo_arm'
+    # The same URDF again: its links are taken; renamed, it takes the prefix <name>_.
+    text = ARM.read_text()
+    assert _spawn(ros, node, resource=text, name='arm2', y=5.0,
+                  z=0.0).result.result == codes.NAME_NOT_UNIQUE
+    entry = yaml.safe_dump({'urdf': str(ARM), 'name': 'arm2', 'command_groups': [
+        {'name': 'arm2_reach', 'joints': ['shoulder', 'elbow'],
+         'interface': 'position', 'mode': 'exact'}]})
+    second = _spawn(ros, node, resource=entry, allow_renaming=True, x=0.0, y=5.0, z=0.0)
+    assert second.result.result == OK, second.result.error_message
+    assert second.entity_name == 'arm2'
+    assert _entities(ros, node) == ['brick', 'bob', 'servo_arm', 'arm2']
+    names = ['shoulder', 'elbow', 'wrist', 'arm2_shoulder', 'arm2_elbow', 'arm2_wrist']
+    ros.client.wait_for(lambda: states and list(states[-1].name) == names,
+                        'joint_states of both arms', node=node)
+    group = ros.client.node.create_publisher(Float64MultiArray,
+                                             '/arm2_reach/commands', 10)
+    ros.client.wait_for(lambda: group.get_subscription_count() > 0, 'the group subscribed',
+                        node=node)
+
+    def reached():
+        if not states:
+            return False
+        q = dict(zip(states[-1].name, states[-1].position))
+        return abs(q['arm2_shoulder'] - 0.5) < 1e-3 and abs(q['arm2_elbow'] + 0.3) < 1e-3
+    group.publish(Float64MultiArray(data=[0.5, -0.3]))
+    ros.client.wait_for(reached, 'arm2 at its targets', node=node)
+    # Its state: its root link's (its URDF's 'world' link: where it was spawned, at rest).
+    state = _state(ros, node, 'arm2')
+    np.testing.assert_array_equal(state[1], [0.0, 5.0, 0.0])
+    np.testing.assert_array_equal(state[3], [0.0, 0.0, 0.0])
+    # Deleting a robot: its joints leave joint_states, its group's topic goes.
+    deleted = _call(ros, node, DeleteEntity, 'delete_entity', entity='servo_arm')
+    assert deleted.result.result == OK, deleted.result.error_message
+    ros.client.wait_for(lambda: list(states[-1].name) == names[3:],
+                        'joint_states without servo_arm', node=node)
+    assert _call(ros, node, ResetSimulation, 'reset_simulation',
+                 scope=ResetSimulation.Request.SCOPE_SPAWNED).result.result == OK
+    assert _entities(ros, node) == ['brick', 'bob']
+    ros.client.wait_for(
+        lambda: group.get_subscription_count() == 0
+        and '/rigid_body_sim/bodies/arm2_hand/pose' not in _topics(ros),
+        "arm2's topics gone", node=node)

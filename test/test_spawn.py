@@ -17,7 +17,6 @@ import pytest
 
 from rigid_body_sim.core import CollisionShape, Constraint, Damping, Gravity, RigidBody, \
     Simulation, SpecError
-from rigid_body_sim.scene import scene_from_dict
 
 G = 9.81
 
@@ -160,18 +159,6 @@ def test_reset_returns_spawned_bodies_to_their_spawn_and_remove_spawned_removes_
     np.testing.assert_array_equal(sim.pose('c')[0], [7.0, 0.0, 2.0])
     assert sim.remove_spawned() == ['c'] and sim.bodies.names == ['a', 'b', 'box']
     assert sim.remove_spawned() == []
-
-
-def test_a_scene_with_joints_refuses_spawning_for_now(tmp_path):
-    urdf = tmp_path / 'r.urdf'
-    urdf.write_text('<robot name="r"><link name="base"><inertial><mass value="1"/>'
-                    '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
-                    '</link></robot>')
-    sim = scene_from_dict({'dt': 1e-3, 'robots': [{'urdf': str(urdf)}]},
-                          str(tmp_path / 's.yaml')).simulation
-    with pytest.raises(SpecError) as err:
-        sim.add_body(RigidBody('c', 1.0, (0.1,) * 3))
-    assert 'not supported yet' in str(err.value)
 
 
 def test_reset_scene_brings_back_the_scene_as_built():

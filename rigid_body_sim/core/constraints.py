@@ -714,6 +714,15 @@ class ConstraintSet:
             out[i] = target + rate * (float(time) - t0)
         return out
 
+    def drive_motions(self, names: list) -> list:
+        """Return ``(c₀, ċ, t₀)`` of ``drive`` constraints: ``c(t) = c₀ + ċ (t − t₀)``."""
+        out = []
+        for name in names:
+            res = self._drive(name)
+            rate, t0 = res.motion
+            out.append((res.angles[0][3] if res.angles else res.lines[0][3], rate, t0))
+        return out
+
     def drive_rates(self, names: list) -> np.ndarray:
         """Rates (k,) of ``drive`` constraints' targets, rad/s or m/s."""
         return np.array([self._drive(name).motion[0] for name in names], dtype=float)

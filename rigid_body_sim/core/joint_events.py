@@ -25,6 +25,7 @@ friction stop is); its name stays among the constraints, its reaction being the 
 
 from __future__ import annotations
 
+import copy
 from typing import Any, Optional
 
 import numpy as np
@@ -1211,7 +1212,7 @@ class JointEvents:
 
     # -- between steps ----------------------------------------------------------------------
 
-    def from_state(self) -> None:
+    def from_state(self, only: Optional[np.ndarray] = None) -> None:
         """
         Rebuild the rows at the simulation's current state (after a reset, a state set).
 
@@ -1219,36 +1220,94 @@ class JointEvents:
         violated constraint does, and a step releases it if it pulls); a joint that
         only touches its bound gets its row when a step moves it into the bound.
         A joint with friction sticks where it is if it is at rest, else slips.
+        ``only``: these joints' rows (indices; a robot spawned), the others' as they are.
         """
-        sim, lim, fr = self.sim, self.limits, self.friction
-        self.engage_all()
+        sim, lim, fr, dr = self.sim, self.limits, self.friction, self.drives
+        mine = np.ones(len(sim.joints), dtype=bool)
+        if only is not None:
+            mine[:] = False
+            mine[np.asarray(only, dtype=int)] = True
+        if dr is not None:
+            for i in dr.saturated():
+                if mine[i]:
+                    self._engage(int(i), sim.state)
         self.rows_changed()   # (the drives' rows: a reset added them anew)
         if lim is not None:
             for i in np.flatnonzero(lim.active):
-                self._unbound(int(i))
+                if mine[i]:
+                    self._unbound(int(i))
         if fr is not None:
             for i in fr.joints:
-                self._friction_off(int(i))
+                if mine[i]:
+                    self._friction_off(int(i))
         q, rates, _ = sim.joints.coordinates(sim._outputs_now(), sim.joints.positions)
         beyond = np.zeros(len(sim.joints), dtype=bool)
         if lim is not None:
             gap, side = lim.gaps(q)
-            out = gap < -self.location
+            out = (gap < -self.location) & mine[lim.joints]
             for i, sd in zip(lim.joints[out], side[out]):
                 self._bound(int(i), int(sd), sim.state)
             beyond[lim.joints[out]] = True
-            lim.beyond[:] = beyond
+            lim.beyond[mine] = beyond[mine]
+        sticks = False
         if fr is not None:
             for i in fr.joints:
-                if beyond[i]:
+                if beyond[i] or not mine[i]:
                     continue
                 if abs(rates[i]) <= self.rate:
                     self._stick(int(i), sim.state, float(q[i]))
+                    sticks = True
                 else:
                     self._slip(int(i), 1 if rates[i] > 0.0 else -1)
                     fr.moving[i] = True
-        if beyond.any() or (fr is not None and fr.rows):
+        if beyond.any() or sticks:
             sim._reconcile_velocities()
+
+    def carry(self, old: 'JointEvents', pairs: list) -> None:
+        """
+        Take the rows and modes of ``old`` (a simulation rebuilt around a spawn or a removal).
+
+        ``pairs``: ``[(joint here, joint in old)]`` of the joints both have. Each keeps
+        what it was doing: a bound held, a stick at its point, a slip, a saturated
+        drive's effort and motion; the others' (a spawned robot's) come from the state
+        (:meth:`from_state`). The counters go on. The simulation's state, joint
+        positions and drive targets are carried first.
+        """
+        sim, lim, fr, dr = self.sim, self.limits, self.friction, self.drives
+        state, solver = sim.state, old.sim.dynamics.solver
+        # First the rows a reset gave these joints go (a stick would stop a slipping
+        # joint in the projection below) and the saturated drives let go; then the
+        # spawned joints' rows from the state; then these joints' rows as they were.
+        for i, k in pairs:
+            if dr is not None and dr.mode[i] != ENGAGED:
+                self._engage(i, state)
+            if lim is not None and lim.active[i]:
+                self._unbound(i)
+            if fr is not None:
+                self._friction_off(i)
+            if dr is not None and old.drives is not None and old.drives.mode[k] != ENGAGED:
+                self._saturate(i, int(old.drives.mode[k]), state.time)
+                dr.motion[i] = old.drives.motion[k]
+                dr.away[i] = old.drives.away[k]
+        here = np.array([i for i, _ in pairs], dtype=int)
+        self.from_state(np.setdiff1d(np.arange(len(sim.joints)), here))
+        state = sim.state
+        for i, k in pairs:
+            if lim is not None and old.limits is not None and old.limits.active[k]:
+                self._bound(i, int(old.limits.active[k]), state)
+                lim.beyond[i] = old.limits.beyond[k]
+            if fr is not None and old.friction is not None and old.friction.mode[k] != OFF:
+                if old.friction.mode[k] == STICK:
+                    q = solver.drive_targets([old.friction.names[k]], state.time)[0]
+                    self._stick(i, state, float(q))
+                else:
+                    self._slip(i, int(old.friction.mode[k]))
+                fr.moving[i] = old.friction.moving[k]
+        for part, was in ((lim, old.limits), (fr, old.friction), (dr, old.drives)):
+            if part is not None and was is not None:
+                part.counters = copy.deepcopy(was.counters)
+        self.counters = dict(old.counters)
+        self.rows_changed()
 
     def restore_friction(self) -> None:
         """Apply the slipping joints' friction again (after the wrenches were cleared)."""

@@ -129,7 +129,10 @@ class Simulation:
                  shapes: Sequence[CollisionShape] = ()) -> None:
         self.dt = positive_scalar(dt, 'dt')
         #: What the scene was built of, for a spawn or a removal (:meth:`add_body`).
-        self._built = {'effects': list(effects), 'shapes': list(shapes),
+        self._built = {'bodies': list(bodies), 'effects': list(effects),
+                       'shapes': list(shapes), 'constraints': list(constraints),
+                       'robots': list(robots), 'command_groups': list(command_groups),
+                       'scene_joints': list(scene_joints),
                        'constraint_time_constant': constraint_time_constant,
                        'tolerance_budget': tolerance_budget}
         #: What the scene was first built of (:meth:`reset_scene`).
@@ -139,8 +142,10 @@ class Simulation:
                         'tolerance_budget': tolerance_budget, 'robots': list(robots),
                         'command_groups': list(command_groups),
                         'scene_joints': list(scene_joints), 'shapes': list(shapes)}
-        #: Bodies added at run time (:meth:`add_body`), in order.
+        #: Bodies and robots added at run time (:meth:`add_body`, :meth:`add_robot`),
+        #: in order.
         self._spawned: list = []
+        self._spawned_robots: list = []
         bodies, constraints = list(bodies), list(constraints)
         self.robots = []
         taken = {b.name: 'a body of the scene' for b in bodies if isinstance(b, RigidBody)}
@@ -856,23 +861,23 @@ class Simulation:
         The body starts from its own initial conditions (``position_world``, ...); the
         others go on from where they are, bit for bit, with their constraints (those
         added at run time too, anchored as they were), applied wrenches, the time, the
-        step and the accuracy knob. The simulation is rebuilt around it (its compiled
-        kernels re-plan; the work counters and the contacts' warm start restart). A
-        reset (:meth:`reset`) puts it back where it was spawned;
-        :meth:`remove_spawned` removes every spawned body.
+        step and the accuracy knob; robots' joints keep their coordinates (turns
+        included), commands, drive targets, held bounds, sticks, slips and saturated
+        drives (:meth:`.JointEvents.carry`). The simulation is rebuilt around it (its
+        compiled kernels re-plan; the work counters and the contacts' warm start
+        restart). A reset (:meth:`reset`) puts it back where it was spawned;
+        :meth:`remove_spawned` removes every spawned body and robot.
 
         Raises
         ------
         SpecError
-            Not a RigidBody, a name taken, a shape on another body or invalid, the new
+            Not a RigidBody, a name taken, a shape on another body or invalid, or the new
             body's shapes overlapping another's deeper than the contacts' tolerance
-            (``allow_overlap`` False), or a scene with joints (robots or scene joints:
-            not yet). Nothing changes then.
+            (``allow_overlap`` False). Nothing changes then.
 
         """
         if not isinstance(body, RigidBody):
             raise SpecError('body', f'expected a RigidBody, got {body!r}')
-        self._no_joints('spawning a body')
         if body.name in self.bodies.index:
             raise SpecError('body.name', f'{body.name!r} is taken; bodies: '
                                          f'{list(self.bodies.names)}')
@@ -881,66 +886,185 @@ class Simulation:
             if not isinstance(shape, CollisionShape) or shape.body != body.name:
                 raise SpecError(f'shapes[{i}]', f'expected a CollisionShape on body '
                                                 f'{body.name!r}, got {shape!r}')
-        new = self._rebuilt(self._specs + [body], self._built['shapes'] + shapes, ())
-        if not allow_overlap and new.contact is not None and shapes:
-            con = new.contact.detect(new.state)
-            mine = new.bodies.index[body.name]
-            deep = (con.depth > new.contact.location) & ((con.body_a == mine)
-                                                         | (con.body_b == mine))
-            if np.any(deep):
-                k = int(np.argmax(np.where(deep, con.depth, -np.inf)))
-                names = [s.name for s in new.contact.detector.shapes]
-                raise SpecError('body.position_world', f'{body.name!r} would overlap: '
-                                                       f'{names[con.shape_a[k]]!r} and '
-                                                       f'{names[con.shape_b[k]]!r} by '
-                                                       f'{con.depth[k]:.3g} m')
+        new = self._rebuilt((), bodies=self._built['bodies'] + [body],
+                            shapes=self._built['shapes'] + shapes)
+        if not allow_overlap and shapes:
+            new._refuse_overlap([body.name], 'body.position_world')
         new._spawned = self._spawned + [body.name]
+        new._spawned_robots = list(self._spawned_robots)
         new._origin = self._origin
         self._adopt(new)
+
+    def add_robot(self, robot: RobotSpec, command_groups: Sequence[CommandGroup] = (),
+                  allow_overlap: bool = False) -> None:
+        """
+        Add a robot (its links, joints, shapes, limits, friction, drives) between steps.
+
+        It starts from its spec (base pose, initial joint positions and velocities); the
+        rest goes on as for :meth:`add_body`. ``command_groups`` command its joints
+        (names as in the simulation, its prefix included); its other joints take
+        efforts. :meth:`remove_robot` removes it.
+
+        Raises
+        ------
+        SpecError
+            Not a RobotSpec, a robot or link name taken, a group name taken or naming a
+            joint of another robot, servos unstable at the step, or its shapes
+            overlapping another's (``allow_overlap`` False). Nothing changes then.
+
+        """
+        if not isinstance(robot, RobotSpec):
+            raise SpecError('robot', f'expected a RobotSpec, got {robot!r}')
+        taken = [m.spec.name for m in self.robots]
+        if robot.name in taken:
+            raise SpecError('robot.name', f'{robot.name!r} is taken; robots: {taken}')
+        groups = list(command_groups)
+        for g, group in enumerate(groups):
+            if not isinstance(group, CommandGroup):
+                raise SpecError(f'command_groups[{g}]', f'expected a CommandGroup, got '
+                                                        f'{group!r}')
+            if group.name in self.command_groups():
+                raise SpecError(f'command_groups[{g}].name', f'{group.name!r} is taken; '
+                                                             f'groups: '
+                                                             f'{sorted(self.command_groups())}')
+            for j, name in enumerate(group.joints):
+                if name in self.joints.index:
+                    raise SpecError(f'command_groups[{g}].joints[{j}]',
+                                    f'{name!r} is a joint already in the simulation; a '
+                                    f"spawned robot's groups command its own joints")
+        try:
+            new = self._rebuilt((), robots=self._built['robots'] + [robot],
+                                groups=self._built['command_groups'] + groups)
+        except SpecError as exc:
+            if exc.field.startswith('robots['):   # (the new robot's: as ``robot``)
+                raise exc.within('robot') from None
+            raise
+        links = [b.name for b in new.robots[-1].bodies]
+        if not allow_overlap and new.shapes:
+            new._refuse_overlap(links, 'robot.base_xyz')
+        new._spawned = list(self._spawned)
+        new._spawned_robots = self._spawned_robots + [robot.name]
+        new._origin = self._origin
+        self._adopt(new)
+
+    def _refuse_overlap(self, names: list, field: str) -> None:
+        """Raise SpecError if shapes of bodies ``names`` overlap others deeper than allowed."""
+        if self.contact is None:
+            return
+        con = self.contact.detect(self.state)
+        mine = np.isin(con.body_a, [self.bodies.index[n] for n in names]) | np.isin(
+            con.body_b, [self.bodies.index[n] for n in names])
+        deep = (con.depth > self.contact.location) & mine
+        if np.any(deep):
+            k = int(np.argmax(np.where(deep, con.depth, -np.inf)))
+            shapes = [s.name for s in self.contact.detector.shapes]
+            what = repr(names[0]) if len(names) == 1 else 'the robot'
+            raise SpecError(field, f'{what} would overlap: {shapes[con.shape_a[k]]!r} and '
+                                   f'{shapes[con.shape_b[k]]!r} by {con.depth[k]:.3g} m')
 
     def remove_body(self, name: str) -> list:
         """
         Remove a body, its shapes and the constraints that hold it, between steps.
 
         Returns the names of the constraints removed with it (the scene's and those
-        added at run time). Effects naming it forget it (a damping's list, the applied
-        wrenches on it). The others go on bit for bit, as for :meth:`add_body`.
+        added at run time; a scene joint's limits and friction go with its hinge or
+        slider). Effects naming it forget it (a damping's list, the applied wrenches on
+        it). The others go on as for :meth:`add_body`.
 
         Raises
         ------
         SpecError
-            An unknown body, a robot's link, or a scene with joints (not yet).
+            An unknown body, or a robot's link (:meth:`remove_robot` removes robots).
 
         """
         self.bodies.lookup(name, 'name')
-        self._no_joints('removing a body')
-        present = self.dynamics.solver.constraints.names
-        gone = [c for c in present if name in (self.dynamics.solver.constraints.spec(c).body_a,
-                                               self.dynamics.solver.constraints.spec(c).body_b)]
-        new = self._rebuilt([b for b in self._specs if b.name != name],
-                            [s for s in self._built['shapes'] if s.body != name], (name,))
+        owner = self._robot_of(name)
+        if owner is not None:
+            raise SpecError('name', f'{name!r} is a link of robot {owner!r}: remove the robot')
+        gone = self._constraints_of({name})
+        new = self._rebuilt((name,), bodies=[b for b in self._built['bodies'] if b.name != name],
+                            shapes=[s for s in self._built['shapes'] if s.body != name])
         new._spawned = [b for b in self._spawned if b != name]
+        new._spawned_robots = list(self._spawned_robots)
         new._origin = self._origin
         self._adopt(new)
         return gone
 
+    def remove_robot(self, name: str) -> list:
+        """
+        Remove robot ``name`` (links, joints, shapes, its command groups), between steps.
+
+        Returns the names of the other constraints removed with it (scene constraints
+        or constraints added at run time that hold one of its links). Groups keep their
+        other joints (a group of its joints only goes). The rest goes on as for
+        :meth:`add_body`.
+
+        Raises
+        ------
+        SpecError
+            An unknown robot.
+
+        """
+        models = {m.spec.name: m for m in self.robots}
+        if name not in models:
+            raise SpecError('name', f'no robot {name!r}; robots: {sorted(models)}')
+        model = models[name]
+        links = {b.name for b in model.bodies}
+        joints = {j.name for j in model.joints}
+        gone = [c for c in self._constraints_of(links) if c in self._built_names()]
+        groups = []
+        for group in self._built['command_groups']:
+            kept = [j for j in group.joints if j not in joints]
+            if kept:
+                groups.append(group if len(kept) == len(group.joints)
+                              else replace(group, joints=kept))
+        new = self._rebuilt(tuple(links), robots=[r for r in self._built['robots']
+                                                  if r.name != name], groups=groups)
+        new._spawned = list(self._spawned)
+        new._spawned_robots = [r for r in self._spawned_robots if r != name]
+        new._origin = self._origin
+        self._adopt(new)
+        return gone
+
+    def _robot_of(self, body: str) -> Optional[str]:
+        """Return the name of the robot whose link ``body`` is (None: none)."""
+        return next((m.spec.name for m in self.robots if any(b.name == body for b in m.bodies)),
+                    None)
+
+    def _built_names(self) -> set:
+        """Return the names of the constraints that are not a robot's own (a user's)."""
+        return {c.name for c in self._built['constraints'] if isinstance(c, Constraint)} \
+            | set(self._added)
+
+    def _constraints_of(self, bodies: set) -> list:
+        """Return the names of the constraints present that hold one of ``bodies``."""
+        specs = [self.constraint_spec(c) for c in self.constraint_names]
+        return [c.name for c in specs if c.body_a in bodies or c.body_b in bodies]
+
     def remove_spawned(self) -> list:
-        """Remove every body added at run time (:meth:`add_body`); return their names."""
-        names = list(self._spawned)
-        if names:
-            self._no_joints('removing bodies')
-            new = self._rebuilt([b for b in self._specs if b.name not in names],
-                                [s for s in self._built['shapes'] if s.body not in names],
-                                tuple(names))
+        """Remove every body and robot added at run time; return their names (bodies first)."""
+        bodies, robots = list(self._spawned), list(self._spawned_robots)
+        if bodies or robots:
+            links = {b.name for m in self.robots if m.spec.name in robots for b in m.bodies}
+            joints = {j.name for m in self.robots if m.spec.name in robots for j in m.joints}
+            groups = [g for g in self._built['command_groups'] if not set(g.joints) & joints]
+            new = self._rebuilt(tuple(bodies) + tuple(links),
+                                bodies=[b for b in self._built['bodies'] if b.name not in bodies],
+                                shapes=[s for s in self._built['shapes'] if s.body not in bodies],
+                                robots=[r for r in self._built['robots'] if r.name not in robots],
+                                groups=groups)
             new._origin = self._origin
             self._adopt(new)
-        return names
+        return bodies + robots
 
     @property
     def scene_changed(self) -> bool:
-        """Tell whether bodies were added or removed since the scene was built."""
-        return [b.name for b in self._specs] != [b.name for b in self._origin['bodies']] \
-            or bool(self._spawned)
+        """Tell whether bodies or robots were added or removed since the scene was built."""
+        return [b.name for b in self._built['bodies']] \
+            != [b.name for b in self._origin['bodies']] \
+            or [r.name for r in self._built['robots']] \
+            != [r.name for r in self._origin['robots']] \
+            or bool(self._spawned) or bool(self._spawned_robots)
 
     def reset_scene(self) -> None:
         """
@@ -968,21 +1092,30 @@ class Simulation:
         """Return the names of the bodies added at run time, in order."""
         return list(self._spawned)
 
-    def _no_joints(self, what: str) -> None:
-        if len(self.joints) or self.robots:
-            raise SpecError('scene', f'{what} in a scene with joints (robots or scene joints) '
-                                     f'is not supported yet')
+    @property
+    def spawned_robots(self) -> list:
+        """Return the names of the robots added at run time, in order."""
+        return list(self._spawned_robots)
 
-    def _rebuilt(self, bodies: list, shapes: list, removed: tuple) -> 'Simulation':
+    def _rebuilt(self, removed: tuple, bodies: Optional[list] = None,
+                 shapes: Optional[list] = None, robots: Optional[list] = None,
+                 groups: Optional[list] = None) -> 'Simulation':
         """
-        Return a simulation of ``bodies`` and ``shapes`` that goes on from this one's state.
+        Return a simulation of these parts that goes on from this one's state.
 
-        ``removed``: bodies gone (their constraints, wrenches and damping go with them).
-        This one is not changed (its effects are copied before they are bound anew).
+        ``bodies``, ``shapes`` (the scene's), ``robots`` and command ``groups``: as now if
+        None. ``removed``: bodies gone (robots' links too; their constraints, wrenches,
+        damping and scene joints go with them). This one is not changed (its effects
+        are copied before they are bound anew).
         """
+        built = self._built
+        bodies = built['bodies'] if bodies is None else bodies
+        shapes = built['shapes'] if shapes is None else shapes
+        robots = built['robots'] if robots is None else robots
+        groups = built['command_groups'] if groups is None else groups
         gone = set(removed)
         effects = []
-        for effect in self._built['effects']:
+        for effect in built['effects']:
             effect = copy.deepcopy(effect)
             if isinstance(effect, Damping) and effect.body_names is not None:
                 effect.body_names = [b for b in effect.body_names if b not in gone]
@@ -993,12 +1126,16 @@ class Simulation:
         def touches(c: Any) -> bool:
             return isinstance(c, Constraint) and (c.body_a in gone or c.body_b in gone)
 
+        constraints = [c for c in built['constraints'] if not touches(c)]
+        kept = {c.name for c in constraints if isinstance(c, Constraint)}
+        scene_joints = [j for j in built['scene_joints']
+                        if not isinstance(j, SceneJoint) or j.constraint in kept]
         control = self._control
-        new = Simulation(bodies, effects, self.integrator_name, self.dt,
-                         [c for c in self._initial_constraints if not touches(c)],
-                         self._built['constraint_time_constant'],
+        new = Simulation(bodies, effects, self.integrator_name, self.dt, constraints,
+                         built['constraint_time_constant'],
                          None if control is None else control.tolerance,
-                         self._built['tolerance_budget'], shapes=shapes)
+                         built['tolerance_budget'], robots=robots, command_groups=groups,
+                         scene_joints=scene_joints, shapes=shapes)
         # Its state: this one's, body by body (bit for bit), at this time and step count.
         index = [new.bodies.index.get(name, -1) for name in self.bodies.names]
         parts = [p.copy() for p in new.state.parts]
@@ -1012,8 +1149,9 @@ class Simulation:
         # Constraints: the scene's removed at run time stay removed; those added at run
         # time are anchored anew where they were (their positions then, mapped).
         solver = new.dynamics.solver
-        for name in list(solver.constraints.names):
-            if name not in self.dynamics.solver.constraints.names:
+        present = set(self.constraint_names)   # (a saturated drive's too)
+        for name in kept:
+            if name not in present and name in solver.constraints.names:
                 solver.constraints.remove(name)
         for name, (spec, at) in self._added.items():
             if name in solver.constraints.names:   # (a scene's removed and added anew)
@@ -1029,6 +1167,7 @@ class Simulation:
             solver.constraints.add(spec, anchored)
             new._added[name] = (spec, anchored)
         new.dynamics.changed()
+        new._carry_joints(self)
         if new.contact is not None:
             new.contact.detector.exclude(new._exclusions(new._specs_now()))
         # Applied wrenches (the scene's tables and the one applied through the API), on
@@ -1064,6 +1203,41 @@ class Simulation:
                     new.contact.record = self._record_in(new, rec, index, where)
         new.dynamics.changed()
         return new
+
+    def _carry_joints(self, old: 'Simulation') -> None:
+        """
+        Take the joints' state from ``old`` (this is it rebuilt), joint by joint (by name).
+
+        The unwrapped coordinates (turns), held effort commands, servo targets, exact
+        drives' target motions, and the events' rows and modes (:meth:`.JointEvents.carry`);
+        a spawned robot's joints keep what its reset gave them. The state is carried first.
+        """
+        js, was = self.joints, old.joints
+        if not len(js):
+            return
+        pairs = [(i, was.index[n]) for i, n in enumerate(js.names) if n in was.index]
+        here = np.array([i for i, _ in pairs], dtype=int)
+        there = np.array([k for _, k in pairs], dtype=int)
+        js.positions[here] = was.positions[there]
+        js.track(self._outputs_now())   # (the same coordinates; their rates at the state)
+        js.efforts[here] = was.efforts[there]
+        js.effort_window[here] = was.effort_window[there]
+        js.counters = dict(was.counters)
+        if self.drives is not None and old.drives is not None:
+            for part in ('q_target', 'v_target', 'center'):
+                getattr(self.drives, part)[here] = getattr(old.drives, part)[there]
+            motions = {}
+            names_then = set(old.dynamics.solver.constraints.names)
+            for name in self._drive_names:
+                if name in names_then:   # (engaged; a saturated one's motion: the events')
+                    motions[name] = old.dynamics.solver.drive_motions([name])[0]
+            if motions:
+                self.dynamics.solver.set_drive_motions(motions, self.time)
+            self.dynamics.changed()
+        if self.events is not None and old.events is not None:
+            self.events.carry(old.events, pairs)
+        elif self.events is not None:
+            self.events.from_state()
 
     def _lazy_in(self, new: 'Simulation', lazy: tuple, index: list, where: dict) -> tuple:
         """Return the compiled steps' record ``(state, contacts, sel, force)`` in ``new``'s."""

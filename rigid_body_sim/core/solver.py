@@ -432,6 +432,22 @@ class ConstraintSolver:
         self.constraints.set_drive_targets(names, targets, time, rates)
         self._copy_targets(True)
 
+    def drive_motions(self, names: list) -> list:
+        """Return drives' target motions ``(c₀, ċ, t₀)``: ``c(t) = c₀ + ċ (t − t₀)``."""
+        return self.constraints.drive_motions(names)
+
+    def set_drive_motions(self, motions: dict, time: float) -> None:
+        """
+        Set drives' motions ``{name: (c₀, ċ, t₀)}`` as they are elsewhere, bit for bit.
+
+        (A simulation rebuilt around a spawn takes its drives' targets from the old one;
+        :meth:`set_drive_targets` would set ``t₀`` to now.) Targets are then at ``time``.
+        """
+        for name, (c0, rate, t0) in motions.items():
+            self.constraints.set_drive_targets([name], np.array([c0]), t0, np.array([rate]))
+        self.constraints.drive_targets_at(time)
+        self._copy_targets(True)
+
     def drive_rate_slot(self, name: str) -> tuple:
         """
         Return where the kernels keep drive ``name``'s target rate: ``(array, index)``.

@@ -52,6 +52,7 @@ class Entity:
     position: np.ndarray   # its frame's origin on that body (body frame; world: world)
     rotation: np.ndarray   # its frame's axes on that body
     description: str
+    robot: Optional[str] = None   # a robot's name in the simulation (None: a body)
 
 
 class Entities:
@@ -78,8 +79,17 @@ class Entities:
                 name, ROBOT, tuple(b.name for b in model.bodies), frame.body,
                 np.array(frame.position, dtype=float), np.array(frame.rotation, dtype=float),
                 f'robot {spec.name!r} ({spec.source or "URDF"}): {len(model.bodies)} bodies, '
-                f'{len(model.joints)} joints, base link {spec.prefix + root!r}{fixed}')
+                f'{len(model.joints)} joints, base link {spec.prefix + root!r}{fixed}',
+                spec.name)
         self.by_name = out
+
+    def entity_of(self, name: str, robot: bool = False) -> str:
+        """Return the entity name of body ``name`` (``robot``: of robot ``name``)."""
+        for entity_name, e in self.by_name.items():
+            if (e.robot == name) if robot else (e.robot is None and e.body == name):
+                return entity_name
+        raise EntityError('NOT_FOUND', f'no entity of {"robot" if robot else "body"} '
+                                       f'{name!r}')
 
     def names(self) -> list:
         """Return every entity's name, in the scene's order (bodies, then robots)."""

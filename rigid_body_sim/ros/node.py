@@ -226,28 +226,42 @@ class SimNode(Node):
 
     def _make_robot_interfaces(self) -> None:
         """joint_states, ~/joint_commands, <group>/commands (joints), robot_description, tf."""
-        self._joint_pub = self._tf_pub = self._tf_static_pub = None
+        self._joint_pub = self._tf_pub = self._tf_static_pub = self._description_pub = None
         self._tf_stamp_ns: Optional[int] = None   # of the last /tf message
         self._group_subs = {}
-        if self.sim.joint_names():
+        self._sync_robot_interfaces()
+
+    def _sync_robot_interfaces(self) -> None:
+        """
+        Make the robot interfaces the joints and robots there now need (after a spawn too).
+
+        A group removed loses its subscription; joint_states and the tf publishers, once
+        made, stay (a topic that goes quiet); /tf_static is published again for the
+        robots there now, and robot_description once, for the first robot there was.
+        """
+        if self.sim.joint_names() and self._joint_pub is None:
             self._joint_pub = self.create_publisher(JointState, JOINT_STATES_TOPIC, 10)
             self._joint_sub = self.create_subscription(
                 JointState, JOINT_COMMANDS_TOPIC, self._on_joint_command, QoSProfile(depth=10))
+        for group in set(self._group_subs) - set(self.session.groups):
+            self.destroy_subscription(self._group_subs.pop(group))
         for group in self.session.groups:   # (forward_command_controller's topic and QoS)
-            self._group_subs[group] = self.create_subscription(
-                Float64MultiArray, group_topic(group),
-                lambda msg, group=group: self._on_group_command(group, msg),
-                QoSProfile(depth=10))
-        robots = self.session.scene.robots
-        if robots:
+            if group not in self._group_subs:
+                self._group_subs[group] = self.create_subscription(
+                    Float64MultiArray, group_topic(group),
+                    lambda msg, group=group: self._on_group_command(group, msg),
+                    QoSProfile(depth=10))
+        robots = self.session.robots
+        if robots and self._description_pub is None:
             self._description_pub = self.create_publisher(String, ROBOT_DESCRIPTION_TOPIC,
                                                           LATCHED)
             prefix, parsed = robots[0]   # named as joint_states and /tf name them
             self._description_pub.publish(String(data=prefixed_xml(parsed.xml, prefix)))
-            if self.settings.tf == 'links':
-                self._tf_pub = self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
-                self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED)
-                self._publish_tf_static()
+        if robots and self.settings.tf == 'links' and self._tf_pub is None:
+            self._tf_pub = self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
+            self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED)
+        if self._tf_static_pub is not None:
+            self._publish_tf_static()
 
     def _guarded(self, name: str, handler, srv_type):
         """
@@ -401,17 +415,20 @@ class SimNode(Node):
         self._publish_now()
 
     def bodies_changed(self, before: list, markers: Optional[dict] = None,
-                       scene: bool = False) -> None:
+                       scene: bool = False, robots: Optional[dict] = None) -> None:
         """
         Follow a change of bodies from ``before`` (names): topics, outputs, entities.
 
         Each body added gets its ``~/bodies/<B>/{pose,twist,wrench}``, each removed one
-        loses them; the constraints' reaction publishers follow the constraints.
-        ``scene``: the scene as loaded is back (followed even with the same names).
+        loses them; the constraints' reaction publishers follow the constraints, the
+        joints' and groups' topics the robots (``robots``: ``{name: (prefix,
+        ParsedUrdf)}`` of those added). ``scene``: the scene as loaded is back
+        (followed even with the same names).
         """
         now = list(self.sim.bodies.names)
         if now != before or scene:
-            self.session.bodies_changed(markers, scene=scene)
+            self.session.bodies_changed(markers, scene=scene, robots=robots)
+            self._sync_robot_interfaces()
             if self.settings.per_body_topics:
                 for name in set(before) - set(now):
                     for kind in ('pose', 'twist'):

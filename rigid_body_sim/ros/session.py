@@ -72,6 +72,9 @@ class Session:
         #: {group: (joints in the order of its commands, interface)}
         self.groups = {name: (tuple(g.joints), g.interface.value)
                        for name, g in scene.simulation.command_groups().items()}
+        #: The robots there now, in the order of ``sim.robots``: (prefix, ParsedUrdf).
+        self.robots = list(scene.robots)
+        self._models = list(scene.simulation.robots)   # (whose the robots above are)
         for name in self.groups:
             check_name_token(name, f'scene {scene.source}: command group name',
                              self.full_relative_topic(group_topic(name)))
@@ -83,7 +86,7 @@ class Session:
         self.scene_integrator = self.sim.integrator_name
         self.scene_tolerance = self.sim.accuracy().tolerance
         self.configure()
-        self.outputs = Outputs(self.sim, scene.shapes, settings.world_frame, scene.robots)
+        self.outputs = Outputs(self.sim, scene.shapes, settings.world_frame, self.robots)
         self.outputs.collision_markers = settings.collision_markers
         self.totals = Totals()
         self.pending: dict = {}   # body -> (force, torque, frame): the latest message
@@ -339,13 +342,16 @@ class Session:
 
     # -- stepping -------------------------------------------------------------------------
 
-    def bodies_changed(self, markers: Optional[dict] = None, scene: bool = False) -> None:
+    def bodies_changed(self, markers: Optional[dict] = None, scene: bool = False,
+                       robots: Optional[dict] = None) -> None:
         """
-        Follow bodies added or removed (a spawn, a deletion, a scene reset).
+        Follow bodies and robots added or removed (a spawn, a deletion, a scene reset).
 
         ``markers``: ``{body: (shape, dims)}`` of bodies added (their marker shapes);
-        ``scene``: the scene as loaded is back (its own marker shapes). The outputs are
-        rebuilt for the bodies there now; inputs queued for bodies gone are dropped.
+        ``scene``: the scene as loaded is back (its own marker shapes); ``robots``:
+        ``{name: (prefix, ParsedUrdf)}`` of robots added. The outputs, command groups
+        and joint interfaces are rebuilt for what is there now; inputs queued for
+        bodies or joints gone are dropped.
         """
         names = set(self.sim.bodies.names)
         now = dict(self.scene.shapes)
@@ -353,7 +359,20 @@ class Session:
             now.update(self.outputs.shapes)
         shapes = {b: m for b, m in {**now, **(markers or {})}.items() if b in names}
         collision = self.outputs.collision_markers
-        self.outputs = Outputs(self.sim, shapes, self.settings.world_frame, self.scene.robots)
+        # The robots: (prefix, URDF) by robot name, as the simulation has them now.
+        known = {m.spec.name: r for m, r in zip(self._models, self.robots)}
+        if scene:
+            known.update({m.spec.name: r for m, r in zip(self.sim.robots, self.scene.robots)})
+        known.update(robots or {})
+        self.robots = [known[m.spec.name] for m in self.sim.robots]
+        self._models = list(self.sim.robots)
+        self.groups = {name: (tuple(g.joints), g.interface.value)
+                       for name, g in self.sim.command_groups().items()}
+        self.interfaces = self.sim.joint_interfaces()
+        self._rotary = dict(zip(self.sim.joints.names, self.sim.joints.rotary.tolist()))
+        self.pending_commands = {j: c for j, c in self.pending_commands.items()
+                                 if j in self.interfaces}
+        self.outputs = Outputs(self.sim, shapes, self.settings.world_frame, self.robots)
         self.outputs.collision_markers = collision
         self.pending = {b: v for b, v in self.pending.items() if b in names}
         # (the energy drift reported is measured from the bodies there now)

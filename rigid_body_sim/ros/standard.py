@@ -15,8 +15,8 @@ reply whose ``result`` says what happened, and a refused request changes nothing
 - ``reset_simulation``: SCOPE_TIME restarts the published clock at 0 with the bodies
   where they are; SCOPE_STATE puts the scene back to its start (bodies, joints,
   constraints, applied wrenches; as ``~/reset``) with the clock running on; both, or
-  SCOPE_ALL / SCOPE_DEFAULT, do both; SCOPE_SPAWNED removes spawned entities (there are
-  none: spawning is not yet served). The play state is kept.
+  SCOPE_ALL / SCOPE_DEFAULT, do both (the scene as loaded: spawned entities gone,
+  deleted ones back); SCOPE_SPAWNED removes spawned entities. The play state is kept.
 - ``step_simulation`` and the ``simulate_steps`` action (feedback after every step,
   cancellable between steps): while paused (or stopped) only; while playing they answer
   RESULT_INCORRECT_STATE (the Result message's own example; the two files' comments
@@ -28,15 +28,21 @@ reply whose ``result`` says what happened, and a refused request changes nothing
   ``get_entity_info``, ``get_entity_bounds`` (a box about the entity's frame from its
   shapes): see :mod:`.entities` for what an entity is. An unknown entity answers
   RESULT_NOT_FOUND.
-- ``spawn_entity``, ``delete_entity``, ``set_entity_info``, ``get_named_poses``,
-  ``get_named_pose_bounds``, ``get_spawnables``: served, answering
-  RESULT_FEATURE_UNSUPPORTED (not in the features).
+- ``spawn_entity``: a robot (URDF or xacro: a file at ``uri``, plain, ``file://`` or
+  ``package://``, or the document in ``resource_string``; or our YAML robot entry with
+  its command groups), or one body (our YAML body entry); names as asked, or free ones
+  with ``allow_renaming`` (a robot whose links or joints are taken gets the prefix
+  ``<name>_``); the initial pose in the world frame. ``delete_entity``: a body or a
+  robot, with the constraints that held it (named in the reply).
+- ``set_entity_info``, ``get_named_poses``, ``get_named_pose_bounds``,
+  ``get_spawnables``: served, answering RESULT_FEATURE_UNSUPPORTED (not in the features).
 
 Our own ``~/reset``, ``~/pause`` and ``~/step`` share these implementations.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 from pathlib import Path
 import time
@@ -61,9 +67,11 @@ import yaml
 from . import conversions as conv
 from .entities import Entities, EntityError, ROBOT
 from .inputs import check_name_token
-from .outputs import body_topic
+from .outputs import body_topic, group_topic
 from ..core import SpecError
-from ..scene import body_from_dict
+from ..core.robots import build_robot
+from ..scene import body_from_dict, robot_from_dict
+from ..urdf import read_robot_xml, UrdfError
 
 F = SimulatorFeatures
 #: What this node implements of the standard (GetSimulatorFeatures).
@@ -76,11 +84,13 @@ FEATURES = (F.SPAWNING, F.DELETING, F.SPAWNING_RESOURCE_STRING,
             F.STEP_SIMULATION_MULTIPLE, F.STEP_SIMULATION_ACTION)
 CUSTOM_INFO = ('rigid_body_sim: exact multipliers (joints, limits, contact), every '
                "service of simulation_interfaces 1.0.0 answers; entities are the scene's "
-               "bodies and robots (a robot's state is its base link's); spawn format "
-               "'yaml': one body as a scene's bodies: entry (shapes included; URDF robots "
-               'not yet); see docs/node.md')
-#: What spawn_entity takes: one body in the scene format (a scene's ``bodies:`` entry).
-SPAWN_FORMATS = ['yaml']
+               "bodies and robots (a robot's state is its base link's); spawn formats: "
+               "'urdf' and 'xacro' (a robot: a file at uri, or the document in "
+               "resource_string), 'yaml' (one body as a scene's bodies: entry, or one robot "
+               'as a robots: entry with its command_groups); see docs/node.md')
+#: What spawn_entity takes: a URDF or xacro robot, or our YAML (a scene's ``bodies:`` or
+#: ``robots:`` entry).
+SPAWN_FORMATS = ['urdf', 'xacro', 'yaml']
 S = SimulationState
 STATE_NAMES = {S.STATE_STOPPED: 'STOPPED', S.STATE_PLAYING: 'PLAYING',
                S.STATE_PAUSED: 'PAUSED', S.STATE_QUITTING: 'QUITTING'}
@@ -93,6 +103,44 @@ CODES = {'NOT_FOUND': Result.RESULT_NOT_FOUND,
          'OPERATION_FAILED': Result.RESULT_OPERATION_FAILED,
          'INCORRECT_STATE': Result.RESULT_INCORRECT_STATE,
          'FEATURE_UNSUPPORTED': Result.RESULT_FEATURE_UNSUPPORTED}
+
+
+def resolve_uri(uri: str) -> Path:
+    """
+    Return the file a spawn ``uri`` names: a path, ``file://`` a path, ``package://P/rest``.
+
+    A package is looked up in the ament index (its share folder); EntityError
+    (MISSING_ASSETS) if it is not found.
+    """
+    if uri.startswith('file://'):
+        return Path(uri[len('file://'):])
+    if uri.startswith('package://'):
+        package, _, rest = uri[len('package://'):].partition('/')
+        try:
+            from ament_index_python.packages import get_package_share_directory
+            return Path(get_package_share_directory(package)) / rest
+        except Exception as exc:  # noqa: B902 - no index, or no such package
+            raise EntityError('MISSING_ASSETS', f'uri: {uri!r}: package {package!r} not '
+                                                f'found ({type(exc).__name__})') from None
+    return Path(uri)
+
+
+def uri_format(path: Path) -> Any:
+    """Return ``'yaml'``, ``'urdf'`` or ``'xacro'`` by a file's suffix (None: not served)."""
+    suffix = path.suffix.lower()
+    return {'.yaml': 'yaml', '.yml': 'yaml', '.urdf': 'urdf', '.xacro': 'xacro'}.get(suffix)
+
+
+def expand_xacro(text: str) -> str:
+    """Return the URDF of a xacro document given as text (EntityError if xacro fails)."""
+    import tempfile
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / 'resource.urdf.xacro'
+        path.write_text(text)
+        try:
+            return read_robot_xml(path)
+        except UrdfError as exc:
+            raise EntityError('RESOURCE_PARSE_ERROR', f'resource: {exc}') from None
 
 
 def result(code: int = Result.RESULT_OK, message: str = '') -> Result:
@@ -383,70 +431,107 @@ class StandardInterface:
         self.entities = Entities(self.node.sim)
 
     def _spawn(self, request, response):
-        """One body in the scene format, from ``resource_string`` or a file at ``uri``."""
+        """Spawn a body (our YAML) or a robot (URDF, xacro, or our YAML robot entry)."""
         Sp = SpawnEntity.Response
+        node = self.node
         try:
-            body, shapes, marker = self._spawned_body(request)
+            kind, made = self._spawned_entity(request)
         except EntityError as exc:
             response.result = result(getattr(Sp, exc.code, CODES.get(exc.code)), str(exc))
             return response
-        node = self.node
         before = list(node.sim.bodies.names)
         try:
-            node.sim.add_body(body, shapes)
+            if kind == 'body':
+                body, shapes, marker = made
+                node.sim.add_body(body, shapes)
+                name, what = body.name, f'{len(shapes)} shapes'
+            else:
+                spec, parsed, groups = made
+                node.sim.add_robot(spec, groups)
+                model = node.sim.robots[-1]
+                name, what = spec.name, (f'robot: {len(model.bodies)} bodies, '
+                                         f'{len(model.joints)} joints')
         except SpecError as exc:
-            code = Sp.INVALID_POSE if 'would overlap' in exc.problem else (
-                Result.RESULT_FEATURE_UNSUPPORTED if exc.field == 'scene'
-                else Sp.RESOURCE_PARSE_ERROR)
+            code = Sp.INVALID_POSE if 'would overlap' in exc.problem \
+                else Sp.RESOURCE_PARSE_ERROR
             response.result = result(code, str(exc))
             return response
         try:
-            node.bodies_changed(before, {body.name: marker} if marker else None)
+            if kind == 'body':
+                node.bodies_changed(before, {body.name: marker} if marker else None)
+            else:
+                node.bodies_changed(before, robots={spec.name: (spec.prefix, parsed)})
         except BaseException:   # (its topics failed: it goes again, nothing else changed)
-            node.sim.remove_body(body.name)
-            node.bodies_changed(before + [body.name])
+            node.sim.remove_body(name) if kind == 'body' else node.sim.remove_robot(name)
+            node.bodies_changed(list(node.sim.bodies.names) + ['?'])
             raise
         self.stopped = False
         node.publish_now()
-        response.entity_name = body.name
-        response.result = result(message=f'spawned {body.name!r} ({len(shapes)} shapes) at '
+        response.entity_name = self.entities.entity_of(name, kind == 'robot')
+        response.result = result(message=f'spawned {response.entity_name!r} ({what}) at '
                                          f't = {node.session.seconds():.9g} s')
         return response
 
-    def _spawned_body(self, request) -> tuple:
-        """Return ``(RigidBody, shapes, marker)`` of a spawn request, or EntityError (a code)."""
-        text, folder = request.resource_string, Path('.')
+    def _spawned_entity(self, request) -> tuple:
+        """
+        Return what a spawn request makes: a body or a robot, by the resource's format.
+
+        ``('body', (RigidBody, shapes, marker))`` or ``('robot', (RobotSpec, ParsedUrdf,
+        groups))``; EntityError (a code) if refused.
+        """
+        text, folder, fmt = request.resource_string, Path('.'), None
         if not text and not request.uri:
             raise EntityError('NO_RESOURCE', 'uri and resource_string are both empty')
         if request.entity_namespace:
             raise EntityError('FEATURE_UNSUPPORTED', 'entity_namespace: entities are not '
-                                                     'put in namespaces here (leave it empty)')
+                                                     'put in namespaces here (leave it empty; '
+                                                     "a robot's prefix: a YAML robot entry)")
         if request.uri:   # (the standard: a uri, when given, wins over resource_string)
-            path = Path(request.uri[len('file://'):] if request.uri.startswith('file://')
-                        else request.uri)
-            if path.suffix.lower() not in ('.yaml', '.yml'):
+            path = resolve_uri(request.uri)
+            fmt = uri_format(path)
+            if fmt is None:
                 raise EntityError('UNSUPPORTED_FORMAT', f'uri: {request.uri!r}: formats: '
-                                                        f'{SPAWN_FORMATS} (.yaml, .yml)')
-            try:
-                text = path.read_text()
-            except (OSError, UnicodeDecodeError) as exc:
-                raise EntityError('RESOURCE_PARSE_ERROR', f'uri: {exc}') from None
+                                                        f'{SPAWN_FORMATS} (.yaml, .yml, '
+                                                        f'.urdf, .xacro)')
+            if not path.is_file():
+                raise EntityError('RESOURCE_PARSE_ERROR', f'uri: {request.uri!r}: no such '
+                                                          f'file ({path})')
             folder = path.parent
-        if text.lstrip().startswith('<'):
-            raise EntityError('UNSUPPORTED_FORMAT', f'resource: XML (URDF, SDFormat) is not '
-                                                    f'spawned yet; formats: {SPAWN_FORMATS}')
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise EntityError('RESOURCE_PARSE_ERROR', f'resource: not YAML: {exc}') from None
-        if not isinstance(data, dict):
-            raise EntityError('RESOURCE_PARSE_ERROR', f'resource: expected one body as a '
-                                                      f"mapping (a scene's bodies: entry), got "
-                                                      f'{data!r}'[:300])
-        data = dict(data)
-        name = request.name or data.get('name') or ''
-        node = self.node
-        taken = set(self.entities.names()) | set(node.sim.bodies.names)
+            if fmt == 'yaml':
+                try:
+                    text = path.read_text()
+                except (OSError, UnicodeDecodeError) as exc:
+                    raise EntityError('RESOURCE_PARSE_ERROR', f'uri: {exc}') from None
+        elif text.lstrip().startswith('<'):
+            if '<sdf' in text[:2000]:
+                raise EntityError('UNSUPPORTED_FORMAT', f'resource: SDFormat is not read; '
+                                                        f'formats: {SPAWN_FORMATS}')
+            fmt = 'xacro' if 'xmlns:xacro' in text[:5000] else 'urdf'
+        else:
+            fmt = 'yaml'
+        if fmt == 'yaml':
+            try:
+                data = yaml.safe_load(text)
+            except yaml.YAMLError as exc:
+                raise EntityError('RESOURCE_PARSE_ERROR', f'resource: not YAML: {exc}') from None
+            if not isinstance(data, dict):
+                raise EntityError('RESOURCE_PARSE_ERROR', f'resource: expected one body (a '
+                                                          f"scene's bodies: entry) or one robot "
+                                                          f'(a robots: entry) as a mapping, got '
+                                                          f'{data!r}'[:300])
+            if 'urdf' in data:
+                return 'robot', self._spawned_robot(request, dict(data), folder, None)
+            return 'body', self._spawned_body(request, dict(data), folder)
+        if request.uri:
+            entry = {'urdf': str(path)}
+            xml = None
+        else:
+            entry = {'urdf': '<resource_string>'}
+            xml = text if fmt == 'urdf' else expand_xacro(text)
+        return 'robot', self._spawned_robot(request, entry, folder, xml)
+
+    def _free_name(self, request, name: Any, taken: set) -> str:
+        """Return the entity's name: as asked, or (allow_renaming) a free one; EntityError."""
         if not isinstance(name, str) or not name or name in taken:
             if not request.allow_renaming:
                 raise EntityError('NAME_NOT_UNIQUE' if name else 'NAME_INVALID',
@@ -460,11 +545,11 @@ class StandardInterface:
             while f'{base}{k}' in taken:
                 k += 1
             name = f'{base}{k}'
-        try:   # (the name, renamed or not, must make valid topics)
-            check_name_token(name, 'name', node.session.full_topic(body_topic(name, 'wrench')))
-        except SpecError as exc:
-            raise EntityError('NAME_INVALID', str(exc)) from None
-        data['name'] = name
+        return name
+
+    def _initial_pose(self, request) -> tuple:
+        """Return the request's initial pose ``(position, quat)``, or None: the resource's."""
+        node = self.node
         pose = request.initial_pose
         if pose.header.frame_id not in ('', node.settings.world_frame):
             raise EntityError('INVALID_POSE', f'initial_pose.header.frame_id: '
@@ -478,8 +563,23 @@ class StandardInterface:
         if np.any(position) or not np.array_equal(quat, [0.0, 0.0, 0.0, 1.0]) \
                 or pose.header.frame_id:
             # (the message's default, the identity at the origin, leaves the resource's)
-            data['position_world'] = position.tolist()
-            data['orientation_xyzw'] = (quat / np.linalg.norm(quat)).tolist()
+            return position, quat / np.linalg.norm(quat)
+        return None
+
+    def _spawned_body(self, request, data: dict, folder: Path) -> tuple:
+        """Return ``(RigidBody, shapes, marker)`` of a body spawn, or EntityError (a code)."""
+        node = self.node
+        taken = set(self.entities.names()) | set(node.sim.bodies.names)
+        name = self._free_name(request, request.name or data.get('name') or '', taken)
+        try:   # (the name, renamed or not, must make valid topics)
+            check_name_token(name, 'name', node.session.full_topic(body_topic(name, 'wrench')))
+        except SpecError as exc:
+            raise EntityError('NAME_INVALID', str(exc)) from None
+        data['name'] = name
+        pose = self._initial_pose(request)
+        if pose is not None:
+            data['position_world'] = pose[0].tolist()
+            data['orientation_xyzw'] = pose[1].tolist()
             data.pop('orientation_rpy', None)
         try:
             return body_from_dict(data, folder, 'resource')
@@ -489,6 +589,62 @@ class StandardInterface:
             raise EntityError('MISSING_ASSETS' if missing else 'RESOURCE_PARSE_ERROR',
                               str(exc)) from None
 
+    def _spawned_robot(self, request, entry: dict, folder: Path, xml) -> tuple:
+        """
+        Return ``(RobotSpec, ParsedUrdf, groups)`` of a robot spawn, or EntityError (a code).
+
+        Its links and joints keep their names if they are free; else, with
+        allow_renaming, they take the prefix ``<name>_`` (unless the entry gives one).
+        Its command groups name its joints as its URDF does (without the prefix).
+        """
+        node = self.node
+        try:
+            spec, parsed, groups = robot_from_dict(entry, folder, 'resource', xml)
+        except SpecError as exc:
+            raise EntityError('RESOURCE_PARSE_ERROR', str(exc)) from None
+        missing = [x for x in parsed.ignored if 'file not found' in x]
+        if missing and entry.get('collisions'):
+            raise EntityError('MISSING_ASSETS', f'resource: {"; ".join(missing)}')
+        sim = node.sim
+        taken = set(self.entities.names()) | {m.spec.name for m in sim.robots}
+        name = self._free_name(request, request.name or spec.name, taken)
+
+        def names(spec) -> tuple:
+            try:
+                model = build_robot(spec)
+            except SpecError as exc:
+                raise EntityError('RESOURCE_PARSE_ERROR', str(exc)) from None
+            return [b.name for b in model.bodies], [j.name for j in model.joints]
+        links, joints = names(spec)
+        clash = sorted((set(links) & set(sim.bodies.names))
+                       | (set(joints) & set(sim.joints.names)))
+        if clash and 'prefix' not in entry and request.allow_renaming:
+            spec = replace(spec, prefix=f'{name}_')
+            links, joints = names(spec)
+        elif clash:
+            raise EntityError('NAME_NOT_UNIQUE', f'links or joints {clash[:5]} are taken: give '
+                                                 f'the robot a prefix (a YAML robot entry) or '
+                                                 f'allow_renaming (prefix {name + "_"!r})')
+        spec = replace(spec, name=name)
+        # (its groups name its URDF joints: the prefix, given or not, is prepended)
+        groups = [replace(g, joints=[spec.prefix + j for j in g.joints]) for g in groups]
+        for link in links:
+            try:
+                check_name_token(link, 'link name',
+                                 node.session.full_topic(body_topic(link, 'wrench')))
+            except SpecError as exc:
+                raise EntityError('NAME_INVALID', str(exc)) from None
+        for group in groups:
+            try:
+                check_name_token(group.name, 'command group name',
+                                 node.session.full_relative_topic(group_topic(group.name)))
+            except SpecError as exc:
+                raise EntityError('NAME_INVALID', str(exc)) from None
+        pose = self._initial_pose(request)
+        if pose is not None:
+            spec = replace(spec, base_xyz=pose[0], base_quat_xyzw=pose[1])
+        return spec, parsed, groups
+
     def _delete(self, request, response):
         """Remove an entity: a body with its shapes and the constraints that hold it."""
         _, response.result = self._entity_call(lambda: self.entities.get(request.entity))
@@ -496,16 +652,12 @@ class StandardInterface:
             return response
         entity = self.entities.get(request.entity)
         node = self.node
-        if entity.category == ROBOT:
-            response.result = result(Result.RESULT_FEATURE_UNSUPPORTED,
-                                     'deleting a robot is not supported yet')
-            return response
         before = list(node.sim.bodies.names)
         try:
-            gone = node.sim.remove_body(entity.body)
+            gone = node.sim.remove_robot(entity.robot) if entity.category == ROBOT \
+                else node.sim.remove_body(entity.body)
         except SpecError as exc:
-            response.result = result(Result.RESULT_FEATURE_UNSUPPORTED if exc.field == 'scene'
-                                     else Result.RESULT_OPERATION_FAILED, str(exc))
+            response.result = result(Result.RESULT_OPERATION_FAILED, str(exc))
             return response
         node.bodies_changed(before)
         node.publish_now()

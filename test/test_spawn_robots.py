@@ -1,0 +1,246 @@
+"""
+Robots added and removed at run time, and bodies spawned into scenes with joints.
+
+``Simulation.add_robot``, ``remove_robot``; ``add_body`` and ``remove_body`` with robots
+present. References:
+
+- the same run without the spawn: a robot whose joints are, at the spawn, in every mode
+  the events keep (a bound held, a stick, a slip, a drive saturated towards its velocity
+  target, a servo, a continuous joint past a turn, held effort commands) goes on as if
+  nothing was spawned, to the solvers' tolerances (the rebuild restarts their warm
+  starts: the constraint solve stops within 1e-10 of Φ and of its velocity law, so a
+  restart moves a coordinate by far less than 1e-9 over 0.5 s; measured 1e-16), with
+  its modes, turns and counters;
+- a robot spawned at t₀ into a scene moves as the same robot started alone at 0 (its
+  equations are autonomous and nothing touches it): the same coordinates after the same
+  steps, to the same tolerance;
+- the same spawns and removals at the same steps give bit-identical runs;
+- a removal takes the robot's links, joints, groups and the constraints that hold its
+  links (named); every refusal names its field and changes nothing.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from rigid_body_sim.core import Constraint, RigidBody, SpecError
+from rigid_body_sim.core.robots import CommandGroup
+from rigid_body_sim.scene import scene_from_dict
+from robot_helpers import inertial, joint, link, robot
+
+G = 9.81
+#: rad or m, rad/s or m/s: two runs' joint coordinates and rates after a restart of the
+#: solvers' warm starts (module docstring).
+TOL_Q, TOL_V = 1e-9, 1e-7
+
+
+def _modes_urdf():
+    """Five joints on a fixed base, one per mode at the spawn (module docstring)."""
+    arm = inertial(1.0, xyz=(0.3, 0, 0), ixx=0.01, iyy=0.01, izz=0.01)
+    disc = inertial(1.0, xyz=(0.1, 0, 0), ixx=0.01, iyy=0.01, izz=0.01)
+    return robot(
+        'modes', link('world'),
+        *(link(n, arm if n == 'pendulum' else disc)
+          for n in ('pendulum', 'stuck', 'spinner', 'wheel', 'servoed')),
+        # Falls onto its upper bound (0.5 rad) under gravity and rests there: a bound held.
+        joint('limit', 'revolute', 'world', 'pendulum', xyz=(0, 0, 1), axis=(0, 1, 0),
+              extra='<limit effort="1e6" velocity="1e6" lower="-0.5" upper="0.5"/>'),
+        # A vertical axis, 1 N m commanded against 5 N m of friction: it sticks.
+        joint('stick', 'revolute', 'world', 'stuck', xyz=(1, 0, 1), axis=(0, 0, 1),
+              extra='<limit effort="1e6" velocity="1e6" lower="-3" upper="3"/>'
+                    '<dynamics friction="5.0"/>'),
+        # 2 N m against 0.1 N m: it slips and spins up past a turn.
+        joint('slip', 'continuous', 'world', 'spinner', xyz=(2, 0, 1), axis=(0, 0, 1),
+              extra='<limit effort="1e6" velocity="1e6"/><dynamics friction="0.1"/>'),
+        # Asked for 50 rad/s with 0.5 N m at most: saturated for 4 s.
+        joint('axle', 'continuous', 'world', 'wheel', xyz=(3, 0, 1), axis=(0, 0, 1),
+              extra='<limit effort="0.5" velocity="1e6"/>'),
+        joint('servo', 'revolute', 'world', 'servoed', xyz=(4, 0, 1), axis=(0, 0, 1)))
+
+
+def _groups(prefix=''):
+    return [CommandGroup(f'{prefix}wheel', [f'{prefix}axle'], 'velocity', 'exact'),
+            CommandGroup(f'{prefix}servo', [f'{prefix}servo'], 'position', 'servo',
+                         kp=20.0, kd=2.0)]
+
+
+def _scene(tmp_path, bodies=True, events=True):
+    """Return the modes robot, with a pendulum ``bob`` (``bodies``); ``events``: see _robot."""
+    path = tmp_path / 'modes.urdf'
+    path.write_text(_modes_urdf())
+    data = {'dt': 1e-3, 'effects': {'gravity': {'g_world': [0.0, 0.0, -G]}},
+            'robots': [{'urdf': str(path), 'limits': events, 'friction': events,
+                        'effort_limits': events}],
+            'command_groups': [{'name': g.name, 'joints': list(g.joints),
+                                'interface': g.interface.value, 'mode': g.mode,
+                                'kp': g.kp, 'kd': g.kd} for g in _groups()]}
+    if bodies:
+        data['bodies'] = [{'name': 'bob', 'mass': 1.0, 'inertia': [0.01, 0.01, 0.01],
+                           'position_world': [0.0, 3.0, 1.0]}]
+        data['constraints'] = [{'name': 'rope', 'type': 'ball', 'body_a': 'bob',
+                                'body_b': 'world', 'anchor_world': [0.0, 3.0, 2.0]}]
+    sim = scene_from_dict(data, str(tmp_path / 's.yaml')).simulation
+    sim.command_joints({'stick': 1.0, 'slip': 2.0, 'axle': 50.0, 'servo': 1.0})
+    return sim
+
+
+def _robot(tmp_path, prefix, events=True):
+    """
+    Return the modes robot as a RobotSpec (its links and joints ``prefix``-ed).
+
+    ``events`` False: without limits, friction and effort limits (no events: a located
+    event splits every body's step, and so changes the others' truncation error).
+    """
+    sim = _scene(tmp_path, bodies=False)
+    spec = sim.robots[0].spec
+    return replace(spec, prefix=prefix, name=prefix + spec.name, base_xyz=(0.0, -3.0, 0.0),
+                   enforce_limits=events, enforce_friction=events, enforce_efforts=events)
+
+
+def _modes(sim, prefix=''):
+    """Return what the events keep (names without ``prefix``), and the counters."""
+    def strip(d):
+        return {k[len(prefix):]: v for k, v in d.items() if k.startswith(prefix)}
+    fr, lim, dr = sim.joint_friction(), sim.joint_limits(), sim.drive_saturation()
+    return (sorted(n[len(prefix):] for n in fr['sticking'] if n.startswith(prefix)),
+            strip(fr['slipping']), strip(lim['active']), strip(dr['saturated']))
+
+
+def _joints(sim, prefix=''):
+    names = [n for n in sim.joint_names() if n.startswith(prefix)]
+    js = sim.joint_state(names)
+    return np.array(js.positions), np.array(js.velocities)
+
+
+def _assert_close(a, b):
+    np.testing.assert_allclose(a[0], b[0], rtol=0, atol=TOL_Q)
+    np.testing.assert_allclose(a[1], b[1], rtol=0, atol=TOL_V)
+
+
+def test_every_joint_mode_goes_on_across_a_spawn_and_a_removal(tmp_path):
+    sim, ref = _scene(tmp_path), _scene(tmp_path)
+    for s in (sim, ref):
+        s.step(700)
+        s.apply_wrench('bob', force=(0.5, 0.0, 0.0), key='push')
+    modes = _modes(sim)
+    assert modes == (['stick'], {'slip': 1}, {'limit': 'upper'}, {'axle': 1})
+    assert sim.joint_state(['slip']).positions[0] > 2 * np.pi   # (past a turn)
+    sim.add_body(RigidBody('far', 1.0, (0.1,) * 3, position_world=(0.0, 10.0, 5.0)))
+    assert _modes(sim) == modes and sim.joint_counters() == ref.joint_counters()
+    assert sim.drive_saturation()['counters'] == ref.drive_saturation()['counters']
+    sim.step(500)
+    ref.step(500)
+    _assert_close(_joints(sim), _joints(ref))
+    assert _modes(sim) == _modes(ref)
+    np.testing.assert_allclose(sim.pose('bob')[0], ref.pose('bob')[0], rtol=0, atol=TOL_Q)
+    assert sim.remove_body('far') == []
+    sim.step(300)
+    ref.step(300)
+    _assert_close(_joints(sim), _joints(ref))
+    assert _modes(sim) == _modes(ref)
+
+
+def test_a_spawned_robot_moves_as_the_same_robot_started_alone(tmp_path):
+    # Into a scene without events (a located event splits every body's step, and so
+    # changes the others' truncation error): the spawned robot's steps are split where
+    # the lone robot's are, and the two see the same steps.
+    sim = _scene(tmp_path, events=False)
+    sim.step(250)
+    sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+    assert sim.spawned_robots == ['b_modes'] and len(sim.joint_names()) == 10
+    sim.command_joints({'b_stick': 1.0, 'b_slip': 2.0, 'b_axle': 50.0, 'b_servo': 1.0})
+    alone = _scene(tmp_path, bodies=False)
+    for n in (300, 400):
+        sim.step(n)
+        alone.step(n)
+        _assert_close(_joints(sim, 'b_'), _joints(alone))
+        assert _modes(sim, 'b_') == _modes(alone)
+    # The spawned robot's servo and drive answer commands.
+    sim.command_joints({'b_servo': -0.5, 'b_axle': 0.0})
+    alone.command_joints({'servo': -0.5, 'axle': 0.0})
+    sim.step(300)
+    alone.step(300)
+    _assert_close(_joints(sim, 'b_'), _joints(alone))
+
+
+def test_removing_a_robot_takes_its_links_joints_groups_and_the_constraints_on_them(tmp_path):
+    sim, ref = _scene(tmp_path), _scene(tmp_path)
+    sim.step(100)
+    ref.step(100)
+    sim.add_robot(_robot(tmp_path, 'b_', events=False), _groups('b_'))
+    sim.add_constraint(Constraint('leash', 'ball', 'bob', 'b_pendulum',
+                                  anchor_world=(0.0, 0.0, 1.0)))
+    sim.step(200)
+    with pytest.raises(SpecError, match="'b_pendulum' is a link of robot 'b_modes'"):
+        sim.remove_body('b_pendulum')
+    assert sim.remove_robot('b_modes') == ['leash']
+    assert sim.robots[0].spec.name == 'modes' and sorted(sim.command_groups()) == [
+        'servo', 'wheel']
+    assert 'b_axle' not in sim.joint_names() and 'b_pendulum' not in sim.bodies.index
+    assert sim.constraint_names == ref.constraint_names
+    with pytest.raises(SpecError, match="no robot 'b_modes'"):
+        sim.remove_robot('b_modes')
+    # The bob was tied to the removed robot for 0.2 s: the first robot only goes on.
+    ref.step(200)
+    sim.step(300)
+    ref.step(300)
+    _assert_close(_joints(sim), _joints(ref))
+    assert sim.remove_body('bob') == ['rope']
+
+
+def test_the_same_robot_spawns_and_removals_give_bit_identical_runs(tmp_path):
+    runs = []
+    for _ in range(2):
+        sim = _scene(tmp_path)
+        sim.step(150)
+        sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+        sim.command_joints({'b_slip': 2.0, 'b_axle': 20.0})
+        sim.step(200)
+        sim.add_body(RigidBody('c', 1.0, (0.1,) * 3, position_world=(0, 10, 1)))
+        sim.step(100)
+        sim.remove_robot('b_modes')
+        sim.step(100)
+        runs.append((sim.state.y.copy(), _joints(sim)))
+    assert np.array_equal(runs[0][0], runs[1][0])
+    assert all(np.array_equal(a, b) for a, b in zip(runs[0][1], runs[1][1]))
+
+
+@pytest.mark.parametrize('change, field, words', [
+    (lambda sim, tp: sim.add_robot(_robot(tp, '')), 'robot.name', "'modes' is taken"),
+    (lambda sim, tp: sim.add_robot('arm'), 'robot', 'expected a RobotSpec'),
+    (lambda sim, tp: sim.add_robot(_robot(tp, 'b_'), _groups('')), 'command_groups[0].name',
+     "'wheel' is taken"),
+    (lambda sim, tp: sim.add_robot(_robot(tp, 'b_'), [CommandGroup('x', ['axle'])]),
+     'command_groups[0].joints[0]', "'axle' is a joint already"),
+    (lambda sim, tp: sim.add_robot(_robot(tp, 'b_'), [CommandGroup('x', ['b_servo'], 'position',
+                                                                   'servo', kp=1e9)]),
+     'command_groups', 'unstable'),
+    (lambda sim, tp: sim.remove_body('pendulum'), 'name', 'a link of robot'),
+])
+def test_a_refused_robot_change_names_its_field_and_changes_nothing(tmp_path, change, field,
+                                                                    words):
+    sim, ref = _scene(tmp_path), _scene(tmp_path)
+    sim.step(50)
+    ref.step(50)
+    with pytest.raises(SpecError) as err:
+        change(sim, tmp_path)
+    assert err.value.field.startswith(field) and words in str(err.value)
+    sim.step(100)
+    ref.step(100)
+    assert np.array_equal(sim.state.y, ref.state.y)
+    assert sim.joint_names() == ref.joint_names()
+
+
+def test_reset_scene_and_remove_spawned_take_spawned_robots_away(tmp_path):
+    sim = _scene(tmp_path)
+    sim.step(10)
+    sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+    sim.add_body(RigidBody('c', 1.0, (0.1,) * 3, position_world=(0, 10, 1)))
+    assert sim.scene_changed
+    assert sim.remove_spawned() == ['c', 'b_modes']
+    assert [m.spec.name for m in sim.robots] == ['modes'] and not sim.scene_changed
+    sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+    sim.reset_scene()
+    assert [m.spec.name for m in sim.robots] == ['modes'] and sim.time == 0.0
+    assert not _scene(tmp_path).scene_changed
