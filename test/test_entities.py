@@ -12,7 +12,7 @@ import numpy as np
 
 from rigid_body_sim.core import CollisionShape, Gravity, RigidBody, Simulation
 from rigid_body_sim.core import rotation as so3
-from rigid_body_sim.ros.entities import Entities, OBJECT, ROBOT
+from rigid_body_sim.ros.entities import Entities, EntityError, OBJECT, ROBOT
 from rigid_body_sim.scene import scene_from_dict
 
 #: Rim samples: a sampled circle falls short of its true extreme by at most
@@ -90,3 +90,41 @@ def test_a_robot_is_one_entity_bounded_by_its_links_and_a_body_keeps_its_name(tm
     np.testing.assert_allclose(position, [0, 0, 5], rtol=0, atol=1e-14)
     np.testing.assert_allclose(quat, [0, 0, math.sin(0.25), math.cos(0.25)], rtol=0,
                                atol=1e-15)
+
+
+def test_a_bounds_filter_selects_the_entities_whose_box_meets_the_region():
+    # A unit cube turned 45° about z (its box: the cube itself, its frame's axes), a
+    # bare point body, and queries placed just inside and just outside each, by the
+    # closed-form distances: the turned cube reaches √2/2 along x, its faces 0.5 out.
+    turn = _quat((0, 0, 1), math.pi / 4)
+    sim = Simulation([RigidBody('cube', 1.0, (0.1,) * 3, orientation_xyzw=turn),
+                      RigidBody('dot', 1.0, (0.1,) * 3, position_world=(5.0, 0.0, 0.0))],
+                     [], shapes=[CollisionShape('box', 'cube', size=(1.0, 1.0, 1.0))])
+    ent = Entities(sim)
+    names = ['cube', 'dot']
+    reach, eps = math.sqrt(0.5), 1e-6
+    # Spheres: the corner at (√2/2, 0, 0); the dot by its origin.
+    assert ent.overlapping(names, 'sphere', [(reach + 0.1 + eps, 0, 0), (0.1, 0, 0)]) == []
+    assert ent.overlapping(names, 'sphere', [(reach + 0.1 - eps, 0, 0), (0.1, 0, 0)]) == \
+        ['cube']
+    assert ent.overlapping(names, 'sphere', [(5.0, 0.0, 0.3), (0.3, 0, 0)]) == ['dot']
+    # A box (world axes) beside the corner; then one over the dot and the cube's top.
+    assert ent.overlapping(names, 'box', [(reach + eps, -1, -1), (2, 1, 1)]) == []
+    assert ent.overlapping(names, 'box', [(reach - eps, -1, -1), (2, 1, 1)]) == ['cube']
+    assert ent.overlapping(names, 'box', [(6, 1, 0.5), (-1, -1, 0.0)]) == names
+    # A hull: a triangle in the plane x + y = c; the cube's face x' = 0.5 is that plane
+    # for c = 0.5 √2 (its rotated normal (1, 1, 0) / √2).
+
+    def triangle(c):
+        return [(c / 2 + 3, c / 2 - 3, -3), (c / 2 - 3, c / 2 + 3, -3), (c / 2, c / 2, 3)]
+    assert ent.overlapping(names, 'hull', triangle(reach + 1e-5)) == []
+    assert ent.overlapping(names, 'hull', triangle(reach - 1e-5)) == ['cube']
+    for kind, points in (('sphere', [(0, 0, 0), (-1, 0, 0)]), ('box', [(0, 0, 0)]),
+                         ('hull', [(0, 0, 0), (1, 0, 0)]),
+                         ('sphere', [(math.nan, 0, 0), (1, 0, 0)])):
+        try:
+            ent.overlapping(names, kind, points)
+        except EntityError as exc:
+            assert exc.code == 'OPERATION_FAILED' and 'filters.bounds' in str(exc)
+        else:
+            raise AssertionError(f'{kind} {points} accepted')

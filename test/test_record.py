@@ -17,11 +17,15 @@ import threading
 import time
 
 from geometry_msgs.msg import WrenchStamped
+import numpy as np
 import pytest
 from rigid_body_sim.ros.bag import typestore
+from rigid_body_sim.ros.plot import main as plot_main, read_bag
 from rigid_body_sim_interfaces.msg import BodyStates
 from rigid_body_sim_interfaces.srv import AddConstraint
 from ros_harness import DEADLINE, executable, random_domain, ros_env
+from simulation_interfaces.msg import Result
+from simulation_interfaces.srv import DeleteEntity, SpawnEntity
 
 NODE = '/rigid_body_sim'
 G = 9.81
@@ -397,3 +401,64 @@ def test_an_existing_bag_folder_is_refused(tmp_path):
     assert 'Traceback' not in done.stderr
     assert [p.name for p in out.iterdir()] == ['keep.txt']
     assert (out / 'keep.txt').read_text() == 'mine'
+
+
+def test_a_bag_across_a_spawn_and_a_delete_plots(ros, tmp_path, recorders):
+    # The bob falls from rest; a crate is spawned while recording, falls from rest where
+    # it was spawned, and is deleted. The bag holds the crate in body_states only between
+    # the two calls (and its pose topic from its spawn on), each state on the closed form
+    # of its own fall; plot reads the bob and the crate (NaN outside the crate's life),
+    # marks both calls at their simulation times, and draws the PNG.
+    node = ros.start({'scene': _scene(tmp_path)})
+    out = tmp_path / 'bag'
+    rec = recorders(node, out)
+    _wait_said(ros, node, rec, [f'first message on {NODE}/body_states'],
+               'the recorder to record')
+    states = ros.client.subscribe(BodyStates, f'{NODE}/body_states')
+    ros.client.wait_for(lambda: len(states) >= 20, '20 body states', node=node)
+    request = SpawnEntity.Request(name='crate', resource_string=(
+        '{mass: 2.0, inertia: {box: [0.2, 0.2, 0.2]}}'))
+    request.initial_pose.pose.position.x = 3.0
+    request.initial_pose.pose.position.z = 10.0
+    reply = ros.client.call(SpawnEntity, '/spawn_entity', request, node=node)
+    assert reply.result.result == Result.RESULT_OK, reply.result.error_message
+    topic = f'{NODE}/bodies/crate/pose'
+    _wait_said(ros, node, rec, [f'first message on {topic}'], "the crate's pose recorded")
+    ros.client.wait_for(lambda: sum('crate' in m.names for m in states) >= 20,
+                        '20 states with the crate', node=node)
+    deleted = ros.client.call(DeleteEntity, '/delete_entity',
+                              DeleteEntity.Request(entity='crate'), node=node)
+    assert deleted.result.result == Result.RESULT_OK, deleted.result.error_message
+    ros.client.wait_for(lambda: 'crate' not in states[-1].names and len(
+        [m for m in states if 'crate' in m.names]) < len(states) - 20,
+        'states after the delete', node=node)
+    n = len(states)
+    ros.client.wait_for(lambda: len(states) >= n + 20, '20 more states', node=node)
+    assert rec.stop(signal.SIGINT) == 0, rec.output()
+    got = _read_rosbags(out)
+    with_crate = [msg for _, msg in got[f'{NODE}/body_states'][1] if 'crate' in msg.names]
+    assert with_crate and all(list(m.names) == ['bob', 'crate'] for m in with_crate)
+    t_spawn = None
+    for msg in with_crate:
+        t = _step_time(msg.header.stamp)
+        z, v = msg.position[5], msg.linear_velocity[5]
+        # Falling from rest at (3, 0, 10) since its spawn, t_s: v = -g (t - t_s), and
+        # z = 10 - v^2 / 2g; t_s from the first state, the others on it.
+        t_s = t + v / G
+        t_spawn = t_s if t_spawn is None else t_spawn
+        assert abs(t_s - t_spawn) <= 1e-9 and msg.position[3] == 3.0
+        assert abs(10.0 - z - v * v / (2 * G)) <= _fall_tolerances(t - t_spawn)[0] + 1e-12
+    series = read_bag(out)
+    assert series.all_bodies == ['bob', 'crate'] and series.bodies == ['bob', 'crate']
+    alive = np.isfinite(series.position['crate'][:, 2])
+    assert alive.sum() == len(with_crate) and not alive[0] and not alive[-1]
+    # One contiguous stretch: NaN, then the crate, then NaN again.
+    assert np.count_nonzero(np.diff(alive.astype(int))) == 2
+    marks = [(e.service, e.name, e.success) for e in series.events]
+    assert marks == [('spawn_entity', 'crate', True), ('delete_entity', 'crate', True)]
+    spawned, removed = (e.t for e in series.events)
+    assert spawned < removed
+    # The crate's first state is stamped at its spawn (the node publishes one then).
+    assert series.t[alive][0] == pytest.approx(t_spawn, abs=1e-9)
+    png = tmp_path / 'bag.png'
+    assert plot_main([str(out), '-o', str(png)]) == 0 and png.stat().st_size > 0

@@ -139,6 +139,17 @@ def test_every_joint_mode_goes_on_across_a_spawn_and_a_removal(tmp_path):
     ref.step(300)
     _assert_close(_joints(sim), _joints(ref))
     assert _modes(sim) == _modes(ref)
+    # A robot with events spawned into it: at the spawn the others' state is the same bits
+    # (the new robot's sticks and bounds take nothing from them) and their modes go on.
+    before = _modes(sim), [p.copy() for p in sim.state.parts]
+    sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+    n = len(before[1][0])
+    sticking, slipping, active, saturated = _modes(sim)
+    assert (sorted(n for n in sticking if not n.startswith('b_')), slipping, active,
+            saturated) == before[0]
+    # (the spawned robot at rest: its friction joints stick, nothing else)
+    assert _modes(sim, 'b_') == (['slip', 'stick'], {}, {}, {})
+    assert all(np.array_equal(p[:n], q) for p, q in zip(sim.state.parts, before[1]))
 
 
 def test_a_spawned_robot_moves_as_the_same_robot_started_alone(tmp_path):
@@ -187,6 +198,26 @@ def test_removing_a_robot_takes_its_links_joints_groups_and_the_constraints_on_t
     ref.step(300)
     _assert_close(_joints(sim), _joints(ref))
     assert sim.remove_body('bob') == ['rope']
+
+
+def test_a_joint_removed_stays_removed_and_a_robot_may_not_take_a_constraints_name(tmp_path):
+    sim = _scene(tmp_path)
+    sim.step(10)
+    sim.remove_constraint('servo')   # (the servoed link's hinge: the link goes free)
+    sim.add_body(RigidBody('far', 1.0, (0.1,) * 3, position_world=(0.0, 10.0, 5.0)))
+    assert 'servo' not in sim.constraint_names
+    sim.add_constraint(Constraint('b_servo', 'ball', 'bob', None, anchor_world=(0, 3, 1)))
+    before = sim.state.y.copy()
+    with pytest.raises(SpecError, match=r"constraints named \['b_servo'\]") as err:
+        sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+    assert err.value.field == 'robot' and np.array_equal(sim.state.y, before)
+    # Removed with its robot, the name is free again for the next one.
+    sim.remove_constraint('b_servo')
+    sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+    assert sim.constraint_spec('b_servo').type.value == 'hinge'
+    sim.remove_robot('b_modes')
+    sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+    assert 'b_servo' in sim.constraint_names
 
 
 def test_the_same_robot_spawns_and_removals_give_bit_identical_runs(tmp_path):
@@ -240,7 +271,11 @@ def test_reset_scene_and_remove_spawned_take_spawned_robots_away(tmp_path):
     assert sim.scene_changed
     assert sim.remove_spawned() == ['c', 'b_modes']
     assert [m.spec.name for m in sim.robots] == ['modes'] and not sim.scene_changed
+    assert sorted(sim.command_groups()) == ['servo', 'wheel'] and sim.spawned_robots == []
     sim.add_robot(_robot(tmp_path, 'b_'), _groups('b_'))
+    sim.step(5)
     sim.reset_scene()
     assert [m.spec.name for m in sim.robots] == ['modes'] and sim.time == 0.0
-    assert not _scene(tmp_path).scene_changed
+    assert not sim.scene_changed and sim.spawned_robots == []
+    assert sorted(sim.command_groups()) == ['servo', 'wheel']
+    assert np.array_equal(sim.state.y, _scene(tmp_path).state.y)

@@ -113,8 +113,8 @@ def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Parameters
     ----------
-    inertia : ndarray, shape (3, 3)
-        Symmetric positive-definite inertia tensor.
+    inertia : ndarray, shape (3, 3) or (n, 3, 3)
+        Symmetric positive-definite inertia tensor (or a stack of them).
 
     Returns
     -------
@@ -125,8 +125,8 @@ def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     """
     moments, axes = np.linalg.eigh(inertia)
-    if np.linalg.det(axes) < 0.0:
-        axes[:, 2] *= -1.0
+    flip = np.linalg.det(axes) < 0.0   # (a stack of tensors (n, 3, 3) too)
+    axes[..., 2] *= np.where(flip, -1.0, 1.0)[..., None]
     return moments, axes
 
 
@@ -377,9 +377,8 @@ class BodySet:
             if b.name in index:
                 raise SpecError(f'bodies[{i}].name', f'duplicate body name {b.name!r}')
             index[b.name] = i
-        moments, axes = zip(*(principal_axes(b.inertia) for b in bodies))
-        moments = np.array(moments)
-        axes = np.array(axes)
+        # (one batched eigendecomposition: a rebuild around a spawn redoes every body's)
+        moments, axes = principal_axes(np.array([b.inertia for b in bodies]))
         mass = np.array([b.mass for b in bodies])
         spread = moments.max(axis=1) - moments.min(axis=1)
         aniso = np.flatnonzero(spread > ISOTROPY_RTOL * moments.max(axis=1))

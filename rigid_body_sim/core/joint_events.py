@@ -1260,7 +1260,9 @@ class JointEvents:
                 else:
                     self._slip(int(i), 1 if rates[i] > 0.0 else -1)
                     fr.moving[i] = True
-        if beyond.any() or sticks:
+        # (``only``: a spawned robot's joints, whose rows its reset had at this state and
+        # reconciled its velocities with; the others' velocities stay bit for bit)
+        if (beyond.any() or sticks) and only is None:
             sim._reconcile_velocities()
 
     def carry(self, old: 'JointEvents', pairs: list) -> None:

@@ -241,7 +241,8 @@ class ContactDetector:
         index = {name: i for i, name in enumerate(body_names)}
         n = self.n_bodies = len(body_names)
         names = [s.name for s in self.shapes]
-        twice = sorted({x for x in names if names.count(x) > 1})
+        seen: set = set()
+        twice = sorted({x for x in names if x in seen or seen.add(x)})
         if twice:
             raise SpecError('shapes', f'shape names used twice: {twice} (name them)')
         body = []
@@ -266,8 +267,8 @@ class ContactDetector:
                 at += len(rec)
         self.hulls = np.concatenate(records) if records else np.zeros(1)
         self.c_body = np.array([self.shapes[k].position_body for k in live]).reshape(m, 3)
-        self.R_body = np.array([quat_to_matrix(self.shapes[k].orientation_xyzw)
-                                for k in live]).reshape(m, 3, 3)
+        self.R_body = quat_to_matrix(np.array([self.shapes[k].orientation_xyzw for k in live],
+                                              dtype=float).reshape(m, 4))
         self.group = np.array([self.shapes[k].group for k in live], dtype=np.int64)
         self.mask = np.array([self.shapes[k].mask for k in live], dtype=np.int64)
         self._index = index

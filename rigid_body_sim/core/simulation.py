@@ -38,8 +38,8 @@ from .errors import DivergenceError, InconsistentConstraintError, SpecError
 from .integrators import integrator_class
 from .joint_events import JointEvents
 from .kernels import free_step
-from .limits import (DriveEfforts, ENGAGED, JointFriction, JointLimits, restitution_of,
-                     SceneJoint)
+from .limits import (DriveEfforts, ENGAGED, JointFriction, JointLimits, limit_name,
+                     restitution_of, SceneJoint, stick_name)
 from .robots import (build_robot, CommandGroup, drive_name, Interface, Joint, JointDrives,
                      JointSpace, JointSpec, JointState, mimic_name, RobotSpec, rpy_matrix)
 from .shapes import ALL_BITS, CollisionShape, ContactDetector
@@ -621,6 +621,8 @@ class Simulation:
         """Back to the initial state; applied wrenches return to the scene's own."""
         #: Constraints added at run time: ``{name: (spec, the state it was anchored at)}``.
         self._added: dict = {}
+        #: Names of constraints removed at run time (a rebuild removes them again).
+        self._removed: set = set()
         self.dynamics.discard_effect_work()   # the counters restart from zero
         self.state: State = self.bodies.initial_state(self._specs)
         if self._control is not None:
@@ -933,6 +935,16 @@ class Simulation:
                                     f'{name!r} is a joint already in the simulation; a '
                                     f"spawned robot's groups command its own joints")
         try:
+            model = build_robot(robot)
+        except SpecError as exc:
+            raise exc.within('robot') from None
+        taken = sorted(self.row_names(model) & (set(self.constraint_names) | set(self._added)
+                                                | set(self._built_names())))
+        if taken:
+            raise SpecError('robot', f'its joints would make constraints named {taken}, '
+                                     f'names of constraints already in the simulation: give '
+                                     f'the robot a prefix')
+        try:
             new = self._rebuilt((), robots=self._built['robots'] + [robot],
                                 groups=self._built['command_groups'] + groups)
         except SpecError as exc:
@@ -946,6 +958,20 @@ class Simulation:
         new._spawned_robots = self._spawned_robots + [robot.name]
         new._origin = self._origin
         self._adopt(new)
+
+    @staticmethod
+    def row_names(model: Any) -> set:
+        """
+        Return the constraint names a robot model's joints may take (a RobotModel's).
+
+        Its joints' constraints, and per one-coordinate joint its mimic row, exact drive,
+        bound and stick (whether it has them or not).
+        """
+        rows = {c.name for c in model.constraints if isinstance(c, Constraint)}
+        for j in model.joints:
+            rows |= {mimic_name(j.name), drive_name(j.name), limit_name(j.name),
+                     stick_name(j.name)}
+        return rows
 
     def _refuse_overlap(self, names: list, field: str) -> None:
         """Raise SpecError if shapes of bodies ``names`` overlap others deeper than allowed."""
@@ -1149,10 +1175,9 @@ class Simulation:
         # Constraints: the scene's removed at run time stay removed; those added at run
         # time are anchored anew where they were (their positions then, mapped).
         solver = new.dynamics.solver
-        present = set(self.constraint_names)   # (a saturated drive's too)
-        for name in kept:
-            if name not in present and name in solver.constraints.names:
-                solver.constraints.remove(name)
+        new._removed = self._removed & set(solver.constraints.names)   # (of those still here)
+        for name in sorted(new._removed):   # (a scene's, or a robot joint's)
+            solver.constraints.remove(name)
         for name, (spec, at) in self._added.items():
             if name in solver.constraints.names:   # (a scene's removed and added anew)
                 solver.constraints.remove(name)
@@ -1526,7 +1551,8 @@ class Simulation:
             self.dynamics.solver.constraints.spec(name)   # (an unknown name: its error)
             self.contact.detector.exclude(self._exclusions(self._specs_now(name)))
         spec = self.dynamics.solver.constraints.remove(name)
-        self._added.pop(name, None)
+        if self._added.pop(name, None) is None:   # (one a rebuild would make again)
+            self._removed.add(name)
         self.dynamics.changed()
         if self.events is not None:   # rows may have moved
             self.events.rows_changed()

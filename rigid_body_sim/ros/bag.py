@@ -8,8 +8,9 @@ definitions and type hashes go into the bag, so rosbag2 and MCAP readers
 (Foxglove, ``ros2 bag``, ``rosbags``, ``mcap``) decode them (except
 ``mcap_ros2``'s decoder for service event types: it refuses the underscore in
 ``AddConstraint_Event``, as it does in any rosbag2 service recording). This
-package's own types (``rigid_body_sim_interfaces``) and the service event types
-of its services
+package's own types (``rigid_body_sim_interfaces``), the ROS simulator interface's
+(``simulation_interfaces``: ``spawn_entity``'s calls, ...), and the service event types
+of their services
 (``<srv>_Event``, which ``ros2 bag record --all-services`` records on
 ``<service>/_service_event``) are registered from their definition files.
 """
@@ -37,16 +38,38 @@ def msgtype_name(msg: Any) -> str:
     return f'{package}/{kind}/{cls.__name__}'
 
 
-def _interface_dir() -> Path:
-    """Return the folder holding this package's msg/ and srv/ definitions."""
+#: The ROS simulator interface's package (its service events are recorded too).
+STANDARD = 'simulation_interfaces'
+#: Field types that are not messages.
+PRIMITIVES = {'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16',
+              'uint16', 'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'}
+
+
+def _interface_dir(package: str = INTERFACES) -> Optional[Path]:
+    """Return the folder holding a package's msg/ and srv/ definitions (None: not found)."""
     try:
         from ament_index_python.packages import get_package_share_directory
-        share = Path(get_package_share_directory(INTERFACES))
+        share = Path(get_package_share_directory(package))
         if (share / 'msg').is_dir():
             return share
     except Exception:  # noqa: B902 - not installed: the source tree
         pass
-    return Path(__file__).resolve().parents[2] / 'interfaces'
+    root = Path(__file__).resolve().parents[2]
+    folder = root / 'interfaces' if package == INTERFACES else root / 'vendor' / package
+    return folder if (folder / 'msg').is_dir() else None
+
+
+def _qualified(text: str, package: str) -> str:
+    """Return a definition with its package's own message types named in full."""
+    lines = []
+    for line in text.splitlines():
+        words = line.split('#', 1)[0].split()
+        if words:
+            base = words[0].split('[', 1)[0].split('<=', 1)[0]
+            if base not in PRIMITIVES and '/' not in base:
+                line = line.replace(words[0], f'{package}/msg/{words[0]}', 1)
+        lines.append(line)
+    return '\n'.join(lines) + '\n'
 
 
 @lru_cache(maxsize=None)
@@ -56,16 +79,21 @@ def typestore():
 
     Service ``S`` gives ``S_Request``, ``S_Response`` and ``S_Event`` (its
     ``service_msgs/ServiceEventInfo`` plus at most one request and one response):
-    those of this package's services, and of ``std_srvs/Trigger``.
+    those of this package's services, of ``simulation_interfaces`` (its messages too)
+    and of ``std_srvs/Trigger``.
     """
     store = get_typestore(Stores.ROS2_JAZZY)
-    folder = _interface_dir()
     types = {}
-    for path in sorted((folder / 'msg').glob('*.msg')):
-        types.update(get_types_from_msg(path.read_text(), f'{INTERFACES}/msg/{path.stem}'))
-    for path in sorted((folder / 'srv').glob('*.srv')):
-        request, response = path.read_text().split('\n---', 1)
-        types.update(_service_types(INTERFACES, path.stem, request, response))
+    for package in (INTERFACES, STANDARD):
+        folder = _interface_dir(package)
+        if folder is None:   # (the standard's package, where it is neither built nor here)
+            continue
+        for path in sorted((folder / 'msg').glob('*.msg')):
+            types.update(get_types_from_msg(path.read_text(), f'{package}/msg/{path.stem}'))
+        for path in sorted((folder / 'srv').glob('*.srv')):
+            request, response = path.read_text().split('\n---', 1)
+            types.update(_service_types(package, path.stem, _qualified(request, package),
+                                        _qualified(response, package)))
     # std_srvs/Trigger (~/reset), which the Jazzy store lacks as a service.
     types.update(_service_types('std_srvs', 'Trigger', '', 'bool success\nstring message\n'))
     store.register(types)

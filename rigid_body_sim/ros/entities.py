@@ -181,6 +181,60 @@ class Entities:
 
     # -- bounds ---------------------------------------------------------------------------
 
+    def frame(self, name: str) -> tuple:
+        """Return the entity frame's origin (3,) and axes (3, 3) in the world now."""
+        e = self.get(name)
+        if e.body is None:
+            return e.position.copy(), e.rotation.copy()
+        pos, quat = self.sim.pose(e.body)
+        R_b = so3.quat_to_matrix(quat)
+        return pos + R_b @ e.position, R_b @ e.rotation
+
+    def overlapping(self, names: list, kind: str, points: np.ndarray) -> list:
+        """
+        Return those of ``names`` whose bounds overlap a region (touching counts).
+
+        An entity's bounds are its :meth:`bounds` box about its frame, placed where the
+        entity is (an oriented box); an entity without shapes is its frame's origin.
+        The region: ``kind`` 'sphere' (``points`` the centre, then a point whose x is the
+        radius), 'box' (two opposite corners, world axes) or 'hull' (the convex hull of
+        three or more points). A sphere is tested in closed form (the box's closest
+        point); a box or a hull by whether the two convex hulls share a point (a linear
+        program's feasibility, scipy's HiGHS, to its 1e-7 feasibility tolerance).
+        Raises EntityError OPERATION_FAILED for a malformed region, naming it.
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if not np.all(np.isfinite(points)):
+            raise EntityError('OPERATION_FAILED', 'filters.bounds.points: not finite')
+        need = {'sphere': 2, 'box': 2, 'hull': 3}[kind]
+        if len(points) < need or (kind != 'hull' and len(points) != need):
+            raise EntityError('OPERATION_FAILED', f'filters.bounds: a {kind} takes '
+                                                  f'{"at least " if kind == "hull" else ""}'
+                                                  f'{need} points, got {len(points)}')
+        if kind == 'sphere' and not points[1][0] >= 0.0:
+            raise EntityError('OPERATION_FAILED', f'filters.bounds.points[1].x: the radius '
+                                                  f'must be >= 0, got {points[1][0]!r}')
+        if kind == 'box':
+            lo, hi = points.min(axis=0), points.max(axis=0)
+            points = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
+        out = []
+        for name in names:
+            p, R = self.frame(name)
+            box = self.bounds(name)
+            if kind == 'sphere':
+                centre, radius = points[0], float(points[1][0])
+                local = R.T @ (centre - p)
+                nearest = np.zeros(3) if box is None else np.clip(local, box[0], box[1])
+                hit = float(np.linalg.norm(local - nearest)) <= radius
+            else:
+                corners = p[None, :] if box is None else np.array(
+                    [p + R @ np.array([(box[0], box[1])[i >> k & 1][k] for k in range(3)])
+                     for i in range(8)])
+                hit = _hulls_meet(corners, points)
+            if hit:
+                out.append(name)
+        return out
+
     def bounds(self, name: str) -> Optional[tuple]:
         """
         Return ``(lower, upper)`` (3,) each: the box around the entity's shapes in its frame.
@@ -195,12 +249,7 @@ class Entities:
         shapes = [s for s in sim.shapes if s.body in e.bodies and s.kind != 'plane']
         if not shapes:
             return None
-        if e.body is None:
-            p_frame, R_frame = e.position, e.rotation
-        else:
-            pos, quat = sim.pose(e.body)
-            R_b = so3.quat_to_matrix(quat)
-            p_frame, R_frame = pos + R_b @ e.position, R_b @ e.rotation
+        p_frame, R_frame = self.frame(name)
         lower, upper = np.full(3, np.inf), np.full(3, -np.inf)
         for s in shapes:
             pos, quat = sim.pose(s.body)
@@ -214,6 +263,19 @@ class Entities:
                 upper[k] = max(upper[k], centre + _support(s, local))
                 lower[k] = min(lower[k], centre - _support(s, -local))
         return lower, upper
+
+
+def _hulls_meet(a: np.ndarray, b: np.ndarray) -> bool:
+    """Tell whether the convex hulls of points ``a`` (n, 3) and ``b`` (m, 3) share a point."""
+    from scipy.optimize import linprog
+    n, m = len(a), len(b)
+    # λ ≥ 0, μ ≥ 0, Σλ = Σμ = 1, aᵀλ − bᵀμ = 0: feasible exactly when they meet.
+    eq = np.zeros((5, n + m))
+    eq[:3, :n], eq[:3, n:] = a.T, -b.T
+    eq[3, :n], eq[4, n:] = 1.0, 1.0
+    rhs = np.array([0.0, 0.0, 0.0, 1.0, 1.0])
+    res = linprog(np.zeros(n + m), A_eq=eq, b_eq=rhs, bounds=(0, None), method='highs')
+    return res.status == 0
 
 
 def _support(shape, d: np.ndarray) -> float:

@@ -227,6 +227,7 @@ class SimNode(Node):
     def _make_robot_interfaces(self) -> None:
         """joint_states, ~/joint_commands, <group>/commands (joints), robot_description, tf."""
         self._joint_pub = self._tf_pub = self._tf_static_pub = self._description_pub = None
+        self._description_of = None   # the (prefix, URDF) robot_description carries
         self._tf_stamp_ns: Optional[int] = None   # of the last /tf message
         self._group_subs = {}
         self._sync_robot_interfaces()
@@ -255,8 +256,13 @@ class SimNode(Node):
         if robots and self._description_pub is None:
             self._description_pub = self.create_publisher(String, ROBOT_DESCRIPTION_TOPIC,
                                                           LATCHED)
-            prefix, parsed = robots[0]   # named as joint_states and /tf name them
+        first = robots[0] if robots else None
+        if first is not None and first is not self._description_of:
+            # The first robot there is now (named as joint_states and /tf name them): a
+            # late joiner gets the robot that exists.
+            prefix, parsed = first
             self._description_pub.publish(String(data=prefixed_xml(parsed.xml, prefix)))
+        self._description_of = first
         if robots and self.settings.tf == 'links' and self._tf_pub is None:
             self._tf_pub = self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
             self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED)
@@ -426,7 +432,10 @@ class SimNode(Node):
         (followed even with the same names).
         """
         now = list(self.sim.bodies.names)
-        if now != before or scene:
+        # (a robot fixed to the world with no moving link changes robots, not bodies)
+        robots_now = [m.spec.name for m in self.sim.robots]
+        robots_then = [m.spec.name for m in self.session.models]
+        if now != before or scene or robots_now != robots_then:
             self.session.bodies_changed(markers, scene=scene, robots=robots)
             self._sync_robot_interfaces()
             if self.settings.per_body_topics:
@@ -651,7 +660,8 @@ class SimNode(Node):
 
     def _publish_joint_states(self) -> None:
         """Publish joint_states (where subscribed): the joints now, stamped simulation time."""
-        if self._joint_pub is not None and self._joint_pub.get_subscription_count():
+        if self._joint_pub is not None and self._joint_pub.get_subscription_count() \
+                and len(self.sim.joints):   # (quiet once every robot is deleted)
             self._joint_pub.publish(self.session.outputs.joint_states(self.session.stamp()))
 
     def _publish_tf(self) -> None:

@@ -5,12 +5,15 @@ Usage: ``plot BAG [--node /rigid_body_sim] [--bodies B ...] [-o OUT.png]``.
 BAG is a rosbag2 folder (or one of its ``.mcap`` / ``.db3`` files) holding the
 node's ``<node>/body_states`` and, when recorded, ``<node>/metrics``,
 ``<node>/constraints/<C>/wrench``, ``<node>/bodies/<B>/wrench`` and the
-service events of ``reset``, ``add_constraint`` and ``remove_constraint``. The
+service events of ``reset``, ``add_constraint`` and ``remove_constraint``, and of
+the standard's ``spawn_entity`` and ``delete_entity`` (in the node's namespace). The
 panels share the simulation time axis (header stamps, not the time the bag
 received a message): body positions x, y, z; how far each body has turned
 from its first orientation; energy; energy change; constraint violation (log
 scale); reaction force magnitude per constraint. Wrench inputs are shaded
-while they hold; resets and constraint changes are lines across all panels.
+while they hold; resets, constraint changes, spawns and deletions are lines across
+all panels. Bodies spawned or deleted during the recording are drawn while they
+exist; without ``--bodies`` the first bodies to appear are drawn.
 A panel without data is left out, and the title says so. Without ``-o`` the
 picture goes next to the bag, ``BAG.png``. Exit code 2 for a missing or
 unreadable bag, one without body states, an unknown ``--node`` or body.
@@ -39,6 +42,10 @@ METRIC_FIELDS = ('total_energy', 'kinetic_energy', 'potential_energy', 'energy_c
 MAX_BODIES = 8
 #: The node's services whose calls are marked on the time axis (from their service events).
 SERVICES = ('reset', 'add_constraint', 'remove_constraint')
+#: The ROS simulator interface's calls marked alike (under the node's namespace).
+STANDARD_SERVICES = ('spawn_entity', 'delete_entity')
+#: simulation_interfaces/msg/Result: RESULT_OK.
+RESULT_OK = 1
 
 
 class PlotError(Exception):
@@ -71,11 +78,11 @@ class WrenchInputs:
 
 @dataclass
 class ServiceEvent:
-    """A call of the node's reset, add_constraint or remove_constraint service."""
+    """A call of the node's reset, add_constraint, remove_constraint, spawn or delete."""
 
     t: float                 # s, simulation time at which the bag received the reply
-    service: str             # 'reset', 'add_constraint' or 'remove_constraint'
-    name: str                # the constraint's name ('' for reset)
+    service: str             # one of SERVICES or STANDARD_SERVICES
+    name: str                # the constraint's or entity's name ('' for reset)
     success: bool
     message: str
 
@@ -254,18 +261,22 @@ def _read(reader: Reader, path: Path, node: Optional[str],
     reaction_re = re.compile(re.escape(node) + r'/constraints/([^/]+)/wrench')
     input_re = re.compile(re.escape(node) + r'/bodies/([^/]+)/wrench')
     service_re = re.compile(re.escape(node) + r'/(' + '|'.join(SERVICES) + ')/_service_event')
+    namespace = node.rsplit('/', 1)[0]   # (the standard's services are the node's siblings)
+    standard_re = re.compile(re.escape(namespace) + r'/(' + '|'.join(STANDARD_SERVICES)
+                             + ')/_service_event')
     wanted = [c for c in connections
               if (c.topic == states_topic and c.msgtype == BODY_STATES)
               or (c.topic == metrics_topic and c.msgtype == METRICS)
               or (c.msgtype == WRENCH and (reaction_re.fullmatch(c.topic)
                                            or input_re.fullmatch(c.topic)))
-              or (service_re.fullmatch(c.topic) and c.msgtype.endswith('_Event'))]
+              or ((service_re.fullmatch(c.topic) or standard_re.fullmatch(c.topic))
+                  and c.msgtype.endswith('_Event'))]
 
     stamps, logtimes = [], []
-    position: dict = {}
-    orientation: dict = {}
     all_bodies: list = []
-    chosen: Optional[list] = None
+    chosen = list(dict.fromkeys(bodies)) if bodies else []
+    position: dict = {b: [] for b in chosen}
+    orientation: dict = {b: [] for b in chosen}
     world_frame = None
     index: dict = {}
     names_seen: list = []
@@ -285,11 +296,13 @@ def _read(reader: Reader, path: Path, node: Optional[str],
                 names_seen = names
                 index = {n: i for i, n in enumerate(names)}
                 all_bodies.extend(n for n in names if n not in all_bodies)
-            if chosen is None:
-                # Bodies are the scene's: the first message names them all.
-                chosen = list(dict.fromkeys(bodies)) if bodies else names[:MAX_BODIES]
-                position = {b: [] for b in chosen}
-                orientation = {b: [] for b in chosen}
+                # Without --bodies, the first MAX_BODIES to appear (spawned ones too),
+                # NaN before they did.
+                for n in names:
+                    if not bodies and n not in position and len(chosen) < MAX_BODIES:
+                        chosen.append(n)
+                        position[n] = [nan3] * len(stamps)
+                        orientation[n] = [nan4] * len(stamps)
             if world_frame is None and msg.header.frame_id:
                 world_frame = msg.header.frame_id
             stamps.append(_seconds(msg.header.stamp))
@@ -321,10 +334,12 @@ def _read(reader: Reader, path: Path, node: Optional[str],
             # Server and client sides both record a call; one entry per call, its first
             # reply (the server's, sent before the client receives it).
             info = msg.info
-            call = calls.setdefault((service_re.fullmatch(topic).group(1),
-                                     bytes(info.client_gid), info.sequence_number), ['', None])
+            matched = service_re.fullmatch(topic) or standard_re.fullmatch(topic)
+            call = calls.setdefault((matched.group(1), bytes(info.client_gid),
+                                     info.sequence_number), ['', None])
             if msg.request:
-                call[0] = getattr(msg.request[0], 'name', '')
+                call[0] = getattr(msg.request[0], 'name', '') or \
+                    getattr(msg.request[0], 'entity', '')
             if msg.response and call[1] is None:
                 call[1] = (logtime, msg.response[0])
 
@@ -375,8 +390,8 @@ def _read(reader: Reader, path: Path, node: Optional[str],
                      key=lambda r: r[0])
     if monotonic or len(logtimes) == 1:
         series.events = [ServiceEvent(t=float(sim_time([logtime])[0]), service=service,
-                                      name=name, success=bool(response.success),
-                                      message=response.message)
+                                      name=getattr(response, 'entity_name', '') or name,
+                                      **_outcome(response))
                          for logtime, service, name, response in replies]
     # Resets: where the step count since the last reset drops, else the reset calls.
     if series.metrics is not None and len(series.metrics['t']) > 1:
@@ -386,6 +401,19 @@ def _read(reader: Reader, path: Path, node: Optional[str],
         series.resets = np.array([e.t for e in series.events
                                   if e.service == 'reset' and e.success])
     return series
+
+
+def _outcome(response) -> dict:
+    """Return ``success`` and ``message`` of a reply (ours, or the standard's ``result``)."""
+    if hasattr(response, 'success'):
+        return {'success': bool(response.success), 'message': response.message}
+    return {'success': response.result.result == RESULT_OK,
+            'message': response.result.error_message}
+
+
+#: How a call is marked on the time axis: its sign before the name.
+MARKS = {'add_constraint': '+ ', 'remove_constraint': '\u2212 ', 'spawn_entity': 'spawned ',
+         'delete_entity': 'deleted '}
 
 
 def _broken(t: np.ndarray, y: np.ndarray,
@@ -490,8 +518,8 @@ def draw(series: BagSeries, out: Path) -> list:
     marks = [(float(r), 'reset', '--') for r in series.resets]
     for e in series.events:
         if e.service != 'reset':
-            sign = '+' if e.service == 'add_constraint' else '−'
-            marks.append((e.t, f'{sign} {e.name}' + ('' if e.success else ' (refused)'), ':'))
+            marks.append((e.t, MARKS[e.service] + e.name + ('' if e.success else ' (refused)'),
+                          ':'))
     for ax in axes:
         ax.grid(True, alpha=0.3)
         for body, inputs in series.inputs.items():
@@ -533,9 +561,13 @@ def draw(series: BagSeries, out: Path) -> list:
                  bbox={'facecolor': 'white', 'alpha': 0.75, 'lw': 0, 'pad': 1.0})
     if marks:
         handles.append(Line2D([], [], color='0.3', ls='--', lw=1, label='reset'))
-        if any(style == ':' for *_, style in marks):
+        calls = {e.service for e in series.events}
+        if calls & set(SERVICES[1:]):
             handles.append(Line2D([], [], color='0.3', ls=':', lw=1,
                                   label='constraint added (+)\nor removed (−)'))
+        if calls & set(STANDARD_SERVICES):
+            handles.append(Line2D([], [], color='0.3', ls=':', lw=1,
+                                  label='entity spawned\nor deleted'))
     top.legend(handles=handles, title='body', **side)
 
     ax = ax_of['orientation']
@@ -585,7 +617,8 @@ def draw(series: BagSeries, out: Path) -> list:
         worst = float(np.max(np.abs(change)))
         start = float(np.max(np.abs(m['total_energy'] - change)))
         relative = f', {100.0 * worst / start:.2g} % of |E0|' if start > 0 else ''
-        title(ax, f'Energy change since the last reset (largest |ΔE| {worst:.3g} J{relative})')
+        title(ax, f'Energy change since the last reset or spawn or deletion (largest |ΔE| '
+                  f'{worst:.3g} J{relative})')
 
         if 'constraint violation' in ax_of:
             ax = ax_of['constraint violation']
@@ -679,10 +712,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if len(series.bodies) < len(series.all_bodies) and not bodies:
         extra += f' (first {MAX_BODIES} of {len(series.all_bodies)} bodies; pick with --bodies)'
     n_inputs = sum(len(i.t) for i in series.inputs.values())
-    n_calls = sum(e.service != 'reset' for e in series.events)
+    n_calls = sum(e.service in SERVICES[1:] for e in series.events)
+    n_entities = sum(e.service in STANDARD_SERVICES for e in series.events)
     n_resets = len(series.resets)
     marked = [f'{n} {what}{"s" * (n != 1)}' for n, what in (
-        (n_inputs, 'wrench input'), (n_resets, 'reset'), (n_calls, 'constraint call')) if n]
+        (n_inputs, 'wrench input'), (n_resets, 'reset'), (n_calls, 'constraint call'),
+        (n_entities, 'spawn or delete call')) if n]
     reactions = f' ({", ".join(series.reactions)})' if series.reactions else ''
     print(f'plot: {out}: {series.node}{extra}, {len(series.t)} states '
           f'{np.nanmin(series.t):.6g}..{np.nanmax(series.t):.6g} s, '

@@ -74,7 +74,7 @@ class Session:
                        for name, g in scene.simulation.command_groups().items()}
         #: The robots there now, in the order of ``sim.robots``: (prefix, ParsedUrdf).
         self.robots = list(scene.robots)
-        self._models = list(scene.simulation.robots)   # (whose the robots above are)
+        self.models = list(scene.simulation.robots)   # (whose the robots above are)
         for name in self.groups:
             check_name_token(name, f'scene {scene.source}: command group name',
                              self.full_relative_topic(group_topic(name)))
@@ -360,12 +360,12 @@ class Session:
         shapes = {b: m for b, m in {**now, **(markers or {})}.items() if b in names}
         collision = self.outputs.collision_markers
         # The robots: (prefix, URDF) by robot name, as the simulation has them now.
-        known = {m.spec.name: r for m, r in zip(self._models, self.robots)}
+        known = {m.spec.name: r for m, r in zip(self.models, self.robots)}
         if scene:
             known.update({m.spec.name: r for m, r in zip(self.sim.robots, self.scene.robots)})
         known.update(robots or {})
         self.robots = [known[m.spec.name] for m in self.sim.robots]
-        self._models = list(self.sim.robots)
+        self.models = list(self.sim.robots)
         self.groups = {name: (tuple(g.joints), g.interface.value)
                        for name, g in self.sim.command_groups().items()}
         self.interfaces = self.sim.joint_interfaces()

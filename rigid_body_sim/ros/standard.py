@@ -22,7 +22,8 @@ reply whose ``result`` says what happened, and a refused request changes nothing
   RESULT_INCORRECT_STATE (the Result message's own example; the two files' comments
   say OPERATION_FAILED).
 - ``get_entities`` / ``get_entities_states`` (a regular expression searched in the
-  name, and categories; tags and bounds filters are not supported), ``get_entity_state``,
+  name, categories, and a region the entity's bounds overlap: a sphere, a box or a
+  convex hull; a tags filter is not supported: entities have no tags), ``get_entity_state``,
   ``set_entity_state`` (world frame: an empty ``frame_id`` or the node's
   ``world_frame``; the acceleration given is ignored: it follows from the forces),
   ``get_entity_info``, ``get_entity_bounds`` (a box about the entity's frame from its
@@ -67,7 +68,7 @@ import yaml
 from . import conversions as conv
 from .entities import Entities, EntityError, ROBOT
 from .inputs import check_name_token
-from .outputs import body_topic, group_topic
+from .outputs import body_topic, constraint_topic, group_topic
 from ..core import SpecError
 from ..core.robots import build_robot
 from ..scene import body_from_dict, robot_from_dict
@@ -76,7 +77,8 @@ from ..urdf import read_robot_xml, UrdfError
 F = SimulatorFeatures
 #: What this node implements of the standard (GetSimulatorFeatures).
 FEATURES = (F.SPAWNING, F.DELETING, F.SPAWNING_RESOURCE_STRING,
-            F.ENTITY_BOUNDS, F.ENTITY_CATEGORIES, F.ENTITY_STATE_GETTING,
+            F.ENTITY_BOUNDS, F.ENTITY_BOUNDS_BOX, F.ENTITY_BOUNDS_CONVEX,
+            F.ENTITY_CATEGORIES, F.ENTITY_STATE_GETTING,
             F.ENTITY_STATE_SETTING, F.ENTITY_INFO_GETTING, F.SIMULATION_RESET,
             F.SIMULATION_RESET_TIME, F.SIMULATION_RESET_STATE, F.SIMULATION_RESET_SPAWNED,
             F.SIMULATION_STATE_GETTING,
@@ -452,8 +454,9 @@ class StandardInterface:
                 name, what = spec.name, (f'robot: {len(model.bodies)} bodies, '
                                          f'{len(model.joints)} joints')
         except SpecError as exc:
-            code = Sp.INVALID_POSE if 'would overlap' in exc.problem \
-                else Sp.RESOURCE_PARSE_ERROR
+            code = Sp.INVALID_POSE if 'would overlap' in exc.problem else (
+                Sp.NAME_NOT_UNIQUE if 'is taken' in exc.problem or 'constraints named'
+                in exc.problem else Sp.RESOURCE_PARSE_ERROR)
             response.result = result(code, str(exc))
             return response
         try:
@@ -593,7 +596,7 @@ class StandardInterface:
         """
         Return ``(RobotSpec, ParsedUrdf, groups)`` of a robot spawn, or EntityError (a code).
 
-        Its links and joints keep their names if they are free; else, with
+        Its links, joints and groups keep their names if they are free; else, with
         allow_renaming, they take the prefix ``<name>_`` (unless the entry gives one).
         Its command groups name its joints as its URDF does (without the prefix).
         """
@@ -609,31 +612,39 @@ class StandardInterface:
         taken = set(self.entities.names()) | {m.spec.name for m in sim.robots}
         name = self._free_name(request, request.name or spec.name, taken)
 
-        def names(spec) -> tuple:
+        def clashes(spec, groups) -> list:
+            """Return its link, joint, row and group names that are taken."""
             try:
                 model = build_robot(spec)
             except SpecError as exc:
                 raise EntityError('RESOURCE_PARSE_ERROR', str(exc)) from None
-            return [b.name for b in model.bodies], [j.name for j in model.joints]
-        links, joints = names(spec)
-        clash = sorted((set(links) & set(sim.bodies.names))
-                       | (set(joints) & set(sim.joints.names)))
+            return sorted((({b.name for b in model.bodies} & set(sim.bodies.names))
+                           | ({j.name for j in model.joints} & set(sim.joints.names))
+                           | (sim.row_names(model) & set(sim.constraint_names))
+                           | ({g.name for g in groups} & set(sim.command_groups()))))
+        clash = clashes(spec, groups)
         if clash and 'prefix' not in entry and request.allow_renaming:
+            # Its links, joints and groups take the prefix <name>_ (a free entity name).
             spec = replace(spec, prefix=f'{name}_')
-            links, joints = names(spec)
-        elif clash:
-            raise EntityError('NAME_NOT_UNIQUE', f'links or joints {clash[:5]} are taken: give '
-                                                 f'the robot a prefix (a YAML robot entry) or '
-                                                 f'allow_renaming (prefix {name + "_"!r})')
+            groups = [replace(g, name=f'{name}_{g.name}') for g in groups]
+            clash = clashes(spec, groups)
+        if clash:
+            hint = '' if request.allow_renaming else f' or allow_renaming (prefix {name}_)'
+            raise EntityError('NAME_NOT_UNIQUE', f'links, joints or groups {clash[:5]} are '
+                                                 f'taken: give the robot a prefix (a YAML robot '
+                                                 f'entry){hint}')
         spec = replace(spec, name=name)
         # (its groups name its URDF joints: the prefix, given or not, is prepended)
         groups = [replace(g, joints=[spec.prefix + j for j in g.joints]) for g in groups]
-        for link in links:
-            try:
-                check_name_token(link, 'link name',
-                                 node.session.full_topic(body_topic(link, 'wrench')))
-            except SpecError as exc:
-                raise EntityError('NAME_INVALID', str(exc)) from None
+        model = build_robot(spec)
+        for field, names, topic in (
+                ('link name', [b.name for b in model.bodies], lambda n: body_topic(n, 'wrench')),
+                ('joint name', sorted(sim.row_names(model)), constraint_topic)):
+            for n in names:
+                try:
+                    check_name_token(n, field, node.session.full_topic(topic(n)))
+                except SpecError as exc:
+                    raise EntityError('NAME_INVALID', str(exc)) from None
         for group in groups:
             try:
                 check_name_token(group.name, 'command group name',
@@ -670,10 +681,18 @@ class StandardInterface:
     def _selected(self, filters) -> list:
         if filters.tags.tags:
             raise EntityError('FEATURE_UNSUPPORTED', 'filters.tags: entities have no tags here')
-        if filters.bounds.type != Bounds.TYPE_EMPTY or filters.bounds.points:
-            raise EntityError('FEATURE_UNSUPPORTED', 'filters.bounds: filtering by bounds is '
-                                                     'not supported')
-        return self.entities.select(filters.filter, [c.category for c in filters.categories])
+        names = self.entities.select(filters.filter, [c.category for c in filters.categories])
+        b = filters.bounds
+        if b.type == Bounds.TYPE_EMPTY:
+            if b.points:
+                raise EntityError('OPERATION_FAILED', 'filters.bounds: TYPE_EMPTY with points')
+            return names
+        kind = {Bounds.TYPE_SPHERE: 'sphere', Bounds.TYPE_BOX: 'box',
+                Bounds.TYPE_CONVEX_HULL: 'hull'}.get(b.type)
+        if kind is None:
+            raise EntityError('OPERATION_FAILED', f'filters.bounds.type: {b.type} is not a '
+                                                  f'type of Bounds')
+        return self.entities.overlapping(names, kind, [(p.x, p.y, p.z) for p in b.points])
 
     def _entity_call(self, handler):
         """Run ``handler()``; an EntityError becomes the reply's result (nothing changed)."""
