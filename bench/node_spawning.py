@@ -96,7 +96,7 @@ def run(n_bodies: int, n_robots: int, quiet: float, workdir: Path) -> list:
                       GetEntityState.Request(entity=probe)).state.header.stamp
             return s.sec + 1e-9 * s.nanosec
 
-        def phase(label: str, calls: list, bodies_after: int) -> None:
+        def phase(label: str, calls: list, bodies_after: int, wait: float = 0.0) -> None:
             seen = len(diags)
             client.spin_until(lambda: len(diags) > seen, 'a diagnostics window',
                               STARTUP_DEADLINE, proc, log)
@@ -110,6 +110,8 @@ def run(n_bodies: int, n_robots: int, quiet: float, workdir: Path) -> list:
                 trips.append(time.perf_counter() - start)
                 if reply.result.result != Result.RESULT_OK:
                     raise RuntimeError(f'{label}: {reply.result.error_message}')
+            end = time.perf_counter() + wait   # (a phase without calls: time passing)
+            client.spin_until(lambda: time.perf_counter() > end, label, wait + 10.0)
             t1, w1 = sim_time(), time.perf_counter()
             seen = len(diags)   # (a window that ends after the phase: its lag resets)
             client.spin_until(lambda: len(diags) > seen, 'a diagnostics window',
@@ -148,9 +150,7 @@ def run(n_bodies: int, n_robots: int, quiet: float, workdir: Path) -> list:
             return make
 
         base = len(scene['bodies'])
-        phase('quiet', [], base)
-        end = time.perf_counter() + quiet
-        client.spin_until(lambda: time.perf_counter() > end, 'the quiet phase', quiet + 10)
+        phase('quiet', [], base, wait=quiet)
         phase(f'spawn {n_bodies} bodies', [spawn_body(k) for k in range(n_bodies)],
               base + n_bodies)
         phase(f'delete {n_bodies} bodies', [delete(f'crate{k}') for k in range(n_bodies)],

@@ -360,6 +360,12 @@ def sections(quick: bool, node_args: list) -> list:
         ('skip_node', 'node_robot', node_args, report.Section(
             'The ROS node with a robot', f'./dev.sh python bench/node_robot.py{q}',
             [T('node_robot.md')])),
+        ('skip_node', 'node_spawning', ['--quick'] if quick else [], report.Section(
+            'The ROS node while entities are spawned and deleted',
+            f'./dev.sh python bench/node_spawning.py{q}', [T('node_spawning.md')],
+            about='spawn_entity and delete_entity called back to back from another process '
+                  'while the node runs at 1 kHz: the round trips of the calls, the simulated '
+                  'time over the wall time, and the lag resets.')),
     ]
 
 
