@@ -128,3 +128,42 @@ def test_a_bounds_filter_selects_the_entities_whose_box_meets_the_region():
             assert exc.code == 'OPERATION_FAILED' and 'filters.bounds' in str(exc)
         else:
             raise AssertionError(f'{kind} {points} accepted')
+
+
+def test_a_state_set_in_a_moving_frame_is_what_that_frame_observes():
+    # The reference spins (2 rad/s about z) and moves (1 m/s along x); a cube is set at
+    # p, at rest in its axes but for v and ω relative. Read back from the world state
+    # alone: the cube's position in the frame's axes is p, its change over one short
+    # free step (no forces, isotropic bodies) is v to O(h), and its angular velocity
+    # relative to the frame, in its axes, is ω.
+    h = 1e-7
+    sim = Simulation([RigidBody('cube', 1.0, (0.1,) * 3),
+                      RigidBody('ref', 1.0, (0.1,) * 3, position_world=(1.0, 2.0, 3.0),
+                                orientation_xyzw=_quat((1, 1, 0), 0.4),
+                                linear_velocity_world=(1.0, 0.0, 0.0),
+                                angular_velocity_body=(0.0, 0.0, 2.0))], [], dt=h)
+    ent = Entities(sim)
+    p, v, w = np.array([1.0, -0.5, 0.2]), np.array([0.0, 0.5, 0.1]), np.array([0.3, 0, 0])
+    q = _quat((0, 1, 0), 0.3)
+    ent.set_state('cube', p, q, v, w, frame='ref')
+
+    def relative():
+        pc, qc = sim.pose('cube')
+        pr, qr = sim.pose('ref')
+        R = so3.quat_to_matrix(qr)
+        return R.T @ (pc - pr), R.T @ so3.quat_to_matrix(qc), R.T @ (
+            sim.twist('cube')[1] - sim.twist('ref')[1])
+    r0, R0, w0 = relative()
+    np.testing.assert_allclose(r0, p, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(R0, so3.quat_to_matrix(q), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(w0, w, rtol=0, atol=1e-14)
+    sim.step()
+    # (the finite difference's error: h times the relative acceleration, ~ |ω|² |p| + 2|ω||v|)
+    np.testing.assert_allclose((relative()[0] - r0) / h, v, rtol=0, atol=10 * h)
+    for frame in ('cube', 'nowhere'):
+        try:
+            ent.set_state('cube', p, q, v, w, frame=frame)
+        except EntityError as exc:
+            assert exc.code == 'OPERATION_FAILED' and repr(frame) in str(exc)
+        else:
+            raise AssertionError(frame)

@@ -263,6 +263,16 @@ def test_entities_states_info_and_bounds_from_the_scene(ros, tmp_path):
     _, p, q, v, _, _, _ = _state(ros, node, 'dog')
     np.testing.assert_allclose(p, [1.0, 2.0, 30.0], rtol=0, atol=1e-13)
     np.testing.assert_allclose(v, [-1.0, 0.0, 0.0], rtol=0, atol=1e-13)
+    # In another entity's frame: 2 m above the brick (unturned), at rest relative to it.
+    relative = EntityState()
+    relative.header.frame_id = 'brick'
+    relative.pose.position.z = 2.0
+    assert _call(ros, node, SetEntityState, 'set_entity_state', entity='ball',
+                 state=relative).result.result == OK
+    _, p_brick, _, v_brick, _, _, _ = _state(ros, node, 'brick')
+    _, p, _, v, _, _, _ = _state(ros, node, 'ball')
+    np.testing.assert_allclose(p, p_brick + [0.0, 0.0, 2.0], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(v, v_brick, rtol=0, atol=1e-13)
     # Refusals, each changing nothing.
     before = [_state(ros, node, e) for e in ('ball', 'bob')]
     assert _call(ros, node, SetEntityState, 'set_entity_state', entity='nobody',

@@ -55,7 +55,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import enum
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -652,15 +652,35 @@ class ConstraintSet:
 
     def add(self, spec: Constraint, state: State) -> None:
         """Add ``spec``, fixing its body-frame vectors from ``state``."""
-        if not isinstance(spec, Constraint):
-            raise SpecError('constraint', f'expected a Constraint, got {spec!r}')
-        if spec.name in self._resolved:
-            raise SpecError('name', f'duplicate constraint name {spec.name!r}')
-        res = self._resolve(spec, state)
-        if spec.type is JointType.GENERIC:
-            # Evaluate once: validates the function and fixes its number of rows.
-            res.n_rows = len(self.generic_rows(res, *self._frames(state))[0])
-        self._resolved[spec.name] = res
+        self.add_all([spec], state)
+
+    def add_all(self, specs: Sequence[Constraint], state: State, field: str = '') -> None:
+        """
+        Add ``specs`` in order, as :meth:`add` each, with the row tables built once.
+
+        All or none: an error names ``field[i]`` (``field`` given) of the one at fault,
+        and the set is as it was.
+        """
+        added = []
+        try:
+            for i, spec in enumerate(specs):
+                try:
+                    if not isinstance(spec, Constraint):
+                        raise SpecError('constraint', f'expected a Constraint, got {spec!r}')
+                    if spec.name in self._resolved:
+                        raise SpecError('name', f'duplicate constraint name {spec.name!r}')
+                    res = self._resolve(spec, state)
+                    if spec.type is JointType.GENERIC:
+                        # Evaluate once: validates the function and fixes its number of rows.
+                        res.n_rows = len(self.generic_rows(res, *self._frames(state))[0])
+                except SpecError as exc:
+                    raise exc.within(f'{field}[{i}]') if field else exc from None
+                self._resolved[spec.name] = res
+                added.append(spec.name)
+        except BaseException:
+            for name in added:
+                del self._resolved[name]
+            raise
         self._build()
 
     def set_drive_targets(self, names: list, targets: np.ndarray, time: float,

@@ -115,6 +115,8 @@ class Simulation:
     command_groups : sequence of CommandGroup
         The robots' joints commanded by position or velocity (servos); the
         others take efforts.
+    _converted : dict, optional
+        Internal: robots already converted (a rebuild around a spawn passes its own).
 
     """
 
@@ -126,7 +128,8 @@ class Simulation:
                  robots: Sequence[RobotSpec] = (),
                  command_groups: Sequence[CommandGroup] = (),
                  scene_joints: Sequence[SceneJoint] = (),
-                 shapes: Sequence[CollisionShape] = ()) -> None:
+                 shapes: Sequence[CollisionShape] = (), _converted: Optional[dict] = None
+                 ) -> None:
         self.dt = positive_scalar(dt, 'dt')
         #: What the scene was built of, for a spawn or a removal (:meth:`add_body`).
         self._built = {'bodies': list(bodies), 'effects': list(effects),
@@ -142,6 +145,10 @@ class Simulation:
                         'tolerance_budget': tolerance_budget, 'robots': list(robots),
                         'command_groups': list(command_groups),
                         'scene_joints': list(scene_joints), 'shapes': list(shapes)}
+        #: Each robot spec's conversion, ``{id(spec): (spec, RobotModel)}``: a rebuild
+        #: around a spawn takes the robots already there from it (:meth:`_rebuilt`).
+        self._converted: dict = {k: v for k, v in (_converted or {}).items()
+                                 if any(v[0] is r for r in robots)}
         #: Bodies and robots added at run time (:meth:`add_body`, :meth:`add_robot`),
         #: in order.
         self._spawned: list = []
@@ -153,7 +160,7 @@ class Simulation:
             if not isinstance(robot, RobotSpec):
                 raise SpecError(f'robots[{i}]', f'expected a RobotSpec, got {robot!r}')
             try:
-                model = build_robot(robot)
+                model = self._convert(robot)
             except SpecError as exc:
                 raise exc.within(f'robots[{i}]') from None
             for body in model.bodies:
@@ -242,6 +249,14 @@ class Simulation:
             self.contact = ContactSteps(self, detector, contact_wrenches)
         self._tracking = len(self.joints) > 0
         self.reset()
+
+    def _convert(self, robot: RobotSpec) -> Any:
+        """Return ``build_robot(robot)``, from :attr:`_converted` if it was (a fresh copy)."""
+        done = self._converted.get(id(robot))
+        if done is None or done[0] is not robot:
+            done = self._converted[id(robot)] = (robot, build_robot(robot))
+        # (its notes are the simulation's to add to: a list of its own)
+        return replace(done[1], notes=list(done[1].notes))
 
     def _joint_friction(self) -> Optional[JointFriction]:
         """Build the robots' joint Coulomb friction (None: none)."""
@@ -642,11 +657,8 @@ class Simulation:
         solver = self.dynamics.solver
         solver.constraints = ConstraintSet(self.bodies)
         solver.counters.reset()
-        for i, spec in enumerate(self._initial_constraints):
-            try:
-                solver.constraints.add(spec, self.state)
-            except SpecError as exc:
-                raise exc.within(f'constraints[{i}]') from None
+        # (the row tables built once: a rebuild around a spawn adds every constraint anew)
+        solver.constraints.add_all(self._initial_constraints, self.state, 'constraints')
         if not solver.consistent(self.state):
             index, residual = solver.first_inconsistent(self._initial_constraints, self.state)
             raise self._inconsistent(self._initial_constraints[index].name,
@@ -661,8 +673,8 @@ class Simulation:
             self.drives.check_stability(self.state, self.dt, self.integrator.name)
         if len(self._exact):
             # Exact drives hold the initial positions; driven joints start at rest.
-            for spec in self.drives.drive_constraints(self.joints.positions):
-                solver.constraints.add(spec, self.state)
+            solver.constraints.add_all(self.drives.drive_constraints(self.joints.positions),
+                                       self.state)
             self.dynamics.changed()
             self._reconcile_velocities()
         if self.contact is not None:
@@ -935,7 +947,7 @@ class Simulation:
                                     f'{name!r} is a joint already in the simulation; a '
                                     f"spawned robot's groups command its own joints")
         try:
-            model = build_robot(robot)
+            model = self._convert(robot)
         except SpecError as exc:
             raise exc.within('robot') from None
         taken = sorted(self.row_names(model) & (set(self.constraint_names) | set(self._added)
@@ -1161,7 +1173,8 @@ class Simulation:
                          built['constraint_time_constant'],
                          None if control is None else control.tolerance,
                          built['tolerance_budget'], robots=robots, command_groups=groups,
-                         scene_joints=scene_joints, shapes=shapes)
+                         scene_joints=scene_joints, shapes=shapes,
+                         _converted=self._converted)
         # Its state: this one's, body by body (bit for bit), at this time and step count.
         index = [new.bodies.index.get(name, -1) for name in self.bodies.names]
         parts = [p.copy() for p in new.state.parts]

@@ -151,15 +151,65 @@ class Entities:
                 acc[i] + np.cross(alpha[i], r) + np.cross(omega, np.cross(omega, r)),
                 alpha[i])
 
+    def reference(self, frame: str) -> tuple:
+        """
+        Return a frame's origin, axes, origin velocity and angular velocity, world, now.
+
+        ``frame``: an entity's name, a body's, or a robot link's (its name in
+        ``joint_states`` and ``/tf``, the prefix included). EntityError OPERATION_FAILED
+        for another name.
+        """
+        sim = self.sim
+        if frame in self.by_name:
+            e = self.by_name[frame]
+            body, p, R = e.body, e.position, e.rotation
+        elif frame in sim.bodies.index:
+            body, p, R = frame, np.zeros(3), np.eye(3)
+        else:
+            link = next((f for m in sim.robots for k, f in m.links.items()
+                         if m.spec.prefix + k == frame), None)
+            if link is None:
+                raise EntityError('OPERATION_FAILED', f'state.header.frame_id: {frame!r} is '
+                                                      f'not the world, an entity, a body or a '
+                                                      f"robot's link")
+            body, p, R = link.body, np.asarray(link.position), np.asarray(link.rotation)
+        if body is None:   # (fixed to the world)
+            return p.copy(), R.copy(), np.zeros(3), np.zeros(3)
+        pos, quat = sim.pose(body)
+        vel, omega = sim.twist(body)
+        R_b = so3.quat_to_matrix(quat)
+        r = R_b @ p
+        return pos + r, R_b @ R, vel + np.cross(omega, r), omega
+
     def set_state(self, name: str, position: np.ndarray, quat_xyzw: np.ndarray,
-                  velocity: np.ndarray, omega: np.ndarray) -> None:
+                  velocity: np.ndarray, omega: np.ndarray, frame: str = '') -> None:
         """
         Move the entity rigidly to a pose of its frame and its twist (see the module doc).
 
+        ``frame``: the reference they are given in ('' the world; else :meth:`reference`'s
+        names): the pose in its axes about its origin, the twist as observed from it
+        (relative velocity and angular velocity, in its axes), as EntityState says.
         Raises EntityError: NOT_FOUND; OPERATION_FAILED for a robot fixed to the world,
-        a value that is not finite, a zero quaternion, or a constraint it would break.
+        a value that is not finite, a zero quaternion, a frame unknown or moving with the
+        entity, or a constraint it would break.
         """
         e = self.get(name)
+        if frame:
+            p_f, R_f, v_f, w_f = self.reference(frame)
+            if (frame in self.by_name and self.by_name[frame].bodies == e.bodies) \
+                    or frame in e.bodies or self._body_of(frame) in e.bodies:
+                raise EntityError('OPERATION_FAILED', f'state.header.frame_id: {frame!r} '
+                                                      f'moves with {name!r}')
+            q = np.asarray(quat_xyzw, dtype=float)
+            norm = float(np.linalg.norm(q))
+            if not (math.isfinite(norm) and norm > 1e-6):
+                raise EntityError('OPERATION_FAILED', f'state.pose.orientation: not a '
+                                                      f'rotation (norm {norm:.3g})')
+            r = R_f @ np.asarray(position, dtype=float)
+            position = p_f + r
+            quat_xyzw = so3.matrix_to_quat(R_f @ so3.quat_to_matrix(q / norm))
+            velocity = v_f + np.cross(w_f, r) + R_f @ np.asarray(velocity, dtype=float)
+            omega = w_f + R_f @ np.asarray(omega, dtype=float)
         if e.body is None:
             raise EntityError('OPERATION_FAILED', f'{name!r} is fixed to the world (its base '
                                                   f'link is welded to it): it cannot be moved')
@@ -178,6 +228,14 @@ class Entities:
                            np.asarray(velocity, dtype=float) - np.cross(omega, r), omega)
         except SpecError as exc:
             raise EntityError('OPERATION_FAILED', str(exc)) from None
+
+    def _body_of(self, frame: str) -> Optional[str]:
+        """Return the body a robot link's frame is on (None: not a link, or the world)."""
+        for m in self.sim.robots:
+            for k, f in m.links.items():
+                if m.spec.prefix + k == frame:
+                    return f.body
+        return None
 
     # -- bounds ---------------------------------------------------------------------------
 

@@ -24,8 +24,10 @@ reply whose ``result`` says what happened, and a refused request changes nothing
 - ``get_entities`` / ``get_entities_states`` (a regular expression searched in the
   name, categories, and a region the entity's bounds overlap: a sphere, a box or a
   convex hull; a tags filter is not supported: entities have no tags), ``get_entity_state``,
-  ``set_entity_state`` (world frame: an empty ``frame_id`` or the node's
-  ``world_frame``; the acceleration given is ignored: it follows from the forces),
+  ``set_entity_state`` (in the header's frame: the world (empty or the node's
+  ``world_frame``), an entity's, a body's or a robot link's, where it is now; the
+  acceleration given is ignored: it follows from the forces; states read are in the
+  world frame),
   ``get_entity_info``, ``get_entity_bounds`` (a box about the entity's frame from its
   shapes): see :mod:`.entities` for what an entity is. An unknown entity answers
   RESULT_NOT_FOUND.
@@ -33,8 +35,9 @@ reply whose ``result`` says what happened, and a refused request changes nothing
   ``package://``, or the document in ``resource_string``; or our YAML robot entry with
   its command groups), or one body (our YAML body entry); names as asked, or free ones
   with ``allow_renaming`` (a robot whose links or joints are taken gets the prefix
-  ``<name>_``); the initial pose in the world frame. ``delete_entity``: a body or a
-  robot, with the constraints that held it (named in the reply).
+  ``<name>_``); the initial pose in its header's frame (as set_entity_state's).
+  ``delete_entity``: a body or a robot, with the constraints that held it (named in the
+  reply).
 - ``set_entity_info``, ``get_named_poses``, ``get_named_pose_bounds``,
   ``get_spawnables``: served, answering RESULT_FEATURE_UNSUPPORTED (not in the features).
 
@@ -69,6 +72,7 @@ from . import conversions as conv
 from .entities import Entities, EntityError, ROBOT
 from .inputs import check_name_token
 from .outputs import body_topic, constraint_topic, group_topic
+from ..core import rotation as so3
 from ..core import SpecError
 from ..core.robots import build_robot
 from ..scene import body_from_dict, robot_from_dict
@@ -554,15 +558,19 @@ class StandardInterface:
         """Return the request's initial pose ``(position, quat)``, or None: the resource's."""
         node = self.node
         pose = request.initial_pose
-        if pose.header.frame_id not in ('', node.settings.world_frame):
-            raise EntityError('INVALID_POSE', f'initial_pose.header.frame_id: '
-                                              f'{pose.header.frame_id!r}: poses are in the '
-                                              f"world frame ('' or "
-                                              f'{node.settings.world_frame!r})')
         position, quat = conv.pose_arrays(pose.pose)
         if not (np.all(np.isfinite(position)) and np.all(np.isfinite(quat))) or \
                 not 1e-6 < float(np.linalg.norm(quat)):
             raise EntityError('INVALID_POSE', 'initial_pose: not finite, or not a rotation')
+        if pose.header.frame_id not in ('', node.settings.world_frame):
+            # In another frame (an entity's, a body's, a robot link's) where it is now.
+            try:
+                p_f, R_f, _, _ = self.entities.reference(pose.header.frame_id)
+            except EntityError as exc:
+                raise EntityError('INVALID_POSE', f'initial_pose.header.frame_id: '
+                                                  f'{exc}') from None
+            quat = so3.matrix_to_quat(R_f @ so3.quat_to_matrix(quat / np.linalg.norm(quat)))
+            position = p_f + R_f @ position
         if np.any(position) or not np.array_equal(quat, [0.0, 0.0, 0.0, 1.0]) \
                 or pose.header.frame_id:
             # (the message's default, the identity at the origin, leaves the resource's)
@@ -725,12 +733,7 @@ class StandardInterface:
         if response.result.result != Result.RESULT_OK:
             return response
         frame = request.state.header.frame_id
-        world = self.node.settings.world_frame
-        if frame not in ('', world):
-            response.result = result(Result.RESULT_OPERATION_FAILED,
-                                     f'state.header.frame_id: {frame!r}: states are set in '
-                                     f"the world frame ('' or {world!r})")
-            return response
+        frame = '' if frame == self.node.settings.world_frame else frame
         position, quat = conv.pose_arrays(request.state.pose)
         velocity, omega = conv.twist_arrays(request.state.twist)
         values = np.concatenate([position, quat, velocity, omega])
@@ -739,7 +742,7 @@ class StandardInterface:
                                      'state: pose and twist must be finite')
             return response
         _, response.result = self._entity_call(lambda: self.entities.set_state(
-            request.entity, position, quat, velocity, omega))
+            request.entity, position, quat, velocity, omega, frame))
         if response.result.result == Result.RESULT_OK:
             self.stopped = False
             self.node.publish_now()
