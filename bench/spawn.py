@@ -9,6 +9,11 @@ of one step of the same scene (``step(100)`` per call), and how many steps a spa
 A spawn rebuilds the simulation around the new body (the scene's arrays, the detector,
 the kernels' plans) and carries the running state over; its cost grows with N.
 
+Robots: ``config/servo_arm.urdf`` (3 moving links, 3 joints; each with its prefix) spawned
+one after another with ``Simulation.add_robot`` into 10 free boxes under gravity, the
+wall time of the k-th spawn against the k - 1 robots there (each over the repetitions,
+from a fresh scene), then of ``remove_robot`` of the last one.
+
 Run: ``./dev.sh python bench/spawn.py [--quick]`` (``--quick``: 3 repetitions, else 7).
 Prints the table and writes ``bench/out/spawn.md``.
 """
@@ -16,6 +21,7 @@ Prints the table and writes ``bench/out/spawn.md``.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 import math
 from pathlib import Path
 import sys
@@ -25,8 +31,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import report  # noqa: E402, I100
 
 from rigid_body_sim.core import CollisionShape, Gravity, RigidBody, Simulation  # noqa: E402
+from rigid_body_sim.scene import robot_from_dict  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / 'out'
+ROOT = Path(__file__).resolve().parents[1]
 R = 0.05
 
 
@@ -67,7 +75,35 @@ def run(sizes: list, repeats: int) -> list:
     return rows
 
 
-def table(rows: list) -> str:
+def robots(counts: list, repeats: int) -> list:
+    """Return ``[(robots there, spawn s, delete s)]``: the k-th arm's spawn and deletion."""
+    spec = robot_from_dict({'urdf': str(ROOT / 'config' / 'servo_arm.urdf')})[0]
+    most = max(counts)
+    spawn, delete = {k: 0.0 for k in counts}, {k: 0.0 for k in counts}
+    for rep in range(repeats + 1):   # (the first loads the joint kernels: not timed)
+        sim = Simulation([RigidBody(f'b{i}', 1.0, (0.1, 0.2, 0.3), position_world=(i, 0, 0))
+                          for i in range(10)], [Gravity()], integrator='rkmk4', dt=1e-3)
+        sim.step(10)
+        for k in range(most + 1):
+            arm = replace(spec, name=f'arm{k}', prefix=f'arm{k}_', base_xyz=(k, -5.0, 0.0))
+            t0 = time.perf_counter()
+            sim.add_robot(arm)
+            spent = time.perf_counter() - t0
+            sim.step(5)
+            if k in spawn and rep:
+                spawn[k] += spent
+                t0 = time.perf_counter()
+                sim.remove_robot(arm.name)
+                delete[k] += time.perf_counter() - t0
+                sim.add_robot(arm)
+            sim.step(5)
+    rows = [(k, spawn[k] / repeats, delete[k] / repeats) for k in counts]
+    for k, s, d in rows:
+        print(f'{k} robots there: spawn {s * 1e3:.1f} ms, delete {d * 1e3:.1f} ms', flush=True)
+    return rows
+
+
+def table(rows: list, robot_rows: list = ()) -> str:
     """Return the markdown table."""
     lines = ['| bodies N | step, us | spawn, ms | delete, ms | a spawn costs (steps) |',
              '|---|---|---|---|---|']
@@ -78,7 +114,12 @@ def table(rows: list) -> str:
         "\n\nA spawn or a deletion rebuilds the simulation around the change (the scene's "
         "arrays, the contact detector, the kernels' plans; the compiled kernels themselves "
         'are cached) and carries the running state over, body by body: its cost grows '
-        'with N, where re-planning only what changed would not (not done).')
+        'with N, where re-planning only what changed would not (not done).') + (
+        '\n\n| robots there | spawn an arm, ms | delete it, ms |\n|---|---|---|\n'
+        + '\n'.join(f'| {k} | {s * 1e3:.1f} | {d * 1e3:.1f} |' for k, s, d in robot_rows)
+        + "\n\nA robot's spawn converts its URDF once; the robots already there keep "
+          'their conversions, and the constraint tables are built once.'
+        if robot_rows else '')
 
 
 def main(argv=None) -> int:
@@ -88,8 +129,9 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     rows = run([10, 100, 1000], 3 if args.quick else 7)
+    robot_rows = robots([0, 5, 10, 20], 2 if args.quick else 5)
     report.write_page(OUT, 'spawn', 'Spawning and deleting: cost against scene size',
-                      args.quick, table(rows), t0)
+                      args.quick, table(rows, robot_rows), t0)
     return 0
 
 

@@ -530,7 +530,7 @@ class StandardInterface:
                 return 'robot', self._spawned_robot(request, dict(data), folder, None)
             return 'body', self._spawned_body(request, dict(data), folder)
         if request.uri:
-            entry = {'urdf': str(path)}
+            entry = {'urdf': str(path.resolve())}
             xml = None
         else:
             entry = {'urdf': '<resource_string>'}
