@@ -79,7 +79,7 @@ def robots(counts: list, repeats: int) -> list:
     """Return ``[(robots there, spawn s, delete s)]``: the k-th arm's spawn and deletion."""
     spec = robot_from_dict({'urdf': str(ROOT / 'config' / 'servo_arm.urdf')})[0]
     most = max(counts)
-    spawn, delete = {k: 0.0 for k in counts}, {k: 0.0 for k in counts}
+    spawn, delete = dict.fromkeys(counts, 0.0), dict.fromkeys(counts, 0.0)
     for rep in range(repeats + 1):   # (the first loads the joint kernels: not timed)
         sim = Simulation([RigidBody(f'b{i}', 1.0, (0.1, 0.2, 0.3), position_world=(i, 0, 0))
                           for i in range(10)], [Gravity()], integrator='rkmk4', dt=1e-3)

@@ -279,3 +279,24 @@ def test_reset_scene_and_remove_spawned_take_spawned_robots_away(tmp_path):
     assert not sim.scene_changed and sim.spawned_robots == []
     assert sorted(sim.command_groups()) == ['servo', 'wheel']
     assert np.array_equal(sim.state.y, _scene(tmp_path).state.y)
+
+
+def test_a_robot_may_not_take_another_robots_possible_rows_and_a_refusal_caches_nothing(
+        tmp_path):
+    # 'servo_limit' and 'servo_stick' are the rows that would hold the first robot's servo
+    # on a bound or by friction (it has neither now): a robot prefixed 'servo_' makes joints
+    # of those names ('limit', 'stick'), and is refused by name, before any rebuild.
+    sim = _scene(tmp_path)
+    with pytest.raises(SpecError, match=r"named \['servo_limit', 'servo_stick'\]") as err:
+        sim.add_robot(_robot(tmp_path, 'servo_'))
+    assert err.value.field == 'robot'
+    # A refused spec leaves no conversion behind: changed in place and added again, it is
+    # converted anew (its servo at the new initial position).
+    spec = _robot(tmp_path, 'b_')
+    sim.add_constraint(Constraint('b_servo', 'ball', 'bob', None, anchor_world=(0, 3, 1)))
+    with pytest.raises(SpecError):
+        sim.add_robot(spec)
+    sim.remove_constraint('b_servo')
+    spec.initial_positions['servo'] = 0.7
+    sim.add_robot(spec, _groups('b_'))
+    assert sim.joint_state(['b_servo']).positions[0] == pytest.approx(0.7, abs=1e-12)

@@ -947,18 +947,18 @@ class Simulation:
                                     f'{name!r} is a joint already in the simulation; a '
                                     f"spawned robot's groups command its own joints")
         try:
-            model = self._convert(robot)
+            model = build_robot(robot)   # (cached by the rebuild only: a refusal keeps none)
         except SpecError as exc:
             raise exc.within('robot') from None
-        taken = sorted(self.row_names(model) & (set(self.constraint_names) | set(self._added)
-                                                | set(self._built_names())))
+        taken = sorted(self.row_names(model) & self.taken_names())
         if taken:
             raise SpecError('robot', f'its joints would make constraints named {taken}, '
-                                     f'names of constraints already in the simulation: give '
-                                     f'the robot a prefix')
+                                     f'names of constraints (or of rows) already in the '
+                                     f'simulation: give the robot a prefix')
         try:
             new = self._rebuilt((), robots=self._built['robots'] + [robot],
-                                groups=self._built['command_groups'] + groups)
+                                groups=self._built['command_groups'] + groups,
+                                converted={**self._converted, id(robot): (robot, model)})
         except SpecError as exc:
             if exc.field.startswith('robots['):   # (the new robot's: as ``robot``)
                 raise exc.within('robot') from None
@@ -1069,6 +1069,19 @@ class Simulation:
         return next((m.spec.name for m in self.robots if any(b.name == body for b in m.bodies)),
                     None)
 
+    def taken_names(self) -> set:
+        """
+        Return the constraint names a spawned robot's rows may not take.
+
+        The constraints present, added at run time or the scene's (removed or not), and
+        every robot's possible rows (:meth:`row_names`: its joints, mimic rows, exact
+        drives, bounds and sticks, present or not).
+        """
+        out = set(self.constraint_names) | set(self._added) | self._built_names()
+        for model in self.robots:
+            out |= self.row_names(model)
+        return out
+
     def _built_names(self) -> set:
         """Return the names of the constraints that are not a robot's own (a user's)."""
         return {c.name for c in self._built['constraints'] if isinstance(c, Constraint)} \
@@ -1137,7 +1150,8 @@ class Simulation:
 
     def _rebuilt(self, removed: tuple, bodies: Optional[list] = None,
                  shapes: Optional[list] = None, robots: Optional[list] = None,
-                 groups: Optional[list] = None) -> 'Simulation':
+                 groups: Optional[list] = None, converted: Optional[dict] = None
+                 ) -> 'Simulation':
         """
         Return a simulation of these parts that goes on from this one's state.
 
@@ -1174,7 +1188,7 @@ class Simulation:
                          None if control is None else control.tolerance,
                          built['tolerance_budget'], robots=robots, command_groups=groups,
                          scene_joints=scene_joints, shapes=shapes,
-                         _converted=self._converted)
+                         _converted=self._converted if converted is None else converted)
         # Its state: this one's, body by body (bit for bit), at this time and step count.
         index = [new.bodies.index.get(name, -1) for name in self.bodies.names]
         parts = [p.copy() for p in new.state.parts]

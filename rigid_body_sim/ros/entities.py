@@ -194,22 +194,6 @@ class Entities:
         entity, or a constraint it would break.
         """
         e = self.get(name)
-        if frame:
-            p_f, R_f, v_f, w_f = self.reference(frame)
-            if (frame in self.by_name and self.by_name[frame].bodies == e.bodies) \
-                    or frame in e.bodies or self._body_of(frame) in e.bodies:
-                raise EntityError('OPERATION_FAILED', f'state.header.frame_id: {frame!r} '
-                                                      f'moves with {name!r}')
-            q = np.asarray(quat_xyzw, dtype=float)
-            norm = float(np.linalg.norm(q))
-            if not (math.isfinite(norm) and norm > 1e-6):
-                raise EntityError('OPERATION_FAILED', f'state.pose.orientation: not a '
-                                                      f'rotation (norm {norm:.3g})')
-            r = R_f @ np.asarray(position, dtype=float)
-            position = p_f + r
-            quat_xyzw = so3.matrix_to_quat(R_f @ so3.quat_to_matrix(q / norm))
-            velocity = v_f + np.cross(w_f, r) + R_f @ np.asarray(velocity, dtype=float)
-            omega = w_f + R_f @ np.asarray(omega, dtype=float)
         if e.body is None:
             raise EntityError('OPERATION_FAILED', f'{name!r} is fixed to the world (its base '
                                                   f'link is welded to it): it cannot be moved')
@@ -219,6 +203,16 @@ class Entities:
             raise EntityError('OPERATION_FAILED', f'state.pose.orientation: not a rotation '
                                                   f'(norm {norm:.3g})')
         R_frame = so3.quat_to_matrix(q / norm)
+        if frame:
+            if (frame in self.by_name and self.by_name[frame].bodies == e.bodies) \
+                    or frame in e.bodies or self._body_of(frame) in e.bodies:
+                raise EntityError('OPERATION_FAILED', f'state.header.frame_id: {frame!r} '
+                                                      f'moves with {name!r}')
+            p_f, R_f, v_f, w_f = self.reference(frame)
+            r = R_f @ np.asarray(position, dtype=float)
+            position, R_frame = p_f + r, R_f @ R_frame
+            velocity = v_f + np.cross(w_f, r) + R_f @ np.asarray(velocity, dtype=float)
+            omega = w_f + R_f @ np.asarray(omega, dtype=float)
         # The body's frame from the entity's: R_body = R_frame Rᵀ, origin at p − R_body r.
         R_body = R_frame @ e.rotation.T
         r = R_body @ e.position

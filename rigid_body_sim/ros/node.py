@@ -238,7 +238,9 @@ class SimNode(Node):
 
         A group removed loses its subscription; joint_states and the tf publishers, once
         made, stay (a topic that goes quiet); /tf_static is published again for the
-        robots there now, and robot_description once, for the first robot there was.
+        robots there now, and robot_description when the first robot there changes (once
+        every robot is deleted it keeps the last one's: an empty URDF would break its
+        readers, robot_state_publisher and RViz).
         """
         if self.sim.joint_names() and self._joint_pub is None:
             self._joint_pub = self.create_publisher(JointState, JOINT_STATES_TOPIC, 10)

@@ -628,7 +628,7 @@ class StandardInterface:
                 raise EntityError('RESOURCE_PARSE_ERROR', str(exc)) from None
             return sorted((({b.name for b in model.bodies} & set(sim.bodies.names))
                            | ({j.name for j in model.joints} & set(sim.joints.names))
-                           | (sim.row_names(model) & set(sim.constraint_names))
+                           | (sim.row_names(model) & sim.taken_names())
                            | ({g.name for g in groups} & set(sim.command_groups()))))
         clash = clashes(spec, groups)
         if clash and 'prefix' not in entry and request.allow_renaming:
