@@ -300,3 +300,40 @@ def test_a_robot_may_not_take_another_robots_possible_rows_and_a_refusal_caches_
     spec.initial_positions['servo'] = 0.7
     sim.add_robot(spec, _groups('b_'))
     assert sim.joint_state(['b_servo']).positions[0] == pytest.approx(0.7, abs=1e-12)
+
+
+def test_a_spawn_plans_only_the_components_it_changes_and_copies_step_as_plans_do(
+        tmp_path, monkeypatch):
+    # The compiled steps' components (a connected set of bodies and joints each: here the
+    # modes robot's five joints on the world, and bob on its rope) are planned and packed
+    # once; a rebuild copies those whose rows and bodies are the same (the solver's plans)
+    # and plans only what a spawn or a removal changed. A copy must step exactly as a
+    # component planned afresh (the same run with no plan ever copied).
+    def run():
+        sim = _scene(tmp_path, events=False)
+        sim.step(120)
+        counts = []
+        for change in (lambda: sim.add_body(RigidBody('far', 1.0, (0.1,) * 3,
+                                                      position_world=(0.0, 10.0, 5.0))),
+                       lambda: sim.add_robot(_robot(tmp_path, 'b_', events=False),
+                                             _groups('b_')),
+                       lambda: sim.remove_robot('b_modes'),
+                       lambda: sim.remove_body('far')):
+            change()
+            counts.append(dict(sim.dynamics.solver.plan_counts))
+            sim.step(80)
+        return sim, counts
+
+    sim, counts = run()
+    # (no content: every component is planned, as one with Python rows is)
+    monkeypatch.setattr('rigid_body_sim.core.solver._content', lambda *args: None)
+    fresh, fresh_counts = run()
+    assert np.array_equal(sim.state.y, fresh.state.y)
+    assert all(np.array_equal(a, b) for a, b in zip(_joints(sim), _joints(fresh)))
+    # Planned anew: nothing for a free body spawned or removed; for the robot's spawn its
+    # five components, one of them twice (its exact drive's, before and after the reset
+    # adds the drive's row); nothing for its removal. Every other component copied.
+    assert [c['planned'] for c in counts] == [0, 6, 0, 0]
+    assert [c['copied'] > 0 for c in counts] == [True] * 4
+    assert all(c['copied'] == 0 for c in fresh_counts)
+    assert [c['planned'] for c in fresh_counts][0] >= 6

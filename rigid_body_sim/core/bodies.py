@@ -236,12 +236,19 @@ class _Outputs:
 
     def __init__(self, n: int, quat_body_principal: np.ndarray, com_body: np.ndarray) -> None:
         self.out = np.empty((n, OUTPUT.width))
-        self.views = [tuple(self.out[i, a:b] for a, b in self._PARTS) for i in range(n)]
-        self.views.append(tuple(self.out[:, a:b] for a, b in self._PARTS))
+        # Per body, made when first read (a scene rebuilt around a spawn makes none).
+        self._views: dict = {None: tuple(self.out[:, a:b] for a, b in self._PARTS)}
         self.frames = np.ascontiguousarray(np.hstack([quat_body_principal, com_body]))
         self.key: tuple = self.NOTHING
         #: Read since the last step: the next step's kernel computes them.
         self.wanted = False
+
+    def views(self, body: Optional[int]) -> tuple:
+        """Return the views of ``out``'s parts, of body index ``body`` (None: all)."""
+        v = self._views.get(body)
+        if v is None:
+            v = self._views[body] = tuple(self.out[body, a:b] for a, b in self._PARTS)
+        return v
 
     def adopt(self, state: 'State') -> None:
         """Record that ``out`` now holds the outputs of ``state``."""
@@ -460,7 +467,7 @@ class BodySet:
         if not (k[0] is state and k[1] is state.y):
             free_step.state_outputs(state.y, c.frames, c.out)
             c.adopt(state)
-        return c.views[-1 if body is None else body]
+        return c.views(body)
 
     def want_outputs(self) -> bool:
         """

@@ -662,6 +662,7 @@ class ConstraintSet:
         and the set is as it was.
         """
         added = []
+        frames = None   # (the bodies' frames at the state, made once for all of them)
         try:
             for i, spec in enumerate(specs):
                 try:
@@ -669,10 +670,14 @@ class ConstraintSet:
                         raise SpecError('constraint', f'expected a Constraint, got {spec!r}')
                     if spec.name in self._resolved:
                         raise SpecError('name', f'duplicate constraint name {spec.name!r}')
-                    res = self._resolve(spec, state)
+                    if frames is None:
+                        frames = self._frames(state) + (
+                            np.concatenate([self.bodies.R_body_principal, np.eye(3)[None]]),
+                            np.vstack([self.bodies.com_body, np.zeros((1, 3))]))
+                    res = self._resolve(spec, state, frames)
                     if spec.type is JointType.GENERIC:
                         # Evaluate once: validates the function and fixes its number of rows.
-                        res.n_rows = len(self.generic_rows(res, *self._frames(state))[0])
+                        res.n_rows = len(self.generic_rows(res, *frames[:2])[0])
                 except SpecError as exc:
                     raise exc.within(f'{field}[{i}]') if field else exc from None
                 self._resolved[spec.name] = res
@@ -803,14 +808,13 @@ class ConstraintSet:
         R = np.concatenate([so3.quat_to_matrix(state.quat_principal_world), np.eye(3)[None]])
         return x, R
 
-    def _resolve(self, spec: Constraint, state: State) -> ResolvedConstraint:
+    def _resolve(self, spec: Constraint, state: State, frames: tuple) -> ResolvedConstraint:
+        """Resolve ``spec`` at ``state``; ``frames``: its :meth:`_frames`, then V and com."""
         bodies = self.bodies
         n = len(bodies)
         a = bodies.lookup(spec.body_a, 'body_a')
         b = n if spec.body_b is None else bodies.lookup(spec.body_b, 'body_b')
-        x, R = self._frames(state)
-        V = np.concatenate([bodies.R_body_principal, np.eye(3)[None]])
-        com = np.vstack([bodies.com_body, np.zeros((1, 3))])
+        x, R, V, com = frames
 
         def local_point(i: int, p_world: np.ndarray) -> np.ndarray:
             return R[i].T @ (p_world - x[i])

@@ -98,7 +98,7 @@ from .kernels import contact_step as kern
 from .kernels.free_step import HAS_POSITION_FORCES, state_outputs
 from .kernels.layout import O_WIDTH, W_BODY, W_FORCE, W_TORQUE, W_WIDTH
 from .rotation import cross, exp_quat, quat_multiply, quat_to_matrix
-from .shapes import ContactDetector, Contacts
+from .shapes import ContactDetector, Contacts, ROW
 
 #: m: a contact whose gap is within this is touching (a row); an impact is located
 #: until the depth is within it.
@@ -298,13 +298,13 @@ class ContactSteps:
         self.sim = sim
         self.detector = detector
         self.wrenches = wrenches
-        shapes = detector.shapes
-        self._mu = np.array([s.friction for s in shapes], dtype=float)
+        table = detector.table
+        self._mu = table[:, ROW['friction']].copy()
         # m: how far a contact's point may move on its shape a and stay the same contact:
         # a quarter of the shape's smallest half size (a box's corners are further apart).
-        self._radius = np.array([0.25 * float(np.min(d[d > 0.0], initial=np.inf))
-                                 for d in (s.dimensions() for s in shapes)])
-        self._e = np.array([s.restitution for s in shapes], dtype=float)
+        size = table[:, ROW['size']]
+        self._radius = 0.25 * np.min(np.where(size > 0.0, size, np.inf), axis=1, initial=np.inf)
+        self._e = table[:, ROW['restitution']].copy()
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
         self._seen: Optional[tuple] = None
         self._frames_seen: Optional[tuple] = None

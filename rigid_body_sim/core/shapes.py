@@ -51,6 +51,11 @@ OPTIONAL = ('scale',)
 DEFAULT_MARGIN = 1e-3
 #: Every group bit (the default group and mask: everything meets everything).
 ALL_BITS = (1 << 31) - 1
+#: The columns of :meth:`CollisionShape.row` (the filter bits, < 2³¹, are exact floats).
+ROW = {'collide': 0, 'kind': 1, 'size': slice(2, 5), 'position_body': slice(5, 8),
+       'orientation_xyzw': slice(8, 12), 'group': 12, 'mask': 13, 'friction': 14,
+       'restitution': 15}
+ROW_WIDTH = 16
 
 
 @dataclass(frozen=True)
@@ -172,6 +177,19 @@ class CollisionShape:
             object.__setattr__(self, key, value)
         if not self.name:
             object.__setattr__(self, 'name', f'{self.body or "world"}/{self.kind}')
+        object.__setattr__(self, '_row', (
+            float(self.collide), float(KINDS[self.kind]), *self.dimensions(),
+            *self.position_body, *self.orientation_xyzw, float(self.group), float(self.mask),
+            self.friction, self.restitution))
+
+    def row(self) -> tuple:
+        """
+        Return the detector's numbers of this shape, made once (:data:`ROW` names them).
+
+        A detector's tables are these rows stacked: rebuilding one for a scene with a
+        shape more (a spawn) costs a copy of the others' numbers, not their making.
+        """
+        return self._row
 
     @property
     def hull(self) -> Optional[np.ndarray]:
@@ -245,32 +263,35 @@ class ContactDetector:
         twice = sorted({x for x in names if x in seen or seen.add(x)})
         if twice:
             raise SpecError('shapes', f'shape names used twice: {twice} (name them)')
-        body = []
-        for k, s in enumerate(self.shapes):
-            if s.body is not None and s.body not in index:
-                raise SpecError(f'shapes[{k}].body', f'unknown body {s.body!r}')
-            body.append(n if s.body is None else index[s.body])
-        live = [k for k, s in enumerate(self.shapes) if s.collide]
+        body = np.array([n if s.body is None else index.get(s.body, -1) for s in self.shapes],
+                        dtype=np.int64)
+        if np.any(body < 0):
+            k = int(np.argmax(body < 0))
+            raise SpecError(f'shapes[{k}].body', f'unknown body {self.shapes[k].body!r}')
+        #: Every shape's numbers (a row each, :data:`ROW`): the friction and restitution
+        #: the contact rows read, the rest the kernels' tables below.
+        self.table = np.array([s.row() for s in self.shapes], dtype=float).reshape(
+            len(self.shapes), ROW_WIDTH)
+        live = np.flatnonzero(self.table[:, ROW['collide']] > 0.0)
         m = len(live)
+        rows = self.table[live]
         #: Indices of the shapes that collide (the kernels' rows), and per row its data.
-        self.live = np.array(live, dtype=np.int64)
-        self.body = np.array([body[k] for k in live], dtype=np.int64)
-        self.kind = np.array([int(KINDS[self.shapes[k].kind]) for k in live], dtype=np.int64)
-        self.size = np.array([self.shapes[k].dimensions() for k in live]).reshape(m, 3)
+        self.live = live.astype(np.int64)
+        self.body = body[live]
+        self.kind = rows[:, ROW['kind']].astype(np.int64)
+        self.size = rows[:, ROW['size']].copy()
         # The hulls' records, one after another (their rows' starts in hull_at).
         records, at, self.hull_at = [], 0, np.full(m, -1, dtype=np.int64)
-        for row, k in enumerate(live):
-            rec = self.shapes[k].hull
-            if rec is not None:
-                self.hull_at[row] = at
-                records.append(rec)
-                at += len(rec)
+        for row in np.flatnonzero(self.kind == int(Shape.HULL)):
+            rec = self.shapes[live[row]].hull
+            self.hull_at[row] = at
+            records.append(rec)
+            at += len(rec)
         self.hulls = np.concatenate(records) if records else np.zeros(1)
-        self.c_body = np.array([self.shapes[k].position_body for k in live]).reshape(m, 3)
-        self.R_body = quat_to_matrix(np.array([self.shapes[k].orientation_xyzw for k in live],
-                                              dtype=float).reshape(m, 4))
-        self.group = np.array([self.shapes[k].group for k in live], dtype=np.int64)
-        self.mask = np.array([self.shapes[k].mask for k in live], dtype=np.int64)
+        self.c_body = rows[:, ROW['position_body']].copy()
+        self.R_body = quat_to_matrix(rows[:, ROW['orientation_xyzw']].copy())
+        self.group = rows[:, ROW['group']].astype(np.int64)
+        self.mask = rows[:, ROW['mask']].astype(np.int64)
         self._index = index
         self.excluded = self._codes(excluded)
         plane = self.kind == int(Shape.PLANE)

@@ -56,6 +56,28 @@ def _non_finite_bodies(s: State) -> np.ndarray:
     return np.flatnonzero(~np.all([np.all(np.isfinite(a), axis=1) for a in s.parts], axis=0))
 
 
+def _unbound_copy(effect: Effect) -> Effect:
+    """Return a deep copy of an effect without the bodies it is bound to (bound anew)."""
+    bodies = getattr(effect, 'bodies', None)
+    return copy.deepcopy(effect, {} if bodies is None else {id(bodies): None})
+
+
+def _moved(parts: tuple, index: Any, into: tuple) -> State:
+    """
+    Return ``into``'s state (its time, parts copied) with body ``k`` of ``parts`` at ``index[k]``.
+
+    ``parts``: a state's four arrays in the old order; ``index[k]``, body ``k``'s row now
+    (negative: gone). The rows carried are copied bit for bit.
+    """
+    time, into = into
+    index = np.asarray(index, dtype=np.int64)
+    old = np.flatnonzero(index >= 0)
+    new = [p.copy() for p in into]
+    for whole, part in zip(new, parts):
+        whole[index[old]] = part[old]
+    return State(time, *new)
+
+
 @dataclass(frozen=True)
 class Reaction:
     """
@@ -117,6 +139,9 @@ class Simulation:
         others take efforts.
     _converted : dict, optional
         Internal: robots already converted (a rebuild around a spawn passes its own).
+    _plans : dict, optional
+        Internal: the compiled steps' components already planned and packed, by content
+        (:attr:`.ConstraintSolver.plans`; a rebuild around a spawn passes its own).
 
     """
 
@@ -128,7 +153,8 @@ class Simulation:
                  robots: Sequence[RobotSpec] = (),
                  command_groups: Sequence[CommandGroup] = (),
                  scene_joints: Sequence[SceneJoint] = (),
-                 shapes: Sequence[CollisionShape] = (), _converted: Optional[dict] = None
+                 shapes: Sequence[CollisionShape] = (), _converted: Optional[dict] = None,
+                 _plans: Optional[dict] = None
                  ) -> None:
         self.dt = positive_scalar(dt, 'dt')
         #: What the scene was built of, for a spawn or a removal (:meth:`add_body`).
@@ -215,6 +241,8 @@ class Simulation:
                                                 time_constant=constraint_time_constant,
                                                 tally=self.dynamics.tally)
         self.dynamics.solver.dt = self.dt
+        self.dynamics.solver.plans = dict(_plans or {})
+        self._asked: list = []   # (robot spec, model) of robot_model's last questions
         self._initial_constraints = list(constraints)
         names = {c.name for c in constraints if isinstance(c, Constraint)}
         #: Joints held by driving constraints (command groups of mode 'exact').
@@ -877,10 +905,12 @@ class Simulation:
         added at run time too, anchored as they were), applied wrenches, the time, the
         step and the accuracy knob; robots' joints keep their coordinates (turns
         included), commands, drive targets, held bounds, sticks, slips and saturated
-        drives (:meth:`.JointEvents.carry`). The simulation is rebuilt around it (its
-        compiled kernels re-plan; the work counters and the contacts' warm start
-        restart). A reset (:meth:`reset`) puts it back where it was spawned;
-        :meth:`remove_spawned` removes every spawned body and robot.
+        drives (:meth:`.JointEvents.carry`). The simulation is rebuilt around it from what
+        did not change (each shape's numbers, the robots' conversions, and the compiled
+        steps' components it leaves as they were, copied: :attr:`.ConstraintSolver.plans`;
+        the work counters and the contacts' warm start restart). A reset (:meth:`reset`)
+        puts it back where it was spawned; :meth:`remove_spawned` removes every spawned
+        body and robot.
 
         Raises
         ------
@@ -946,8 +976,12 @@ class Simulation:
                     raise SpecError(f'command_groups[{g}].joints[{j}]',
                                     f'{name!r} is a joint already in the simulation; a '
                                     f"spawned robot's groups command its own joints")
+        # Converted once (robot_model's, if it was asked about), then kept by the rebuild
+        # only: a refusal keeps none, and a spec changed in place after it is converted anew.
+        model = next((m for spec, m in self._asked if spec is robot), None)
+        self._asked = [(spec, m) for spec, m in self._asked if spec is not robot]
         try:
-            model = build_robot(robot)   # (cached by the rebuild only: a refusal keeps none)
+            model = build_robot(robot) if model is None else model
         except SpecError as exc:
             raise exc.within('robot') from None
         taken = sorted(self.row_names(model) & self.taken_names())
@@ -970,6 +1004,22 @@ class Simulation:
         new._spawned_robots = self._spawned_robots + [robot.name]
         new._origin = self._origin
         self._adopt(new)
+
+    def robot_model(self, robot: RobotSpec) -> Any:
+        """
+        Return a robot spec's model (:func:`.robots.build_robot`), converted once.
+
+        The last specs asked about are kept (by identity, a few), so that checking a
+        robot before :meth:`add_robot` (its names, :meth:`row_names`) and adding it
+        convert it once: a spec is not to be changed in between. ``add_robot`` takes
+        its model out. Raises SpecError as ``build_robot`` does.
+        """
+        for spec, model in self._asked:
+            if spec is robot:
+                return model
+        model = build_robot(robot)
+        self._asked = [(robot, model)] + self._asked[:3]
+        return model
 
     @staticmethod
     def row_names(model: Any) -> set:
@@ -1128,7 +1178,7 @@ class Simulation:
             self.reset()
             return
         origin = dict(self._origin)
-        origin['effects'] = [copy.deepcopy(e) for e in origin['effects']]
+        origin['effects'] = [_unbound_copy(e) for e in origin['effects']]
         control = self._control
         new = Simulation(integrator=self.integrator_name, dt=self.dt,
                          tolerance=None if control is None else control.tolerance, **origin)
@@ -1168,7 +1218,7 @@ class Simulation:
         gone = set(removed)
         effects = []
         for effect in built['effects']:
-            effect = copy.deepcopy(effect)
+            effect = _unbound_copy(effect)
             if isinstance(effect, Damping) and effect.body_names is not None:
                 effect.body_names = [b for b in effect.body_names if b not in gone]
             if isinstance(effect, AppliedWrenches):
@@ -1188,15 +1238,11 @@ class Simulation:
                          None if control is None else control.tolerance,
                          built['tolerance_budget'], robots=robots, command_groups=groups,
                          scene_joints=scene_joints, shapes=shapes,
-                         _converted=self._converted if converted is None else converted)
+                         _converted=self._converted if converted is None else converted,
+                         _plans=self.dynamics.solver.plans)
         # Its state: this one's, body by body (bit for bit), at this time and step count.
         index = [new.bodies.index.get(name, -1) for name in self.bodies.names]
-        parts = [p.copy() for p in new.state.parts]
-        for old, new_i in enumerate(index):
-            if new_i >= 0:
-                for whole, part in zip(parts, self.state.parts):
-                    whole[new_i] = part[old]
-        new.state = State(self.state.time, *parts)
+        new.state = _moved(self.state.parts, index, (self.state.time, new.state.parts))
         new._steps, new._time_base = self._steps, self._time_base
         new._control = copy.deepcopy(self._control)   # (its budget, estimator and state)
         # Constraints: the scene's removed at run time stay removed; those added at run
@@ -1210,12 +1256,7 @@ class Simulation:
                 solver.constraints.remove(name)
             if touches(spec):
                 continue
-            then = [p.copy() for p in new.state.parts]
-            for old, new_i in enumerate(index):
-                if new_i >= 0:
-                    for whole, part in zip(then, at.parts):
-                        whole[new_i] = part[old]
-            anchored = State(at.time, *then)
+            anchored = _moved(at.parts, index, (at.time, new.state.parts))
             solver.constraints.add(spec, anchored)
             new._added[name] = (spec, anchored)
         new.dynamics.changed()
@@ -1295,21 +1336,21 @@ class Simulation:
         """Return the compiled steps' record ``(state, contacts, sel, force)`` in ``new``'s."""
         state, con, sel, force = lazy
         to_new = np.append(np.array(index, dtype=int), len(new.bodies.names))
-        names = [s.name for s in self.contact.detector.shapes]
-        sa = np.array([where.get(names[k], -1) for k in con.shape_a], dtype=np.int64)
-        sb = np.array([where.get(names[k], -1) for k in con.shape_b], dtype=np.int64)
+        shape_to_new = self._shapes_in(where)
+        sa, sb = shape_to_new[con.shape_a], shape_to_new[con.shape_b]
         ba, bb = to_new[con.body_a], to_new[con.body_b]
         good = (sa >= 0) & (sb >= 0) & (ba >= 0) & (bb >= 0)
         renumber = np.cumsum(good) - 1
         keep = good[sel]
-        parts = [p.copy() for p in new.state.parts]
-        for old, i in enumerate(index):
-            if i >= 0:
-                for whole, part in zip(parts, state.parts):
-                    whole[i] = part[old]
         contacts = con._replace(shape_a=sa, shape_b=sb, body_a=ba, body_b=bb)
         contacts = type(con)(*(part[good] for part in contacts))
-        return (State(state.time, *parts), contacts, renumber[sel[keep]], force[keep])
+        return (_moved(state.parts, index, (state.time, new.state.parts)), contacts,
+                renumber[sel[keep]], force[keep])
+
+    def _shapes_in(self, where: dict) -> np.ndarray:
+        """Return per shape of this one's detector its index in ``where`` (-1: gone)."""
+        return np.array([where.get(s.name, -1) for s in self.contact.detector.shapes],
+                        dtype=np.int64)
 
     def _record_in(self, new: 'Simulation', rec: ContactRecord, index: list,
                    where: dict) -> ContactRecord:
@@ -1323,26 +1364,22 @@ class Simulation:
         rows = rec.rows
         n_new = len(new.bodies.names)
         to_new = np.append(np.array(index, dtype=int), n_new)   # (the world last)
-        names = [s.name for s in self.contact.detector.shapes]
         con = rows.contacts
-        sa = np.array([where.get(names[k], -1) for k in con.shape_a], dtype=np.int64)
-        sb = np.array([where.get(names[k], -1) for k in con.shape_b], dtype=np.int64)
+        shape_to_new = self._shapes_in(where)
+        sa, sb = shape_to_new[con.shape_a], shape_to_new[con.shape_b]
         ba, bb = to_new[con.body_a], to_new[con.body_b]
         keep = (sa >= 0) & (sb >= 0) & (ba >= 0) & (bb >= 0)
         rows = rows.subset(keep)
-        G = np.zeros((len(rows.G), 6 * n_new))
-        for old, i in enumerate(index):
-            if i >= 0:
-                G[:, 6 * i:6 * i + 6] = rows.G[:, 6 * old:6 * old + 6]
-        parts = [p.copy() for p in new.state.parts]
-        for old, i in enumerate(index):
-            if i >= 0:
-                for whole, part in zip(parts, rows.state.parts):
-                    whole[i] = part[old]
+        r = len(rows.G)
+        G = np.zeros((r, n_new, 6))
+        there = np.asarray(index, dtype=np.int64)
+        old = np.flatnonzero(there >= 0)
+        G[:, there[old]] = rows.G.reshape(r, len(index), 6)[:, old]
         contacts = rows.contacts._replace(shape_a=sa[keep], shape_b=sb[keep], body_a=ba[keep],
                                           body_b=bb[keep])
-        moved = ContactRows(State(rows.state.time, *parts), contacts, rows.frame, rows.lever_a,
-                            rows.lever_b, rows.mu, rows.restitution, G, rows.sliding, rows.vn)
+        moved = ContactRows(_moved(rows.state.parts, index, (rows.state.time, new.state.parts)),
+                            contacts, rows.frame, rows.lever_a, rows.lever_b, rows.mu,
+                            rows.restitution, G.reshape(r, 6 * n_new), rows.sliding, rows.vn)
         return ContactRecord(rec.time, moved, rec.force[keep])
 
     def _adopt(self, new: 'Simulation') -> None:

@@ -80,7 +80,8 @@ from .graph import closes_loop, component_labels, loop_structure, tree_structure
 from .kernels.constrained_step import (component_multipliers, component_project_velocities,
                                        component_reach, CURRENT, dense_storage, GENERIC,
                                        nullspace_storage, pack, tree_storage, workspace)
-from .kernels.layout import BODY, PAR, PAR_C0, PAR_RATE, PAR_SCALAR, PAR_T0, Solve
+from .kernels.layout import BODY, COMPONENT, L_OFFSET, L_SHAPE, PAR, PAR_C0, PAR_RATE, \
+    PAR_SCALAR, PAR_T0, Solve
 from .kernels.nullspace_solve import nullspace_structure
 from .validate import positive_scalar
 
@@ -194,6 +195,51 @@ class ComponentSetup(NamedTuple):
     couplings: np.ndarray
 
 
+#: Setups a component's plan is kept for after the last one that had it (:attr:`plans`).
+PLAN_SETUPS = 3
+
+
+def _repack(packed: tuple) -> tuple:
+    """
+    Return a copy of a packed component and its views: ``(packed, views)`` as ``pack``'s.
+
+    Its buffers are copied (the copy's workspace is its own), its layout shared (it is
+    never written), and its workspace's state set as ``workspace`` sets it: no factor
+    held (``factor_state``), every body watched; the rest is work the steps write
+    before they read it (:mod:`.kernels.constrained_step`). Generic rows (a key other
+    than -1) are not copied: their key names the Python rows of one setup.
+    """
+    key, floats, ints, layout = packed
+    if key != -1:
+        raise ValueError('repack: a component with generic rows is packed anew')
+    floats, ints = floats.copy(), ints.copy()
+    views = {}
+    for row, field in zip(layout.tolist(), COMPONENT.fields):
+        shape = row[L_SHAPE:L_SHAPE + field.ndim]
+        size = 1
+        for d in shape:
+            size *= d
+        buf = floats if field.kind == 'f' else ints
+        views[field.name] = buf[row[L_OFFSET]:row[L_OFFSET] + size].reshape(shape)
+    views['factor_state'][:] = 0
+    views['watch'][:] = 1
+    return (key, floats, ints, layout), views
+
+
+def _content(rows: dict, body: np.ndarray, ja: np.ndarray, jb: np.ndarray, m: int,
+             inertia_form: bool) -> bytes:
+    """
+    Return what a component's plan and packed arrays are made of, as one key.
+
+    Its rows in its own body numbering (kinds, parameters, bodies, couplings), its
+    bodies' masses and moments, its joints' pairs (whether they close a loop) and the
+    solve's choices: two components with the same key are planned and packed alike.
+    """
+    parts = [np.array([m, len(body), len(ja), inertia_form], dtype=np.int64), body, ja, jb]
+    parts += [rows[k] for k in sorted(rows) if k != 'key']
+    return b''.join(np.ascontiguousarray(x).tobytes() + str(x.shape).encode() for x in parts)
+
+
 class _ReactionPlan(NamedTuple):
     """Per (constraint, side on a body): where :meth:`ConstraintSolver.reactions` reads."""
 
@@ -262,6 +308,16 @@ class ConstraintSolver:
         self.counters = SolverCounters(tally=tally)
         self.dt: Optional[float] = None
         self._kernel_cache: Optional[tuple] = None
+        #: The last kernel setups' components by their content (:func:`_content`), each
+        #: with the number of setups since one had it: the next setup copies a component
+        #: of the same content instead of planning and packing it anew (a simulation
+        #: rebuilt around a spawn starts with the old one's: only the components a spawn
+        #: or a removal changed are planned). Kept for :data:`PLAN_SETUPS` setups (a
+        #: rebuild's reset sets up before its drives are added, and again after).
+        self.plans: dict = {}
+        #: Components planned and packed by :meth:`kernel_setup`, and those copied from
+        #: :attr:`plans` (the setups' work, for the tests and benchmarks that show it).
+        self.plan_counts = {'planned': 0, 'copied': 0}
         self._plan: Optional[tuple] = None
         self._par: Optional[tuple] = None
         #: The last multipliers read (:meth:`multipliers`) and what they were read of.
@@ -346,6 +402,7 @@ class ConstraintSolver:
                 # mimic row is a closure row (below) whatever the graph.
                 continue
             joints_of.setdefault(label[r.a], []).append((r.a, r.b))
+        plans, self.plans = self.plans, {}
         for lab in np.unique(label[touched]):
             bodies = np.flatnonzero(label == lab)
             rows_global = np.flatnonzero(label[a] == lab)
@@ -356,11 +413,40 @@ class ConstraintSolver:
             mc = len(rows_global)
             closure = np.zeros(0, dtype=np.int64)
             ja, jb = np.array(joints_of.get(lab, []), dtype=np.int64).reshape(-1, 2).T
-            closes = closes_loop(local[ja], local[jb], len(bodies))
             # Coupling parts (mimic rows' leader sides): their rows couple up to four
             # bodies, which the tree solve cannot take: closure rows of the loop solve.
             xs = np.flatnonzero(label[cs.x_a] == lab)
             x_local = np.searchsorted(rows_global, cs.x_row[xs])
+            body = np.zeros((len(bodies), BODY.width))
+            body[:, BODY.start['inv_mass']] = self.bodies.inv_mass[bodies]
+            j = BODY.start['moments']
+            body[:, j:j + 3] = self.bodies.moments[bodies]
+            # Built-in rows first (compiled), then generic ones (Python, object mode).
+            builtin = rows_global[rows_global < mb]
+            generic = [res for res in cs.generic if label[res.a] == lab]
+            rows = {'kind': cs.row_kind[builtin], 'comp': cs.row_comp[builtin],
+                    'row_a': np.concatenate([ra, local[cs.x_a[xs]]]),
+                    'row_b': np.concatenate([rb, local[cs.x_b[xs]]]),
+                    'row_par': np.ascontiguousarray(cs.row_par[builtin]),
+                    'row_owner': np.concatenate([np.arange(mc), x_local]).astype(np.int64),
+                    'x_kind': cs.x_kind[xs], 'x_comp': cs.x_comp[xs],
+                    'x_par': np.ascontiguousarray(cs.x_par[xs]), 'x_weight': cs.x_weight[xs],
+                    'key': -1}
+            content = None if generic else _content(
+                rows, body, local[ja], local[jb], mc, self._inertia_form)
+            old = plans.get(content, (None,))[0]
+            if old is not None:   # (the same rows on the same bodies: copied, not planned)
+                packed, views = _repack(old.packed)
+                for name, table in rows.items():   # (the rows as now: a drive's target moves)
+                    if name != 'key':
+                        views[name][...] = table
+                comp = ComponentSetup(bodies, rows_global, packed, views, old.solve,
+                                      np.zeros(mc), body, xs)
+                components.append(comp)
+                self.plans[content] = (comp, 0)
+                self.plan_counts['copied'] += 1
+                continue
+            closes = closes_loop(local[ja], local[jb], len(bodies))
             # A loop through the world counts: its redundant rows go to the closure
             # (beyond DENSE_ROWS a loop among bodies must: the tree solve needs a tree).
             loops = (loop_structure(ra, rb, len(bodies), through_world=True, forced=x_local)
@@ -388,31 +474,21 @@ class ConstraintSolver:
             # current geometry (see kernels.constrained_step._sym_factor).
             trees = (tree_storage(st, closure, mc, len(bodies)),
                      tree_storage(st, closure, mc, len(bodies)))
-            body = np.zeros((len(bodies), BODY.width))
-            body[:, BODY.start['inv_mass']] = self.bodies.inv_mass[bodies]
-            j = BODY.start['moments']
-            body[:, j:j + 3] = self.bodies.moments[bodies]
-            # Built-in rows first (compiled), then generic ones (Python, object mode).
-            builtin = rows_global[rows_global < mb]
-            generic = [res for res in cs.generic if label[res.a] == lab]
-            key = -1
             if generic:
-                key = next(_KEYS)
-                GENERIC[key] = _GenericRows(cs, bodies, generic, len(builtin))
-                self._generic_keys.append(key)
-            rows = {'kind': cs.row_kind[builtin], 'comp': cs.row_comp[builtin],
-                    'row_a': np.concatenate([ra, local[cs.x_a[xs]]]),
-                    'row_b': np.concatenate([rb, local[cs.x_b[xs]]]),
-                    'row_par': np.ascontiguousarray(cs.row_par[builtin]),
-                    'row_owner': np.concatenate([np.arange(mc), x_local]).astype(np.int64),
-                    'x_kind': cs.x_kind[xs], 'x_comp': cs.x_comp[xs],
-                    'x_par': np.ascontiguousarray(cs.x_par[xs]), 'x_weight': cs.x_weight[xs],
-                    'key': key}
+                rows['key'] = next(_KEYS)
+                GENERIC[rows['key']] = _GenericRows(cs, bodies, generic, len(builtin))
+                self._generic_keys.append(rows['key'])
             packed, views = pack(rows, workspace(len(bodies), mc, body, len(xs)),
                                  (dense_storage(d), dense_storage(d)), trees,
                                  nullspace_storage(joints, len(bodies)))
             components.append(ComponentSetup(bodies, rows_global, packed, views, solve,
                                              np.zeros(mc), body, xs))
+            self.plan_counts['planned'] += 1
+            if content is not None:
+                self.plans[content] = (components[-1], 0)
+        for content, (comp, age) in plans.items():   # (those not had: kept a while)
+            if content not in self.plans and age + 1 < PLAN_SETUPS:
+                self.plans[content] = (comp, age + 1)
         setup = KernelSetup(np.flatnonzero(~touched), tuple(components), [None])
         self._kernel_cache = (cs, cs.version, setup)
         self.kernel_time = cs.time   # the copies' targets are the set's

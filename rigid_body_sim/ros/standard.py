@@ -74,7 +74,6 @@ from .inputs import check_name_token
 from .outputs import body_topic, constraint_topic, group_topic
 from ..core import rotation as so3
 from ..core import SpecError
-from ..core.robots import build_robot
 from ..scene import body_from_dict, robot_from_dict
 from ..urdf import read_robot_xml, UrdfError
 
@@ -619,11 +618,17 @@ class StandardInterface:
         sim = node.sim
         taken = set(self.entities.names()) | {m.spec.name for m in sim.robots}
         name = self._free_name(request, request.name or spec.name, taken)
+        # Its name and pose first: the spec checked below is the one added (converted
+        # once, Simulation.robot_model; twice when renamed).
+        spec = replace(spec, name=name)
+        pose = self._initial_pose(request)
+        if pose is not None:
+            spec = replace(spec, base_xyz=pose[0], base_quat_xyzw=pose[1])
 
         def clashes(spec, groups) -> list:
             """Return its link, joint, row and group names that are taken."""
             try:
-                model = build_robot(spec)
+                model = sim.robot_model(spec)
             except SpecError as exc:
                 raise EntityError('RESOURCE_PARSE_ERROR', str(exc)) from None
             return sorted((({b.name for b in model.bodies} & set(sim.bodies.names))
@@ -641,10 +646,9 @@ class StandardInterface:
             raise EntityError('NAME_NOT_UNIQUE', f'links, joints or groups {clash[:5]} are '
                                                  f'taken: give the robot a prefix (a YAML robot '
                                                  f'entry){hint}')
-        spec = replace(spec, name=name)
         # (its groups name its URDF joints: the prefix, given or not, is prepended)
         groups = [replace(g, joints=[spec.prefix + j for j in g.joints]) for g in groups]
-        model = build_robot(spec)
+        model = sim.robot_model(spec)
         for field, names, topic in (
                 ('link name', [b.name for b in model.bodies], lambda n: body_topic(n, 'wrench')),
                 ('joint name', sorted(sim.row_names(model)), constraint_topic)):
@@ -659,9 +663,6 @@ class StandardInterface:
                                  node.session.full_relative_topic(group_topic(group.name)))
             except SpecError as exc:
                 raise EntityError('NAME_INVALID', str(exc)) from None
-        pose = self._initial_pose(request)
-        if pose is not None:
-            spec = replace(spec, base_xyz=pose[0], base_quat_xyzw=pose[1])
         return spec, parsed, groups
 
     def _delete(self, request, response):
