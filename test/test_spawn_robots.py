@@ -300,6 +300,15 @@ def test_a_robot_may_not_take_another_robots_possible_rows_and_a_refusal_caches_
     spec.initial_positions['servo'] = 0.7
     sim.add_robot(spec, _groups('b_'))
     assert sim.joint_state(['b_servo']).positions[0] == pytest.approx(0.7, abs=1e-12)
+    # So too a spec asked about first (robot_model: converted once for a check and the
+    # add), refused on a group name before its conversion is taken.
+    spec = _robot(tmp_path, 'c_')
+    assert sim.robot_model(spec) is sim.robot_model(spec)
+    with pytest.raises(SpecError, match="'wheel' is taken"):
+        sim.add_robot(spec, _groups(''))
+    spec.initial_positions['servo'] = -0.4
+    sim.add_robot(spec, _groups('c_'))
+    assert sim.joint_state(['c_servo']).positions[0] == pytest.approx(-0.4, abs=1e-12)
 
 
 def test_a_spawn_plans_only_the_components_it_changes_and_copies_step_as_plans_do(

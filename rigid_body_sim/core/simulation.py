@@ -959,6 +959,10 @@ class Simulation:
         """
         if not isinstance(robot, RobotSpec):
             raise SpecError('robot', f'expected a RobotSpec, got {robot!r}')
+        # Converted once (robot_model's, if it was asked about), then kept by the rebuild
+        # only: a refusal keeps none, and a spec changed in place after it is converted anew.
+        model = next((m for spec, m in self._asked if spec is robot), None)
+        self._asked = [(spec, m) for spec, m in self._asked if spec is not robot]
         taken = [m.spec.name for m in self.robots]
         if robot.name in taken:
             raise SpecError('robot.name', f'{robot.name!r} is taken; robots: {taken}')
@@ -976,10 +980,6 @@ class Simulation:
                     raise SpecError(f'command_groups[{g}].joints[{j}]',
                                     f'{name!r} is a joint already in the simulation; a '
                                     f"spawned robot's groups command its own joints")
-        # Converted once (robot_model's, if it was asked about), then kept by the rebuild
-        # only: a refusal keeps none, and a spec changed in place after it is converted anew.
-        model = next((m for spec, m in self._asked if spec is robot), None)
-        self._asked = [(spec, m) for spec, m in self._asked if spec is not robot]
         try:
             model = build_robot(robot) if model is None else model
         except SpecError as exc:

@@ -619,9 +619,13 @@ class StandardInterface:
         taken = set(self.entities.names()) | {m.spec.name for m in sim.robots}
         name = self._free_name(request, request.name or spec.name, taken)
         # Its name and pose first: the spec checked below is the one added (converted
-        # once, Simulation.robot_model; twice when renamed).
+        # once, Simulation.robot_model; twice when renamed). An invalid pose is answered
+        # after the names, as before.
         spec = replace(spec, name=name)
-        pose = self._initial_pose(request)
+        try:
+            pose, bad_pose = self._initial_pose(request), None
+        except EntityError as exc:
+            pose, bad_pose = None, exc
         if pose is not None:
             spec = replace(spec, base_xyz=pose[0], base_quat_xyzw=pose[1])
 
@@ -663,6 +667,8 @@ class StandardInterface:
                                  node.session.full_relative_topic(group_topic(group.name)))
             except SpecError as exc:
                 raise EntityError('NAME_INVALID', str(exc)) from None
+        if bad_pose is not None:
+            raise bad_pose
         return spec, parsed, groups
 
     def _delete(self, request, response):
