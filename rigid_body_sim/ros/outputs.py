@@ -232,15 +232,16 @@ class Outputs:
         fixed to the world relative to the world frame (a URDF link that is the
         world frame itself is left out).
         """
-        out = []
-        for frame_id, frame in self._links:
-            parent = self.world_frame if frame.body is None else frame.body
-            if frame_id == parent:
-                continue   # (the body's own frame, or the world link as the world frame)
-            out.append(conv.transform_stamped(Header(stamp=stamp, frame_id=parent), frame_id,
-                                              frame.position,
-                                              so3.matrix_to_quat(frame.rotation)))
-        return out
+        links = [(frame_id, frame, self.world_frame if frame.body is None else frame.body)
+                 for frame_id, frame in self._links]
+        # (the body's own frame, or the world link as the world frame, left out)
+        links = [x for x in links if x[0] != x[2]]
+        if not links:
+            return []
+        quats = so3.matrix_to_quat(np.array([frame.rotation for _, frame, _ in links]))
+        return [conv.transform_stamped(Header(stamp=stamp, frame_id=parent), frame_id,
+                                       frame.position, q)
+                for (frame_id, frame, parent), q in zip(links, quats)]
 
     def metrics(self, header: Header, step_count: int, energy0: float) -> Metrics:
         """Return the scene's energies, largest violation and momenta now."""
