@@ -441,6 +441,32 @@ def test_a_big_box_on_a_small_one_keeps_four_points_of_the_clipped_octagon():
         assert np.ptp(p[:, 0]) > 0.13 and np.ptp(p[:, 1]) > 0.13
 
 
+def test_a_box_on_a_box_turned_and_tilted_a_little_rests_on_four_points():
+    # Each turned about the vertical at random and the top one tilted by up to 1e-4 rad,
+    # its lowest corner 1e-5 m into the lower one's top face: faces resting on faces. An
+    # edge pair's axis (within the tilt of vertical) can overlap less than the face by
+    # the tilt times the size; it is not taken (FACE_EDGE): four points, not one,
+    # spanning the faces, along one box's face normal (within the tilt of vertical). Moved
+    # along it by the deepest point's depth, the top box is clear of the lower one.
+    rng = np.random.default_rng(7)
+    for _ in range(100):
+        yaw = rotation((0.0, 0.0, rng.uniform(0, 2 * np.pi)))
+        R = rotation(rng.normal(size=3) * 1e-4 / np.sqrt(3)) @ yaw
+        corners = np.array([[x, y, z] for x in (-0.1, 0.1) for y in (-0.1, 0.1)
+                            for z in (-0.1, 0.1)]) @ R.T
+        lower = box((0.0, 0.0, 0.0), rotation((0.0, 0.0, rng.uniform(0, 2 * np.pi))))
+        top = box((0.0, 0.0, 0.1 - 1e-5 - corners[:, 2].min()), R)
+        p, n, d = check_swapped(top, lower, margin=1e-3)
+        assert len(d) == MANIFOLD
+        np.testing.assert_allclose(n, np.tile(n[0], (4, 1)), atol=TOL)
+        assert max(abs(n[0] @ R[:, 2]), abs(n[0] @ lower[2][:, 2])) >= 1.0 - TOL
+        assert n[0][2] >= np.cos(1.5e-4)
+        assert 0.0 < d.max() <= 1e-5 + TOL
+        assert np.ptp(p[:, 0]) > 0.1 and np.ptp(p[:, 1]) > 0.1
+        moved = (BOX, top[1] + (d.max() + 1e-9) * n[0], top[2], top[3])
+        assert len(contacts(*moved, *lower)[2]) == 0
+
+
 def test_crossed_edges_touch_once():
     low = box((0.0, 0.0, 0.0), rotation((np.pi / 4, 0.0, 0.0)))   # an edge along x on top
     high = box((0.0, 0.0, 2 * 0.1 * np.sqrt(2.0) - 1e-4),

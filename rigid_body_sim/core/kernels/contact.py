@@ -55,6 +55,13 @@ MANIFOLD = 4
 #: Below this sine of the angle between two axes (or a normal and an axis) they count as
 #: parallel: a capsule lying on a capsule, a cylinder standing on a plane.
 PARALLEL = 1e-6
+#: rad: box on box, an edge pair whose axis lies within this of a face normal is a face
+#: on a face (the two boxes' faces within it of parallel, resting on each other): the
+#: face's manifold, its normal within this of the edge pair's, each point's depth its
+#: distance to the reference face. (An edge pair can overlap less than the face by the
+#: tilt times the size, and would give one point where the faces rest on four.)
+FACE_EDGE = 1e-3
+FACE_EDGE_COS = math.cos(FACE_EDGE)
 
 
 @njit(cache=True)
@@ -416,8 +423,9 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
     Emit box on box: the separating axis test (15 axes), then the manifold.
 
     The axis of least overlap is the normal (a face axis unless an edge pair's
-    overlap is smaller by more than 5% of the face's plus 1e-9 of the boxes' size: a
-    resting face keeps its normal). A face: the other box's face most against it (the incident
+    overlap is smaller by more than 5% of the face's plus 1e-9 of the boxes' size, and
+    the pair's axis is not within :data:`FACE_EDGE` of a face normal: a resting face
+    keeps its normal). A face: the other box's face most against it (the incident
     face) is clipped by the reference face's four sides, and its corners below the
     reference plane (within the margin) are the contacts, at most
     :data:`MANIFOLD` (:func:`_reduce`). An edge pair: the closest points of the two
@@ -463,9 +471,16 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
                 for r in range(3):
                     face_axis[r] = sg * L[r]
         elif sep > edge_sep:
-            best_edge, edge_sep = ax, sep
-            for r in range(3):
-                edge_axis[r] = sg * L[r]
+            # Not edges in nearly parallel planes (L within FACE_EDGE of a face normal):
+            # faces resting on each other, whose manifold is the face's.
+            near = 0.0
+            for q in range(3):
+                near = max(near, abs(Ra[0, q] * L[0] + Ra[1, q] * L[1] + Ra[2, q] * L[2]),
+                           abs(Rb[0, q] * L[0] + Rb[1, q] * L[1] + Rb[2, q] * L[2]))
+            if near < FACE_EDGE_COS:
+                best_edge, edge_sep = ax, sep
+                for r in range(3):
+                    edge_axis[r] = sg * L[r]
     if best_edge >= 0 and edge_sep > face_sep + 0.05 * abs(face_sep) + 1e-9 * size:
         # Edge on edge: the edge of a most against b, of b most against a.
         i, j = (best_edge - 6) // 3, (best_edge - 6) % 3
