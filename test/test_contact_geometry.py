@@ -467,6 +467,54 @@ def test_a_box_on_a_box_turned_and_tilted_a_little_rests_on_four_points():
         assert len(contacts(*moved, *lower)[2]) == 0
 
 
+def _least_overlap(a, b):
+    """Return the separating axis test's least overlap of two boxes and its axis."""
+    (_, ca, Ra, ha), (_, cb, Rb, hb) = a, b
+    axes = [Ra[:, i] for i in range(3)] + [Rb[:, i] for i in range(3)]
+    axes += [np.cross(Ra[:, i], Rb[:, j]) for i in range(3) for j in range(3)]
+    best = (np.inf, None)
+    for L in axes:
+        if np.linalg.norm(L) > 1e-6:
+            L = L / np.linalg.norm(L)
+            overlap = np.abs(Ra.T @ L) @ ha + np.abs(Rb.T @ L) @ hb - abs((ca - cb) @ L)
+            best = min(best, (overlap, L), key=lambda x: x[0])
+    return best
+
+
+def test_a_tilted_box_overhanging_another_reports_the_least_overlap():
+    # Tilted by up to 1 mrad and turned, the top box overhangs the lower one's edge or
+    # corner, up to 2e-4 m deep. Where the least-overlap edge pair lies within FACE_EDGE
+    # of a face normal no edge pair is taken (the next one's could overlap twice as
+    # much): the deepest point is the least overlap over the 15 axes, to second order in
+    # the angle θ between the normal given and that axis (ov θ², twice the cosine's
+    # ov θ²/2), and moved along the normal by it the boxes are clear.
+    rng = np.random.default_rng(1)
+    seen = 0
+    for _ in range(400):
+        hl, ht = rng.uniform(0.05, 0.2, 3), rng.uniform(0.05, 0.2, 3)
+        Rl = rotation((0.0, 0.0, rng.uniform(0, 2 * np.pi)))
+        axis = rng.normal(size=3)
+        axis[2] = 0.0
+        Rt = rotation(axis / np.linalg.norm(axis) * rng.uniform(0, 1e-3)) @ rotation(
+            (0.0, 0.0, rng.uniform(0, 2 * np.pi)))
+        xy = Rl[:2, :2] @ (hl[:2] * rng.uniform(0.5, 1.5, 2) * rng.choice([-1, 1], 2))
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1)
+                            for z in (-1, 1)]) * ht @ Rt.T
+        lower = (BOX, np.zeros(3), Rl, hl)
+        top = (BOX, np.array([xy[0], xy[1], hl[2] - corners[:, 2].min()
+                              - rng.uniform(0, 2e-4)]), Rt, ht)
+        overlap, L = _least_overlap(top, lower)
+        if overlap <= 1e-9:
+            continue
+        seen += 1
+        p, n, d = contacts(*top, *lower)
+        theta = np.arccos(min(1.0, abs(n[0] @ L)))
+        assert abs(d.max() - overlap) <= overlap * theta ** 2 + 1e-12
+        moved = (BOX, top[1] + (d.max() + 1e-9) * n[0], top[2], top[3])
+        assert len(contacts(*moved, *lower)[2]) == 0
+    assert seen > 250
+
+
 def test_crossed_edges_touch_once():
     low = box((0.0, 0.0, 0.0), rotation((np.pi / 4, 0.0, 0.0)))   # an edge along x on top
     high = box((0.0, 0.0, 2 * 0.1 * np.sqrt(2.0) - 1e-4),

@@ -55,11 +55,12 @@ MANIFOLD = 4
 #: Below this sine of the angle between two axes (or a normal and an axis) they count as
 #: parallel: a capsule lying on a capsule, a cylinder standing on a plane.
 PARALLEL = 1e-6
-#: rad: box on box, an edge pair whose axis lies within this of a face normal is a face
-#: on a face (the two boxes' faces within it of parallel, resting on each other): the
-#: face's manifold, its normal within this of the edge pair's, each point's depth its
-#: distance to the reference face. (An edge pair can overlap less than the face by the
-#: tilt times the size, and would give one point where the faces rest on four.)
+#: rad: box on box, when the edge pair of least overlap has its axis within this of a
+#: face normal, the contact is a face on a face (the two boxes' faces within it of
+#: parallel, resting on each other): the face's manifold, its normal within this of the
+#: edge pair's, each point's depth its distance to the reference face; no edge pair is
+#: taken (the next one's axis is further off). An edge pair can overlap less than the
+#: face by the tilt times the size, and would give one point where the faces rest on four.
 FACE_EDGE = 1e-3
 FACE_EDGE_COS = math.cos(FACE_EDGE)
 
@@ -424,10 +425,11 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
 
     The axis of least overlap is the normal (a face axis unless an edge pair's
     overlap is smaller by more than 5% of the face's plus 1e-9 of the boxes' size, and
-    the pair's axis is not within :data:`FACE_EDGE` of a face normal: a resting face
-    keeps its normal). A face: the other box's face most against it (the incident
-    face) is clipped by the reference face's four sides, and its corners below the
-    reference plane (within the margin) are the contacts, at most
+    the least-overlap edge pair's axis is not within :data:`FACE_EDGE` of a face normal:
+    a resting face keeps its normal; then no edge pair is taken, not the next one). A
+    face: the other box's face most against it (the incident face) is clipped by the
+    reference face's four sides, and its corners below the reference plane (within the
+    margin) are the contacts, at most
     :data:`MANIFOLD` (:func:`_reduce`). An edge pair: the closest points of the two
     edges, one contact.
     """
@@ -437,6 +439,7 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
     size = max(ha[0], ha[1], ha[2], hb[0], hb[1], hb[2])
     best_face, face_sep, face_axis = -1, -math.inf, w[67:70]
     best_edge, edge_sep, edge_axis = -1, -math.inf, w[70:73]
+    edge_flat = False
     L = w[73:76]
     for ax in range(15):
         if ax < 3:
@@ -471,17 +474,18 @@ def _box_box(ca: np.ndarray, Ra: np.ndarray, ha: np.ndarray, cb: np.ndarray,
                 for r in range(3):
                     face_axis[r] = sg * L[r]
         elif sep > edge_sep:
-            # Not edges in nearly parallel planes (L within FACE_EDGE of a face normal):
+            best_edge, edge_sep = ax, sep
+            for r in range(3):
+                edge_axis[r] = sg * L[r]
+            # Edges in nearly parallel planes (L within FACE_EDGE of a face normal):
             # faces resting on each other, whose manifold is the face's.
             near = 0.0
             for q in range(3):
                 near = max(near, abs(Ra[0, q] * L[0] + Ra[1, q] * L[1] + Ra[2, q] * L[2]),
                            abs(Rb[0, q] * L[0] + Rb[1, q] * L[1] + Rb[2, q] * L[2]))
-            if near < FACE_EDGE_COS:
-                best_edge, edge_sep = ax, sep
-                for r in range(3):
-                    edge_axis[r] = sg * L[r]
-    if best_edge >= 0 and edge_sep > face_sep + 0.05 * abs(face_sep) + 1e-9 * size:
+            edge_flat = near >= FACE_EDGE_COS
+    if best_edge >= 0 and not edge_flat \
+            and edge_sep > face_sep + 0.05 * abs(face_sep) + 1e-9 * size:
         # Edge on edge: the edge of a most against b, of b most against a.
         i, j = (best_edge - 6) // 3, (best_edge - 6) % 3
         n = edge_axis
