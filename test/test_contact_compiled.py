@@ -277,3 +277,82 @@ def test_compiled_steps_repeat_bit_for_bit(name):
         assert sim.contact.counters['compiled_steps'] == steps // 3
         runs.append(sim.state.y.copy())
     assert all(np.array_equal(runs[0], r) for r in runs[1:])
+
+
+def _random_contact_lcp(rng):
+    """
+    Return ``(A, q, mu)``: the contact rows of a few spheres touching one another and the world.
+
+    ``nb`` spheres (radius 0.05 m, 1 kg) and ``nc`` contacts between random pairs (or a
+    sphere and the world) along random normals, each a normal and two tangent rows on
+    the relative velocity of the touching points; ``A = G M⁻¹ Gᵀ``, ``q = G v`` at a
+    random velocity (falling at 1 cm/s). More rows than freedoms: redundant contacts.
+    """
+    nb, nc, r = int(rng.integers(2, 6)), int(rng.integers(4, 16)), 0.05
+    G = np.zeros((3 * nc, 6 * nb))
+    for k in range(nc):
+        a = int(rng.integers(nb))
+        b = int(rng.integers(-1, nb - 1))
+        b = b + 1 if b >= a else b   # (another sphere, or −1: the world)
+        n = rng.standard_normal(3)
+        n /= np.linalg.norm(n)
+        t1 = np.cross(n, (1.0, 0.0, 0.0) if abs(n[0]) < 0.9 else (0.0, 1.0, 0.0))
+        t1 /= np.linalg.norm(t1)
+        F = np.stack([n, t1, np.cross(n, t1)])
+        # The row F (v + ω × l) = F v + (l × F) ω: a's point at −r n, b's at +r n.
+        G[3 * k:3 * k + 3, 6 * a:6 * a + 3] = F
+        G[3 * k:3 * k + 3, 6 * a + 3:6 * a + 6] = np.cross(-r * n, F)
+        if b >= 0:
+            G[3 * k:3 * k + 3, 6 * b:6 * b + 3] = -F
+            G[3 * k:3 * k + 3, 6 * b + 3:6 * b + 6] = -np.cross(r * n, F)
+    minv = np.tile(np.array([1.0] * 3 + [1.0 / (0.4 * r * r)] * 3), nb)
+    v = 0.01 * rng.standard_normal(6 * nb)
+    v[2::6] -= 0.01
+    return (G * minv) @ G.T, G @ v, np.full(nc, rng.choice([0.3, 0.5, 1.0]))
+
+
+def test_lcps_the_fixed_point_cannot_solve_are_pivoted_as_in_the_python_path():
+    # The friction boxes' fixed point drifts on some redundant contacts (about one
+    # problem in twelve of these): the Python path then solves the pyramid by Lemke's
+    # pivoting, and the compiled steps do the same (they kept the drifting iterate: a
+    # residual of 0.06 m/s in the poured pile). On 300 such problems both solve the
+    # same ones, pivot the same ones, and reach the same impulses: the same pivots in
+    # the same order, each least-squares solve on the same support, so they differ by
+    # the rounding of those solves (LAPACK's and numpy's), 1e-9 of the largest impulse
+    # with room for a support's conditioning. A pivoted solution meets the Python
+    # path's own residual bound (PIVOT_TOLERANCE of the rows' scale). The problems the
+    # fixed point solves agree to its stop: an iteration changing no impulse by more
+    # than FRICTION_TOLERANCE of the largest, at most ten times that from its limit
+    # (a contraction of at most 0.9).
+    from rigid_body_sim.core import contact_step as cs
+    from rigid_body_sim.core.kernels import contact_step as kern
+    sim = Simulation([RigidBody('s', 1.0, (0.004,) * 3, position_world=(0, 0, 1))], [Gravity()],
+                     dt=1e-3, shapes=[CollisionShape('plane', None),
+                                      CollisionShape('sphere', 's', radius=0.1)])
+    contact = sim.contact
+    prm = contact.kernel_parameters()
+    rng = np.random.default_rng(7)
+    pivoted = 0
+    for _ in range(300):
+        A, q, mu = _random_contact_lcp(rng)
+        c = len(mu)
+        before = dict(contact.counters)
+        p_py = contact.solve(A, q, mu)
+        py_pivoted = contact.counters['lcp_pivoted'] - before['lcp_pivoted']
+        py_failed = contact.counters['lcp_failures'] - before['lcp_failures']
+        cnt = np.zeros(len(kern.COUNTERS))
+        p, ok = kern.solve_rows(A, q, mu, np.zeros(3 * c), False, np.zeros(c, dtype=bool),
+                                False, np.zeros(c, dtype=bool), prm, cnt)
+        assert ok
+        assert cnt[kern.C_PIVOTED] == py_pivoted
+        assert cnt[kern.C_FAILURES] == py_failed
+        if py_failed:
+            continue
+        scale = float(np.max(np.abs(p_py)))
+        bound = 1e-9 if py_pivoted else 10.0 * FRICTION_TOLERANCE
+        np.testing.assert_allclose(p, p_py, rtol=0, atol=bound * scale)
+        if py_pivoted:
+            pivoted += 1
+            w_scale = float(np.max(np.abs(A) @ np.abs(p) + np.abs(q)))
+            assert cs._residual(A, q, p, mu, False) <= cs.PIVOT_TOLERANCE * w_scale
+    assert pivoted >= 10

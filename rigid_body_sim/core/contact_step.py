@@ -981,6 +981,12 @@ class ContactSteps:
         det = (d.kind, d.size, d.c_body, d.R_body, d.body, d.group, d.mask, d._solids,
                d._planes, d._solid_body, d._solid_group, d._solid_mask, d.excluded, d.live,
                float(d.margin), d.hulls, d.hull_at)
+        self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), self.kernel_parameters())
+        self._kernel_key = (model, d.excluded, (self.location, self.rate))
+        return self._kernel_args
+
+    def kernel_parameters(self) -> np.ndarray:
+        """Return the tolerances and limits the compiled steps take (``prm``, ``P_*``)."""
         prm = np.zeros(kern.P_WIDTH)
         prm[kern.P_LOCATION], prm[kern.P_RATE] = self.location, self.rate
         prm[kern.P_FRICTION_TOLERANCE] = FRICTION_TOLERANCE
@@ -992,9 +998,10 @@ class ContactSteps:
         prm[kern.P_MAX_LOCATION_ITERATIONS] = MAX_LOCATION_ITERATIONS
         prm[kern.P_RESIDUAL_TOLERANCE] = RESIDUAL_TOLERANCE
         prm[kern.P_PROJECTION_PASSES] = PROJECTION_PASSES
-        self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), prm)
-        self._kernel_key = (model, d.excluded, (self.location, self.rate))
-        return self._kernel_args
+        prm[kern.P_PIVOT_TOLERANCE] = PIVOT_TOLERANCE
+        prm[kern.P_PIVOT_REGULARIZATION_1], prm[kern.P_PIVOT_REGULARIZATION_2] = \
+            PIVOT_REGULARIZATIONS
+        return prm
 
     def _buffers(self) -> tuple:
         """Return the detector's buffers and the kernel's scratch for its shapes' frames."""

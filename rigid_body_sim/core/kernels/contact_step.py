@@ -16,7 +16,8 @@ for function:
 * :func:`_held` (``_held_step``): the LCP ``w = A p + q`` (``A = G M⁻¹ Gᵀ``, ``q =
   G ṽ``) by the friction boxes' fixed point over a proximal active-set solve
   (:func:`solve_rows`, :func:`solve_direct` with an envelope Cholesky), warm-started
-  from the last step's normal impulses; sticking contacts that begin to slip turned
+  from the last step's normal impulses (where that fixed point drifts, Lemke's pivoting
+  on the pyramid: :func:`pyramid`); sticking contacts that begin to slip turned
   to their slip (:func:`slip_turn`); the step with the forces held, its model
   checked at the end's geometry (each contact found again: :func:`match`) and
   corrected up to ``MODEL_CORRECTIONS`` times;
@@ -47,14 +48,15 @@ from .so3 import quat_exp_multiply, quat_matrix
 (P_LOCATION, P_RATE, P_FRICTION_TOLERANCE, P_FRICTION_ITERATIONS, P_PROXIMAL,
  P_MODEL_TOLERANCE, P_MODEL_CORRECTIONS, P_HOLD_RATE, P_RATE_FLOOR, P_MAX_EVENTS,
  P_MAX_BOUNCES, P_MAX_LOCATION_ITERATIONS, P_RESIDUAL_TOLERANCE, P_PROJECTION_PASSES,
- P_WIDTH) = range(15)
+ P_PIVOT_TOLERANCE, P_PIVOT_REGULARIZATION_1, P_PIVOT_REGULARIZATION_2,
+ P_WIDTH) = range(18)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
-            'max_depth', 'projections', 'max_projected', 'projection_left')
+            'max_depth', 'projections', 'max_projected', 'projection_left', 'lcp_pivoted')
 (C_SOLVES, C_ITERATIONS_MAX, C_FAILURES, C_COMPLEMENTARITY, C_CORRECTIONS, C_HELD,
  C_IMPACTS, C_LOCATED, C_CAPPED, C_MAX_DEPTH, C_PROJECTIONS, C_MAX_PROJECTED,
- C_PROJECTION_LEFT) = range(13)
+ C_PROJECTION_LEFT, C_PIVOTED) = range(14)
 #: The counters that are maxima (the others are sums).
 MAXIMA = ('lcp_iterations_max', 'complementarity_max', 'max_depth', 'max_projected',
           'projection_left')
@@ -624,6 +626,21 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
                     <= prm[P_RESIDUAL_TOLERANCE] * wmax + 2.0 * rho * change:
                 converged = True
                 break
+    if not converged and not normal_only and not has_equal:
+        # The fixed point drifts: Lemke's pivoting on the pyramid (``_pyramid``).
+        for reg in (prm[P_PIVOT_REGULARIZATION_1], prm[P_PIVOT_REGULARIZATION_2]):
+            pivoted, ok = pyramid(Ar, qr, mu, sliding, reg)
+            scale = 0.0
+            for a in range(nr):
+                wa = abs(qr[a])
+                for b in range(nr):
+                    wa += abs(Ar[a, b]) * abs(pivoted[b])
+                scale = max(scale, wa)
+            if ok and residual(Ar, qr, pivoted, mu, False, sliding, tol, equal, False) \
+                    <= prm[P_PIVOT_TOLERANCE] * scale:
+                p, converged = pivoted, True
+                cnt[C_PIVOTED] += 1
+                break
     cnt[C_SOLVES] += 1
     cnt[C_ITERATIONS_MAX] = max(cnt[C_ITERATIONS_MAX], it)
     if not converged:
@@ -636,6 +653,181 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
     for a in range(nr):
         out[idx[a]] = p[a]
     return out, True
+
+
+@njit(cache=True)
+def pyramid(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
+            regularization: float) -> tuple:
+    """
+    Return ``(p, ok)``: the rows by Lemke's pivoting on the pyramid, as ``_pyramid``.
+
+    ``w = A p + q`` (normal, t₁, t₂ per contact; a sliding contact's t₁ alone) with
+    ``p_t = p⁺ − p⁻``, ``w_t + β ≥ 0 ⊥ p⁺``, ``−w_t + β ≥ 0 ⊥ p⁻``, ``μ p_n − p⁺ − p⁻
+    ≥ 0 ⊥ β``; ``A`` takes ``regularization`` of its largest diagonal on its diagonal.
+    """
+    m = q.shape[0]
+    c = m // 3
+    dmax = 0.0
+    for a in range(m):
+        dmax = max(dmax, A[a, a])
+    r = 0
+    for k in range(c):
+        r += 1 if sliding[k] else 2
+    f = np.empty(r, dtype=np.int64)
+    j = 0
+    for k in range(c):
+        f[j] = 3 * k + 1
+        j += 1
+        if not sliding[k]:
+            f[j] = 3 * k + 2
+            j += 1
+    n = c + 3 * r
+    M = np.zeros((n, n))
+    qq = np.zeros(n)
+    for x in range(c):
+        qq[x] = q[3 * x]
+        for y in range(c):
+            M[x, y] = A[3 * x, 3 * y] + (regularization * dmax if x == y else 0.0)
+        for y in range(r):
+            M[x, c + y] = A[3 * x, f[y]]
+            M[x, c + r + y] = -A[3 * x, f[y]]
+    for x in range(r):
+        qq[c + x], qq[c + r + x] = q[f[x]], -q[f[x]]
+        for y in range(c):
+            M[c + x, y] = A[f[x], 3 * y]
+            M[c + r + x, y] = -A[f[x], 3 * y]
+        for y in range(r):
+            a = A[f[x], f[y]] + (regularization * dmax if x == y else 0.0)
+            M[c + x, c + y], M[c + x, c + r + y] = a, -a
+            M[c + r + x, c + y], M[c + r + x, c + r + y] = -a, a
+        M[c + x, c + 2 * r + x] = 1.0
+        M[c + r + x, c + 2 * r + x] = 1.0
+        own = f[x] // 3
+        M[c + 2 * r + x, own] = mu[own]
+        M[c + 2 * r + x, c + x] = -1.0
+        M[c + 2 * r + x, c + r + x] = -1.0
+    z, ok = lemke(M, qq)
+    p = np.zeros(m)
+    for x in range(c):
+        p[3 * x] = z[x]
+    for x in range(r):
+        p[f[x]] = z[c + x] - z[c + r + x]
+    return p, ok
+
+
+@njit(cache=True)
+def lemke(M: np.ndarray, q: np.ndarray) -> tuple:
+    """
+    Return ``(z, ok)``: the LCP ``w = M z + q ≥ 0 ⊥ z ≥ 0`` by Lemke's pivoting.
+
+    As :func:`..complementarity.lemke`: the covering vector all ones, ties broken
+    lexicographically, at most ``50 n`` pivots, the basic ``z`` solved again by least
+    squares on their rows and kept if no worse; ``ok`` False on a secondary ray.
+    """
+    n = q.shape[0]
+    if n == 0 or np.min(q) >= 0.0:
+        return np.zeros(n), True
+    T = np.zeros((n, 2 * n + 2))
+    mmax = 0.0
+    for i in range(n):
+        T[i, i] = 1.0
+        for j in range(n):
+            T[i, n + j] = -M[i, j]
+            mmax = max(mmax, abs(M[i, j]))
+        T[i, 2 * n] = -1.0
+        T[i, 2 * n + 1] = q[i]
+    basis = np.arange(n)
+    tol = 1e-12 * max(1.0, mmax)
+    entering = 2 * n
+    row = int(np.argmin(q))
+    done = False
+    cand = np.empty(n, dtype=np.int64)
+    for _ in range(50 * n):
+        # Gauss–Jordan pivot on (row, entering).
+        piv = T[row, entering]
+        for j in range(2 * n + 2):
+            T[row, j] /= piv
+        for i in range(n):
+            if i != row:
+                fac = T[i, entering]
+                if fac != 0.0:
+                    for j in range(2 * n + 2):
+                        T[i, j] -= fac * T[row, j]
+        leaving = basis[row]
+        basis[row] = entering
+        if leaving == 2 * n:
+            done = True
+            break
+        entering = leaving + n if leaving < n else leaving - n
+        best = np.inf
+        nc = 0
+        for i in range(n):
+            if T[i, entering] > tol:
+                ratio = max(T[i, 2 * n + 1], 0.0) / T[i, entering]
+                best = min(best, ratio)
+                cand[nc] = i
+                nc += 1
+        if nc == 0:
+            return np.zeros(n), False
+        k = 0
+        for x in range(nc):
+            i = cand[x]
+            if max(T[i, 2 * n + 1], 0.0) / T[i, entering] <= best + tol * max(1.0, abs(best)):
+                cand[k] = i
+                k += 1
+        nc = k
+        for j in range(n):
+            if nc == 1:
+                break
+            kmin = np.inf
+            for x in range(nc):
+                kmin = min(kmin, T[cand[x], j] / T[cand[x], entering])
+            k = 0
+            for x in range(nc):
+                if T[cand[x], j] / T[cand[x], entering] <= kmin + tol:
+                    cand[k] = cand[x]
+                    k += 1
+            nc = k
+        row = cand[0]
+    if not done:
+        return np.zeros(n), False
+    z = np.zeros(n)
+    ns = 0
+    for i in range(n):
+        b = basis[i]
+        if n <= b < 2 * n:
+            z[b - n] = max(T[i, 2 * n + 1], 0.0)
+            ns += 1
+    if ns:
+        support = np.empty(ns, dtype=np.int64)
+        k = 0
+        for j in range(n):
+            for i in range(n):
+                if basis[i] == n + j:
+                    support[k] = j
+                    k += 1
+        Ms, rhs = np.empty((ns, ns)), np.empty(ns)
+        for x in range(ns):
+            rhs[x] = -q[support[x]]
+            for y in range(ns):
+                Ms[x, y] = M[support[x], support[y]]
+        sol = np.linalg.lstsq(Ms, rhs, rcond=EPS * ns)[0]
+        again = np.zeros(n)
+        for x in range(ns):
+            again[support[x]] = max(sol[x], 0.0)
+        if _lcp_error(M, q, again) <= _lcp_error(M, q, z):
+            z = again
+    return z, True
+
+
+@njit(cache=True)
+def _lcp_error(M: np.ndarray, q: np.ndarray, z: np.ndarray) -> float:
+    """Return the natural-map residual ``max |min(z, M z + q)|``."""
+    w = M @ z + q
+    out = 0.0
+    for i in range(q.shape[0]):
+        out = max(out, abs(min(z[i], w[i])))
+    return out
 
 
 @njit(cache=True)
