@@ -805,3 +805,68 @@ def test_spheres_poured_into_a_box_gain_no_energy_and_stay_inside(compiled, step
     assert max(energy) <= energy[0] + 1e-9 and energy[-1] < 0.95 * energy[0]
     assert deepest <= 1e-4
     assert sim.contact.counters['compiled_steps'] == (steps if compiled else 0)
+
+
+def test_a_ball_bounces_by_newtons_law_down_to_the_bounce_speed_and_then_rests():
+    # e = 0.5 from 0.4 m: impacts at v₁ eᵏ (v₁ = 2.80 m/s), each rebounding at e times
+    # its approach, until the approach falls below BOUNCE_SPEED (1 cm/s): that closure
+    # is inelastic (its rebound would rise (e v)² / 2g < 1.3 µm), and the ball rests,
+    # on the ground to the location tolerance, still to rounding, carrying m g. The
+    # bounces end by t₁ + 2 e v₁ / (g (1 − e)) = 0.86 s.
+    from rigid_body_sim.core.contact_step import BOUNCE_SPEED
+    radius, drop, e = 0.1, 0.4, 0.5
+    sim = _ball(radius, height=radius + drop, e=e)
+    sim.step(1200)
+    v1 = math.sqrt(2 * G * drop)
+    impacts = list(sim.contact.impacts)
+    fast = [i for i in impacts if -i.approach > BOUNCE_SPEED]
+    # Every bounce faster than the bounce speed is located and keeps Newton's law; the
+    # k-th at v₁ eᵏ to the location's error (1e-10 m over the speed, on v² = 2 g h).
+    for k, impact in enumerate(fast):
+        assert impact.approach == pytest.approx(-v1 * e ** k, rel=1e-6)
+        assert impact.rebound == pytest.approx(-e * impact.approach, rel=1e-9)
+    assert len(fast) == math.floor(math.log(BOUNCE_SPEED / v1) / math.log(e)) + 1
+    # The slower closures are inelastic.
+    for impact in impacts[len(fast):]:
+        assert abs(impact.rebound) <= 1e-15
+    z0 = sim.state.pos_com_world[0].copy()
+    sim.step(1000)
+    assert np.max(np.abs(sim.state.pos_com_world[0] - z0)) <= 1e-15
+    assert np.max(np.abs(sim.state.vel_com_world)) <= 1e-15
+    assert abs(sim.state.pos_com_world[0, 2] - radius) <= LOCATION_TOLERANCE
+    force = sim.contact.record.force.sum(axis=0)
+    np.testing.assert_allclose(force, [0.0, 0.0, G], rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize('knob', [False, True])
+def test_a_closure_slower_than_the_bounce_speed_is_the_steps_own_and_located_under_the_knob(
+        knob):
+    # A box lowered onto the ground at 5 mm/s (below BOUNCE_SPEED), e = 0.5, from 0.5001 mm
+    # up: it lands without a bounce (below the bounce speed), at 0.10002 s. Fixed steps take
+    # the closure in the step it happens (no event located: the row of a contact apart
+    # asks v_n⁺ ≥ −g / h), so it lands within that step, and its depth at the step's end
+    # (at most h v / 2 = 2.5 µm before the projection) is projected out; the knob
+    # locates it to its tolerance (1e-9 dt). Either way it then rests, its speed zero
+    # to rounding, on the ground to the location tolerance.
+    half, v, gap, dt = 0.1, 5e-3, 5.001e-4, 1e-3
+    body = RigidBody('b', 2.0, (2.0 * (2 * half) ** 2 / 6,) * 3,
+                     position_world=(0, 0, half + gap), linear_velocity_world=(0, 0, -v))
+    shapes = [CollisionShape('plane', None, restitution=0.5),
+              CollisionShape('box', 'b', size=(2 * half,) * 3, restitution=0.5)]
+    sim = Simulation([body], [], integrator='rkmk4', dt=dt, shapes=shapes,
+                     tolerance=1e-9 if knob else None)
+    landed = None
+    for k in range(300):
+        sim.step()
+        if landed is None and sim.state.vel_com_world[0, 2] > -v / 2:
+            landed = sim.time
+    counters = sim.contact.counters
+    assert counters['located_steps'] == (1 if knob else 0)
+    if knob:
+        assert landed == pytest.approx(gap / v, abs=sim.dt)   # (the step it lands in)
+        assert all(abs(i.rebound) <= 1e-15 for i in sim.contact.impacts)
+    else:
+        assert gap / v <= landed <= gap / v + dt + 1e-12
+        assert counters['max_depth'] <= dt * v / 2 + 1e-12
+    assert np.max(np.abs(sim.state.vel_com_world)) <= 1e-15
+    assert abs(sim.state.pos_com_world[0, 2] - half) <= LOCATION_TOLERANCE

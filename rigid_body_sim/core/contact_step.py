@@ -62,7 +62,13 @@ one step the next are inelastic (a bouncing ball's impacts accumulate in finite
 time); after :data:`MAX_EVENTS` the step stands and its depth is corrected below.
 So a dropped ball's bounces reach ``e^{2k} h`` and happen at their times, to the
 tolerance, with fixed steps as under the accuracy knob (whose tolerance tightens
-the location: :meth:`ContactSteps.tighten`).
+the location: :meth:`ContactSteps.tighten`), down to :data:`BOUNCE_SPEED`: an
+impact slower than that is inelastic, and with the knob off a contact apart within
+the detector's margin that the step closes that slowly is not located but held as a
+row of the step that takes its gap ``g`` (``v_n⁺ ≥ −g / h``, Stewart and Trinkle's
+time-stepping; :meth:`ContactSteps._step_rows`): first order in the closure's time,
+its depth at the step's end at most ``h v / 2``, projected out there. A pile makes
+dozens of such closures a step, each of which was an event located on its own.
 
 **Penetration** beyond the tolerance left by a step (a contact's curvature over the
 step, a spawn inside another body) is projected out at the step's end: the bodies
@@ -151,6 +157,12 @@ HOLD_RATE = 1e-6
 MAX_LOCATION_ITERATIONS = 60
 #: Impacts in one step after which the next are inelastic (Zeno's cut).
 MAX_BOUNCES = 8
+#: m/s: an impact approaching slower than this is inelastic (``e = 0``), and a contact
+#: apart (within the detector's margin) closing slower than this is a row of its step
+#: (its gap taken: ``v_n⁺ ≥ −g / h``), not an event located. Its rebound would rise at
+#: most ``(e v)² / (2 g)`` (0.5 µm at ``e`` 0.3 under 9.81 m/s²) and return within
+#: ``2 e v / g`` (0.6 ms): in a pile such closures come by the dozen each step.
+BOUNCE_SPEED = 1e-2
 #: Most events (impacts) in one step: beyond them the step stands.
 MAX_EVENTS = 32
 EPS = float(np.finfo(float).eps)
@@ -306,6 +318,12 @@ class ContactSteps:
         self._radius = 0.25 * np.min(np.where(size > 0.0, size, np.inf), axis=1, initial=np.inf)
         self._e = table[:, ROW['restitution']].copy()
         self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
+        #: m/s: impacts approaching slower are inelastic (:data:`BOUNCE_SPEED`).
+        self.bounce = BOUNCE_SPEED
+        #: m/s: contacts apart closing slower than this are rows of the step, not events
+        #: (:meth:`_step_rows`): the bounce speed; 0 under the accuracy knob (every
+        #: closure located).
+        self.unlocated = BOUNCE_SPEED
         self._seen: Optional[tuple] = None
         self._frames_seen: Optional[tuple] = None
         self._lazy: Optional[tuple] = None
@@ -362,6 +380,7 @@ class ContactSteps:
     def tighten(self) -> None:
         """Set the tolerances for the accuracy knob (``tolerance dt``, floored) or the defaults."""
         control, dt = self.sim._control, self.sim.dt
+        self.unlocated = self.bounce if control is None else 0.0
         if control is None:
             self.location, self.rate = LOCATION_TOLERANCE, RATE_TOLERANCE
         else:
@@ -629,6 +648,10 @@ class ContactSteps:
                 break
         cnt = self.counters
         if not converged and not normal_only and equal is None:
+            # An iterate within what a pivoted solve must reach stands.
+            converged = _residual(A_r, q_r, p, mu, False, sliding, None, pinned) \
+                <= PIVOT_TOLERANCE * float(np.max(np.abs(A_r) @ np.abs(p) + np.abs(q_r)))
+        if not converged and not normal_only and equal is None:
             for regularization in PIVOT_REGULARIZATIONS:
                 pivoted, ok = _pyramid(A_r, q_r, mu, sliding, pinned, regularization)
                 scale = float(np.max(np.abs(A_r) @ np.abs(pivoted) + np.abs(q_r)))
@@ -667,9 +690,10 @@ class ContactSteps:
                     bounces += 1
                     events += 1
                     touching = self.rows(state)
-            rows = touching.subset(touching.vn <= self.rate)
+            rows = self._step_rows(state, touching)
             self._overlaps = self._overlapping(state, rows)
             trial = self._held_step(state, rows, h, t_end)
+            rows = self.record.rows   # (those held: the contacts apart it closes slowly)
             hit = None if events >= MAX_EVENTS else self._new_overlap(rows, trial)
             if events >= MAX_EVENTS:
                 self.counters['events_capped'] += 1
@@ -684,6 +708,28 @@ class ContactSteps:
             self.counters['located_steps'] += 1
             state = self._stands(state, tau, state.time + tau, located)
             events += 1
+
+    def _step_rows(self, state: State, touching: ContactRows) -> ContactRows:
+        """
+        Return the rows a (partial) step from ``state`` holds.
+
+        The touching contacts, moving apart too (their rows let them go: a ball's bounce
+        flies on, and one slower than the step takes out ends on the ground), and the
+        contacts apart within the detector's margin that close slower than
+        :attr:`unlocated` (:data:`BOUNCE_SPEED`) at the step's start and at the end of
+        its free step, which closes them (:meth:`_held_step` drops the others: under a
+        force steady over the step, the closure's speed lies between): their rows take
+        their gap ``g`` (``v_n⁺ ≥ −g / h``), so that such a closure in the step is no
+        event located but the step's own, inelastic and first order in its time (the
+        time-stepping of Stewart and Trinkle), its depth at the end at most ``h v / 2``
+        and projected out there. Under the accuracy knob (``unlocated`` 0) every closure
+        is located and the rows are those touching and not moving apart.
+        """
+        if self.unlocated <= 0.0:
+            return touching.subset(touching.vn <= self.rate)
+        everyone = self.rows(state, select=np.ones(len(self.detect(state).depth), dtype=bool))
+        return everyone.subset((everyone.contacts.depth >= -self.location)
+                               | (everyone.vn >= -self.unlocated))
 
     def _stands(self, state: State, h: float, t: float, trial: State) -> State:
         """
@@ -713,14 +759,29 @@ class ContactSteps:
         """
         self._set_forces(None)
         free = self._advance(state, h, t_end)
+        v_free = _stack(free.vel_com_world, free.ang_vel_principal)
+        if len(rows):
+            # A contact apart is a row where the free step closes it (its gap ``g`` to
+            # ``g + h (v_n + v_n,free) / 2``, under a steady force), slower than the bounce
+            # speed (:meth:`_step_rows`): one closing faster is an event located, one
+            # the step does not close is none of its rows.
+            gap = -rows.contacts.depth
+            vn_free = (rows.G @ v_free)[0::3]
+            drop = (gap > self.location) & ((vn_free < -self.unlocated)
+                                            | (gap + 0.5 * h * (rows.vn + vn_free) > 0.0))
+            if np.any(drop):
+                rows = rows.subset(~drop)
         if not len(rows):
             self.record = ContactRecord(state.time, rows, np.zeros((0, 3)))
             return free
-        v_free = _stack(free.vel_com_world, free.ang_vel_principal)
         A = self._step_response(state, rows, h, t_end, v_free)
         q = rows.G @ v_free
-        p = self.solve(A, q, rows.mu, start=self._warm_start(rows), sliding=rows.sliding,
-                       symmetric=self._symmetric)
+        # A row of a contact apart by its gap g asks v_n⁺ ≥ −g / h (:meth:`_step_rows`).
+        shift = np.zeros(len(q))
+        depth = rows.contacts.depth
+        shift[0::3] = np.where(depth < -self.location, -depth / h, 0.0)
+        p = self.solve(A, q + shift, rows.mu, start=self._warm_start(rows),
+                       sliding=rows.sliding, symmetric=self._symmetric)
         turned = self._slipping(rows, p, A @ p + q)
         if turned is not None:
             # Contacts that stuck at the start and slip over the step: their friction
@@ -728,7 +789,7 @@ class ContactSteps:
             rows = turned
             A = self._step_response(state, rows, h, t_end, v_free)
             q = rows.G @ v_free
-            p = self.solve(A, q, rows.mu, start=p, sliding=rows.sliding,
+            p = self.solve(A, q + shift, rows.mu, start=p, sliding=rows.sliding,
                            symmetric=self._symmetric)
         new = free
         force = np.zeros((len(rows), 3))
@@ -748,7 +809,7 @@ class ContactSteps:
                 break
             self.counters['model_corrections'] += 1
             q = q + offset
-            p = self.solve(A, q, rows.mu, start=p, sliding=rows.sliding,
+            p = self.solve(A, q + shift, rows.mu, start=p, sliding=rows.sliding,
                            symmetric=self._symmetric)
         self._remember(rows, p)
         self.record = ContactRecord(state.time, rows, force)
@@ -972,7 +1033,7 @@ class ContactSteps:
         d = self.detector
         key = self._kernel_key
         if key is not None and key[0] is model and key[1] is d.excluded \
-                and key[2] == (self.location, self.rate):
+                and key[2] == (self.location, self.rate, self.bounce, self.unlocated):
             return self._kernel_args
         n = len(self.sim.bodies.names)
         wrench = model[2]
@@ -982,7 +1043,8 @@ class ContactSteps:
                d._planes, d._solid_body, d._solid_group, d._solid_mask, d.excluded, d.live,
                float(d.margin), d.hulls, d.hull_at)
         self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), self.kernel_parameters())
-        self._kernel_key = (model, d.excluded, (self.location, self.rate))
+        self._kernel_key = (model, d.excluded,
+                            (self.location, self.rate, self.bounce, self.unlocated))
         return self._kernel_args
 
     def kernel_parameters(self) -> np.ndarray:
@@ -1001,6 +1063,7 @@ class ContactSteps:
         prm[kern.P_PIVOT_TOLERANCE] = PIVOT_TOLERANCE
         prm[kern.P_PIVOT_REGULARIZATION_1], prm[kern.P_PIVOT_REGULARIZATION_2] = \
             PIVOT_REGULARIZATIONS
+        prm[kern.P_BOUNCE], prm[kern.P_UNLOCATED] = self.bounce, self.unlocated
         return prm
 
     def _buffers(self) -> tuple:
@@ -1206,7 +1269,8 @@ class ContactSteps:
         approach = vn < -self.rate
         if not np.any(approach):
             return state, False
-        e = np.zeros(len(rows)) if inelastic else rows.restitution
+        e = np.zeros(len(rows)) if inelastic else np.where(vn < -self.bounce,
+                                                           rows.restitution, 0.0)
         target = np.where(approach, e * vn, 0.0)   # w_n = v_n⁺ + e v_n⁻ ≥ 0
         q = rel.copy()
         q[0::3] += target

@@ -42,7 +42,7 @@ from .limits import (DriveEfforts, ENGAGED, JointFriction, JointLimits, limit_na
                      restitution_of, SceneJoint, stick_name)
 from .robots import (build_robot, CommandGroup, drive_name, Interface, Joint, JointDrives,
                      JointSpace, JointSpec, JointState, mimic_name, RobotSpec, rpy_matrix)
-from .shapes import ALL_BITS, CollisionShape, ContactDetector
+from .shapes import ALL_BITS, CollisionShape, ContactDetector, Contacts
 from .solver import ConstraintSolver
 from .validate import finite_scalar, positive_scalar
 
@@ -1679,7 +1679,10 @@ class Simulation:
         [name or 'world'], 'point': (c, 3) m, 'normal': (c, 3) from b to a,
         'normal_force': (c,) N, 'friction_force': (c, 3) N, 'depth': (c,) m,
         'counters': {...}}``, world frame, at the state the step's (last) held forces
-        were found (``time``): the force on shape a is ``normal_force · normal +
+        were found (``time``): the contacts touching there and not moving apart, and
+        those that carried a force over the step (also apart, or moving apart:
+        :meth:`.ContactSteps._step_rows`). The force on
+        shape a is ``normal_force · normal +
         friction_force``, on b its opposite. ``counters`` (since the reset): impacts,
         steps with a located impact, those cut at :data:`.contact_step.MAX_EVENTS`, the
         contact LCPs solved, their most iterations, failures and largest residual (m/s),
@@ -1701,14 +1704,19 @@ class Simulation:
                     'point': z3, 'normal': z3, 'normal_force': np.zeros(0),
                     'friction_force': z3, 'depth': np.zeros(0)}
         con = rec.rows.contacts
-        fn = np.sum(rec.force * con.normal, axis=1)
+        # (a row that carried no force, its contact apart or moving apart, is none)
+        keep = ((con.depth >= -self.contact.location) & (rec.rows.vn <= self.contact.rate)) \
+            | np.any(rec.force != 0.0, axis=1)
+        con = Contacts(*(part[keep] for part in con))
+        force = rec.force[keep]
+        fn = np.sum(force * con.normal, axis=1)
         return {**out, 'shape_a': [shapes[k].name for k in con.shape_a],
                 'shape_b': [shapes[k].name for k in con.shape_b],
                 'body_a': [names[k] for k in con.body_a],
                 'body_b': [names[k] for k in con.body_b],
-                'point': con.point.copy(), 'normal': con.normal.copy(), 'normal_force': fn,
-                'friction_force': rec.force - fn[:, None] * con.normal,
-                'depth': con.depth.copy()}
+                'point': con.point, 'normal': con.normal, 'normal_force': fn,
+                'friction_force': force - fn[:, None] * con.normal,
+                'depth': con.depth}
 
     def complementarity(self) -> dict:
         """

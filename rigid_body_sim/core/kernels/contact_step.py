@@ -10,7 +10,9 @@ for function:
 
 * :func:`_step` (``ContactSteps.step``): the touching contacts' rows at the start
   (``G`` as two (3c, 6) blocks, on body ``a`` and body ``b``); :func:`_impact` for
-  those approaching; :func:`_held`, the trial step with the forces held; a new
+  those approaching (inelastic below ``P_BOUNCE``); the rows the step holds
+  (:func:`_step_rows`: those touching, and those apart closing slower than
+  ``P_UNLOCATED``, with their gaps); :func:`_held`, the trial step with the forces held; a new
   contact overlapping at its end is located (:func:`_locate`) and the step taken
   again from there, up to ``MAX_EVENTS`` events; :func:`_accept` at the end;
 * :func:`_held` (``_held_step``): the LCP ``w = A p + q`` (``A = G M⁻¹ Gᵀ``, ``q =
@@ -49,7 +51,7 @@ from .so3 import quat_exp_multiply, quat_matrix
  P_MODEL_TOLERANCE, P_MODEL_CORRECTIONS, P_HOLD_RATE, P_RATE_FLOOR, P_MAX_EVENTS,
  P_MAX_BOUNCES, P_MAX_LOCATION_ITERATIONS, P_RESIDUAL_TOLERANCE, P_PROJECTION_PASSES,
  P_PIVOT_TOLERANCE, P_PIVOT_REGULARIZATION_1, P_PIVOT_REGULARIZATION_2,
- P_WIDTH) = range(18)
+ P_BOUNCE, P_UNLOCATED, P_WIDTH) = range(20)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
@@ -627,6 +629,16 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
                 converged = True
                 break
     if not converged and not normal_only and not has_equal:
+        wmax = 0.0
+        for a in range(nr):
+            wa = abs(qr[a])
+            for b in range(nr):
+                wa += abs(Ar[a, b]) * abs(p[b])
+            wmax = max(wmax, wa)
+        # An iterate within what a pivoted solve must reach stands (``solve_island``).
+        converged = residual(Ar, qr, p, mu, False, sliding, tol, equal, False) \
+            <= prm[P_PIVOT_TOLERANCE] * wmax
+    if not converged and not normal_only and not has_equal:
         # The fixed point drifts: Lemke's pivoting on the pyramid (``_pyramid``).
         for reg in (prm[P_PIVOT_REGULARIZATION_1], prm[P_PIVOT_REGULARIZATION_2]):
             pivoted, ok = pyramid(Ar, qr, mu, sliding, reg)
@@ -1112,7 +1124,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     ``found``: the contacts at ``y0`` when ``have`` (the last step's end's).
     """
     prm, dt = ctx[15], ctx[17]
-    loc, rate = prm[P_LOCATION], prm[P_RATE]
+    loc = prm[P_LOCATION]
     max_events, max_bounces = int(prm[P_MAX_EVENTS]), int(prm[P_MAX_BOUNCES])
     cnt = np.zeros(cnt_total.shape[0])
     empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
@@ -1142,7 +1154,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
                 events += 1
                 state = state2
                 touching = _make_rows(ctx, state, con, _where(con[7] >= -loc))
-        rows_ = _subset(touching, _where(touching[7] <= rate))
+        rows_ = _step_rows(ctx, state, con, touching)
         # The overlaps the (partial) step starts from that are not rows (``_overlapping``).
         deep0 = np.zeros(con[0], dtype=np.bool_)
         if np.any(con[7] > loc):
@@ -1155,9 +1167,10 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
                                                              warm, cnt)
         if code != DONE:
             return grow if code == GROW else fail
+        held_sel = record[0]   # (the rows held: those apart that the step closes slowly)
         hit_depth = -np.inf
         if events < max_events:
-            cont = _known(ctx, con, rows_[0], ov, state, con_trial, trial)
+            cont = _known(ctx, con, held_sel, ov, state, con_trial, trial)
             for j in range(con_trial[0]):
                 if not cont[j] and con_trial[7][j] > loc:
                     hit_depth = max(hit_depth, con_trial[7][j])
@@ -1166,7 +1179,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         if hit_depth == -np.inf:
             code, new, con_new = _accept(ctx, trial, record, cnt, con_trial)
             break
-        code, located, tau = _locate(ctx, state, con, rows_, ov, h, hit_depth, nw, fl)
+        code, located, tau = _locate(ctx, state, con, held_sel, ov, h, hit_depth, nw, fl)
         if code != DONE:
             return grow if code == GROW else fail
         if tau <= 0.0:
@@ -1182,6 +1195,26 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         return grow if code == GROW else fail
     _merge(cnt_total, cnt)
     return DONE, new, warm, record, con_new, n_log
+
+
+@njit(cache=True)
+def _step_rows(ctx: tuple, y: np.ndarray, con: tuple, touching: tuple) -> tuple:
+    """
+    Return the rows a (partial) step holds, as ``ContactSteps._step_rows``.
+
+    The touching contacts (``touching``, gap within the tolerance) and, while
+    ``P_UNLOCATED`` is positive, the contacts apart within the margin that close slower
+    than it (their rows take their gap: ``_held``).
+    """
+    prm = ctx[15]
+    slow = prm[P_UNLOCATED]
+    if slow <= 0.0:
+        return _subset(touching, _where(touching[7] <= prm[P_RATE]))
+    everyone = _make_rows(ctx, y, con, np.arange(con[0]))
+    keep = np.zeros(con[0], dtype=np.bool_)
+    for j in range(con[0]):
+        keep[j] = con[7][j] >= -prm[P_LOCATION] or everyone[7][j] >= -slow
+    return _subset(everyone, _where(keep))
 
 
 @njit(cache=True)
@@ -1207,9 +1240,10 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
     if n_log + approaching > log.shape[0]:
         return BAIL, y, False, n_log
     q = rel.copy()
+    bounce = prm[P_BOUNCE]
     for k in range(c):
         if rel[3 * k] < -rate:
-            q[3 * k] += (0.0 if inelastic else e[k]) * rel[3 * k]
+            q[3 * k] += (0.0 if inelastic or rel[3 * k] >= -bounce else e[k]) * rel[3 * k]
     A = delassus(Ga, Gb, ba, bb, minv)
     p, ok = solve_rows(A, q, mu, np.zeros(3 * c), False, np.zeros(c, dtype=np.bool_), False,
                        sliding, prm, cnt)
@@ -1254,13 +1288,31 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t)
     if not finite:
         return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+    fpos, fquat, fvel, fom = state_parts(free)
+    if c:
+        # A contact apart is a row where the free step closes it, slower than
+        # P_UNLOCATED (``_held_step``).
+        q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
+        keep = np.ones(c, dtype=np.bool_)
+        for k in range(c):
+            g = -con[7][sel[k]]
+            if g > prm[P_LOCATION]:
+                keep[k] = q[3 * k] >= -prm[P_UNLOCATED] and g + 0.5 * h * (vn[k] + q[3 * k]) <= 0.0
+        if not np.all(keep):
+            r = _subset(r, _where(keep))
+            sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
+            c = sel.shape[0]
     if c == 0:
         con1 = _detect_ctx(ctx, free)
         code = GROW if con1[0] < 0 else DONE
         return code, free, n_applied, flags, warm, (sel, np.zeros((0, 3)), con, y0, t), con1
-    fpos, fquat, fvel, fom = state_parts(free)
     A = delassus(Ga, Gb, ba, bb, minv)
     q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
+    # A row of a contact apart by its gap g asks v_n⁺ ≥ −g / h (``_held_step``).
+    shift = np.zeros(3 * c)
+    for k in range(c):
+        if con[7][sel[k]] < -prm[P_LOCATION]:
+            shift[3 * k] = -con[7][sel[k]] / h
     start = np.zeros(3 * c)
     w_sa, w_sb, w_pt, w_pn = warm
     pt0 = con[5]
@@ -1273,7 +1325,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
                 start[3 * k] = w_pn[x]
                 break
     no_equal = np.zeros(c, dtype=np.bool_)
-    p, ok = solve_rows(A, q, mu, start, False, no_equal, False, sliding, prm, cnt)
+    p, ok = solve_rows(A, q + shift, mu, start, False, no_equal, False, sliding, prm, cnt)
     if not ok:
         return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
     w = A @ p + q
@@ -1285,7 +1337,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         Ga, Gb = jacobian(frame, ba, bb, la, lb, rotations(quat0), n)
         A = delassus(Ga, Gb, ba, bb, minv)
         q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
-        p, ok = solve_rows(A, q, mu, p, False, no_equal, False, sliding, prm, cnt)
+        p, ok = solve_rows(A, q + shift, mu, p, False, no_equal, False, sliding, prm, cnt)
         if not ok:
             return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
     pos0, quat0, _, _ = state_parts(y0)
@@ -1331,7 +1383,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
             break
         cnt[C_CORRECTIONS] += 1
         q = q + (w1 - model_w)
-        p, ok = solve_rows(A, q, mu, p, False, no_equal, False, sliding, prm, cnt)
+        p, ok = solve_rows(A, q + shift, mu, p, False, no_equal, False, sliding, prm, cnt)
         if not ok:
             return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
     if not have1:
@@ -1346,7 +1398,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
 
 
 @njit(cache=True)
-def _locate(ctx: tuple, y0: np.ndarray, con: tuple, r: tuple, ov: np.ndarray, h: float,
+def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndarray, h: float,
             hit_depth: float, nw: int, fl: int) -> tuple:
     """
     Return ``(code, state, τ)``: where the first new contact's depth crossed zero.
@@ -1358,7 +1410,6 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, r: tuple, ov: np.ndarray, h:
     prm = ctx[15]
     loc, rate = prm[P_LOCATION], prm[P_RATE]
     margin = ctx[10][14]
-    sel = r[0]
     g0, code = _new_depth(ctx, con, sel, ov, y0, con, y0, margin)
     if code != DONE:
         return code, y0, 0.0
