@@ -618,38 +618,20 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
             converged = True
             break
         if ok and stalled >= 2:
-            wmax = 0.0
-            for a in range(nr):
-                wa = abs(qr[a])
-                for b in range(nr):
-                    wa += abs(Ar[a, b]) * abs(p[b])
-                wmax = max(wmax, wa)
             if residual(Ar, qr, p, mu, normal_only, sliding, tol, equal, has_equal) \
-                    <= prm[P_RESIDUAL_TOLERANCE] * wmax + 2.0 * rho * change:
+                    <= prm[P_RESIDUAL_TOLERANCE] * _row_scale(Ar, qr, p) + 2.0 * rho * change:
                 converged = True
                 break
     if not converged and not normal_only and not has_equal:
-        wmax = 0.0
-        for a in range(nr):
-            wa = abs(qr[a])
-            for b in range(nr):
-                wa += abs(Ar[a, b]) * abs(p[b])
-            wmax = max(wmax, wa)
         # An iterate within what a pivoted solve must reach stands (``solve_island``).
         converged = residual(Ar, qr, p, mu, False, sliding, tol, equal, False) \
-            <= prm[P_PIVOT_TOLERANCE] * wmax
+            <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, p)
     if not converged and not normal_only and not has_equal:
         # The fixed point drifts: Lemke's pivoting on the pyramid (``_pyramid``).
         for reg in (prm[P_PIVOT_REGULARIZATION_1], prm[P_PIVOT_REGULARIZATION_2]):
             pivoted, ok = pyramid(Ar, qr, mu, sliding, reg)
-            scale = 0.0
-            for a in range(nr):
-                wa = abs(qr[a])
-                for b in range(nr):
-                    wa += abs(Ar[a, b]) * abs(pivoted[b])
-                scale = max(scale, wa)
             if ok and residual(Ar, qr, pivoted, mu, False, sliding, tol, equal, False) \
-                    <= prm[P_PIVOT_TOLERANCE] * scale:
+                    <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, pivoted):
                 p, converged = pivoted, True
                 cnt[C_PIVOTED] += 1
                 break
@@ -665,6 +647,18 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
     for a in range(nr):
         out[idx[a]] = p[a]
     return out, True
+
+
+@njit(cache=True)
+def _row_scale(A: np.ndarray, q: np.ndarray, p: np.ndarray) -> float:
+    """Return the rows' velocity scale at ``p``: the largest ``|A| |p| + |q|``."""
+    out = 0.0
+    for a in range(q.shape[0]):
+        wa = abs(q[a])
+        for b in range(q.shape[0]):
+            wa += abs(A[a, b]) * abs(p[b])
+        out = max(out, wa)
+    return out
 
 
 @njit(cache=True)
