@@ -120,7 +120,7 @@ def _simulate(ros, node, steps, cancel_after=None):
         ros.client.wait_for(cancel.done, 'the cancel answered', node=node)
     status, code = _outcome(ros, node, handle)
     if status == 4:   # SUCCEEDED: one feedback a step, which may come after the result
-        ros.client.wait_for(lambda: len(feedback) >= steps, 'every step\'s feedback',
+        ros.client.wait_for(lambda: len(feedback) >= steps, "every step's feedback",
                             node=node)
     return (status, code, [f.completed_steps for f in feedback],
             [f.remaining_steps for f in feedback])
