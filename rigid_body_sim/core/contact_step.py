@@ -64,10 +64,13 @@ So a dropped ball's bounces reach ``e^{2k} h`` and happen at their times, to the
 tolerance, with fixed steps as under the accuracy knob (whose tolerance tightens
 the location: :meth:`ContactSteps.tighten`), down to :data:`BOUNCE_SPEED`: an
 impact slower than that is inelastic, and with the knob off a contact apart within
-the detector's margin that the step closes that slowly is not located but held as a
-row of the step that takes its gap ``g`` (``v_n⁺ ≥ −g / h``, Stewart and Trinkle's
-time-stepping; :meth:`ContactSteps._step_rows`): first order in the closure's time,
-its depth at the step's end at most ``h v / 2``, projected out there. A pile makes
+the detector's margin closing that slowly at the step's start (and slower than twice
+that at its free step's end) is not located but held as a row of the step that asks
+it to close at most its gap ``g`` (``h (v_n + v_n⁺) / 2 ≥ −g``, not rebounding;
+Stewart and Trinkle's time-stepping; :meth:`ContactSteps._step_rows`): first order in
+the closure's time, its depth at the step's end at most ``h v / 2``, projected out
+there. So impacts faster than twice the bounce speed keep Newton's law, those slower
+than it are inelastic, and those between may be either. A pile makes
 dozens of such closures a step, each of which was an event located on its own.
 
 **Penetration** beyond the tolerance left by a step (a contact's curvature over the
@@ -158,10 +161,11 @@ MAX_LOCATION_ITERATIONS = 60
 #: Impacts in one step after which the next are inelastic (Zeno's cut).
 MAX_BOUNCES = 8
 #: m/s: an impact approaching slower than this is inelastic (``e = 0``), and a contact
-#: apart (within the detector's margin) closing slower than this is a row of its step
-#: (its gap taken: ``v_n⁺ ≥ −g / h``), not an event located. Its rebound would rise at
-#: most ``(e v)² / (2 g)`` (0.5 µm at ``e`` 0.3 under 9.81 m/s²) and return within
-#: ``2 e v / g`` (0.6 ms): in a pile such closures come by the dozen each step.
+#: apart (within the detector's margin) closing slower than this at a step's start (and
+#: slower than twice this at the end of its free step) is a row of its step (asking it
+#: to close at most the gap), not an event located. Its rebound would rise at most
+#: ``(e v)² / (2 g)`` (0.5 µm at ``e`` 0.3 under 9.81 m/s²) and return within ``2 e v /
+#: g`` (0.6 ms): in a pile such closures come by the dozen each step.
 BOUNCE_SPEED = 1e-2
 #: Most events (impacts) in one step: beyond them the step stands.
 MAX_EVENTS = 32
@@ -683,14 +687,16 @@ class ContactSteps:
             h = sim.dt if state is start else t_end - state.time
             if h <= 4.0 * EPS * abs(t_end):
                 return self._accept(State(t_end, *state.parts))
-            touching = self.rows(state)
+            near = self._in_margin(state)
+            touching = near if self.unlocated <= 0.0 else near.subset(
+                near.contacts.depth >= -self.location)
             if len(touching) and events < MAX_EVENTS:
                 state, hit = self._impact(state, touching, bounces >= MAX_BOUNCES)
                 if hit:
                     bounces += 1
                     events += 1
-                    touching = self.rows(state)
-            rows = self._step_rows(state, touching)
+                    near = self._in_margin(state)
+            rows = self._step_rows(near)
             self._overlaps = self._overlapping(state, rows)
             trial = self._held_step(state, rows, h, t_end)
             rows = self.record.rows   # (those held: the contacts apart it closes slowly)
@@ -709,27 +715,41 @@ class ContactSteps:
             state = self._stands(state, tau, state.time + tau, located)
             events += 1
 
-    def _step_rows(self, state: State, touching: ContactRows) -> ContactRows:
+    def _in_margin(self, state: State) -> ContactRows:
         """
-        Return the rows a (partial) step from ``state`` holds.
+        Return the rows of the contacts a (partial) step from ``state`` may hold.
+
+        Those touching under the accuracy knob (:attr:`unlocated` 0, every closure
+        located), else every contact within the detector's margin (:meth:`_step_rows`).
+        """
+        if self.unlocated <= 0.0:
+            return self.rows(state)
+        con = self.detect(state)
+        return self.rows(state, con, select=np.ones(len(con.depth), dtype=bool))
+
+    def _step_rows(self, near: ContactRows) -> ContactRows:
+        """
+        Return the rows a (partial) step holds, of the contacts ``near`` (:meth:`_in_margin`).
 
         The touching contacts, moving apart too (their rows let them go: a ball's bounce
         flies on, and one slower than the step takes out ends on the ground), and the
         contacts apart within the detector's margin that close slower than
-        :attr:`unlocated` (:data:`BOUNCE_SPEED`) at the step's start and at the end of
-        its free step, which closes them (:meth:`_held_step` drops the others: under a
-        force steady over the step, the closure's speed lies between): their rows take
-        their gap ``g`` (``v_n⁺ ≥ −g / h``), so that such a closure in the step is no
-        event located but the step's own, inelastic and first order in its time (the
-        time-stepping of Stewart and Trinkle), its depth at the end at most ``h v / 2``
-        and projected out there. Under the accuracy knob (``unlocated`` 0) every closure
-        is located and the rows are those touching and not moving apart.
+        :attr:`unlocated` (:data:`BOUNCE_SPEED`) at the step's start and slower than
+        twice that at the end of its free step (:meth:`_held_step` drops the others):
+        such a row asks the step to close at most the contact's gap (:meth:`_held_step`),
+        so that a closure in the step, whether the step's own motion or a neighbour's
+        held force makes it, is no event located but the step's own: inelastic and first
+        order in its time (the time-stepping of Stewart and Trinkle), its depth at the
+        end at most ``h v / 2`` and projected out there. So an impact approaching faster
+        than twice the bounce speed is located and keeps Newton's law, one slower than
+        the bounce speed is inelastic, and one between may be either (it depends on where
+        in its step the closure falls). Under the accuracy knob (``unlocated`` 0) every
+        closure is located and the rows are those touching and not moving apart.
         """
         if self.unlocated <= 0.0:
-            return touching.subset(touching.vn <= self.rate)
-        everyone = self.rows(state, select=np.ones(len(self.detect(state).depth), dtype=bool))
-        return everyone.subset((everyone.contacts.depth >= -self.location)
-                               | (everyone.vn >= -self.unlocated))
+            return near.subset(near.vn <= self.rate)
+        return near.subset((near.contacts.depth >= -self.location)
+                           | (near.vn >= -self.unlocated))
 
     def _stands(self, state: State, h: float, t: float, trial: State) -> State:
         """
@@ -761,14 +781,10 @@ class ContactSteps:
         free = self._advance(state, h, t_end)
         v_free = _stack(free.vel_com_world, free.ang_vel_principal)
         if len(rows):
-            # A contact apart is a row where the free step closes it (its gap ``g`` to
-            # ``g + h (v_n + v_n,free) / 2``, under a steady force), slower than the bounce
-            # speed (:meth:`_step_rows`): one closing faster is an event located, one
-            # the step does not close is none of its rows.
-            gap = -rows.contacts.depth
-            vn_free = (rows.G @ v_free)[0::3]
-            drop = (gap > self.location) & ((vn_free < -self.unlocated)
-                                            | (gap + 0.5 * h * (rows.vn + vn_free) > 0.0))
+            # A contact apart closing faster than twice the bounce speed at the free
+            # step's end is an event located (:meth:`_step_rows`).
+            drop = (rows.contacts.depth < -self.location) \
+                & ((rows.G @ v_free)[0::3] < -2.0 * self.unlocated)
             if np.any(drop):
                 rows = rows.subset(~drop)
         if not len(rows):
@@ -776,10 +792,16 @@ class ContactSteps:
             return free
         A = self._step_response(state, rows, h, t_end, v_free)
         q = rows.G @ v_free
-        # A row of a contact apart by its gap g asks v_n⁺ ≥ −g / h (:meth:`_step_rows`).
+        # A row of a contact apart by its gap g, closing at v_n at the step's start, asks
+        # the step to close at most g, h (v_n + v_n⁺) / 2 ≥ −g (the displacement under a
+        # force steady over the step), and not to rebound: v_n⁺ ≥ min(0, −2 g / h − v_n).
+        # So it carries no force unless the step would close it (by its own motion or a
+        # neighbour's held force), and then it ends the step touching, or, closing
+        # faster than the step can take out, at v_n⁺ = 0, at most h |v_n| / 2 deep.
         shift = np.zeros(len(q))
         depth = rows.contacts.depth
-        shift[0::3] = np.where(depth < -self.location, -depth / h, 0.0)
+        shift[0::3] = np.where(depth < -self.location,
+                               np.maximum(0.0, -2.0 * depth / h + rows.vn), 0.0)
         p = self.solve(A, q + shift, rows.mu, start=self._warm_start(rows),
                        sliding=rows.sliding, symmetric=self._symmetric)
         turned = self._slipping(rows, p, A @ p + q)

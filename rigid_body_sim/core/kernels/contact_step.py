@@ -12,9 +12,10 @@ for function:
   (``G`` as two (3c, 6) blocks, on body ``a`` and body ``b``); :func:`_impact` for
   those approaching (inelastic below ``P_BOUNCE``); the rows the step holds
   (:func:`_step_rows`: those touching, and those apart closing slower than
-  ``P_UNLOCATED``, with their gaps); :func:`_held`, the trial step with the forces held; a new
-  contact overlapping at its end is located (:func:`_locate`) and the step taken
-  again from there, up to ``MAX_EVENTS`` events; :func:`_accept` at the end;
+  ``P_UNLOCATED``, asked to close at most their gaps); :func:`_held`, the trial step
+  with the forces held; a new contact overlapping at its end is located
+  (:func:`_locate`) and the step taken again from there, up to ``MAX_EVENTS`` events;
+  :func:`_accept` at the end;
 * :func:`_held` (``_held_step``): the LCP ``w = A p + q`` (``A = G M⁻¹ Gᵀ``, ``q =
   G ṽ``) by the friction boxes' fixed point over a proximal active-set solve
   (:func:`solve_rows`, :func:`solve_direct` with an envelope Cholesky), warm-started
@@ -1118,7 +1119,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     ``found``: the contacts at ``y0`` when ``have`` (the last step's end's).
     """
     prm, dt = ctx[15], ctx[17]
-    loc = prm[P_LOCATION]
+    loc, unlocated = prm[P_LOCATION], prm[P_UNLOCATED]
     max_events, max_bounces = int(prm[P_MAX_EVENTS]), int(prm[P_MAX_BOUNCES])
     cnt = np.zeros(cnt_total.shape[0])
     empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
@@ -1137,7 +1138,8 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
             code, new, con_new = _accept(ctx, state, record, cnt, con)
             break
         first = False
-        touching = _make_rows(ctx, state, con, _where(con[7] >= -loc))
+        near = _in_margin(ctx, state, con)
+        touching = near if unlocated <= 0.0 else _subset(near, _where(con[7] >= -loc))
         if touching[0].shape[0] and events < max_events:
             code, state2, hit, n_log = _impact(ctx, state, t, con, touching,
                                                bounces >= max_bounces, cnt, log, n_log)
@@ -1147,8 +1149,8 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
                 bounces += 1
                 events += 1
                 state = state2
-                touching = _make_rows(ctx, state, con, _where(con[7] >= -loc))
-        rows_ = _step_rows(ctx, state, con, touching)
+                near = _in_margin(ctx, state, con)
+        rows_ = _step_rows(ctx, con, near)
         # The overlaps the (partial) step starts from that are not rows (``_overlapping``).
         deep0 = np.zeros(con[0], dtype=np.bool_)
         if np.any(con[7] > loc):
@@ -1192,23 +1194,35 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
 
 
 @njit(cache=True)
-def _step_rows(ctx: tuple, y: np.ndarray, con: tuple, touching: tuple) -> tuple:
+def _in_margin(ctx: tuple, y: np.ndarray, con: tuple) -> tuple:
+    """
+    Return the rows of the contacts a step may hold, as ``ContactSteps._in_margin``.
+
+    Those touching while ``P_UNLOCATED`` is 0, else every contact of ``con``.
+    """
+    if ctx[15][P_UNLOCATED] <= 0.0:
+        return _make_rows(ctx, y, con, _where(con[7] >= -ctx[15][P_LOCATION]))
+    return _make_rows(ctx, y, con, np.arange(con[0]))
+
+
+@njit(cache=True)
+def _step_rows(ctx: tuple, con: tuple, near: tuple) -> tuple:
     """
     Return the rows a (partial) step holds, as ``ContactSteps._step_rows``.
 
-    The touching contacts (``touching``, gap within the tolerance) and, while
-    ``P_UNLOCATED`` is positive, the contacts apart within the margin that close slower
-    than it (their rows take their gap: ``_held``).
+    Of ``near`` (:func:`_in_margin`): the touching contacts (gap within the tolerance) and,
+    while ``P_UNLOCATED`` is positive, the contacts apart within the margin that close
+    slower than it (their rows ask the step to close at most their gap: ``_held``).
     """
     prm = ctx[15]
     slow = prm[P_UNLOCATED]
     if slow <= 0.0:
-        return _subset(touching, _where(touching[7] <= prm[P_RATE]))
-    everyone = _make_rows(ctx, y, con, np.arange(con[0]))
-    keep = np.zeros(con[0], dtype=np.bool_)
-    for j in range(con[0]):
-        keep[j] = con[7][j] >= -prm[P_LOCATION] or everyone[7][j] >= -slow
-    return _subset(everyone, _where(keep))
+        return _subset(near, _where(near[7] <= prm[P_RATE]))
+    sel, vn = near[0], near[7]
+    keep = np.zeros(sel.shape[0], dtype=np.bool_)
+    for k in range(sel.shape[0]):
+        keep[k] = con[7][sel[k]] >= -prm[P_LOCATION] or vn[k] >= -slow
+    return _subset(near, _where(keep))
 
 
 @njit(cache=True)
@@ -1284,14 +1298,13 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
     fpos, fquat, fvel, fom = state_parts(free)
     if c:
-        # A contact apart is a row where the free step closes it, slower than
-        # P_UNLOCATED (``_held_step``).
+        # A contact apart closing faster than twice P_UNLOCATED at the free step's end
+        # is an event located (``_held_step``).
         q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
         keep = np.ones(c, dtype=np.bool_)
         for k in range(c):
-            g = -con[7][sel[k]]
-            if g > prm[P_LOCATION]:
-                keep[k] = q[3 * k] >= -prm[P_UNLOCATED] and g + 0.5 * h * (vn[k] + q[3 * k]) <= 0.0
+            if con[7][sel[k]] < -prm[P_LOCATION]:
+                keep[k] = q[3 * k] >= -2.0 * prm[P_UNLOCATED]
         if not np.all(keep):
             r = _subset(r, _where(keep))
             sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
@@ -1302,11 +1315,12 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         return code, free, n_applied, flags, warm, (sel, np.zeros((0, 3)), con, y0, t), con1
     A = delassus(Ga, Gb, ba, bb, minv)
     q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
-    # A row of a contact apart by its gap g asks v_n⁺ ≥ −g / h (``_held_step``).
+    # A row of a contact apart by its gap g asks v_n⁺ ≥ min(0, −2 g / h − v_n): the step
+    # closes at most g (``_held_step``).
     shift = np.zeros(3 * c)
     for k in range(c):
         if con[7][sel[k]] < -prm[P_LOCATION]:
-            shift[3 * k] = -con[7][sel[k]] / h
+            shift[3 * k] = max(0.0, -2.0 * con[7][sel[k]] / h + vn[k])
     start = np.zeros(3 * c)
     w_sa, w_sb, w_pt, w_pn = warm
     pt0 = con[5]
