@@ -311,48 +311,60 @@ def _random_contact_lcp(rng):
     return (G * minv) @ G.T, G @ v, np.full(nc, rng.choice([0.3, 0.5, 1.0]))
 
 
-def test_lcps_the_fixed_point_cannot_solve_are_pivoted_as_in_the_python_path():
-    # The friction boxes' fixed point drifts on some redundant contacts (about one
-    # problem in twelve of these): the Python path then solves the pyramid by Lemke's
-    # pivoting, and the compiled steps do the same (they kept the drifting iterate: a
+@pytest.mark.parametrize('newton', [True, False])
+def test_lcps_the_fixed_point_cannot_solve_are_solved_as_in_the_python_path(
+        newton, monkeypatch):
+    # The friction boxes' fixed point stalls or drifts on some redundant contacts: the
+    # Python path then solves the rows by Newton's method on their natural map and, where
+    # that fails (or with it switched off, NEWTON_ITERATIONS 0), the pyramid by Lemke's
+    # pivoting; the compiled steps do the same (they once kept the drifting iterate: a
     # residual of 0.06 m/s in the poured pile). On 300 such problems both solve the
-    # same ones, pivot the same ones, and reach the same impulses: the same pivots in
-    # the same order, each least-squares solve on the same support, so they differ by
-    # the rounding of those solves (LAPACK's and numpy's), 1e-9 of the largest impulse
-    # with room for a support's conditioning. A pivoted solution meets the Python
-    # path's own residual bound (PIVOT_TOLERANCE of the rows' scale). The problems the
-    # fixed point solves agree to its stop: an iteration changing no impulse by more
-    # than FRICTION_TOLERANCE of the largest, at most ten times that from its limit
-    # (a contraction of at most 0.9).
+    # same ones, by the same method, and reach the same impulses: the same guesses or
+    # pivots in the same order, each linear solve the same up to its rounding (LAPACK's
+    # and the kernel's), 1e-9 of the largest impulse with room for a support's
+    # conditioning (Newton's proximal solves leave the null space of redundant rows as
+    # the start has it, to that rounding over PROXIMAL). A solution so found meets the
+    # Python path's own residual bound (PIVOT_TOLERANCE of the rows' scale). The
+    # problems the fixed point solves agree to its stop: an iteration changing no
+    # impulse by more than FRICTION_TOLERANCE of the largest, at most ten times that
+    # from its limit (a contraction of at most 0.9).
     from rigid_body_sim.core import contact_step as cs
     from rigid_body_sim.core.kernels import contact_step as kern
+    if not newton:
+        monkeypatch.setattr(cs, 'NEWTON_ITERATIONS', 0)
     sim = Simulation([RigidBody('s', 1.0, (0.004,) * 3, position_world=(0, 0, 1))], [Gravity()],
                      dt=1e-3, shapes=[CollisionShape('plane', None),
                                       CollisionShape('sphere', 's', radius=0.1)])
     contact = sim.contact
     prm = contact.kernel_parameters()
     rng = np.random.default_rng(7)
-    pivoted = 0
+    solved = {'lcp_newton': 0, 'lcp_pivoted': 0}
     for _ in range(300):
         A, q, mu = _random_contact_lcp(rng)
         c = len(mu)
         before = dict(contact.counters)
         p_py = contact.solve(A, q, mu)
-        py_pivoted = contact.counters['lcp_pivoted'] - before['lcp_pivoted']
-        py_failed = contact.counters['lcp_failures'] - before['lcp_failures']
+        py = {key: contact.counters[key] - before[key]
+              for key in ('lcp_newton', 'lcp_pivoted', 'lcp_failures')}
         cnt = np.zeros(len(kern.COUNTERS))
         p, ok = kern.solve_rows(A, q, mu, np.zeros(3 * c), False, np.zeros(c, dtype=bool),
                                 False, np.zeros(c, dtype=bool), prm, cnt)
         assert ok
-        assert cnt[kern.C_PIVOTED] == py_pivoted
-        assert cnt[kern.C_FAILURES] == py_failed
-        if py_failed:
+        assert cnt[kern.C_NEWTON] == py['lcp_newton']
+        assert cnt[kern.C_PIVOTED] == py['lcp_pivoted']
+        assert cnt[kern.C_FAILURES] == py['lcp_failures']
+        if py['lcp_failures']:
             continue
         scale = float(np.max(np.abs(p_py)))
-        bound = 1e-9 if py_pivoted else 10.0 * FRICTION_TOLERANCE
+        other = py['lcp_newton'] or py['lcp_pivoted']
+        bound = 1e-9 if other else 10.0 * FRICTION_TOLERANCE
         np.testing.assert_allclose(p, p_py, rtol=0, atol=bound * scale)
-        if py_pivoted:
-            pivoted += 1
+        if other:
             w_scale = float(np.max(np.abs(A) @ np.abs(p) + np.abs(q)))
             assert cs._residual(A, q, p, mu, False) <= cs.PIVOT_TOLERANCE * w_scale
-    assert pivoted >= 10
+        for key in solved:
+            solved[key] += py[key]
+    if newton:
+        assert solved['lcp_newton'] >= 10
+    else:
+        assert solved['lcp_newton'] == 0 and solved['lcp_pivoted'] >= 10

@@ -95,9 +95,11 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+import math
 from typing import Any, NamedTuple, Optional
 
 import numpy as np
+import scipy.linalg
 
 from .bodies import State
 from .complementarity import lemke, solve_direct
@@ -142,8 +144,24 @@ PIVOT_TOLERANCE = 1e-10
 PIVOT_REGULARIZATIONS = (1e-12, 1e-10)
 #: Most iterations of the friction boxes (each an exact box LCP, warm-started).
 FRICTION_ITERATIONS = 60
+#: Iterations in a row contracting by less than half after which the friction boxes'
+#: fixed point gives way (where its rows have no equalities) to Newton's method on the
+#: rows' natural map (:func:`_newton`, once), then, if that fails and at its last
+#: contraction ratio the fixed point would not reach :data:`FRICTION_TOLERANCE` within
+#: :data:`FRICTION_ITERATIONS` (or no longer contracts), to pivoting. In a pile's
+#: sliding islands of 60 contacts it contracts by about 0.8 an iteration (measured):
+#: 90 iterations of 0.5 to 2 ms each, where Newton's method takes 2 to 8 solves of
+#: about 0.3 ms and a pivoted solve about 18 ms.
+STALL_ITERATIONS = 2
 #: The proximal regularization, relative to the Delassus operator's largest diagonal.
 PROXIMAL = 1e-6
+#: Most guesses of Newton's method on the rows' natural map (:func:`_newton`); measured
+#: on a pile's sliding islands of 60 contacts: 2 to 8 from the fixed point's first iterate.
+NEWTON_ITERATIONS = 10
+#: Refinements of each of its proximal solves on the same factors: each takes the part
+#: of the step the proximal term held back by ``ρ / (λ + ρ)`` (λ the system's least
+#: nonzero eigenvalue in size).
+NEWTON_REFINEMENTS = 3
 #: Relative to the rows' velocities without contact forces: how far a step's end may
 #: leave them from the LCP's model before the model is corrected and solved again.
 MODEL_TOLERANCE = 1e-12
@@ -363,7 +381,7 @@ class ContactSteps:
                          'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
                          'held_rates': 0, 'immovable_rows': 0, 'compiled_steps': 0,
                          'stepped_responses': 0, 'projection_left': 0.0,
-                         'lcp_pivoted': 0}
+                         'lcp_pivoted': 0, 'lcp_newton': 0}
 
     @property
     def record(self) -> ContactRecord:
@@ -581,7 +599,12 @@ class ContactSteps:
         along the operator's null space) is solved again as the pyramid LCP by Lemke's
         pivoting (:func:`_pyramid`: exact, no iteration on the boxes; counted in
         ``lcp_pivoted``) when its rows have no equalities; if that fails too, the last
-        iterate is kept and counted in ``lcp_failures``.
+        iterate is kept and counted in ``lcp_failures``. One that stalls (contracting
+        by less than half :data:`STALL_ITERATIONS` times in a row) is first solved by
+        Newton's method on the rows' natural map (:func:`_newton`, counted in
+        ``lcp_newton``), exact where it converges; if that fails and the fixed point
+        would not reach its tolerance within :data:`FRICTION_ITERATIONS`, it is pivoted
+        at once (and goes on iterating if that fails).
         """
         m = len(q)
         if not m:
@@ -621,41 +644,69 @@ class ContactSteps:
             lo[::1 if normal_only else 3][equal] = -np.inf
         p[::1 if normal_only else 3] = np.maximum(p[::1 if normal_only else 3],
                                                   lo[::1 if normal_only else 3])
-        converged, it, stalled, last = False, 0, 0, np.inf
-        for it in range(1, FRICTION_ITERATIONS + 1):
-            if not normal_only:
-                half = mu * np.maximum(p[0::3], 0.0)
-                lo[1::3], hi[1::3] = -half, half
-                half2 = half if sliding is None else np.where(sliding, 0.0, half)
-                lo[2::3], hi[2::3] = -half2, half2
-                lo[pinned], hi[pinned] = 0.0, 0.0
-                p = np.clip(p, lo, hi)
-            # Rows whose box is a point (no friction yet, or none: μ = 0, a sliding
-            # contact's t₂) are fixed there, out of the problem.
-            free = hi > lo
-            shift = A_p[np.ix_(free, ~free)] @ p[~free]
-            sol = solve_direct(A_p[np.ix_(free, free)], q_r[free] - rho * p[free] + shift,
-                               lo[free], hi[free], start=p[free])
-            new = p.copy()
-            new[free] = sol.f
-            change = float(np.max(np.abs(new - p)))
-            p = new
-            scale = max(float(np.max(np.abs(p))), 1e-300)
-            stalled = stalled + 1 if change > 0.5 * last else 0
-            last = change
-            if sol.converged and (change <= FRICTION_TOLERANCE * scale + floor or (
-                    stalled >= 2 and _residual(A_r, q_r, p, mu, normal_only, sliding, equal,
-                                               pinned)
-                    <= RESIDUAL_TOLERANCE * float(np.max(np.abs(A_r) @ np.abs(p)
-                                                         + np.abs(q_r))) + 2.0 * rho * change)):
-                converged = True
-                break
+        # Where the rows have no equalities, a fixed point that stalls (STALL_ITERATIONS)
+        # is solved by Newton's method on the natural map (once) or, if that fails and
+        # the fixed point would not reach its tolerance in time, by pivoting (Lemke's, on
+        # the pyramid); if that fails too, the fixed point goes on.
+        pivots = not normal_only and equal is None
+        converged, it, stalled, last, early, pivot_tried = False, 0, 0, np.inf, pivots, False
+        newton_tried = False
         cnt = self.counters
-        if not converged and not normal_only and equal is None:
+        while True:
+            exited = False
+            while it < FRICTION_ITERATIONS:
+                it += 1
+                if not normal_only:
+                    half = mu * np.maximum(p[0::3], 0.0)
+                    lo[1::3], hi[1::3] = -half, half
+                    half2 = half if sliding is None else np.where(sliding, 0.0, half)
+                    lo[2::3], hi[2::3] = -half2, half2
+                    lo[pinned], hi[pinned] = 0.0, 0.0
+                    p = np.clip(p, lo, hi)
+                # Rows whose box is a point (no friction yet, or none: μ = 0, a sliding
+                # contact's t₂) are fixed there, out of the problem.
+                free = hi > lo
+                shift = A_p[np.ix_(free, ~free)] @ p[~free]
+                sol = solve_direct(A_p[np.ix_(free, free)],
+                                   q_r[free] - rho * p[free] + shift,
+                                   lo[free], hi[free], start=p[free])
+                new = p.copy()
+                new[free] = sol.f
+                change = float(np.max(np.abs(new - p)))
+                p = new
+                scale = max(float(np.max(np.abs(p))), 1e-300)
+                ratio = change / last if last > 0.0 else np.inf
+                stalled = stalled + 1 if ratio > 0.5 else 0
+                last = change
+                target = FRICTION_TOLERANCE * scale + floor
+                if sol.converged and (change <= target or (
+                        stalled >= 2 and _residual(A_r, q_r, p, mu, normal_only, sliding,
+                                                   equal, pinned)
+                        <= RESIDUAL_TOLERANCE * float(np.max(np.abs(A_r) @ np.abs(p)
+                                                             + np.abs(q_r)))
+                        + 2.0 * rho * change)):
+                    converged = True
+                    break
+                if early and sol.converged and stalled >= STALL_ITERATIONS:
+                    if not newton_tried:
+                        newton_tried = True
+                        solved, ok = _newton(A_r, q_r, mu, sliding, pinned, p)
+                        if ok:
+                            p, converged = solved, True
+                            cnt['lcp_newton'] += 1
+                            break
+                    if ratio >= 1.0 or it + math.log(target / change) / math.log(ratio) \
+                            > FRICTION_ITERATIONS:
+                        exited = True
+                        break
+            if converged or not pivots:
+                break
             # An iterate within what a pivoted solve must reach stands.
             converged = _residual(A_r, q_r, p, mu, False, sliding, None, pinned) \
                 <= PIVOT_TOLERANCE * float(np.max(np.abs(A_r) @ np.abs(p) + np.abs(q_r)))
-        if not converged and not normal_only and equal is None:
+            if converged or pivot_tried:
+                break
+            pivot_tried = True
             for regularization in PIVOT_REGULARIZATIONS:
                 pivoted, ok = _pyramid(A_r, q_r, mu, sliding, pinned, regularization)
                 scale = float(np.max(np.abs(A_r) @ np.abs(pivoted) + np.abs(q_r)))
@@ -664,6 +715,9 @@ class ContactSteps:
                     p, converged = pivoted, True
                     cnt['lcp_pivoted'] += 1
                     break
+            if converged or not exited:
+                break
+            early = False   # (the pivoting failed: the fixed point goes on from its iterate)
         cnt['lcp_solves'] += 1
         cnt['lcp_iterations_max'] = max(cnt['lcp_iterations_max'], it)
         if not converged:
@@ -1075,6 +1129,9 @@ class ContactSteps:
         prm[kern.P_LOCATION], prm[kern.P_RATE] = self.location, self.rate
         prm[kern.P_FRICTION_TOLERANCE] = FRICTION_TOLERANCE
         prm[kern.P_FRICTION_ITERATIONS] = FRICTION_ITERATIONS
+        prm[kern.P_STALL_ITERATIONS] = STALL_ITERATIONS
+        prm[kern.P_NEWTON_ITERATIONS] = NEWTON_ITERATIONS
+        prm[kern.P_NEWTON_REFINEMENTS] = NEWTON_REFINEMENTS
         prm[kern.P_PROXIMAL], prm[kern.P_MODEL_TOLERANCE] = PROXIMAL, MODEL_TOLERANCE
         prm[kern.P_MODEL_CORRECTIONS], prm[kern.P_HOLD_RATE] = MODEL_CORRECTIONS, HOLD_RATE
         prm[kern.P_RATE_FLOOR] = RATE_FLOOR
@@ -1504,6 +1561,75 @@ def _pyramid(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.
     p[normal] = z[:c]
     p[f] = z[c:c + r] - z[c + r:c + 2 * r]
     return p, ok
+
+
+def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.ndarray],
+            pinned: np.ndarray, p: np.ndarray) -> tuple:
+    """
+    Solve the contact rows ``w = A p + q`` by Newton's method on their natural map.
+
+    The rows' conditions (those :func:`_residual` measures) as the fixed point of the
+    natural map: ``p_n = max(0, y_n)``, ``p_t = clip(y_t, ±μ p_n)`` with ``y = p −
+    w / diag(A)``. Each iteration guesses from ``y`` which normal rows carry a load,
+    which friction rows are on their bound ``p_t = ±μ p_n`` (a linear function of
+    their normal row's impulse: the coupling the boxes' fixed point takes one
+    iteration at a time) and which are inside it, and solves that guess's linear
+    system exactly: ``w = 0`` on the loaded normal rows and the friction rows inside
+    their bounds (a semi-smooth Newton step, or a primal–dual active-set step). Where
+    the guess holds, the solution does, to rounding; its guesses change finitely
+    often. Redundant contacts make the system singular (their load sharing is not
+    unique): each solve is proximal, ``(K + ρ I) δ = r`` with ``ρ`` :data:`PROXIMAL` of
+    the diagonal, refined :data:`NEWTON_REFINEMENTS` times on the same factors, so the
+    step leaves the null space where the start has it. Returns ``(p, ok)``: ``ok`` when
+    the result meets :data:`PIVOT_TOLERANCE` (as a pivoted solve must), within
+    :data:`NEWTON_ITERATIONS` guesses.
+    """
+    m = len(q)
+    c = m // 3
+    d = np.diag(A)
+    one_row = np.zeros(c, dtype=bool) if sliding is None else sliding
+    present = ~pinned.copy()
+    present[2::3] &= ~one_row
+    present[1::3] &= mu > 0.0
+    present[2::3] &= mu > 0.0
+    owner = np.arange(m) // 3
+    previous = None
+    for _ in range(NEWTON_ITERATIONS):
+        w = A @ p + q
+        y = p - w / d
+        load = y[0::3] > 0.0
+        bound = mu * np.maximum(y[0::3], 0.0)
+        # Per row: 1 unknown, ±2 on its bound +μ p_n or −μ p_n, 0 held at zero.
+        kind = np.zeros(m, dtype=int)
+        kind[0::3] = np.where(load, 1, 0)
+        for col in (1, 2):
+            yt = y[col::3]
+            on = np.where(yt >= bound, 2, np.where(yt <= -bound, -2, 1))
+            kind[col::3] = np.where(present[col::3] & load, on, 0)
+        unknown = np.flatnonzero(kind == 1)
+        T = np.zeros((m, len(unknown)))
+        T[unknown, np.arange(len(unknown))] = 1.0
+        at = np.flatnonzero(np.abs(kind) == 2)
+        column = np.full(m, -1)
+        column[unknown] = np.arange(len(unknown))
+        T[at, column[3 * owner[at]]] = np.sign(kind[at]) * mu[owner[at]]
+        K = A[unknown] @ T
+        z = p[unknown]
+        if len(unknown):
+            rho = PROXIMAL * float(np.max(np.abs(np.diag(K))))
+            factors = scipy.linalg.lu_factor(K + rho * np.eye(len(unknown)))
+            step = np.zeros(len(unknown))
+            for _refinement in range(NEWTON_REFINEMENTS + 1):
+                step = step + scipy.linalg.lu_solve(factors, -q[unknown] - K @ (z + step))
+            z = z + step
+        p = T @ z
+        if _residual(A, q, p, mu, False, sliding, None, pinned) \
+                <= PIVOT_TOLERANCE * float(np.max(np.abs(A) @ np.abs(p) + np.abs(q))):
+            return p, True
+        if previous is not None and np.array_equal(kind, previous):
+            return p, False
+        previous = kind
+    return p, False
 
 
 def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,

@@ -19,8 +19,9 @@ for function:
 * :func:`_held` (``_held_step``): the LCP ``w = A p + q`` (``A = G M⁻¹ Gᵀ``, ``q =
   G ṽ``) by the friction boxes' fixed point over a proximal active-set solve
   (:func:`solve_rows`, :func:`solve_direct` with an envelope Cholesky), warm-started
-  from the last step's normal impulses (where that fixed point drifts, Lemke's pivoting
-  on the pyramid: :func:`pyramid`); sticking contacts that begin to slip turned
+  from the last step's normal impulses (where that fixed point stalls, Newton's method
+  on the rows' natural map, :func:`newton`, then Lemke's pivoting on the pyramid:
+  :func:`pyramid`); sticking contacts that begin to slip turned
   to their slip (:func:`slip_turn`); the step with the forces held, its model
   checked at the end's geometry (each contact found again: :func:`match`) and
   corrected up to ``MODEL_CORRECTIONS`` times;
@@ -52,14 +53,16 @@ from .so3 import quat_exp_multiply, quat_matrix
  P_MODEL_TOLERANCE, P_MODEL_CORRECTIONS, P_HOLD_RATE, P_RATE_FLOOR, P_MAX_EVENTS,
  P_MAX_BOUNCES, P_MAX_LOCATION_ITERATIONS, P_RESIDUAL_TOLERANCE, P_PROJECTION_PASSES,
  P_PIVOT_TOLERANCE, P_PIVOT_REGULARIZATION_1, P_PIVOT_REGULARIZATION_2,
- P_BOUNCE, P_UNLOCATED, P_WIDTH) = range(20)
+ P_BOUNCE, P_UNLOCATED, P_STALL_ITERATIONS, P_NEWTON_ITERATIONS, P_NEWTON_REFINEMENTS,
+ P_WIDTH) = range(23)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
-            'max_depth', 'projections', 'max_projected', 'projection_left', 'lcp_pivoted')
+            'max_depth', 'projections', 'max_projected', 'projection_left', 'lcp_pivoted',
+            'lcp_newton')
 (C_SOLVES, C_ITERATIONS_MAX, C_FAILURES, C_COMPLEMENTARITY, C_CORRECTIONS, C_HELD,
  C_IMPACTS, C_LOCATED, C_CAPPED, C_MAX_DEPTH, C_PROJECTIONS, C_MAX_PROJECTED,
- C_PROJECTION_LEFT, C_PIVOTED) = range(14)
+ C_PROJECTION_LEFT, C_PIVOTED, C_NEWTON) = range(15)
 #: The counters that are maxima (the others are sums).
 MAXIMA = ('lcp_iterations_max', 'complementarity_max', 'max_depth', 'max_projected',
           'projection_left')
@@ -572,63 +575,88 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
         if has_equal and equal[a // step3]:
             lo[a] = -np.inf
         p[a] = max(p[a], lo[a])
-    converged, it, stalled, last = False, 0, 0, np.inf
+    # Where the rows have no equalities, a fixed point that stalls gives way to Newton's
+    # method, then to pivoting, and goes on if both fail (``solve_island``).
+    pivots = not normal_only and not has_equal
+    converged, it, stalled, last, early, pivot_tried = False, 0, 0, np.inf, pivots, False
+    newton_tried = False
     tol = prm[P_FRICTION_TOLERANCE]
-    for it in range(1, int(prm[P_FRICTION_ITERATIONS]) + 1):
-        if not normal_only:
-            for k in range(nr // 3):
-                half = mu[k] * max(p[3 * k], 0.0)
-                lo[3 * k + 1], hi[3 * k + 1] = -half, half
-                half2 = 0.0 if sliding[k] else half
-                lo[3 * k + 2], hi[3 * k + 2] = -half2, half2
+    iterations, stall = int(prm[P_FRICTION_ITERATIONS]), int(prm[P_STALL_ITERATIONS])
+    while True:
+        exited = False
+        while it < iterations:
+            it += 1
+            if not normal_only:
+                for k in range(nr // 3):
+                    half = mu[k] * max(p[3 * k], 0.0)
+                    lo[3 * k + 1], hi[3 * k + 1] = -half, half
+                    half2 = 0.0 if sliding[k] else half
+                    lo[3 * k + 2], hi[3 * k + 2] = -half2, half2
+                for a in range(nr):
+                    p[a] = min(max(p[a], lo[a]), hi[a])
+            nf = 0
             for a in range(nr):
-                p[a] = min(max(p[a], lo[a]), hi[a])
-        nf = 0
-        for a in range(nr):
-            if hi[a] > lo[a]:
-                nf += 1
-        fr = np.empty(nf, dtype=np.int64)
-        k = 0
-        for a in range(nr):
-            if hi[a] > lo[a]:
-                fr[k] = a
-                k += 1
-        Sf, qf = np.empty((nf, nf)), np.empty(nf)
-        lof, hif, sf = np.empty(nf), np.empty(nf), np.empty(nf)
-        for x in range(nf):
-            a = fr[x]
-            shift = 0.0
-            for b in range(nr):
-                if not hi[b] > lo[b]:
-                    shift += Ap[a, b] * p[b]
-            qf[x] = qr[a] - rho * p[a] + shift
-            lof[x], hif[x], sf[x] = lo[a], hi[a], p[a]
-            for y in range(nf):
-                Sf[x, y] = Ap[a, fr[y]]
-        f, ok, _ = solve_direct(Sf, qf, lof, hif, sf)
-        change, scale = 0.0, 0.0
-        for x in range(nf):
-            change = max(change, abs(f[x] - p[fr[x]]))
-            p[fr[x]] = f[x]
-        for a in range(nr):
-            scale = max(scale, abs(p[a]))
-        scale = max(scale, 1e-300)
-        stalled = stalled + 1 if change > 0.5 * last else 0
-        last = change
-        if ok and change <= tol * scale + floor:
-            converged = True
-            break
-        if ok and stalled >= 2:
-            if residual(Ar, qr, p, mu, normal_only, sliding, tol, equal, has_equal) \
-                    <= prm[P_RESIDUAL_TOLERANCE] * _row_scale(Ar, qr, p) + 2.0 * rho * change:
+                if hi[a] > lo[a]:
+                    nf += 1
+            fr = np.empty(nf, dtype=np.int64)
+            k = 0
+            for a in range(nr):
+                if hi[a] > lo[a]:
+                    fr[k] = a
+                    k += 1
+            Sf, qf = np.empty((nf, nf)), np.empty(nf)
+            lof, hif, sf = np.empty(nf), np.empty(nf), np.empty(nf)
+            for x in range(nf):
+                a = fr[x]
+                shift = 0.0
+                for b in range(nr):
+                    if not hi[b] > lo[b]:
+                        shift += Ap[a, b] * p[b]
+                qf[x] = qr[a] - rho * p[a] + shift
+                lof[x], hif[x], sf[x] = lo[a], hi[a], p[a]
+                for y in range(nf):
+                    Sf[x, y] = Ap[a, fr[y]]
+            f, ok, _ = solve_direct(Sf, qf, lof, hif, sf)
+            change, scale = 0.0, 0.0
+            for x in range(nf):
+                change = max(change, abs(f[x] - p[fr[x]]))
+                p[fr[x]] = f[x]
+            for a in range(nr):
+                scale = max(scale, abs(p[a]))
+            scale = max(scale, 1e-300)
+            ratio = change / last if last > 0.0 else np.inf
+            stalled = stalled + 1 if ratio > 0.5 else 0
+            last = change
+            target = tol * scale + floor
+            if ok and change <= target:
                 converged = True
                 break
-    if not converged and not normal_only and not has_equal:
+            if ok and stalled >= 2:
+                if residual(Ar, qr, p, mu, normal_only, sliding, tol, equal, has_equal) \
+                        <= prm[P_RESIDUAL_TOLERANCE] * _row_scale(Ar, qr, p) + 2.0 * rho * change:
+                    converged = True
+                    break
+            if early and ok and stalled >= stall:
+                if not newton_tried:
+                    newton_tried = True
+                    solved, solved_ok = newton(Ar, qr, mu, sliding, p, prm)
+                    if solved_ok:
+                        p, converged = solved, True
+                        cnt[C_NEWTON] += 1
+                        break
+                if ratio >= 1.0 or it + math.log(target / change) / math.log(ratio) \
+                        > iterations:
+                    exited = True
+                    break
+        if converged or not pivots:
+            break
         # An iterate within what a pivoted solve must reach stands (``solve_island``).
         converged = residual(Ar, qr, p, mu, False, sliding, tol, equal, False) \
             <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, p)
-    if not converged and not normal_only and not has_equal:
-        # The fixed point drifts: Lemke's pivoting on the pyramid (``_pyramid``).
+        if converged or pivot_tried:
+            break
+        pivot_tried = True
+        # Lemke's pivoting on the pyramid (``_pyramid``).
         for reg in (prm[P_PIVOT_REGULARIZATION_1], prm[P_PIVOT_REGULARIZATION_2]):
             pivoted, ok = pyramid(Ar, qr, mu, sliding, reg)
             if ok and residual(Ar, qr, pivoted, mu, False, sliding, tol, equal, False) \
@@ -636,6 +664,9 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
                 p, converged = pivoted, True
                 cnt[C_PIVOTED] += 1
                 break
+        if converged or not exited:
+            break
+        early = False   # (the pivoting failed: the fixed point goes on from its iterate)
     cnt[C_SOLVES] += 1
     cnt[C_ITERATIONS_MAX] = max(cnt[C_ITERATIONS_MAX], it)
     if not converged:
@@ -648,6 +679,143 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
     for a in range(nr):
         out[idx[a]] = p[a]
     return out, True
+
+
+@njit(cache=True)
+def lu_factor(K: np.ndarray) -> tuple:
+    """Return ``(LU, pivots, ok)``: ``K`` factored by partial pivoting (``ok``: no zero pivot)."""
+    n = K.shape[0]
+    LU = K.copy()
+    piv = np.arange(n)
+    for j in range(n):
+        best, row = 0.0, j
+        for i in range(j, n):
+            if abs(LU[i, j]) > best:
+                best, row = abs(LU[i, j]), i
+        if best == 0.0:
+            return LU, piv, False
+        if row != j:
+            for x in range(n):
+                LU[j, x], LU[row, x] = LU[row, x], LU[j, x]
+            piv[j], piv[row] = piv[row], piv[j]
+        inv = 1.0 / LU[j, j]
+        for i in range(j + 1, n):
+            f = LU[i, j] * inv
+            LU[i, j] = f
+            if f != 0.0:
+                for x in range(j + 1, n):
+                    LU[i, x] -= f * LU[j, x]
+    return LU, piv, True
+
+
+@njit(cache=True)
+def lu_solve(LU: np.ndarray, piv: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Return ``x`` with ``K x = b`` from :func:`lu_factor`'s factors."""
+    n = b.shape[0]
+    x = np.empty(n)
+    for i in range(n):
+        x[i] = b[piv[i]]
+    for i in range(n):
+        for j in range(i):
+            x[i] -= LU[i, j] * x[j]
+    for i in range(n - 1, -1, -1):
+        for j in range(i + 1, n):
+            x[i] -= LU[i, j] * x[j]
+        x[i] /= LU[i, i]
+    return x
+
+
+@njit(cache=True)
+def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
+           p0: np.ndarray, prm: np.ndarray) -> tuple:
+    """
+    Return ``(p, ok)``: Newton's method on the rows' natural map, as ``_newton``.
+
+    Each iteration guesses from ``y = p − w / diag(A)`` the loaded normal rows and the
+    friction rows on their bounds ``±μ p_n`` or inside them, and solves that guess's
+    linear system (``w = 0`` on the loaded normal rows and the friction rows inside)
+    by a proximal LU solve, refined on its factors. ``ok``: within
+    ``P_PIVOT_TOLERANCE``.
+    """
+    m = q.shape[0]
+    c = m // 3
+    p = p0.copy()
+    kind = np.zeros(m, dtype=np.int64)
+    previous = np.zeros(m, dtype=np.int64)
+    column = np.full(m, -1, dtype=np.int64)
+    tol, no_equal = prm[P_FRICTION_TOLERANCE], np.zeros(c, dtype=np.bool_)
+    for guess in range(int(prm[P_NEWTON_ITERATIONS])):
+        w = A @ p + q
+        for k in range(c):
+            n = 3 * k
+            yn = p[n] - w[n] / A[n, n]
+            load = yn > 0.0
+            kind[n] = 1 if load else 0
+            bound = mu[k] * max(yn, 0.0)
+            for col in range(1, 3):
+                t = n + col
+                if not load or not mu[k] > 0.0 or (col == 2 and sliding[k]):
+                    kind[t] = 0
+                else:
+                    yt = p[t] - w[t] / A[t, t]
+                    kind[t] = 2 if yt >= bound else (-2 if yt <= -bound else 1)
+        nu = 0
+        for j in range(m):
+            if kind[j] == 1:
+                column[j] = nu
+                nu += 1
+        unknown = _where(kind == 1)
+        z = np.empty(nu)
+        for a in range(nu):
+            z[a] = p[unknown[a]]
+        if nu:
+            K = np.zeros((nu, nu))
+            for a in range(nu):
+                r = unknown[a]
+                for j in range(m):
+                    if kind[j] == 1:
+                        K[a, column[j]] += A[r, j]
+                    elif kind[j] != 0:
+                        K[a, column[3 * (j // 3)]] += (1.0 if kind[j] > 0 else -1.0) \
+                            * mu[j // 3] * A[r, j]
+            dmax = 0.0
+            for a in range(nu):
+                dmax = max(dmax, abs(K[a, a]))
+            Kp = K.copy()
+            for a in range(nu):
+                Kp[a, a] += prm[P_PROXIMAL] * dmax
+            LU, piv, ok = lu_factor(Kp)
+            if not ok:
+                return p, False
+            step = np.zeros(nu)
+            for refinement in range(int(prm[P_NEWTON_REFINEMENTS]) + 1):
+                zs = z + step
+                rhs = np.empty(nu)
+                for a in range(nu):
+                    v = -q[unknown[a]]
+                    for b in range(nu):
+                        v -= K[a, b] * zs[b]
+                    rhs[a] = v
+                step = step + lu_solve(LU, piv, rhs)
+            z = z + step
+        p = np.zeros(m)
+        for j in range(m):
+            if kind[j] == 1:
+                p[j] = z[column[j]]
+        for j in range(m):
+            if kind[j] == 2 or kind[j] == -2:
+                p[j] = (1.0 if kind[j] > 0 else -1.0) * mu[j // 3] * p[3 * (j // 3)]
+        if residual(A, q, p, mu, False, sliding, tol, no_equal, False) \
+                <= prm[P_PIVOT_TOLERANCE] * _row_scale(A, q, p):
+            return p, True
+        same = guess > 0
+        for j in range(m):
+            if kind[j] != previous[j]:
+                same = False
+            previous[j] = kind[j]
+        if same:
+            return p, False
+    return p, False
 
 
 @njit(cache=True)
