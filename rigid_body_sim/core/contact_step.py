@@ -1576,8 +1576,10 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.n
     iteration at a time) and which are inside it, and solves that guess's linear
     system exactly: ``w = 0`` on the loaded normal rows and the friction rows inside
     their bounds (a semi-smooth Newton step, or a primal–dual active-set step). Where
-    the guess holds, the solution does, to rounding; its guesses change finitely
-    often. Redundant contacts make the system singular (their load sharing is not
+    the guess holds, the solution does, to rounding. The guesses may cycle (friction
+    makes the rows' matrix no P-matrix: measured, a cycle of three guesses in a poured
+    pile of 125 spheres), or repeat: then it fails and the caller pivots. Redundant
+    contacts make the system singular (their load sharing is not
     unique): each solve is proximal, ``(K + ρ I) δ = r`` with ``ρ`` :data:`PROXIMAL` of
     the diagonal, refined :data:`NEWTON_REFINEMENTS` times on the same factors, so the
     step leaves the null space where the start has it. Returns ``(p, ok)``: ``ok`` when
@@ -1617,7 +1619,10 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.n
         z = p[unknown]
         if len(unknown):
             rho = PROXIMAL * float(np.max(np.abs(np.diag(K))))
-            factors = scipy.linalg.lu_factor(K + rho * np.eye(len(unknown)))
+            factors = scipy.linalg.lu_factor(K + rho * np.eye(len(unknown)),
+                                             check_finite=False)
+            if not np.all(np.diag(factors[0])):   # (a zero pivot: as the kernel, none)
+                return p, False
             step = np.zeros(len(unknown))
             for _refinement in range(NEWTON_REFINEMENTS + 1):
                 step = step + scipy.linalg.lu_solve(factors, -q[unknown] - K @ (z + step))
