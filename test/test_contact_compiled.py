@@ -249,6 +249,27 @@ def test_a_detector_buffer_too_small_is_grown_and_the_step_taken():
     np.testing.assert_allclose(fast.state.y, slow.state.y, rtol=0, atol=1e-12)
 
 
+def test_a_full_impact_log_ends_a_call_and_every_step_stays_compiled():
+    # A call of the kernel logs its steps' impacts (IMPACT_LOG rows). A step whose
+    # impacts the log could not take once went to the Python path: in a poured pile of
+    # 125 spheres, 10-step calls met up to 300 impacts, and those steps cost 2 s each.
+    # Now the call ends before that step and the next call takes it; a step whose impacts
+    # alone overflow the log grows it. With a log of one row: every step compiled, the
+    # log grown (the pile's layers land in pairs), and the same steps, bit for bit, and
+    # the same impacts as with a log no step fills.
+    roomy, _, steps = _pair('sphere pile', 'rkmk4')
+    tight, _, _ = _pair('sphere pile', 'rkmk4')
+    tight.contact._log = np.zeros((1, 5))
+    roomy.step(steps)
+    tight.step(steps)
+    assert roomy.contact.counters['impacts'] >= 4
+    assert tight.contact.counters['compiled_steps'] == steps
+    assert len(tight.contact._log) > 1
+    np.testing.assert_array_equal(tight.state.y, roomy.state.y)
+    assert list(tight.contact.impacts) == list(roomy.contact.impacts)
+    assert tight.contact.counters == roomy.contact.counters
+
+
 def test_effect_work_is_charged_to_the_steps_that_did_it():
     # Gravity is charged for every right-hand side of the compiled steps, as of the Python
     # path's; the contact effect for the Python path's steps with contact forces alone
@@ -277,6 +298,28 @@ def test_compiled_steps_repeat_bit_for_bit(name):
         assert sim.contact.counters['compiled_steps'] == steps // 3
         runs.append(sim.state.y.copy())
     assert all(np.array_equal(runs[0], r) for r in runs[1:])
+
+
+@pytest.mark.parametrize('n, band', [(30, None), (120, 4), (120, None), (300, None)])
+def test_the_free_rows_systems_are_solved_to_rounding_banded_or_dense(n, band):
+    # The box LCP's free rows (A + ρ I restricted, positive definite) are solved by
+    # spd_solve's envelope Cholesky, on a banded system (a stack's rows: the envelope
+    # skips the zeros) or a dense one (a pile's islands). Cholesky is backward stable
+    # (Higham, Accuracy and Stability of Numerical Algorithms, 2002, thm. 10.3): the
+    # solution solves S + ΔS with |ΔS| ≤ γ(n+1) |Lᵀ| |L|, whose entries are at most the
+    # largest diagonal of a definite S, so the residual is within (n + 1) n eps of
+    # ‖S‖∞ ‖x‖∞; twice that for the residual's own rounding.
+    from rigid_body_sim.core.kernels.contact_step import spd_solve
+    rng = np.random.default_rng(n)
+    G = rng.standard_normal((n, n + 10))
+    if band is not None:
+        G = np.triu(np.tril(G, band), -band)[:, :n + 10]
+    S = G @ G.T + 1e-6 * np.eye(n)
+    b = rng.standard_normal(n)
+    x = spd_solve(S, b)
+    bound = 2 * (n + 1) * n * np.finfo(float).eps * np.max(np.abs(S).sum(axis=1)) \
+        * np.max(np.abs(x))
+    assert np.max(np.abs(S @ x - b)) <= bound
 
 
 def _random_contact_lcp(rng):

@@ -1050,7 +1050,9 @@ class ContactSteps:
         Scenes of free bodies with the knob off (:mod:`.kernels.contact_step`): the
         same steps as :meth:`step`, the ``k``-th (from 0) ending at ``base + (steps + k +
         1) dt`` (the simulation's clock), until one meets what the kernel gives back (a
-        row no force moves, a full impact log), which :meth:`step` then takes.
+        row no force moves), which :meth:`step` then takes. A step whose impacts the
+        kernel's log cannot take ends the call before it (the log read, the next call
+        takes it); one whose impacts alone overflow it grows the log.
         Elsewhere (joints, the knob, ``compiled`` False): ``(0, start)``.
         """
         sim = self.sim
@@ -1073,9 +1075,12 @@ class ContactSteps:
                 dyn.tally, STEPS, integ._ws, dyn.bodies.outputs_cache.frames, out, det,
                 self._buffers(), self._mu, self._e, self._radius, self._warm, prm, cnt,
                 self._log)
-            if code != kern.GROW or taken:
+            if code not in (kern.GROW, kern.FULL) or taken:
                 break
-            self._grow()
+            if code == kern.GROW:
+                self._grow()
+            else:   # (this step's impacts alone overflow the log)
+                self._log = np.zeros((2 * len(self._log), 5))
         if before is not None:
             dyn.count_effect_work_since(before)
         # (Charged now, with the contact effect empty: its compiled wrenches are not counted

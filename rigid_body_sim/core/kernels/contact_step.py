@@ -67,8 +67,9 @@ COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity
 MAXIMA = ('lcp_iterations_max', 'complementarity_max', 'max_depth', 'max_projected',
           'projection_left')
 #: Why :func:`contact_steps` stopped: every step taken; an event (the Python path's);
-#: the detector's buffers too small (grow them and call again).
-DONE, BAIL, GROW = 0, 1, 2
+#: the detector's buffers too small (grow them and call again); the impact log full (read
+#: it and call again, or, where the first step's impacts alone overflow it, grow it).
+DONE, BAIL, GROW, FULL = 0, 1, 2, 3
 #: Per row of a box LCP: at its lower bound, free, at its upper bound.
 AT_LOWER, FREE, AT_UPPER = -1, 0, 1
 ROUNDING_ULPS = 64.0
@@ -1293,6 +1294,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
     fail = (BAIL, y0, warm, empty, found, n_log)
     grow = (GROW, y0, warm, empty, found, n_log)
+    full = (FULL, y0, warm, empty, found, n_log)
     con = found if have else _detect_ctx(ctx, y0)
     if con[0] < 0:
         return grow
@@ -1311,6 +1313,8 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         if touching[0].shape[0] and events < max_events:
             code, state2, hit, n_log = _impact(ctx, state, t, con, touching,
                                                bounces >= max_bounces, cnt, log, n_log)
+            if code == FULL:
+                return full
             if code != DONE:
                 return fail
             if hit:
@@ -1399,7 +1403,7 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
     """
     Resolve the impacts at ``y``, as ``ContactSteps._impact``: ``(code, y, hit, n_log)``.
 
-    ``code`` BAIL: the log is full (or a row no impulse moves).
+    ``code`` FULL: the log cannot take these impacts; BAIL: a row no impulse moves.
     """
     sel, frame, la, lb, mu, e, sliding, vn_, Ga, Gb, ba, bb = r
     prm, minv = ctx[15], ctx[16]
@@ -1414,7 +1418,7 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
     if approaching == 0:
         return DONE, y, False, n_log
     if n_log + approaching > log.shape[0]:
-        return BAIL, y, False, n_log
+        return FULL, y, False, n_log
     q = rel.copy()
     bounce = prm[P_BOUNCE]
     for k in range(c):
@@ -1465,24 +1469,30 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     if not finite:
         return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
     fpos, fquat, fvel, fom = state_parts(free)
+    # The rows' velocities at the free step's end.
+    q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
     if c:
         # A contact apart closing faster than twice P_UNLOCATED at the free step's end
         # is an event located (``_held_step``).
-        q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
         keep = np.ones(c, dtype=np.bool_)
         for k in range(c):
             if con[7][sel[k]] < -prm[P_LOCATION]:
                 keep[k] = q[3 * k] >= -2.0 * prm[P_UNLOCATED]
         if not np.all(keep):
-            r = _subset(r, _where(keep))
+            kept = _where(keep)
+            r = _subset(r, kept)
             sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
             c = sel.shape[0]
+            q_kept = np.empty(3 * c)
+            for x in range(c):
+                for a in range(3):
+                    q_kept[3 * x + a] = q[3 * kept[x] + a]
+            q = q_kept
     if c == 0:
         con1 = _detect_ctx(ctx, free)
         code = GROW if con1[0] < 0 else DONE
         return code, free, n_applied, flags, warm, (sel, np.zeros((0, 3)), con, y0, t), con1
     A = delassus(Ga, Gb, ba, bb, minv)
-    q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
     # A row of a contact apart by its gap g asks v_n⁺ ≥ min(0, −2 g / h − v_n): the step
     # closes at most g (``_held_step``).
     shift = np.zeros(3 * c)
