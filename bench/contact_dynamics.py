@@ -225,7 +225,7 @@ def table(rows: list) -> str:
         "call), `step()` one step a call (a node's loop: the Python call and its checks each "
         'step), and every step in Python (`ContactSteps.compiled = False`: the reference, and '
         'what scenes with joints still pay). "steps compiled": the share the kernel took; '
-        'the rest (a row no force moves, a full impact log) ran in Python. '
+        'the rest (a row no force moves) ran in Python. '
         'MuJoCo: one `mj_step` call a step.')
 
 

@@ -30,8 +30,9 @@ for function:
 
 What the kernel does not take it gives back untouched (``BAIL``) and the Python path
 takes that step: a row no impulse moves (a point on an axle: joints, which this
-kernel never sees), a non-finite step (the Python path raises its error), a full
-impact log. The results agree with the Python path's to rounding (the tests run
+kernel never sees), a non-finite step (the Python path raises its error). A step whose
+impacts the log cannot take ends the call before it (``FULL``: the log read, the next
+call takes it). The results agree with the Python path's to rounding (the tests run
 both). The counters a step adds are written to ``cnt`` (:data:`COUNTERS`); a step
 given back adds nothing there (the Python path that takes it counts its work).
 """
