@@ -300,26 +300,100 @@ def test_compiled_steps_repeat_bit_for_bit(name):
     assert all(np.array_equal(runs[0], r) for r in runs[1:])
 
 
-@pytest.mark.parametrize('n, band', [(30, None), (120, 4), (120, None), (300, None)])
-def test_the_free_rows_systems_are_solved_to_rounding_banded_or_dense(n, band):
-    # The box LCP's free rows (A + ρ I restricted, positive definite) are solved by
-    # spd_solve's envelope Cholesky, on a banded system (a stack's rows: the envelope
-    # skips the zeros) or a dense one (a pile's islands). Cholesky is backward stable
-    # (Higham, Accuracy and Stability of Numerical Algorithms, 2002, thm. 10.3): the
-    # solution solves S + ΔS with |ΔS| ≤ γ(n+1) |Lᵀ| |L|, whose entries are at most the
-    # largest diagonal of a definite S, so the residual is within (n + 1) n eps of
-    # ‖S‖∞ ‖x‖∞; twice that for the residual's own rounding.
-    from rigid_body_sim.core.kernels.contact_step import spd_solve
-    rng = np.random.default_rng(n)
+def _definite(rng, n, band):
+    """Return a random symmetric positive definite (n, n): banded (a stack's rows) or dense."""
     G = rng.standard_normal((n, n + 10))
     if band is not None:
         G = np.triu(np.tril(G, band), -band)[:, :n + 10]
-    S = G @ G.T + 1e-6 * np.eye(n)
-    b = rng.standard_normal(n)
-    x = spd_solve(S, b)
-    bound = 2 * (n + 1) * n * np.finfo(float).eps * np.max(np.abs(S).sum(axis=1)) \
-        * np.max(np.abs(x))
-    assert np.max(np.abs(S @ x - b)) <= bound
+    return G @ G.T + 1e-6 * np.eye(n)
+
+
+@pytest.mark.parametrize('n, band', [(30, None), (120, 4), (120, None), (300, None)])
+def test_the_free_rows_factor_stays_their_factor_as_rows_join_and_leave(n, band):
+    # The box LCP's free rows (A + ρ I restricted, positive definite) are factored once
+    # and the factor updated as a row joins (a row of Cholesky) or leaves (Givens
+    # rotations of the rows below). Cholesky is backward stable (Higham, Accuracy and
+    # Stability of Numerical Algorithms, 2002, thm. 10.3): L Lᵀ = S + ΔS, |ΔS| ≤ γ(n+1)
+    # |L| |Lᵀ|, whose entries are at most S's largest diagonal d. A deletion applies at
+    # most n rotations to a row, each keeping the row's norm (at most √d) to a few ulps
+    # (Higham, lemma 19.8: 6 eps a rotation), so u updates add at most 12 u n eps d to
+    # L Lᵀ's entries. A row appended or deleted in the wrong place, or a rotation
+    # wrong, leaves entries of order d.
+    from rigid_body_sim.core.kernels.contact_step import (_chol_append, _chol_delete,
+                                                          _chol_factor, _chol_solve)
+    eps = np.finfo(float).eps
+    rng = np.random.default_rng(n + (band or 0))
+    S = _definite(rng, n, band)
+    L, order, first = np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    order[:n // 2] = np.sort(rng.permutation(n)[:n // 2])
+    nf, updates = n // 2, 0
+    assert _chol_factor(S, order, nf, L, first)
+    for _ in range(2 * n):
+        if rng.random() < 0.5 and nf > 1:
+            _chol_delete(L, first, order, nf, int(rng.integers(nf)))
+            nf -= 1
+        else:
+            out = np.setdiff1d(np.arange(n), order[:nf])
+            if not len(out):
+                continue
+            assert _chol_append(S, order, nf, int(rng.choice(out)), L, first)
+            nf += 1
+        updates += 1
+    rows = order[:nf]
+    assert len(np.unique(rows)) == nf
+    # The envelope: what lies before a row's first column is never read, so taken as 0.
+    Lf = np.tril(L[:nf, :nf])
+    for a in range(nf):
+        Lf[a, :first[a]] = 0.0
+    d = float(np.max(np.diag(S)))
+    bound = ((nf + 1) + 12 * updates * nf) * eps * d
+    assert np.max(np.abs(Lf @ Lf.T - S[np.ix_(rows, rows)])) <= bound
+    # And it solves: x = (L Lᵀ)⁻¹ b is the solution of S + ΔS, ‖ΔS‖ as above plus the
+    # triangular solves' γ(n) each.
+    b = rng.standard_normal(nf)
+    x = np.empty(nf)
+    _chol_solve(L, first, nf, b, x)
+    Sr = S[np.ix_(rows, rows)]
+    assert np.max(np.abs(Sr @ x - b)) <= (bound + 2 * nf * eps * d) * nf * np.max(np.abs(x))
+
+
+@pytest.mark.parametrize('n, band', [(40, None), (120, 4), (200, None)])
+def test_the_box_lcp_carries_its_factor_from_call_to_call_and_solves_to_rounding(n, band):
+    # The friction boxes' fixed point calls solve_box again and again on one S with new
+    # q and boxes, the factor of each call's free rows carried to the next. Each call
+    # must end where the method it follows (complementarity.solve_direct: LAPACK each
+    # iteration) ends: the same active set (the solution is unique, S definite), and
+    # the free rows' w zero to the rounding of a backward-stable solve (refined once
+    # against S), 2 (n + 1) n eps of ‖S‖∞ ‖f‖∞ + ‖q‖∞. Some rows' boxes are points
+    # (lo = hi: held there, never freed).
+    from rigid_body_sim.core.complementarity import FREE, solve_direct
+    from rigid_body_sim.core.kernels.contact_step import solve_box
+    eps = np.finfo(float).eps
+    rng = np.random.default_rng(7 * n + (band or 0))
+    S = _definite(rng, n, band)
+    L, order, first = np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    meta = np.zeros(3, dtype=np.int64)
+    q = rng.standard_normal(n)
+    half = rng.random(n)
+    f = np.zeros(n)
+    for call in range(12):
+        q = q + 0.05 * rng.standard_normal(n)
+        half = np.where(rng.random(n) < 0.1, 0.0,
+                        np.maximum(half + 0.05 * rng.standard_normal(n), 0.0))
+        lo, hi = -half, half
+        ref = solve_direct(S, q, lo, hi, f)
+        f, ok, _ = solve_box(S, q, lo, hi, f, L, order, first, meta)
+        assert ok and ref.converged
+        state = np.where(f <= lo, -1, np.where(f >= hi, 1, FREE))
+        boxed = hi > lo   # (the reference may call a point row's bound either side)
+        np.testing.assert_array_equal(state[boxed], ref.state[boxed])
+        w = S @ f + q
+        bound = 2 * (n + 1) * n * eps * (np.max(np.abs(S).sum(axis=1)) * np.max(np.abs(f))
+                                         + np.max(np.abs(q)))
+        assert np.max(np.abs(w[state == FREE])) <= bound
+        assert np.all((f >= lo) & (f <= hi))
+    # The factor was carried: updated, not only factored afresh.
+    assert meta[1] == 1 and meta[2] > 0
 
 
 def _random_contact_lcp(rng):
@@ -361,16 +435,29 @@ def test_lcps_the_fixed_point_cannot_solve_are_solved_as_in_the_python_path(
     # Python path then solves the rows by Newton's method on their natural map and, where
     # that fails (or with it switched off, NEWTON_ITERATIONS 0), the pyramid by Lemke's
     # pivoting; the compiled steps do the same (they once kept the drifting iterate: a
-    # residual of 0.06 m/s in the poured pile). On 300 such problems both solve the
-    # same ones, by the same method, and reach the same impulses: the same guesses or
-    # pivots in the same order, each linear solve the same up to its rounding (LAPACK's
-    # and the kernel's), 1e-9 of the largest impulse with room for a support's
-    # conditioning (Newton's proximal solves leave the null space of redundant rows as
-    # the start has it, to that rounding over PROXIMAL). A solution so found meets the
-    # Python path's own residual bound (PIVOT_TOLERANCE of the rows' scale). The
-    # problems the fixed point solves agree to its stop: an iteration changing no
-    # impulse by more than FRICTION_TOLERANCE of the largest, at most ten times that
-    # from its limit (a contraction of at most 0.9).
+    # residual of 0.06 m/s in the poured pile). On 300 such problems:
+    # - Where the rows are independent (A definite: the solution is unique), they solve
+    #   them by the same method and reach the same impulses: 1e-9 of the largest
+    #   (each linear solve the same up to its rounding, LAPACK's and the kernel's, with
+    #   room for a support's conditioning), or, both by the fixed point, to its stop
+    #   (no impulse changing by more than FRICTION_TOLERANCE of the largest: at most ten
+    #   times that from its limit, at a contraction of at most 0.9).
+    # - Where they are redundant (most: more rows than freedoms), the solutions form a
+    #   set, and which one a path reaches is set by its iterates along A's null space,
+    #   where the proximal solves' rounding is amplified by 1 / PROXIMAL: whether the
+    #   fixed point stalls, and the start Newton's method is given, can turn either way
+    #   on rounding (the kernel as it was before its factor updates, on this test's
+    #   seeds 8 to 10, solved 1 to 4 problems in 300 by another method than the Python
+    #   path, and on seed 9 failed on 2 that Newton's method solved from the Python
+    #   path's start). Failures are counted, not hidden: on seeds 7 to 10, 1 to 3 in
+    #   300 with Newton's method and 3 to 9 with pivoting alone, the two paths' counts
+    #   at most 2 apart; here at most 4 % each and 2 apart. Where a path does not fail,
+    #   its impulses must solve the problem: a solution found by
+    #   Newton's method or pivoting within the Python path's residual bound
+    #   (PIVOT_TOLERANCE of the rows' scale); one the fixed point stopped at, within
+    #   ten times its stop of one (the natural map moving by at most 2 ‖A‖∞ of an
+    #   impulse's move); and by the same method and to the same impulses as above where
+    #   the fixed point solved it in both.
     from rigid_body_sim.core import contact_step as cs
     from rigid_body_sim.core.kernels import contact_step as kern
     if not newton:
@@ -382,9 +469,21 @@ def test_lcps_the_fixed_point_cannot_solve_are_solved_as_in_the_python_path(
     prm = contact.kernel_parameters()
     rng = np.random.default_rng(7)
     solved = {'lcp_newton': 0, 'lcp_pivoted': 0}
+    unique, failures = 0, {'python': 0, 'kernel': 0}
+
+    def solves(p, other, scale):
+        # Within the bound of the method that found it (see above).
+        w_scale = float(np.max(np.abs(A) @ np.abs(p) + np.abs(q)))
+        bound = cs.PIVOT_TOLERANCE * w_scale if other else \
+            2.0 * float(np.max(np.abs(A).sum(axis=1))) * 10.0 * FRICTION_TOLERANCE * scale
+        return cs._residual(A, q, p, mu, False) <= bound
+
     for _ in range(300):
         A, q, mu = _random_contact_lcp(rng)
         c = len(mu)
+        eig = np.linalg.eigvalsh(0.5 * (A + A.T))
+        definite = eig[0] > 1e-9 * eig[-1]
+        unique += definite
         before = dict(contact.counters)
         p_py = contact.solve(A, q, mu)
         py = {key: contact.counters[key] - before[key]
@@ -393,20 +492,23 @@ def test_lcps_the_fixed_point_cannot_solve_are_solved_as_in_the_python_path(
         p, ok = kern.solve_rows(A, q, mu, np.zeros(3 * c), False, np.zeros(c, dtype=bool),
                                 False, np.zeros(c, dtype=bool), prm, cnt)
         assert ok
-        assert cnt[kern.C_NEWTON] == py['lcp_newton']
-        assert cnt[kern.C_PIVOTED] == py['lcp_pivoted']
-        assert cnt[kern.C_FAILURES] == py['lcp_failures']
-        if py['lcp_failures']:
+        failures['python'] += py['lcp_failures']
+        failures['kernel'] += int(cnt[kern.C_FAILURES])
+        if py['lcp_failures'] or cnt[kern.C_FAILURES]:
             continue
         scale = float(np.max(np.abs(p_py)))
         other = py['lcp_newton'] or py['lcp_pivoted']
-        bound = 1e-9 if other else 10.0 * FRICTION_TOLERANCE
-        np.testing.assert_allclose(p, p_py, rtol=0, atol=bound * scale)
-        if other:
-            w_scale = float(np.max(np.abs(A) @ np.abs(p) + np.abs(q)))
-            assert cs._residual(A, q, p, mu, False) <= cs.PIVOT_TOLERANCE * w_scale
+        other_k = cnt[kern.C_NEWTON] or cnt[kern.C_PIVOTED]
+        if definite or not (other or other_k):
+            assert cnt[kern.C_NEWTON] == py['lcp_newton']
+            assert cnt[kern.C_PIVOTED] == py['lcp_pivoted']
+            bound = 1e-9 if other else 10.0 * FRICTION_TOLERANCE
+            np.testing.assert_allclose(p, p_py, rtol=0, atol=bound * scale)
+        assert solves(p, other_k, scale) and solves(p_py, other, scale)
         for key in solved:
             solved[key] += py[key]
+    assert unique >= 5   # (both kinds met)
+    assert max(failures.values()) <= 12 and abs(failures['python'] - failures['kernel']) <= 2
     if newton:
         assert solved['lcp_newton'] >= 10
     else:

@@ -18,7 +18,8 @@ for function:
   :func:`_accept` at the end;
 * :func:`_held` (``_held_step``): the LCP ``w = A p + q`` (``A = G M⁻¹ Gᵀ``, ``q =
   G ṽ``) by the friction boxes' fixed point over a proximal active-set solve
-  (:func:`solve_rows`, :func:`solve_direct` with an envelope Cholesky), warm-started
+  (:func:`solve_rows`, :func:`solve_box`: its Cholesky factor updated as rows join
+  and leave, and kept from one iteration to the next), warm-started
   from the last step's normal impulses (where that fixed point stalls, Newton's method
   on the rows' natural map, :func:`newton`, then Lemke's pivoting on the pyramid:
   :func:`pyramid`); sticking contacts that begin to slip turned
@@ -325,12 +326,38 @@ def response(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
 # -- the box LCP ---------------------------------------------------------------------------
 
 @njit(cache=True)
-def solve_direct(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                 start: np.ndarray) -> tuple:
+def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+              start: np.ndarray, L: np.ndarray, order: np.ndarray, first: np.ndarray,
+              meta: np.ndarray) -> tuple:
     """
-    Return ``(f, converged, iterations)``: :func:`..complementarity.solve_direct`, compiled.
+    Return ``(f, converged, iterations)``: the BLCP by the primal active-set method.
 
-    The same primal active-set method, its cap ``10 (n + 1)``, its rounding test.
+    :func:`..complementarity.solve_direct`'s method, cap and rounding test, with three
+    differences, in how an iteration's free rows' equations are solved and in how many
+    rows it frees, not in the solution (unique: ``S`` definite):
+
+    * the free rows' Cholesky factor is kept (``L`` (n, n), ``order`` its rows,
+      ``first`` each row's first non-zero column, ``meta`` ``[rows, valid, updates]``)
+      and updated as one row joins (:func:`_chol_append`, ``O(n²)``) or leaves
+      (:func:`_chol_delete`, Givens rotations), where the method it follows factors
+      every iteration (``O(n³)``); the caller may pass the factor of its last call
+      (the friction boxes' fixed point calls this with the same ``S`` and nearly the
+      same free rows), brought to this call's free rows the same way, or factored
+      afresh where more than a quarter of them differ, or after ``n`` updates;
+    * a solve that moves no row out of its box is refined once against ``S`` before it
+      is taken (the factor's updates perturb it by rounding; one step of refinement
+      brings the solution back to ``S``'s own);
+    * at a solution of the free rows' equations, every bound row whose ``w`` has the
+      wrong sign is freed at once, not the worst alone (warm-started from the last
+      iteration of a fixed point, several rows' bounds moved). The objective still
+      falls at every move of positive length; a freed row the coupled move would take
+      out of its box at once is blocked at once (a move of length zero), and the last
+      of them freed alone moves into its box (Nocedal & Wright, *Numerical
+      Optimization*, 2006, §16.5): the method stays finite, with the same cap.
+
+    A row whose box is a point (``lo = hi``) is held there, never freed. A pivot that
+    rounding made non-positive drops the factor; that iteration solves by LAPACK's LU,
+    the next factors afresh.
     """
     n = q.shape[0]
     f = np.empty(n)
@@ -339,124 +366,277 @@ def solve_direct(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
         x = start[i] if math.isfinite(start[i]) else 0.0
         f[i] = min(max(x, lo[i]), hi[i])
         state[i] = AT_LOWER if f[i] <= lo[i] else (AT_UPPER if f[i] >= hi[i] else FREE)
+    nfree = 0
+    for i in range(n):
+        if state[i] == FREE:
+            nfree += 1
+    # The last call's factor, brought to this call's free rows (or factored afresh).
+    fresh = meta[1] == 0
+    if not fresh:
+        keep = 0
+        for a in range(meta[0]):
+            if state[order[a]] == FREE:
+                keep += 1
+        changes = (meta[0] - keep) + (nfree - keep)
+        fresh = 4 * changes > nfree + 4 or meta[2] + changes > n
+    if not fresh:
+        a = meta[0] - 1
+        while a >= 0:
+            if state[order[a]] != FREE:
+                _chol_delete(L, first, order, meta[0], a)
+                meta[0] -= 1
+                meta[2] += 1
+            a -= 1
+        inside = np.zeros(n, dtype=np.bool_)
+        for a in range(meta[0]):
+            inside[order[a]] = True
+        for i in range(n):
+            if state[i] == FREE and not inside[i]:
+                if _chol_append(S, order, meta[0], i, L, first):
+                    meta[0] += 1
+                    meta[2] += 1
+                else:
+                    fresh = True
+                    break
+    if fresh:
+        _refactor(S, state, L, order, first, meta)
+    rhs, x, r = np.empty(n), np.empty(n), np.empty(n)
+    bound = np.empty(n, dtype=np.int64)
     cap = 10 * (n + 1)
     for it in range(1, cap + 1):
-        nf = 0
-        for i in range(n):
-            if state[i] == FREE:
-                nf += 1
-        free = np.empty(nf, dtype=np.int64)
-        k = 0
-        for i in range(n):
-            if state[i] == FREE:
-                free[k] = i
-                k += 1
+        if meta[1] == 0 and it > 1:
+            _refactor(S, state, L, order, first, meta)
+        nf = meta[0]
+        nb = 0
+        for j in range(n):
+            if state[j] != FREE:
+                bound[nb] = j
+                nb += 1
         target = f.copy()
+        hit, at, best, side = -1, -1, np.inf, FREE
         if nf:
-            Sf = np.empty((nf, nf))
-            rhs = np.empty(nf)
             for a in range(nf):
-                i = free[a]
+                i = order[a]
                 s = q[i]
-                for j in range(n):
-                    if state[j] != FREE:
-                        s += S[i, j] * f[j]
+                for b in range(nb):
+                    s += S[i, bound[b]] * f[bound[b]]
                 rhs[a] = -s
-                for b in range(nf):
-                    Sf[a, b] = S[i, free[b]]
-            x = spd_solve(Sf, rhs)
+            if meta[1]:
+                _chol_solve(L, first, nf, rhs, x)
+            else:
+                Sf = np.empty((nf, nf))
+                for a in range(nf):
+                    for b in range(nf):
+                        Sf[a, b] = S[order[a], order[b]]
+                x[:nf] = np.linalg.solve(Sf, rhs[:nf])
             for a in range(nf):
-                target[free[a]] = x[a]
-        hit, best, side = -1, np.inf, FREE
-        for a in range(nf):
-            i = free[a]
-            step = target[i] - f[i]
-            if target[i] < lo[i]:
-                ratio = (lo[i] - f[i]) / step
-                if ratio < best or hit < 0:
-                    hit, best, side = i, ratio, AT_LOWER
-            elif target[i] > hi[i]:
-                ratio = (hi[i] - f[i]) / step
-                if ratio < best or hit < 0:
-                    hit, best, side = i, ratio, AT_UPPER
+                target[order[a]] = x[a]
+            hit, at, best, side = _blocking(order, nf, target, f, lo, hi)
+            if hit < 0 and meta[1]:
+                # The step ends here: refined once against S (the updates' rounding
+                # taken out), and its blocking looked at again.
+                for a in range(nf):
+                    i = order[a]
+                    s = rhs[a]
+                    for b in range(nf):
+                        s -= S[i, order[b]] * x[b]
+                    r[a] = s
+                _chol_solve(L, first, nf, r, r)
+                for a in range(nf):
+                    target[order[a]] = x[a] + r[a]
+                hit, at, best, side = _blocking(order, nf, target, f, lo, hi)
         if hit >= 0:
             alpha = min(max(best, 0.0), 1.0)
             for a in range(nf):
-                i = free[a]
+                i = order[a]
                 f[i] += alpha * (target[i] - f[i])
             f[hit] = lo[hit] if side == AT_LOWER else hi[hit]
             state[hit] = side
             for i in range(n):
                 f[i] = min(max(f[i], lo[i]), hi[i])
+            if meta[1]:
+                _chol_delete(L, first, order, nf, at)
+            else:
+                order[at:nf - 1] = order[at + 1:nf].copy()
+            meta[0] -= 1
+            meta[2] += 1
             continue
         f = target
-        worst, kw = -np.inf, -1
-        for i in range(n):
+        # Every bound row whose w has the wrong sign (beyond its rounding) is freed.
+        freed = 0
+        for b in range(nb):
+            i = bound[b]
+            if not hi[i] > lo[i]:
+                continue
             w, mag = q[i], abs(q[i])
             for j in range(n):
                 w += S[i, j] * f[j]
                 mag += abs(S[i, j]) * abs(f[j])
-            if state[i] == AT_LOWER:
-                wrong = -w
-            elif state[i] == AT_UPPER:
-                wrong = w
-            else:
-                wrong = -np.inf
-            wrong -= ROUNDING_ULPS * EPS * mag
-            if kw < 0 or wrong > worst:
-                worst, kw = wrong, i
-        if n == 0 or worst <= 0.0:
+            wrong = -w if state[i] == AT_LOWER else w
+            if wrong > ROUNDING_ULPS * EPS * mag:
+                state[i] = FREE
+                freed += 1
+                if meta[1] and _chol_append(S, order, meta[0], i, L, first):
+                    meta[2] += 1
+                else:
+                    order[meta[0]] = i
+                    meta[1] = 0
+                meta[0] += 1
+        if freed == 0:
             return f, True, it
-        state[kw] = FREE
     return f, False, cap
 
 
 @njit(cache=True)
-def spd_solve(S: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _blocking(order: np.ndarray, nf: int, target: np.ndarray, f: np.ndarray, lo: np.ndarray,
+              hi: np.ndarray) -> tuple:
     """
-    Return ``S⁻¹ b`` for ``S`` symmetric positive definite, by Cholesky.
+    Return ``(row, at, ratio, side)``: the free row a move from ``f`` to ``target`` meets first.
 
-    The free rows' systems are ``A + ρ I`` restricted (``ρ > 0``): positive definite. A
-    pivot that rounding made non-positive falls back to LAPACK's LU (of the original).
+    The smallest ratio of the distance to a bound over the move (ties: the lowest row;
+    ``row`` −1: none leaves its box); ``at`` its place in ``order``, ``side`` the bound.
     """
-    n = b.shape[0]
-    # Each row's first non-zero column: L keeps the envelope (a stack's rows are banded).
-    first = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        first[i] = i
-        for j in range(i):
-            if S[i, j] != 0.0:
-                first[i] = j
+    hit, at, best, side = -1, -1, np.inf, FREE
+    for a in range(nf):
+        i = order[a]
+        step = target[i] - f[i]
+        if target[i] < lo[i]:
+            ratio = (lo[i] - f[i]) / step
+            if ratio < best or hit < 0 or (ratio == best and i < hit):
+                hit, at, best, side = i, a, ratio, AT_LOWER
+        elif target[i] > hi[i]:
+            ratio = (hi[i] - f[i]) / step
+            if ratio < best or hit < 0 or (ratio == best and i < hit):
+                hit, at, best, side = i, a, ratio, AT_UPPER
+    return hit, at, best, side
+
+
+@njit(cache=True)
+def _refactor(S: np.ndarray, state: np.ndarray, L: np.ndarray, order: np.ndarray,
+              first: np.ndarray, meta: np.ndarray) -> None:
+    """Factor the free rows (``state`` FREE, in index order) afresh into ``L``; ``meta`` set."""
+    nf = 0
+    for i in range(state.shape[0]):
+        if state[i] == FREE:
+            order[nf] = i
+            nf += 1
+    meta[0], meta[2] = nf, 0
+    meta[1] = 1 if _chol_factor(S, order, nf, L, first) else 0
+
+
+@njit(cache=True)
+def _chol_factor(S: np.ndarray, order: np.ndarray, nf: int, L: np.ndarray,
+                 first: np.ndarray) -> bool:
+    """
+    Factor ``S[order, order]`` (its first ``nf``) as ``L Lᵀ``: False at a non-positive pivot.
+
+    ``L`` keeps each row's envelope (from ``first``, its first non-zero column: a stack's
+    rows are banded); what lies before it is never read.
+    """
+    for a in range(nf):
+        i = order[a]
+        first[a] = a
+        for b in range(a):
+            if S[i, order[b]] != 0.0:
+                first[a] = b
                 break
-    L = S.copy()
-    for j in range(n):
+        for b in range(first[a], a + 1):
+            L[a, b] = S[i, order[b]]
+    for j in range(nf):
         d = L[j, j]
         for k in range(first[j], j):
             d -= L[j, k] * L[j, k]
         if not d > 0.0:
-            return np.linalg.solve(S, b)
+            return False
         d = math.sqrt(d)
         L[j, j] = d
-        for i in range(j + 1, n):
+        for i in range(j + 1, nf):
             if first[i] > j:
-                L[i, j] = 0.0
                 continue
             s = L[i, j]
             for k in range(max(first[i], first[j]), j):
                 s -= L[i, k] * L[j, k]
             L[i, j] = s / d
-    x = b.copy()
-    for i in range(n):
-        s = x[i]
-        for k in range(first[i], i):
-            s -= L[i, k] * x[k]
-        x[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):
-        s = x[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * x[k]
-        x[i] = s / L[i, i]
-    return x
+    return True
+
+
+@njit(cache=True)
+def _chol_append(S: np.ndarray, order: np.ndarray, nf: int, i: int, L: np.ndarray,
+                 first: np.ndarray) -> bool:
+    """
+    Append row ``i`` to the factor of ``S[order[:nf], order[:nf]]`` (row ``nf`` of ``L``).
+
+    Its row of ``L`` solves ``L l = S[order, i]`` (forward, from its first non-zero), its
+    pivot ``√(S_ii − lᵀl)``; False where that is not positive (the factor left as it was).
+    """
+    f0 = nf
+    for b in range(nf):
+        if S[i, order[b]] != 0.0:
+            f0 = b
+            break
+    d = S[i, i]
+    for b in range(f0, nf):
+        s = S[i, order[b]]
+        for k in range(max(f0, first[b]), b):
+            s -= L[nf, k] * L[b, k]
+        s /= L[b, b]
+        L[nf, b] = s
+        d -= s * s
+    if not d > 0.0:
+        return False
+    L[nf, nf] = math.sqrt(d)
+    first[nf], order[nf] = f0, i
+    return True
+
+
+@njit(cache=True)
+def _chol_delete(L: np.ndarray, first: np.ndarray, order: np.ndarray, nf: int, at: int) -> None:
+    """
+    Take row ``at`` out of an ``nf``-row factor ``L Lᵀ``: the rest factor the rest.
+
+    The rows below move up one; each then reaches one column past its diagonal, which
+    Givens rotations of columns ``(j, j + 1)``, ``j = at …``, take out (``L Q`` keeps
+    ``L Lᵀ``): ``O((nf − at)²)``. A row whose envelope began at ``j + 1`` gains column ``j``.
+    """
+    for r in range(at, nf - 1):
+        order[r] = order[r + 1]
+        fr = first[r + 1]
+        for k in range(fr, r + 2):
+            L[r, k] = L[r + 1, k]
+        first[r] = fr
+    for j in range(at, nf - 1):
+        if first[j] > j:   # (its diagonal moved up from j + 1: nothing left of it)
+            L[j, j] = 0.0
+            first[j] = j
+        a, b = L[j, j], L[j, j + 1]
+        h = math.hypot(a, b)
+        c, s = a / h, b / h
+        L[j, j], L[j, j + 1] = h, 0.0
+        for r in range(j + 1, nf - 1):
+            if first[r] > j + 1:
+                continue
+            if first[r] == j + 1:
+                L[r, j] = 0.0
+                first[r] = j
+            x, y = L[r, j], L[r, j + 1]
+            L[r, j] = c * x + s * y
+            L[r, j + 1] = c * y - s * x
+
+
+@njit(cache=True)
+def _chol_solve(L: np.ndarray, first: np.ndarray, nf: int, b: np.ndarray,
+                x: np.ndarray) -> None:
+    """Set ``x[:nf]`` to ``(L Lᵀ)⁻¹ b[:nf]`` (``x`` may be ``b``), over ``L``'s envelopes."""
+    for a in range(nf):
+        s = b[a]
+        for k in range(first[a], a):
+            s -= L[a, k] * x[k]
+        x[a] = s / L[a, a]
+    for a in range(nf - 1, -1, -1):
+        x[a] /= L[a, a]
+        xa = x[a]
+        for k in range(first[a], a):
+            x[k] -= L[a, k] * xa
 
 
 @njit(cache=True)
@@ -583,6 +763,10 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
     converged, it, stalled, last, early, pivot_tried = False, 0, 0, np.inf, pivots, False
     newton_tried = False
     tol = prm[P_FRICTION_TOLERANCE]
+    # The active-set solves' factor, kept from one iteration's solve to the next.
+    L, qp = np.empty((nr, nr)), np.empty(nr)
+    order, first = np.empty(nr, dtype=np.int64), np.empty(nr, dtype=np.int64)
+    meta = np.zeros(3, dtype=np.int64)
     iterations, stall = int(prm[P_FRICTION_ITERATIONS]), int(prm[P_STALL_ITERATIONS])
     while True:
         exited = False
@@ -596,33 +780,13 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
                     lo[3 * k + 2], hi[3 * k + 2] = -half2, half2
                 for a in range(nr):
                     p[a] = min(max(p[a], lo[a]), hi[a])
-            nf = 0
             for a in range(nr):
-                if hi[a] > lo[a]:
-                    nf += 1
-            fr = np.empty(nf, dtype=np.int64)
-            k = 0
-            for a in range(nr):
-                if hi[a] > lo[a]:
-                    fr[k] = a
-                    k += 1
-            Sf, qf = np.empty((nf, nf)), np.empty(nf)
-            lof, hif, sf = np.empty(nf), np.empty(nf), np.empty(nf)
-            for x in range(nf):
-                a = fr[x]
-                shift = 0.0
-                for b in range(nr):
-                    if not hi[b] > lo[b]:
-                        shift += Ap[a, b] * p[b]
-                qf[x] = qr[a] - rho * p[a] + shift
-                lof[x], hif[x], sf[x] = lo[a], hi[a], p[a]
-                for y in range(nf):
-                    Sf[x, y] = Ap[a, fr[y]]
-            f, ok, _ = solve_direct(Sf, qf, lof, hif, sf)
+                qp[a] = qr[a] - rho * p[a]
+            f, ok, _ = solve_box(Ap, qp, lo, hi, p, L, order, first, meta)
             change, scale = 0.0, 0.0
-            for x in range(nf):
-                change = max(change, abs(f[x] - p[fr[x]]))
-                p[fr[x]] = f[x]
+            for a in range(nr):
+                change = max(change, abs(f[a] - p[a]))
+                p[a] = f[a]
             for a in range(nr):
                 scale = max(scale, abs(p[a]))
             scale = max(scale, 1e-300)
