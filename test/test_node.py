@@ -962,6 +962,9 @@ def test_contacts_markers_and_diagnostics_report_the_cores_contacts(ros, tmp_pat
     values = next(_values(d) for d in reversed(diags) if _values(d).get('contacts') == '1')
     assert int(values['contact_impacts_total']) >= 1
     assert values['contact_lcp_failures_total'] == '0'
+    # One contact's three rows are independent: the fixed point solves them alone.
+    assert int(values['contact_lcp_solves_total']) >= 1
+    assert values['contact_lcp_newton_total'] == values['contact_lcp_pivoted_total'] == '0'
     # A ball resting on the ground: its steps at rest are the compiled kernel's.
     assert int(values['contact_compiled_steps_total']) >= 1
     assert float(values['contact_depth_left_max_m']) == 0.0

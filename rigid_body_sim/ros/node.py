@@ -851,6 +851,9 @@ class SimNode(Node):
             values['contact_complementarity_residual_max'] = f'{c["complementarity_max"]:.3g}'
             values['contact_lcp_iterations_max'] = str(c['lcp_iterations_max'])
             values['contact_lcp_failures_total'] = str(c['lcp_failures'])
+            values['contact_lcp_solves_total'] = str(c['lcp_solves'])
+            values['contact_lcp_newton_total'] = str(c['lcp_newton'])
+            values['contact_lcp_pivoted_total'] = str(c['lcp_pivoted'])
             values['contact_impacts_total'] = str(c['impacts'])
             values['contact_events_capped_total'] = str(c['events_capped'])
             values['contact_compiled_steps_total'] = str(c['compiled_steps'])
