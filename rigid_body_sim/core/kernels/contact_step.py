@@ -764,7 +764,7 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
     newton_tried = False
     tol = prm[P_FRICTION_TOLERANCE]
     # The active-set solves' factor, kept from one iteration's solve to the next.
-    L, qp = np.empty((nr, nr)), np.empty(nr)
+    L, qp, sp = np.empty((nr, nr)), np.empty(nr), np.empty(nr)
     order, first = np.empty(nr, dtype=np.int64), np.empty(nr, dtype=np.int64)
     meta = np.zeros(3, dtype=np.int64)
     iterations, stall = int(prm[P_FRICTION_ITERATIONS]), int(prm[P_STALL_ITERATIONS])
@@ -772,17 +772,30 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
         exited = False
         while it < iterations:
             it += 1
+            for a in range(nr):
+                sp[a] = p[a]
             if not normal_only:
                 for k in range(nr // 3):
                     half = mu[k] * max(p[3 * k], 0.0)
-                    lo[3 * k + 1], hi[3 * k + 1] = -half, half
-                    half2 = 0.0 if sliding[k] else half
-                    lo[3 * k + 2], hi[3 * k + 2] = -half2, half2
+                    for col in range(1, 3):
+                        a = 3 * k + col
+                        half_a = 0.0 if col == 2 and sliding[k] else half
+                        # A friction row the last solve left on its bound starts on its
+                        # new bound (where it slid, it most likely slides on), not inside
+                        # a box that grew (each such row a blocking move to its bound).
+                        if it > 1 and hi[a] > lo[a]:
+                            if p[a] >= hi[a]:
+                                sp[a] = half_a
+                            elif p[a] <= lo[a]:
+                                sp[a] = -half_a
+                        lo[a], hi[a] = -half_a, half_a
                 for a in range(nr):
                     p[a] = min(max(p[a], lo[a]), hi[a])
+                    sp[a] = min(max(sp[a], lo[a]), hi[a])
             for a in range(nr):
                 qp[a] = qr[a] - rho * p[a]
-            f, ok, _ = solve_box(Ap, qp, lo, hi, p, L, order, first, meta)
+            # (The proximal centre is the last iterate, p; sp only where the solve starts.)
+            f, ok, _ = solve_box(Ap, qp, lo, hi, sp, L, order, first, meta)
             change, scale = 0.0, 0.0
             for a in range(nr):
                 change = max(change, abs(f[a] - p[a]))
