@@ -76,6 +76,9 @@ DONE, BAIL, GROW, FULL = 0, 1, 2, 3
 AT_LOWER, FREE, AT_UPPER = -1, 0, 1
 ROUNDING_ULPS = 64.0
 EPS = 2.220446049250313e-16
+#: Up to this many rows ``A p + q`` is a loop, beyond a BLAS call (whose overhead is most
+#: of a small product's cost).
+AFFINE_LOOP_ROWS = 48
 #: The squared distance (m²) within which a contact takes the last step's normal impulse.
 WARM_RADIUS2 = 1e-6
 
@@ -360,11 +363,26 @@ def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     the next factors afresh.
     """
     n = q.shape[0]
-    f = np.empty(n)
-    state = np.zeros(n, dtype=np.int64)
+    work = np.empty((5, n))
+    marks = np.empty((3, n), dtype=np.int64)
+    return _solve_box(S, q, lo, hi, start, L, order, first, meta, work, marks)
+
+
+@njit(cache=True)
+def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+               start: np.ndarray, L: np.ndarray, order: np.ndarray, first: np.ndarray,
+               meta: np.ndarray, work: np.ndarray, marks: np.ndarray) -> tuple:
+    """
+    Return :func:`solve_box` with its work arrays passed: ``work`` (5, n), ``marks`` (3, n).
+
+    The returned ``f`` is ``work[0]`` (a view: the caller copies what it keeps).
+    """
+    n = q.shape[0]
+    f, rhs, x, r, target = work[0], work[1], work[2], work[3], work[4]
+    state, bound, inside = marks[0], marks[1], marks[2]
     for i in range(n):
-        x = start[i] if math.isfinite(start[i]) else 0.0
-        f[i] = min(max(x, lo[i]), hi[i])
+        x0 = start[i] if math.isfinite(start[i]) else 0.0
+        f[i] = min(max(x0, lo[i]), hi[i])
         state[i] = AT_LOWER if f[i] <= lo[i] else (AT_UPPER if f[i] >= hi[i] else FREE)
     nfree = 0
     for i in range(n):
@@ -387,11 +405,12 @@ def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                 meta[0] -= 1
                 meta[2] += 1
             a -= 1
-        inside = np.zeros(n, dtype=np.bool_)
-        for a in range(meta[0]):
-            inside[order[a]] = True
         for i in range(n):
-            if state[i] == FREE and not inside[i]:
+            inside[i] = 0
+        for a in range(meta[0]):
+            inside[order[a]] = 1
+        for i in range(n):
+            if state[i] == FREE and inside[i] == 0:
                 if _chol_append(S, order, meta[0], i, L, first):
                     meta[0] += 1
                     meta[2] += 1
@@ -400,8 +419,6 @@ def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                     break
     if fresh:
         _refactor(S, state, L, order, first, meta)
-    rhs, x, r = np.empty(n), np.empty(n), np.empty(n)
-    bound = np.empty(n, dtype=np.int64)
     cap = 10 * (n + 1)
     for it in range(1, cap + 1):
         if meta[1] == 0 and it > 1:
@@ -412,7 +429,8 @@ def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             if state[j] != FREE:
                 bound[nb] = j
                 nb += 1
-        target = f.copy()
+        for i in range(n):
+            target[i] = f[i]
         hit, at, best, side = -1, -1, np.inf, FREE
         if nf:
             for a in range(nf):
@@ -461,7 +479,8 @@ def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             meta[0] -= 1
             meta[2] += 1
             continue
-        f = target
+        for i in range(n):
+            f[i] = target[i]
         # Every bound row whose w has the wrong sign (beyond its rounding) is freed.
         freed = 0
         for b in range(nb):
@@ -724,7 +743,11 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
     """
     m = q.shape[0]
     nr = m // 3 if normal_only else m
-    idx = np.empty(nr, dtype=np.int64)
+    # The work arrays, three allocations (a small island's solve is mostly their cost).
+    mats = np.empty((3, nr, nr))
+    vecs = np.empty((11, nr))
+    ints = np.empty((6, nr), dtype=np.int64)
+    idx = ints[0]
     for k in range(nr):
         idx[k] = 3 * k if normal_only else k
     dmax = 0.0
@@ -733,8 +756,10 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
     for k in range(nr):
         if not A[idx[k], idx[k]] > 1e-12 * dmax:
             return np.zeros(m), False
-    Ar = np.empty((nr, nr))
-    qr = np.empty(nr)
+    Ar, Ap, L = mats[0], mats[1], mats[2]
+    qr, p, lo, hi, qp, sp = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5]
+    work = vecs[6:]
+    order, first, marks = ints[1], ints[2], ints[3:]
     for a in range(nr):
         qr[a] = q[idx[a]]
         for b in range(nr):
@@ -745,13 +770,13 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
         qmax = max(qmax, abs(qr[a]))
     rho = prm[P_PROXIMAL] * dmax
     floor = 64.0 * EPS * qmax / dmax
-    Ap = Ar.copy()
     for a in range(nr):
+        for b in range(nr):
+            Ap[a, b] = Ar[a, b]
         Ap[a, a] += rho
-    p = np.empty(nr)
     for a in range(nr):
         p[a] = start[idx[a]]
-    lo, hi = np.zeros(nr), np.full(nr, np.inf)
+        lo[a], hi[a] = 0.0, np.inf
     step3 = 1 if normal_only else 3
     for a in range(0, nr, step3):
         if has_equal and equal[a // step3]:
@@ -763,9 +788,8 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
     converged, it, stalled, last, early, pivot_tried = False, 0, 0, np.inf, pivots, False
     newton_tried = False
     tol = prm[P_FRICTION_TOLERANCE]
-    # The active-set solves' factor, kept from one iteration's solve to the next.
-    L, qp, sp = np.empty((nr, nr)), np.empty(nr), np.empty(nr)
-    order, first = np.empty(nr, dtype=np.int64), np.empty(nr, dtype=np.int64)
+    # The active-set solves' factor (L, order, first, meta), kept from one iteration's
+    # solve to the next.
     meta = np.zeros(3, dtype=np.int64)
     iterations, stall = int(prm[P_FRICTION_ITERATIONS]), int(prm[P_STALL_ITERATIONS])
     while True:
@@ -795,7 +819,7 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
             for a in range(nr):
                 qp[a] = qr[a] - rho * p[a]
             # (The proximal centre is the last iterate, p; sp only where the solve starts.)
-            f, ok, _ = solve_box(Ap, qp, lo, hi, sp, L, order, first, meta)
+            f, ok, _ = _solve_box(Ap, qp, lo, hi, sp, L, order, first, meta, work, marks)
             change, scale = 0.0, 0.0
             for a in range(nr):
                 change = max(change, abs(f[a] - p[a]))
@@ -924,7 +948,7 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
     column = np.full(m, -1, dtype=np.int64)
     tol, no_equal = prm[P_FRICTION_TOLERANCE], np.zeros(c, dtype=np.bool_)
     for guess in range(int(prm[P_NEWTON_ITERATIONS])):
-        w = A @ p + q
+        w = _affine(A, p, q)
         for k in range(c):
             n = 3 * k
             yn = p[n] - w[n] / A[n, n]
@@ -1185,13 +1209,28 @@ def _lcp_error(M: np.ndarray, q: np.ndarray, z: np.ndarray) -> float:
 
 
 @njit(cache=True)
+def _affine(A: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Return ``A p + q``: a loop for a few rows (a BLAS call's overhead is the most of it)."""
+    m = q.shape[0]
+    if m > AFFINE_LOOP_ROWS:
+        return A @ p + q
+    w = np.empty(m)
+    for a in range(m):
+        acc = 0.0
+        for b in range(m):
+            acc += A[a, b] * p[b]
+        w[a] = acc + q[a]
+    return w
+
+
+@njit(cache=True)
 def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal_only: bool,
              sliding: np.ndarray, tol: float, equal: np.ndarray, has_equal: bool) -> float:
     """Return how far the contact conditions are from holding (m/s), as the Python path."""
     m = q.shape[0]
     if not m:
         return 0.0
-    w = A @ p + q
+    w = _affine(A, p, q)
     pmax, qmax, dmax = 0.0, 0.0, 0.0
     for a in range(m):
         pmax, qmax, dmax = max(pmax, abs(p[a])), max(qmax, abs(q[a])), max(dmax, A[a, a])
@@ -1231,16 +1270,16 @@ def slip_turn(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndar
     As ``ContactSteps._slipping``: a sticking contact whose friction ends on a bound
     with its point slipping faster than ``rate``, or whose friction left Coulomb's
     cone inside the pyramid, slides, its ``t₁`` along the slip (or against its
-    friction); the frames and flags are new arrays.
+    friction); where one turns, the frames and flags are new arrays (else the same).
     """
     c = mu.shape[0]
     pmax = 0.0
     for a in range(p.shape[0]):
         pmax = max(pmax, abs(p[a]))
     slack = 2.0 * tol * pmax
-    frame2, sliding2 = frame.copy(), sliding.copy()
+    frame2, sliding2 = frame, sliding   # (copied at the first turn)
     turned = False
-    s = np.zeros(3)
+    s, f = np.zeros(3), np.zeros(3)
     for k in range(c):
         if sliding[k]:
             continue
@@ -1248,7 +1287,6 @@ def slip_turn(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndar
         if not bound > 0.0:
             continue
         on = abs(p[3 * k + 1]) >= bound - slack or abs(p[3 * k + 2]) >= bound - slack
-        f = np.zeros(3)
         for x in range(3):
             s[x] = w[3 * k + 1] * frame[k, 1, x] + w[3 * k + 2] * frame[k, 2, x]
             f[x] = p[3 * k + 1] * frame[k, 1, x] + p[3 * k + 2] * frame[k, 2, x]
@@ -1261,6 +1299,8 @@ def slip_turn(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndar
             speed = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
         if not ((on and speed > rate) or beyond):
             continue
+        if not turned:
+            frame2, sliding2 = frame.copy(), sliding.copy()
         turned = True
         sliding2[k] = True
         nrm = frame[k, 0]
@@ -1275,49 +1315,46 @@ def slip_turn(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndar
 # -- contacts found again -------------------------------------------------------------------
 
 @njit(cache=True)
-def in_body(pts: np.ndarray, body: np.ndarray, pos: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Return world points (k, 3) in their bodies' principal frames (the world's: as they are)."""
-    n = pos.shape[0]
-    out = pts.copy()
-    for k in range(pts.shape[0]):
-        i = body[k]
-        if i >= n:
-            continue
-        d0, d1, d2 = pts[k, 0] - pos[i, 0], pts[k, 1] - pos[i, 1], pts[k, 2] - pos[i, 2]
-        for a in range(3):
-            out[k, a] = R[i, 0, a] * d0 + R[i, 1, a] * d1 + R[i, 2, a] * d2
-    return out
+def _local(pt: np.ndarray, k: int, i: int, pos: np.ndarray, R: np.ndarray) -> tuple:
+    """Return point ``pt[k]`` in body ``i``'s principal frame (the world's: as it is)."""
+    if i >= pos.shape[0]:
+        return pt[k, 0], pt[k, 1], pt[k, 2]
+    d0, d1, d2 = pt[k, 0] - pos[i, 0], pt[k, 1] - pos[i, 1], pt[k, 2] - pos[i, 2]
+    return (R[i, 0, 0] * d0 + R[i, 1, 0] * d1 + R[i, 2, 0] * d2,
+            R[i, 0, 1] * d0 + R[i, 1, 1] * d1 + R[i, 2, 1] * d2,
+            R[i, 0, 2] * d0 + R[i, 1, 2] * d1 + R[i, 2, 2] * d2)
 
 
 @njit(cache=True)
-def match(r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarray, r_pt: np.ndarray,
-          r_pos: np.ndarray, r_R: np.ndarray, which: np.ndarray, c_sa: np.ndarray,
-          c_sb: np.ndarray, c_ba: np.ndarray, c_pt: np.ndarray, pos: np.ndarray,
-          R: np.ndarray, radius: np.ndarray, count: int) -> tuple:
+def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarray,
+          r_pt: np.ndarray, r_pos: np.ndarray, r_R: np.ndarray, which: np.ndarray,
+          c_sa: np.ndarray, c_sb: np.ndarray, c_ba: np.ndarray, c_pt: np.ndarray,
+          pos: np.ndarray, R: np.ndarray, radius: np.ndarray, count: int) -> tuple:
     """
     Return the contacts continuing rows, as ``ContactSteps._match`` and ``_continuing``.
 
-    ``(nearest, continuing)``: per row the nearest contact continuing it (−1: none),
-    per contact whether it continues a row of ``which`` (the same pair; its point in
-    body a within its radius of the row's).
+    The rows: the contacts ``r_sel`` of ``r_sa``, ``r_sb``, ``r_ba``, ``r_pt`` (at
+    ``r_pos``, ``r_R``). ``(nearest, continuing)``: per row the nearest contact
+    continuing it (−1: none), per contact whether it continues a row of ``which`` (the
+    same pair; its point in body a within its radius of the row's).
     """
-    r, c = r_sa.shape[0], c_sa.shape[0]
+    r, c = r_sel.shape[0], c_sa.shape[0]
     nearest = np.full(r, -1, dtype=np.int64)
     continuing = np.zeros(c, dtype=np.bool_)
     if r == 0 or c == 0:
         return nearest, continuing
-    ls = in_body(r_pt, r_ba, r_pos, r_R)
-    ln = in_body(c_pt, c_ba, pos, R)
     for i in range(r):
         if not which[i]:
             continue
-        key = r_sa[i] * count + r_sb[i]
+        g = r_sel[i]
+        key = r_sa[g] * count + r_sb[g]
+        s0, s1, s2 = _local(r_pt, g, r_ba[g], r_pos, r_R)
         best = np.inf
         for j in range(c):
             if c_sa[j] * count + c_sb[j] != key:
                 continue
-            d2 = ((ls[i, 0] - ln[j, 0]) ** 2 + (ls[i, 1] - ln[j, 1]) ** 2
-                  + (ls[i, 2] - ln[j, 2]) ** 2)
+            n0, n1, n2 = _local(c_pt, j, c_ba[j], pos, R)
+            d2 = (s0 - n0) ** 2 + (s1 - n1) ** 2 + (s2 - n2) ** 2
             rad = radius[c_sa[j]]
             if d2 <= rad * rad:
                 continuing[j] = True
@@ -1417,8 +1454,10 @@ def _make_rows(ctx: tuple, y: np.ndarray, con: tuple, sel: np.ndarray) -> tuple:
 
 @njit(cache=True)
 def _subset(r: tuple, keep: np.ndarray) -> tuple:
-    """Return rows ``r``'s contacts ``keep`` (indices)."""
+    """Return rows ``r``'s contacts ``keep`` (increasing indices; all of them: ``r`` itself)."""
     sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
+    if keep.shape[0] == sel.shape[0]:
+        return r
     rows3 = np.empty(3 * keep.shape[0], dtype=np.int64)
     for k in range(keep.shape[0]):
         for a in range(3):
@@ -1451,9 +1490,17 @@ def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
     _, sa1, sb1, ba1, _, pt1, _, _ = con
     pos0, quat0, _, _ = state_parts(r_y)
     pos1, quat1, _, _ = state_parts(y)
-    return match(sa0[r_sel], sb0[r_sel], ba0[r_sel], pt0[r_sel], pos0, rotations(quat0),
+    return match(r_sel, sa0, sb0, ba0, pt0, pos0, rotations(quat0),
                  which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), ctx[14],
                  ctx[12].shape[0] + 1)
+
+
+@njit(cache=True)
+def _stopped(code: int, y0: np.ndarray, t0: float, warm: tuple, found: tuple,
+             n_log: int) -> tuple:
+    """Return :func:`_step`'s result for a step not taken (``code``): nothing changed."""
+    empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
+    return code, y0, warm, empty, found, n_log
 
 
 @njit(cache=True)
@@ -1469,17 +1516,14 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     loc, unlocated = prm[P_LOCATION], prm[P_UNLOCATED]
     max_events, max_bounces = int(prm[P_MAX_EVENTS]), int(prm[P_MAX_BOUNCES])
     cnt = np.zeros(cnt_total.shape[0])
-    empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
-    fail = (BAIL, y0, warm, empty, found, n_log)
-    grow = (GROW, y0, warm, empty, found, n_log)
-    full = (FULL, y0, warm, empty, found, n_log)
     con = found if have else _detect_ctx(ctx, y0)
     if con[0] < 0:
-        return grow
+        return _stopped(GROW, y0, t0, warm, found, n_log)
     state, t = y0, t0
     events, bounces = 0, 0
     first = True
-    record = empty
+    # (a record of no rows; the first pass's trial step sets it before it is read)
+    record = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), con, y0, t0)
     while True:
         h = dt if first else t_end - t
         if not first and h <= 4.0 * EPS * abs(t_end):
@@ -1492,9 +1536,9 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
             code, state2, hit, n_log = _impact(ctx, state, t, con, touching,
                                                bounces >= max_bounces, cnt, log, n_log)
             if code == FULL:
-                return full
+                return _stopped(FULL, y0, t0, warm, found, n_log)
             if code != DONE:
-                return fail
+                return _stopped(BAIL, y0, t0, warm, found, n_log)
             if hit:
                 bounces += 1
                 events += 1
@@ -1503,7 +1547,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         rows_ = _step_rows(ctx, con, near)
         # The overlaps the (partial) step starts from that are not rows (``_overlapping``).
         deep0 = np.zeros(con[0], dtype=np.bool_)
-        if np.any(con[7] > loc):
+        if _deepest(con[7]) > loc:
             cont0 = _continuing(ctx, con, rows_[0], state,
                                 np.ones(rows_[0].shape[0], dtype=np.bool_), con, state)[1]
             for j in range(con[0]):
@@ -1512,7 +1556,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         code, trial, nw, fl, warm, record, con_trial = _held(ctx, state, t, con, rows_, h,
                                                              warm, cnt)
         if code != DONE:
-            return grow if code == GROW else fail
+            return _stopped(GROW if code == GROW else BAIL, y0, t0, warm, found, n_log)
         held_sel = record[0]   # (the rows held: those apart that the step closes slowly)
         hit_depth = -np.inf
         if events < max_events:
@@ -1527,7 +1571,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
             break
         code, located, tau = _locate(ctx, state, con, held_sel, ov, h, hit_depth, nw, fl)
         if code != DONE:
-            return grow if code == GROW else fail
+            return _stopped(GROW if code == GROW else BAIL, y0, t0, warm, found, n_log)
         if tau <= 0.0:
             code, new, con_new = _accept(ctx, trial, record, cnt, con_trial)
             break
@@ -1536,9 +1580,9 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         events += 1
         con = _detect_ctx(ctx, state)
         if con[0] < 0:
-            return grow
+            return _stopped(GROW, y0, t0, warm, found, n_log)
     if code != DONE:
-        return grow if code == GROW else fail
+        return _stopped(GROW if code == GROW else BAIL, y0, t0, warm, found, n_log)
     _merge(cnt_total, cnt)
     return DONE, new, warm, record, con_new, n_log
 
@@ -1626,6 +1670,13 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
 
 
 @njit(cache=True)
+def _unheld(code: int, y0: np.ndarray, t: float, flags: int, warm: tuple) -> tuple:
+    """Return :func:`_held`'s result for a step it could not take (``code``)."""
+    none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t)
+    return code, y0, 0, flags, warm, none, _no_contacts(0)
+
+
+@njit(cache=True)
 def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, warm: tuple,
           cnt: np.ndarray) -> tuple:
     """
@@ -1643,9 +1694,8 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     n = minv.shape[0]
     rate = prm[P_RATE]
     free, finite = _advance_ctx(ctx, y0, h, n_applied, flags)
-    none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t)
     if not finite:
-        return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+        return _unheld(BAIL, y0, t, flags, warm)
     fpos, fquat, fvel, fom = state_parts(free)
     # The rows' velocities at the free step's end.
     q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
@@ -1691,8 +1741,8 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     no_equal = np.zeros(c, dtype=np.bool_)
     p, ok = solve_rows(A, q + shift, mu, start, False, no_equal, False, sliding, prm, cnt)
     if not ok:
-        return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
-    w = A @ p + q
+        return _unheld(BAIL, y0, t, flags, warm)
+    w = _affine(A, p, q)
     turned, frame2, sliding2 = slip_turn(frame, mu, sliding, p, w, rate,
                                          prm[P_FRICTION_TOLERANCE])
     if turned:
@@ -1703,7 +1753,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
         p, ok = solve_rows(A, q + shift, mu, p, False, no_equal, False, sliding, prm, cnt)
         if not ok:
-            return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+            return _unheld(BAIL, y0, t, flags, warm)
     pos0, quat0, _, _ = state_parts(y0)
     R0 = rotations(quat0)
     count = shape_mu.shape[0] + 1
@@ -1711,7 +1761,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     new = free
     nw, fl = n_applied, flags
     force = np.zeros((c, 3))
-    con1 = _no_contacts(0)
+    con1 = con   # (a placeholder of its type; set below before it is returned)
     have1 = False
     corrections = int(prm[P_MODEL_CORRECTIONS])
     for correction in range(corrections + 1):
@@ -1729,16 +1779,16 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         fl = flags | HAS_POSITION_FORCES
         new, finite = _advance_ctx(ctx, y0, h, nw, fl)
         if not finite:
-            return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+            return _unheld(BAIL, y0, t, flags, warm)
         con1 = _detect_ctx(ctx, new)
         if con1[0] < 0:
-            return GROW, y0, 0, flags, warm, none, _no_contacts(0)
+            return _unheld(GROW, y0, t, flags, warm)
         have1 = True
         npos, nquat, nvel, nom = state_parts(new)
         G1a, G1b = _rows_at(sa_r, sb_r, ba, bb, pt_r, pos0, R0, frame, Ga, Gb, con1, npos,
                             rotations(nquat), radius, count)
         w1 = apply_rows(G1a, G1b, ba, bb, nvel, nom)
-        model_w = A @ p + q
+        model_w = _affine(A, p, q)
         off, qmax = 0.0, 0.0
         for x in range(3 * c):
             off = max(off, abs(w1[x] - model_w[x]))
@@ -1749,15 +1799,15 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         q = q + (w1 - model_w)
         p, ok = solve_rows(A, q + shift, mu, p, False, no_equal, False, sliding, prm, cnt)
         if not ok:
-            return BAIL, y0, 0, flags, warm, none, _no_contacts(0)
+            return _unheld(BAIL, y0, t, flags, warm)
     if not have1:
         con1 = _detect_ctx(ctx, new)
         if con1[0] < 0:
-            return GROW, y0, 0, flags, warm, none, _no_contacts(0)
+            return _unheld(GROW, y0, t, flags, warm)
     w_pn = np.empty(c)
     for k in range(c):
         w_pn[k] = p[3 * k]
-    warm = (sa_r.copy(), sb_r.copy(), pt_r.copy(), w_pn)
+    warm = (sa_r, sb_r, pt_r, w_pn)   # (indexed by sel: arrays of their own)
     return DONE, new, nw, fl, warm, (sel, force, con, y0, t), con1
 
 
@@ -1964,6 +2014,15 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
 
 
 @njit(cache=True)
+def _deepest(depth: np.ndarray) -> float:
+    """Return the largest of ``depth`` (−inf: none)."""
+    out = -np.inf
+    for j in range(depth.shape[0]):
+        out = max(out, depth[j])
+    return out
+
+
+@njit(cache=True)
 def _merge(total: np.ndarray, cnt: np.ndarray) -> None:
     """Add a step's counters to ``total`` (the largest of the maxima)."""
     for x in range(cnt.shape[0]):
@@ -2019,8 +2078,8 @@ def _rows_at(sa: np.ndarray, sb: np.ndarray, ba: np.ndarray, bb: np.ndarray, pt:
     c = sa.shape[0]
     n = pos.shape[0]
     every = np.ones(c, dtype=np.bool_)
-    nearest, _ = match(sa, sb, ba, pt, pos0, R0, every, sa1, sb1, ba1, pt1, pos, R, radius,
-                       count)
+    nearest, _ = match(np.arange(c), sa, sb, ba, pt, pos0, R0, every, sa1, sb1, ba1, pt1, pos,
+                       R, radius, count)
     G1a, G1b = Ga.copy(), Gb.copy()
     for k in range(c):
         j = nearest[k]
