@@ -357,6 +357,22 @@ def test_the_free_rows_factor_stays_their_factor_as_rows_join_and_leave(n, band)
     assert np.max(np.abs(Sr @ x - b)) <= (bound + 2 * nf * eps * d) * nf * np.max(np.abs(x))
 
 
+def test_the_box_lcp_reads_each_row_of_its_matrix_by_its_non_zeros():
+    # The box LCP's sums over a row of S (right sides, refinement, the bound rows' w) run
+    # over pattern(S)'s columns alone: they must be exactly each row's non-zeros, in
+    # increasing column (the order the dense sums took), an empty row none.
+    from rigid_body_sim.core.kernels.contact_step import pattern
+    rng = np.random.default_rng(11)
+    n = 37
+    S = rng.standard_normal((n, n)) * (rng.random((n, n)) < 0.2)
+    S[5] = 0.0
+    pat = pattern(S)
+    assert pat[0] == n + 1 and pat[n] == len(pat) == n + 1 + np.count_nonzero(S)
+    for i in range(n):
+        np.testing.assert_array_equal(pat[pat[i]:pat[i + 1]], np.flatnonzero(S[i]))
+    assert pattern(np.zeros((0, 0))).tolist() == [1]
+
+
 @pytest.mark.parametrize('n, band', [(40, None), (120, 4), (200, None)])
 def test_the_box_lcp_carries_its_factor_from_call_to_call_and_solves_to_rounding(n, band):
     # The friction boxes' fixed point calls solve_box again and again on one S with new

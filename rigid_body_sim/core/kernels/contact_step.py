@@ -365,13 +365,41 @@ def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     n = q.shape[0]
     work = np.empty((6, n))
     marks = np.empty((3, n), dtype=np.int64)
-    return _solve_box(S, q, lo, hi, start, L, order, first, meta, work, marks)
+    return _solve_box(S, q, lo, hi, start, L, order, first, meta, work, marks, pattern(S))
+
+
+@njit(cache=True)
+def pattern(S: np.ndarray) -> np.ndarray:
+    """
+    Return the non-zero columns of each row of ``S`` (n, n), in one array ``pat``.
+
+    Row ``i``'s columns, increasing, are ``pat[pat[i]:pat[i + 1]]`` (the first ``n + 1``
+    entries point into the rest). A pile's contact meets a dozen others, so most of a
+    large island's row is zero: the box LCP's sums over rows run over these alone.
+    """
+    n = S.shape[0]
+    nnz = 0
+    for i in range(n):
+        for j in range(n):
+            if S[i, j] != 0.0:
+                nnz += 1
+    pat = np.empty(n + 1 + nnz, dtype=np.int64)
+    at = n + 1
+    for i in range(n):
+        pat[i] = at
+        for j in range(n):
+            if S[i, j] != 0.0:
+                pat[at] = j
+                at += 1
+    pat[n] = at
+    return pat
 
 
 @njit(cache=True)
 def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                start: np.ndarray, L: np.ndarray, order: np.ndarray, first: np.ndarray,
-               meta: np.ndarray, work: np.ndarray, marks: np.ndarray) -> tuple:
+               meta: np.ndarray, work: np.ndarray, marks: np.ndarray,
+               pat: np.ndarray) -> tuple:
     """
     Return :func:`solve_box` with its work arrays passed: ``work`` (6, n), ``marks`` (3, n).
 
@@ -379,7 +407,12 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     rows' right sides ``q_i + Σ_bound S_ij f_j`` (``rb``, by row) are kept from one
     iteration to the next: a row meeting its bound adds its term to each free row's
     (``O(free)``, not ``O(free × bound)``), a row freed takes its term out and gets its
-    own; they are computed afresh at each call and each fresh factor.
+    own; they are computed afresh at each call and each fresh factor. ``pat``:
+    :func:`pattern` of ``S`` (symmetric): every sum over a row of ``S`` (the right sides,
+    the refinement's residual, the bound rows' ``w``) and every update of the right
+    sides runs over its non-zeros alone, in increasing column (the sums the dense loops
+    formed, but for the refinement's, whose order of terms is the columns', not the
+    factor's).
     """
     n = q.shape[0]
     f, rhs, x, r, target, rb = work[0], work[1], work[2], work[3], work[4], work[5]
@@ -443,8 +476,10 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                 for a in range(nf):
                     i = order[a]
                     s = q[i]
-                    for b in range(nb):
-                        s += S[i, bound[b]] * f[bound[b]]
+                    for t in range(pat[i], pat[i + 1]):
+                        j = pat[t]
+                        if state[j] != FREE:
+                            s += S[i, j] * f[j]
                     rb[i] = s
                 stale = False
             for a in range(nf):
@@ -466,8 +501,10 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                 for a in range(nf):
                     i = order[a]
                     s = rhs[a]
-                    for b in range(nf):
-                        s -= S[i, order[b]] * x[b]
+                    for t in range(pat[i], pat[i + 1]):
+                        j = pat[t]
+                        if state[j] == FREE:
+                            s -= S[i, j] * target[j]
                     r[a] = s
                 _chol_solve(L, first, nf, r, r)
                 for a in range(nf):
@@ -489,8 +526,10 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             meta[0] -= 1
             meta[2] += 1
             # (its term joins the free rows' right sides)
-            for a in range(meta[0]):
-                rb[order[a]] += S[order[a], hit] * f[hit]
+            for t in range(pat[hit], pat[hit + 1]):
+                j = pat[t]
+                if state[j] == FREE:
+                    rb[j] += S[j, hit] * f[hit]
             continue
         for i in range(n):
             f[i] = target[i]
@@ -502,7 +541,8 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             if not hi[i] > lo[i]:
                 continue
             w, mag = q[i], abs(q[i])
-            for j in range(n):
+            for t in range(pat[i], pat[i + 1]):
+                j = pat[t]
                 w += S[i, j] * f[j]
                 mag += abs(S[i, j]) * abs(f[j])
             wrong = -w if state[i] == AT_LOWER else w
@@ -510,8 +550,10 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                 state[i] = FREE
                 freed += 1
                 # (its term leaves the free rows' right sides)
-                for a in range(meta[0]):
-                    rb[order[a]] -= S[order[a], i] * f[i]
+                for t in range(pat[i], pat[i + 1]):
+                    j = pat[t]
+                    if state[j] == FREE and j != i:
+                        rb[j] -= S[j, i] * f[i]
                 if meta[1] and _chol_append(S, order, meta[0], i, L, first):
                     meta[2] += 1
                 else:
@@ -524,7 +566,8 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
         for a in range(nf0, meta[0]):
             j = order[a]
             s = q[j]
-            for k in range(n):
+            for t in range(pat[j], pat[j + 1]):
+                k = pat[t]
                 if state[k] != FREE:
                     s += S[j, k] * f[k]
             rb[j] = s
@@ -799,6 +842,7 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
         for b in range(nr):
             Ap[a, b] = Ar[a, b]
         Ap[a, a] += rho
+    pat = pattern(Ap)   # (the box solves' sums run over its non-zeros)
     for a in range(nr):
         p[a] = start[idx[a]]
         lo[a], hi[a] = 0.0, np.inf
@@ -844,7 +888,8 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
             for a in range(nr):
                 qp[a] = qr[a] - rho * p[a]
             # (The proximal centre is the last iterate, p; sp only where the solve starts.)
-            f, ok, _ = _solve_box(Ap, qp, lo, hi, sp, L, order, first, meta, work, marks)
+            f, ok, _ = _solve_box(Ap, qp, lo, hi, sp, L, order, first, meta, work, marks,
+                                  pat)
             change, scale = 0.0, 0.0
             for a in range(nr):
                 change = max(change, abs(f[a] - p[a]))
