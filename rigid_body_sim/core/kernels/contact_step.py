@@ -1399,22 +1399,28 @@ def _local(pt: np.ndarray, k: int, i: int, pos: np.ndarray, R: np.ndarray) -> tu
 def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarray,
           r_pt: np.ndarray, r_pos: np.ndarray, r_R: np.ndarray, which: np.ndarray,
           c_sa: np.ndarray, c_sb: np.ndarray, c_ba: np.ndarray, c_pt: np.ndarray,
-          pos: np.ndarray, R: np.ndarray, radius: np.ndarray, count: int) -> tuple:
+          pos: np.ndarray, R: np.ndarray, radius: np.ndarray, count: int,
+          also: np.ndarray) -> tuple:
     """
     Return the contacts continuing rows, as ``ContactSteps._match`` and ``_continuing``.
 
     The rows: the contacts ``r_sel`` of ``r_sa``, ``r_sb``, ``r_ba``, ``r_pt`` (at
-    ``r_pos``, ``r_R``). ``(nearest, continuing)``: per row the nearest contact
-    continuing it (−1: none), per contact whether it continues a row of ``which`` (the
-    same pair; its point in body a within its radius of the row's).
+    ``r_pos``, ``r_R``). ``(nearest, continuing, continuing_also)``: per row the nearest
+    contact continuing it (−1: none), per contact whether it continues a row of ``which``
+    (the same pair; its point in body a within its radius of the row's), and whether it
+    continues a row of ``also`` (a second set of rows, matched in the same pass; an
+    ``also`` of no rows: none, all False).
     """
     r, c = r_sel.shape[0], c_sa.shape[0]
     nearest = np.full(r, -1, dtype=np.int64)
     continuing = np.zeros(c, dtype=np.bool_)
+    continuing_also = np.zeros(c, dtype=np.bool_)
     if r == 0 or c == 0:
-        return nearest, continuing
+        return nearest, continuing, continuing_also
+    has_also = also.shape[0] == r
     for i in range(r):
-        if not which[i]:
+        in_also = has_also and also[i]
+        if not which[i] and not in_also:
             continue
         g = r_sel[i]
         key = r_sa[g] * count + r_sb[g]
@@ -1427,10 +1433,13 @@ def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarra
             d2 = (s0 - n0) ** 2 + (s1 - n1) ** 2 + (s2 - n2) ** 2
             rad = radius[c_sa[j]]
             if d2 <= rad * rad:
-                continuing[j] = True
-                if d2 < best:
-                    best, nearest[i] = d2, j
-    return nearest, continuing
+                if in_also:
+                    continuing_also[j] = True
+                if which[i]:
+                    continuing[j] = True
+                    if d2 < best:
+                        best, nearest[i] = d2, j
+    return nearest, continuing, continuing_also
 
 
 # -- a step ---------------------------------------------------------------------------------
@@ -1554,7 +1563,8 @@ def _where(mask: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
-                which: np.ndarray, con: tuple, y: np.ndarray) -> tuple:
+                which: np.ndarray, con: tuple, y: np.ndarray,
+                also: np.ndarray = np.zeros(0, dtype=np.bool_)) -> tuple:
     """Return :func:`match` of the rows (``r_sel`` of ``r_con`` at ``r_y``) on ``con`` at ``y``."""
     _, sa0, sb0, ba0, _, pt0, _, _ = r_con
     _, sa1, sb1, ba1, _, pt1, _, _ = con
@@ -1562,7 +1572,7 @@ def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
     pos1, quat1, _, _ = state_parts(y)
     return match(r_sel, sa0, sb0, ba0, pt0, pos0, rotations(quat0),
                  which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), ctx[14],
-                 ctx[12].shape[0] + 1)
+                 ctx[12].shape[0] + 1, also)
 
 
 @njit(cache=True)
@@ -1597,7 +1607,8 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     while True:
         h = dt if first else t_end - t
         if not first and h <= 4.0 * EPS * abs(t_end):
-            code, new, con_new = _accept(ctx, state, record, cnt, con)
+            code, new, con_new = _accept(ctx, state, record, cnt, con,
+                                         np.zeros(0, dtype=np.bool_), False)
             break
         first = False
         near = _in_margin(ctx, state, con)
@@ -1618,8 +1629,8 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         # The overlaps the (partial) step starts from that are not rows (``_overlapping``).
         deep0 = np.zeros(con[0], dtype=np.bool_)
         if _deepest(con[7]) > loc:
-            cont0 = _continuing(ctx, con, rows_[0], state,
-                                np.ones(rows_[0].shape[0], dtype=np.bool_), con, state)[1]
+            every = np.ones(rows_[0].shape[0], dtype=np.bool_)
+            cont0 = _continuing(ctx, con, rows_[0], state, every, con, state, every)[1]
             for j in range(con[0]):
                 deep0[j] = con[7][j] > loc and not cont0[j]
         ov = _where(deep0)
@@ -1629,21 +1640,28 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
             return _stopped(GROW if code == GROW else BAIL, y0, t0, warm, found, n_log)
         held_sel = record[0]   # (the rows held: those apart that the step closes slowly)
         hit_depth = -np.inf
+        # (the contacts at the trial's end that continue loaded rows, matched with the new
+        # contacts' match and handed to _accept)
+        held_end, have_held = np.zeros(0, dtype=np.bool_), False
         if events < max_events:
-            cont = _known(ctx, con, held_sel, ov, state, con_trial, trial)
+            cont, held_end = _known(ctx, con, held_sel, ov, state, con_trial, trial,
+                                    _loaded(record))
+            have_held = True
             for j in range(con_trial[0]):
                 if not cont[j] and con_trial[7][j] > loc:
                     hit_depth = max(hit_depth, con_trial[7][j])
         else:
             cnt[C_CAPPED] += 1
         if hit_depth == -np.inf:
-            code, new, con_new = _accept(ctx, trial, record, cnt, con_trial)
+            code, new, con_new = _accept(ctx, trial, record, cnt, con_trial, held_end,
+                                         have_held)
             break
         code, located, tau = _locate(ctx, state, con, held_sel, ov, h, hit_depth, nw, fl)
         if code != DONE:
             return _stopped(GROW if code == GROW else BAIL, y0, t0, warm, found, n_log)
         if tau <= 0.0:
-            code, new, con_new = _accept(ctx, trial, record, cnt, con_trial)
+            code, new, con_new = _accept(ctx, trial, record, cnt, con_trial, held_end,
+                                         have_held)
             break
         cnt[C_LOCATED] += 1
         state, t = located, t + tau
@@ -1915,7 +1933,7 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndar
             return GROW, y0, 0.0
         g, code = _new_depth(ctx, con, sel, ov, y0, con_t, trial, margin)
         if abs(g) <= loc:
-            cont = _known(ctx, con, sel, ov, y0, con_t, trial)
+            cont = _known(ctx, con, sel, ov, y0, con_t, trial, np.zeros(0, dtype=np.bool_))[0]
             fresh = np.zeros(con_t[0], dtype=np.bool_)
             for j in range(con_t[0]):
                 fresh[j] = con_t[7][j] >= -loc and not cont[j]
@@ -1944,22 +1962,29 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndar
 
 @njit(cache=True)
 def _known(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y: np.ndarray,
-           con: tuple, y: np.ndarray) -> np.ndarray:
-    """Tell per contact of ``con`` at ``y`` whether it continues a row or an overlap ``ov``."""
-    known = _continuing(ctx, r_con, r_sel, r_y, np.ones(r_sel.shape[0], dtype=np.bool_), con,
-                        y)[1]
+           con: tuple, y: np.ndarray, loaded: np.ndarray) -> tuple:
+    """
+    Tell per contact of ``con`` at ``y`` whether it continues a row or an overlap ``ov``.
+
+    Returns ``(known, held)``: ``held`` per contact whether it continues a row of
+    ``loaded`` (:func:`_loaded`; :func:`_accept`'s held contacts, matched in the same
+    pass; ``loaded`` of no rows: none).
+    """
+    every = np.ones(r_sel.shape[0], dtype=np.bool_)
+    _, known, held = _continuing(ctx, r_con, r_sel, r_y, every, con, y, loaded)
     if ov.shape[0]:
-        also = _continuing(ctx, r_con, ov, r_y, np.ones(ov.shape[0], dtype=np.bool_), con, y)[1]
+        every = np.ones(ov.shape[0], dtype=np.bool_)
+        also = _continuing(ctx, r_con, ov, r_y, every, con, y, every)[1]
         for j in range(known.shape[0]):
             known[j] = known[j] or also[j]
-    return known
+    return known, held
 
 
 @njit(cache=True)
 def _new_depth(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y: np.ndarray,
                con: tuple, y: np.ndarray, margin: float) -> tuple:
     """Return the deepest depth of new contacts (−margin: none), and DONE."""
-    cont = _known(ctx, r_con, r_sel, ov, r_y, con, y)
+    cont = _known(ctx, r_con, r_sel, ov, r_y, con, y, np.zeros(0, dtype=np.bool_))[0]
     out = -np.inf
     for j in range(con[0]):
         if not cont[j]:
@@ -1968,11 +1993,14 @@ def _new_depth(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y:
 
 
 @njit(cache=True)
-def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tuple) -> tuple:
+def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tuple,
+            held0: np.ndarray, have_held: bool) -> tuple:
     """
     Correct the step's end, as ``ContactSteps._settle``: ``(code, y, contacts at y)``.
 
-    ``con``: the contacts at ``y`` (the trial's, found by :func:`_held`; not found again).
+    ``con``: the contacts at ``y`` (the trial's, found by :func:`_held`; not found again);
+    ``held0`` where ``have_held``: which of them continue a loaded row of ``record``
+    (:func:`_known`'s, matched with the new contacts), else matched here.
 
     Depth beyond the tolerance and loaded contacts left apart are projected out
     (positions: the smallest pushes, loaded contacts held at zero depth; up to
@@ -1983,13 +2011,8 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
     prm, minv = ctx[15], ctx[16]
     loc = prm[P_LOCATION]
     sel, force, r_con, r_y, _ = record
-    c = sel.shape[0]
-    active = np.zeros(c, dtype=np.bool_)
-    nr = r_con[6]
-    for k in range(c):
-        active[k] = (force[k, 0] * nr[sel[k], 0] + force[k, 1] * nr[sel[k], 1]
-                     + force[k, 2] * nr[sel[k], 2]) > 0.0
-    held = _continuing(ctx, r_con, sel, r_y, active, con, y)[1]
+    active = _loaded(record)
+    held = held0 if have_held else _continuing(ctx, r_con, sel, r_y, active, con, y, active)[1]
     for pas in range(int(prm[P_PROJECTION_PASSES]) + 1):
         deep = lifted = False
         dmax, left = -np.inf, 0.0
@@ -2046,7 +2069,7 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
         con = _detect_ctx(ctx, y)
         if con[0] < 0:
             return GROW, y, con
-        held = _continuing(ctx, r_con, sel, r_y, active, con, y)[1]
+        held = _continuing(ctx, r_con, sel, r_y, active, con, y, active)[1]
     hs = _where(held)
     nh = hs.shape[0]
     if nh == 0:
@@ -2081,6 +2104,18 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
             om[i, a] += dv[i, 3 + a]
     cnt[C_HELD] += 1
     return DONE, y, con
+
+
+@njit(cache=True)
+def _loaded(record: tuple) -> np.ndarray:
+    """Return per row of a step's ``record`` whether its force pushes (its contact loaded)."""
+    sel, force, r_con, _, _ = record
+    nr = r_con[6]
+    active = np.zeros(sel.shape[0], dtype=np.bool_)
+    for k in range(sel.shape[0]):
+        active[k] = (force[k, 0] * nr[sel[k], 0] + force[k, 1] * nr[sel[k], 1]
+                     + force[k, 2] * nr[sel[k], 2]) > 0.0
+    return active
 
 
 @njit(cache=True)
@@ -2163,8 +2198,8 @@ def _rows_at(sa: np.ndarray, sb: np.ndarray, ba: np.ndarray, bb: np.ndarray, pt:
     c = sa.shape[0]
     n = pos.shape[0]
     every = np.ones(c, dtype=np.bool_)
-    nearest, _ = match(np.arange(c), sa, sb, ba, pt, pos0, R0, every, sa1, sb1, ba1, pt1, pos,
-                       R, radius, count)
+    nearest, _, _ = match(np.arange(c), sa, sb, ba, pt, pos0, R0, every, sa1, sb1, ba1, pt1,
+                          pos, R, radius, count, every)
     G1a, G1b = Ga.copy(), Gb.copy()
     for k in range(c):
         j = nearest[k]
