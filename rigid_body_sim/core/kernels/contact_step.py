@@ -1563,9 +1563,12 @@ def _where(mask: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
-                which: np.ndarray, con: tuple, y: np.ndarray,
-                also: np.ndarray = np.zeros(0, dtype=np.bool_)) -> tuple:
-    """Return :func:`match` of the rows (``r_sel`` of ``r_con`` at ``r_y``) on ``con`` at ``y``."""
+                which: np.ndarray, con: tuple, y: np.ndarray, also: np.ndarray) -> tuple:
+    """
+    Return :func:`match` of the rows (``r_sel`` of ``r_con`` at ``r_y``) on ``con`` at ``y``.
+
+    (A caller with no second set of rows passes ``which`` as ``also``.)
+    """
     _, sa0, sb0, ba0, _, pt0, _, _ = r_con
     _, sa1, sb1, ba1, _, pt1, _, _ = con
     pos0, quat0, _, _ = state_parts(r_y)
