@@ -373,6 +373,56 @@ def test_the_box_lcp_reads_each_row_of_its_matrix_by_its_non_zeros():
     assert pattern(np.zeros((0, 0))).tolist() == [1]
 
 
+def test_the_delassus_operator_is_stored_by_the_blocks_of_contacts_sharing_a_body():
+    # delassus gives A = G M⁻¹ Gᵀ by its 3 × 3 blocks: contact k's columns must be
+    # exactly the contacts sharing a body with it (a static side, index ≥ n, shares
+    # none), increasing, and each block the dense product's. The kernel adds the same
+    # products (≤ 2 × 6 an entry, each the same in both) summed in another order than
+    # numpy's: each sum within 11 eps of its terms' magnitudes, the two within 24 eps.
+    # A p + q of the blocks likewise (≤ 3 c terms a row: 2 × 3 c eps of the magnitudes).
+    from rigid_body_sim.core.kernels.contact_step import blocks, block_affine, delassus
+    eps = np.finfo(float).eps
+    rng = np.random.default_rng(5)
+    n, c = 9, 40
+    ba = rng.integers(0, n, c)
+    bb = rng.integers(0, n + 2, c)   # (n, n + 1: static shapes)
+    bb[bb == ba] = n
+    ba[:3], bb[:3] = 2, 4   # (three contacts of one pair: blocks through both bodies)
+    Ga, Gb = rng.standard_normal((3 * c, 6)), rng.standard_normal((3 * c, 6))
+    minv = rng.random((n, 6)) + 0.1
+    G = np.zeros((3 * c, 6 * n))
+    for k in range(c):
+        G[3 * k:3 * k + 3, 6 * ba[k]:6 * ba[k] + 6] = Ga[3 * k:3 * k + 3]
+        if bb[k] < n:
+            G[3 * k:3 * k + 3, 6 * bb[k]:6 * bb[k] + 6] = Gb[3 * k:3 * k + 3]
+    W = np.diag(minv.ravel())
+    A, mag = G @ W @ G.T, np.abs(G) @ W @ np.abs(G).T
+    ptr, col, blk = delassus(Ga, Gb, ba, bb, minv)
+    assert ptr[0] == 0 and ptr[c] == len(col) == len(blk)
+    dense = np.zeros_like(A)
+    for k in range(c):
+        cols = col[ptr[k]:ptr[k + 1]]
+        bodies = {ba[k], bb[k]} - {n, n + 1}
+        shared = [m for m in range(c) if bodies & ({ba[m], bb[m]} - {n, n + 1})]
+        assert cols.tolist() == shared
+        for e, m in zip(range(ptr[k], ptr[k + 1]), cols):
+            dense[3 * k:3 * k + 3, 3 * m:3 * m + 3] = blk[e]
+    assert np.all(np.abs(dense - A) <= 24 * eps * mag)
+    p, q = rng.standard_normal(3 * c), rng.standard_normal(3 * c)
+    w = block_affine((ptr, col, blk), p, q)
+    bound = 6 * c * eps * (np.abs(dense) @ np.abs(p) + np.abs(q))
+    assert np.all(np.abs(w - (A @ p + q)) <= bound)
+    # A dense matrix's blocks (the tests' way in): those with a non-zero, exactly.
+    A[3:6, 9:12] = 0.0
+    A[7, 0] = 0.0
+    ptr2, col2, blk2 = blocks(A)
+    for k in range(c):
+        cols = col2[ptr2[k]:ptr2[k + 1]].tolist()
+        assert cols == [m for m in range(c) if np.any(A[3 * k:3 * k + 3, 3 * m:3 * m + 3])]
+        for e, m in zip(range(ptr2[k], ptr2[k + 1]), cols):
+            np.testing.assert_array_equal(blk2[e], A[3 * k:3 * k + 3, 3 * m:3 * m + 3])
+
+
 @pytest.mark.parametrize('n, band', [(40, None), (120, 4), (200, None)])
 def test_the_box_lcp_carries_its_factor_from_call_to_call_and_solves_to_rounding(n, band):
     # The friction boxes' fixed point calls solve_box again and again on one S with new
@@ -505,7 +555,8 @@ def test_lcps_the_fixed_point_cannot_solve_are_solved_as_in_the_python_path(
         py = {key: contact.counters[key] - before[key]
               for key in ('lcp_newton', 'lcp_pivoted', 'lcp_failures')}
         cnt = np.zeros(len(kern.COUNTERS))
-        p, ok = kern.solve_rows(A, q, mu, np.zeros(3 * c), False, np.zeros(c, dtype=bool),
+        p, ok = kern.solve_rows(kern.blocks(A), q, mu, np.zeros(3 * c), False,
+                                np.zeros(c, dtype=bool),
                                 False, np.zeros(c, dtype=bool), prm, cnt)
         assert ok
         failures['python'] += py['lcp_failures']

@@ -54,7 +54,7 @@ def test_islands_are_the_connected_parts_of_the_blocks_both_paths(seed):
     A = _blocks(c, edges, rng)
     expected = _reference(c, edges)
     assert [g.tolist() for g in contact_step.islands(A)] == expected
-    label, count = kern.islands(A)
+    label, count = kern.islands(kern.blocks(A))   # (the compiled path's blocks)
     assert count == len(expected)
     assert [np.flatnonzero(label == g).tolist() for g in range(count)] == expected
 

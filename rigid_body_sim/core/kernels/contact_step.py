@@ -274,23 +274,51 @@ def apply_rows(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
 
 @njit(cache=True)
 def delassus(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
-             minv: np.ndarray) -> np.ndarray:
+             minv: np.ndarray) -> tuple:
     """
-    Return ``A = G M⁻¹ Gᵀ`` (3c, 3c); ``minv`` (n, 6) per body ``1/m`` (3) and ``1/J`` (3).
+    Return ``A = G M⁻¹ Gᵀ`` (3c, 3c) by its 3 × 3 blocks: ``(ptr, col, blk)``.
 
-    Only the blocks of two contacts on a common body are non-zero (a stack's contacts
-    meet those of the interfaces next to them alone): those are the ones computed.
+    ``minv`` (n, 6) per body ``1/m`` (3) and ``1/J`` (3). Only two contacts on a common
+    body have a non-zero block (a pile's contact meets a dozen others, a stack's those of
+    the interfaces next to it): contact ``k``'s are ``blk[ptr[k]:ptr[k + 1]]`` (3, 3),
+    in the columns (contacts) ``col[ptr[k]:ptr[k + 1]]``, increasing. Storage and cost
+    grow as the blocks, not as ``c²``: the contacts are first listed per body. Each
+    entry is the dense product's to the bit (the same terms added in the same order).
     """
     n = minv.shape[0]
     c = ba.shape[0]
-    A = np.zeros((3 * c, 3 * c))
+    # The contacts on each body, increasing: on_body[start[i]:start[i + 1]].
+    start = np.zeros(n + 1, dtype=np.int64)
     for k in range(c):
-        for side_k in range(2):
-            i = ba[k] if side_k == 0 else bb[k]
-            if i >= n:
-                continue
-            Gk = Ga if side_k == 0 else Gb
-            for m in range(c):
+        for side in range(2):
+            i = ba[k] if side == 0 else bb[k]
+            if i < n:
+                start[i + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    on_body = np.empty(start[n], dtype=np.int64)
+    fill = start[:n].copy()
+    for k in range(c):
+        for side in range(2):
+            i = ba[k] if side == 0 else bb[k]
+            if i < n:
+                on_body[fill[i]] = k
+                fill[i] += 1
+    # Each contact's columns: the merge of its two bodies' lists (counted, then filled).
+    ptr = np.zeros(c + 1, dtype=np.int64)
+    for k in range(c):
+        ptr[k + 1] = ptr[k] + _merged(on_body, start, ba[k], bb[k], n, ptr[:0])
+    col = np.empty(ptr[c], dtype=np.int64)
+    blk = np.zeros((ptr[c], 3, 3))
+    for k in range(c):
+        _merged(on_body, start, ba[k], bb[k], n, col[ptr[k]:ptr[k + 1]])
+        for e in range(ptr[k], ptr[k + 1]):
+            m = col[e]
+            for side_k in range(2):   # (the dense product's order: k's sides, then m's)
+                i = ba[k] if side_k == 0 else bb[k]
+                if i >= n:
+                    continue
+                Gk = Ga if side_k == 0 else Gb
                 for side_m in range(2):
                     if (ba[m] if side_m == 0 else bb[m]) != i:
                         continue
@@ -302,8 +330,89 @@ def delassus(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
                             acc = 0.0
                             for x in range(6):
                                 acc += Gk[r, x] * minv[i, x] * Gm[s, x]
-                            A[r, s] += acc
-    return A
+                            blk[e, a, b] += acc
+    return ptr, col, blk
+
+
+@njit(cache=True)
+def _merged(on_body: np.ndarray, start: np.ndarray, i: int, j: int, n: int,
+            out: np.ndarray) -> int:
+    """
+    Return how many contacts are on body ``i`` or ``j`` (``≥ n``: none); fill ``out``.
+
+    ``out`` of its length takes them, increasing (the merge of the two bodies' lists of
+    :func:`delassus`); an ``out`` of no length: counted only.
+    """
+    a0, a1 = (start[i], start[i + 1]) if i < n else (0, 0)
+    b0, b1 = (start[j], start[j + 1]) if j < n else (0, 0)
+    write = out.shape[0] > 0
+    count = 0
+    while a0 < a1 or b0 < b1:
+        if b0 >= b1 or (a0 < a1 and on_body[a0] < on_body[b0]):
+            v = on_body[a0]
+            a0 += 1
+        elif a0 >= a1 or on_body[b0] < on_body[a0]:
+            v = on_body[b0]
+            b0 += 1
+        else:   # (on both bodies)
+            v = on_body[a0]
+            a0 += 1
+            b0 += 1
+        if write:
+            out[count] = v
+        count += 1
+    return count
+
+
+@njit(cache=True)
+def blocks(A: np.ndarray) -> tuple:
+    """Return a dense ``A`` (3c, 3c) as :func:`delassus`'s blocks: those with a non-zero."""
+    c = A.shape[0] // 3
+    nnz = 0
+    for k in range(c):
+        for m in range(c):
+            if _block_nonzero(A, k, m):
+                nnz += 1
+    ptr = np.zeros(c + 1, dtype=np.int64)
+    col = np.empty(nnz, dtype=np.int64)
+    blk = np.zeros((nnz, 3, 3))
+    e = 0
+    for k in range(c):
+        for m in range(c):
+            if _block_nonzero(A, k, m):
+                col[e] = m
+                for a in range(3):
+                    for b in range(3):
+                        blk[e, a, b] = A[3 * k + a, 3 * m + b]
+                e += 1
+        ptr[k + 1] = e
+    return ptr, col, blk
+
+
+@njit(cache=True)
+def _block_nonzero(A: np.ndarray, k: int, m: int) -> bool:
+    for a in range(3):
+        for b in range(3):
+            if A[3 * k + a, 3 * m + b] != 0.0:
+                return True
+    return False
+
+
+@njit(cache=True)
+def block_affine(D: tuple, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Return ``A p + q`` of :func:`delassus`'s blocks ``D`` (each row's sum in column order)."""
+    ptr, col, blk = D
+    c = ptr.shape[0] - 1
+    w = np.empty(3 * c)
+    for k in range(c):
+        for a in range(3):
+            acc = 0.0
+            for e in range(ptr[k], ptr[k + 1]):
+                m = col[e]
+                for b in range(3):
+                    acc += blk[e, a, b] * p[3 * m + b]
+            w[3 * k + a] = acc + q[3 * k + a]
+    return w
 
 
 @njit(cache=True)
@@ -727,25 +836,26 @@ def _chol_solve(L: np.ndarray, first: np.ndarray, nf: int, b: np.ndarray,
 
 
 @njit(cache=True)
-def islands(A: np.ndarray) -> tuple:
+def islands(D: tuple) -> tuple:
     """
     Return ``(label, count)``: each contact's island, as :func:`..contact_step.islands`.
 
-    Contacts joined by a non-zero of ``A``'s 3 × 3 blocks (either way); islands numbered
-    by their first contact.
+    Contacts joined by a block of :func:`delassus`'s ``D`` with a non-zero (either way);
+    islands numbered by their first contact. Union–find over the blocks: ``O(blocks)``.
     """
-    c = A.shape[0] // 3
+    ptr, col, blk = D
+    c = ptr.shape[0] - 1
     parent = np.arange(c)
     for k in range(c):
-        for j in range(k + 1, c):
+        for e in range(ptr[k], ptr[k + 1]):
+            j = col[e]
+            if j == k:
+                continue
             joined = False
             for a in range(3):
                 for b in range(3):
-                    if A[3 * k + a, 3 * j + b] != 0.0 or A[3 * j + b, 3 * k + a] != 0.0:
+                    if blk[e, a, b] != 0.0:
                         joined = True
-                        break
-                if joined:
-                    break
             if joined:
                 rk, rj = k, j
                 while parent[rk] != rk:
@@ -768,73 +878,103 @@ def islands(A: np.ndarray) -> tuple:
 
 
 @njit(cache=True)
-def solve_rows(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
+def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
                normal_only: bool, equal: np.ndarray, has_equal: bool, sliding: np.ndarray,
                prm: np.ndarray, cnt: np.ndarray) -> tuple:
-    """Return ``(p, ok)``: :func:`solve_island` on each island (``ContactSteps.solve``)."""
-    label, count = islands(A)
-    if count <= 1:
-        return solve_island(A, q, mu, start, normal_only, equal, has_equal, sliding, prm, cnt)
+    """
+    Return ``(p, ok)``: :func:`solve_island` on each island (``ContactSteps.solve``).
+
+    ``D``: the rows' operator by its blocks (:func:`delassus`). Each island's symmetric
+    part (``normal_only``: of its normal rows alone) is gathered from its blocks straight
+    into the dense matrix its solve factors, ``O(blocks)`` beside that matrix's zeroing.
+    """
+    ptr, col, blk = D
+    c = ptr.shape[0] - 1
     m = q.shape[0]
+    step3 = 1 if normal_only else 3
+    label, count = islands(D)
+    if count == 0:   # (no rows: the empty solve, counted as the Python path's)
+        return solve_island(np.zeros((0, 0)), np.zeros(0), mu, np.zeros(0), normal_only,
+                            equal, has_equal, sliding, prm, cnt)
+    # The contacts of each island, increasing: members[begin[g]:begin[g + 1]].
+    begin = np.zeros(count + 1, dtype=np.int64)
+    for k in range(c):
+        begin[label[k] + 1] += 1
+    for g in range(count):
+        begin[g + 1] += begin[g]
+    members = np.empty(c, dtype=np.int64)
+    fill = begin[:count].copy()
+    at = np.empty(c, dtype=np.int64)   # each contact's place in its island
+    for k in range(c):
+        g = label[k]
+        members[fill[g]] = k
+        at[k] = fill[g] - begin[g]
+        fill[g] += 1
     out = np.zeros(m)
     for g in range(count):
-        idx = _where(label == g)
+        idx = members[begin[g]:begin[g + 1]]
         n = idx.shape[0]
-        rows = np.empty(3 * n, dtype=np.int64)
+        nr = step3 * n
+        # A_sym = (A + Aᵀ) / 2, each block's halves added where they land (halving is
+        # exact: the same values as halving the sum).
+        Ar = np.zeros((nr, nr))
+        qr = np.empty(nr)
+        sr = np.empty(nr)
         for x in range(n):
-            for a in range(3):
-                rows[3 * x + a] = 3 * idx[x] + a
-        Ag = np.empty((3 * n, 3 * n))
-        for x in range(3 * n):
-            for y in range(3 * n):
-                Ag[x, y] = A[rows[x], rows[y]]
-        p, ok = solve_island(Ag, q[rows], mu[idx], start[rows], normal_only, equal[idx],
-                             has_equal, sliding[idx], prm, cnt)
+            k = idx[x]
+            for a in range(step3):
+                qr[step3 * x + a] = q[3 * k + a]
+                sr[step3 * x + a] = start[3 * k + a]
+            for e in range(ptr[k], ptr[k + 1]):
+                if label[col[e]] != g:   # (a block of zeros)
+                    continue
+                z = at[col[e]]
+                for a in range(step3):
+                    for b in range(step3):
+                        v = 0.5 * blk[e, a, b]
+                        Ar[step3 * x + a, step3 * z + b] += v
+                        Ar[step3 * z + b, step3 * x + a] += v
+        p, ok = solve_island(Ar, qr, mu[idx], sr, normal_only, equal[idx], has_equal,
+                             sliding[idx], prm, cnt)
         if not ok:
             return np.zeros(m), False
-        for x in range(3 * n):
-            out[rows[x]] = p[x]
+        for x in range(n):
+            for a in range(step3):
+                out[3 * idx[x] + a] = p[step3 * x + a]
     return out, True
 
 
 @njit(cache=True)
-def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
+def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarray,
                  normal_only: bool, equal: np.ndarray, has_equal: bool, sliding: np.ndarray,
                  prm: np.ndarray, cnt: np.ndarray) -> tuple:
     """
     Return ``(p, ok)``: the rows' impulses as :meth:`..contact_step.ContactSteps.solve_island`.
 
-    ``start`` (3c,) the warm start; ``equal`` (c,): the contacts whose normal row is
-    an equality (the projections; ``has_equal`` False: none, and the residual is
+    ``Ar`` the island's rows' operator, symmetric (:func:`solve_rows` gathers it;
+    ``normal_only``: the normal rows' alone, one a contact), ``qr``, ``start`` (the warm
+    start) its rows'; ``p`` the same rows'. ``equal`` (c,): the contacts whose normal row
+    is an equality (the projections; ``has_equal`` False: none, and the residual is
     counted); ``sliding`` (c,) contacts with one friction row. ``ok`` False: a row no
     impulse moves (the Python path's case, given back).
     """
-    m = q.shape[0]
-    nr = m // 3 if normal_only else m
+    nr = qr.shape[0]
     # The work arrays, three allocations (a small island's solve is mostly their cost).
-    mats = np.empty((3, nr, nr))
-    vecs = np.empty((12, nr))
-    ints = np.empty((6, nr), dtype=np.int64)
-    idx = ints[0]
-    for k in range(nr):
-        idx[k] = 3 * k if normal_only else k
+    mats = np.empty((2, nr, nr))
+    vecs = np.empty((11, nr))
+    ints = np.empty((5, nr), dtype=np.int64)
     dmax = 0.0
     for k in range(nr):
-        dmax = max(dmax, A[idx[k], idx[k]])
+        dmax = max(dmax, Ar[k, k])
     for k in range(nr):
-        if not A[idx[k], idx[k]] > 1e-12 * dmax:
-            return np.zeros(m), False
-    Ar, Ap, L = mats[0], mats[1], mats[2]
-    qr, p, lo, hi, qp, sp = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5]
-    work = vecs[6:]
-    order, first, marks = ints[1], ints[2], ints[3:]
+        if not Ar[k, k] > 1e-12 * dmax:
+            return np.zeros(nr), False
+    Ap, L = mats[0], mats[1]
+    p, lo, hi, qp, sp = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
+    work = vecs[5:]
+    order, first, marks = ints[0], ints[1], ints[2:]
+    qmax = 0.0
     for a in range(nr):
-        qr[a] = q[idx[a]]
-        for b in range(nr):
-            Ar[a, b] = 0.5 * (A[idx[a], idx[b]] + A[idx[b], idx[a]])
-    dmax, qmax = 0.0, 0.0
-    for a in range(nr):
-        dmax = max(dmax, Ar[a, a])
         qmax = max(qmax, abs(qr[a]))
     rho = prm[P_PROXIMAL] * dmax
     floor = 64.0 * EPS * qmax / dmax
@@ -844,7 +984,7 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
         Ap[a, a] += rho
     pat = pattern(Ap)   # (the box solves' sums run over its non-zeros)
     for a in range(nr):
-        p[a] = start[idx[a]]
+        p[a] = start[a]
         lo[a], hi[a] = 0.0, np.inf
     step3 = 1 if normal_only else 3
     for a in range(0, nr, step3):
@@ -948,10 +1088,7 @@ def solve_island(A: np.ndarray, q: np.ndarray, mu: np.ndarray, start: np.ndarray
         cnt[C_COMPLEMENTARITY] = max(cnt[C_COMPLEMENTARITY],
                                      residual(Ar, qr, p, mu, normal_only, sliding, tol,
                                               equal, False))
-    out = np.zeros(m)
-    for a in range(nr):
-        out[idx[a]] = p[a]
-    return out, True
+    return p.copy(), True
 
 
 @njit(cache=True)
@@ -1645,7 +1782,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         hit_depth = -np.inf
         # (the contacts at the trial's end that continue loaded rows, matched with the new
         # contacts' match and handed to _accept)
-        held_end, have_held = np.zeros(0, dtype=np.bool_), False
+        held_end, have_held = deep0, False   # (an array of its type, not read)
         if events < max_events:
             cont, held_end = _known(ctx, con, held_sel, ov, state, con_trial, trial,
                                     _loaded(record))
@@ -1737,8 +1874,8 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
     for k in range(c):
         if rel[3 * k] < -rate:
             q[3 * k] += (0.0 if inelastic or rel[3 * k] >= -bounce else e[k]) * rel[3 * k]
-    A = delassus(Ga, Gb, ba, bb, minv)
-    p, ok = solve_rows(A, q, mu, np.zeros(3 * c), False, np.zeros(c, dtype=np.bool_), False,
+    D = delassus(Ga, Gb, ba, bb, minv)
+    p, ok = solve_rows(D, q, mu, np.zeros(3 * c), False, np.zeros(c, dtype=np.bool_), False,
                        sliding, prm, cnt)
     if not ok:
         return BAIL, y, False, n_log
@@ -1811,7 +1948,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         con1 = _detect_ctx(ctx, free)
         code = GROW if con1[0] < 0 else DONE
         return code, free, n_applied, flags, warm, (sel, np.zeros((0, 3)), con, y0, t), con1
-    A = delassus(Ga, Gb, ba, bb, minv)
+    D = delassus(Ga, Gb, ba, bb, minv)
     # A row of a contact apart by its gap g asks v_n⁺ ≥ min(0, −2 g / h − v_n): the step
     # closes at most g (``_held_step``).
     shift = np.zeros(3 * c)
@@ -1830,19 +1967,19 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
                 start[3 * k] = w_pn[x]
                 break
     no_equal = np.zeros(c, dtype=np.bool_)
-    p, ok = solve_rows(A, q + shift, mu, start, False, no_equal, False, sliding, prm, cnt)
+    p, ok = solve_rows(D, q + shift, mu, start, False, no_equal, False, sliding, prm, cnt)
     if not ok:
         return _unheld(BAIL, y0, t, flags, warm)
-    w = _affine(A, p, q)
+    w = block_affine(D, p, q)
     turned, frame2, sliding2 = slip_turn(frame, mu, sliding, p, w, rate,
                                          prm[P_FRICTION_TOLERANCE])
     if turned:
         pos0, quat0, _, _ = state_parts(y0)
         frame, sliding = frame2, sliding2
         Ga, Gb = jacobian(frame, ba, bb, la, lb, rotations(quat0), n)
-        A = delassus(Ga, Gb, ba, bb, minv)
+        D = delassus(Ga, Gb, ba, bb, minv)
         q = apply_rows(Ga, Gb, ba, bb, fvel, fom)
-        p, ok = solve_rows(A, q + shift, mu, p, False, no_equal, False, sliding, prm, cnt)
+        p, ok = solve_rows(D, q + shift, mu, p, False, no_equal, False, sliding, prm, cnt)
         if not ok:
             return _unheld(BAIL, y0, t, flags, warm)
     pos0, quat0, _, _ = state_parts(y0)
@@ -1879,7 +2016,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         G1a, G1b = _rows_at(sa_r, sb_r, ba, bb, pt_r, pos0, R0, frame, Ga, Gb, con1, npos,
                             rotations(nquat), radius, count)
         w1 = apply_rows(G1a, G1b, ba, bb, nvel, nom)
-        model_w = _affine(A, p, q)
+        model_w = block_affine(D, p, q)
         off, qmax = 0.0, 0.0
         for x in range(3 * c):
             off = max(off, abs(w1[x] - model_w[x]))
@@ -1888,7 +2025,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
             break
         cnt[C_CORRECTIONS] += 1
         q = q + (w1 - model_w)
-        p, ok = solve_rows(A, q + shift, mu, p, False, no_equal, False, sliding, prm, cnt)
+        p, ok = solve_rows(D, q + shift, mu, p, False, no_equal, False, sliding, prm, cnt)
         if not ok:
             return _unheld(BAIL, y0, t, flags, warm)
     if not have1:
@@ -2040,7 +2177,7 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
         idx = _where(pick)
         pr = _make_rows(ctx, y, con, idx)
         m = idx.shape[0]
-        A = delassus(pr[8], pr[9], pr[10], pr[11], minv)
+        D = delassus(pr[8], pr[9], pr[10], pr[11], minv)
         q3 = np.zeros(3 * m)
         biggest = 0.0
         for k in range(m):
@@ -2049,7 +2186,7 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
         lift = np.zeros(m, dtype=np.bool_)
         for k in range(m):
             lift[k] = held[idx[k]] and con[7][idx[k]] < -loc
-        p, ok = solve_rows(A, q3, pr[4], np.zeros(3 * m), True, lift, True, pr[6], prm, cnt)
+        p, ok = solve_rows(D, q3, pr[4], np.zeros(3 * m), True, lift, True, pr[6], prm, cnt)
         if not ok:
             return BAIL, y, con
         moved = False
@@ -2090,11 +2227,11 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
         near[k] = abs(hvn[k]) <= prm[P_HOLD_RATE]
     sr = _subset(hr, _where(near))
     nn = sr[0].shape[0]
-    A2 = delassus(sr[8], sr[9], sr[10], sr[11], minv)
+    D2 = delassus(sr[8], sr[9], sr[10], sr[11], minv)
     q3 = np.zeros(3 * nn)
     for x in range(nn):
         q3[3 * x] = sr[7][x]
-    p2, ok = solve_rows(A2, q3, sr[4], np.zeros(3 * nn), True, np.ones(nn, dtype=np.bool_),
+    p2, ok = solve_rows(D2, q3, sr[4], np.zeros(3 * nn), True, np.ones(nn, dtype=np.bool_),
                         True, sr[6], prm, cnt)
     if not ok:
         return BAIL, y, con
