@@ -494,6 +494,69 @@ def _random_contact_lcp(rng):
     return (G * minv) @ G.T, G @ v, np.full(nc, rng.choice([0.3, 0.5, 1.0]))
 
 
+def _loaded_contact_lcp(rng, nb=40, nc=60, r=0.05):
+    """
+    Return ``(A, q, mu)``: ``nc`` contacts of ``nb`` spheres, as :func:`_random_contact_lcp`.
+
+    Every normal row approaching (``q_n`` −5 to −15 mm/s), the tangents' ``q`` 4 mm/s:
+    most contacts loaded, so Newton's systems have over a hundred unknowns.
+    """
+    G = np.zeros((3 * nc, 6 * nb))
+    for k in range(nc):
+        a = int(rng.integers(nb))
+        b = int(rng.integers(-1, nb - 1))
+        b = b + 1 if b >= a else b
+        n = rng.standard_normal(3)
+        n /= np.linalg.norm(n)
+        t1 = np.cross(n, (1.0, 0.0, 0.0) if abs(n[0]) < 0.9 else (0.0, 1.0, 0.0))
+        t1 /= np.linalg.norm(t1)
+        F = np.stack([n, t1, np.cross(n, t1)])
+        G[3 * k:3 * k + 3, 6 * a:6 * a + 3] = F
+        G[3 * k:3 * k + 3, 6 * a + 3:6 * a + 6] = np.cross(-r * n, F)
+        if b >= 0:
+            G[3 * k:3 * k + 3, 6 * b:6 * b + 3] = -F
+            G[3 * k:3 * k + 3, 6 * b + 3:6 * b + 6] = -np.cross(r * n, F)
+    minv = np.tile(np.array([1.0] * 3 + [1.0 / (0.4 * r * r)] * 3), nb)
+    q = np.empty(3 * nc)
+    q[0::3] = -0.01 * (0.5 + rng.random(nc))
+    q[1::3], q[2::3] = 0.004 * rng.standard_normal((2, nc))
+    return (G * minv) @ G.T, q, np.full(nc, 0.5)
+
+
+def test_newtons_large_systems_through_lapack_are_the_python_paths():
+    # Beyond NEWTON_LAPACK_ROWS unknowns the compiled Newton solves each guess's system
+    # by LAPACK's inverse (refined on it as the loops' LU is), the Python path by
+    # scipy's LU. Both must take the same guesses and end alike: ok in the same cases,
+    # an ok result within PIVOT_TOLERANCE (what ok means), and the same impulses to
+    # the rounding of the proximal solve: its condition number up to 1/PROXIMAL = 1e6
+    # (these A are singular), times m eps for the solve, of the largest impulse.
+    from rigid_body_sim.core import contact_step as cs
+    from rigid_body_sim.core.kernels import contact_step as kern
+    sim = Simulation([RigidBody('s', 1.0, (0.004,) * 3)], [Gravity()], dt=1e-3,
+                     shapes=[CollisionShape('plane', None),
+                             CollisionShape('sphere', 's', radius=0.1)])
+    prm = sim.contact.kernel_parameters()
+    eps = np.finfo(float).eps
+    large = 0
+    for seed in range(6):
+        A, q, mu = _loaded_contact_lcp(np.random.default_rng(seed))
+        m, c = len(q), len(mu)
+        p_py, ok_py = cs._newton(A, q, mu, None, np.zeros(m, dtype=bool), np.zeros(m))
+        p, ok = kern.newton(A, q, mu, np.zeros(c, dtype=bool), np.zeros(m), prm)
+        assert ok == ok_py
+        if not ok:
+            continue
+        pn = p[0::3]
+        unknowns = np.count_nonzero(pn > 0.0) + sum(
+            pn[k] > 0.0 and abs(p[3 * k + j]) < mu[k] * pn[k] for k in range(c) for j in (1, 2))
+        large += unknowns > kern.NEWTON_LAPACK_ROWS
+        scale = float(np.max(np.abs(A) @ np.abs(p) + np.abs(q)))
+        assert cs._residual(A, q, p, mu, False) <= cs.PIVOT_TOLERANCE * scale
+        np.testing.assert_allclose(p, p_py, rtol=0,
+                                   atol=m * eps / cs.PROXIMAL * float(np.max(np.abs(p_py))))
+    assert large >= 3   # (the LAPACK branch met)
+
+
 @pytest.mark.parametrize('newton', [True, False])
 def test_lcps_the_fixed_point_cannot_solve_are_solved_as_in_the_python_path(
         newton, monkeypatch):

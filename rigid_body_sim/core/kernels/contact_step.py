@@ -79,6 +79,10 @@ EPS = 2.220446049250313e-16
 #: Up to this many rows ``A p + q`` is a loop, beyond a BLAS call (whose overhead is most
 #: of a small product's cost).
 AFFINE_LOOP_ROWS = 48
+#: Beyond this many unknowns Newton's linear solves go through LAPACK's inverse (blocked:
+#: three times the loops' LU's flops, and faster beyond about 50 unknowns, 1.6 times at
+#: 100 and 4 at 300, measured with one BLAS thread); up to it, the loops' LU.
+NEWTON_LAPACK_ROWS = 64
 #: The squared distance (m²) within which a contact takes the last step's normal impulse.
 WARM_RADIUS2 = 1e-6
 
@@ -1136,6 +1140,20 @@ def lu_solve(LU: np.ndarray, piv: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def _inverse(K: np.ndarray) -> tuple:
+    """Return ``(K⁻¹, ok)`` by LAPACK (``ok`` False: ``K`` singular, or not finite)."""
+    try:
+        Ki = np.linalg.inv(K.T).T   # (LAPACK's result is column-major: its transpose's)
+    except Exception:
+        return K, False
+    for a in range(Ki.shape[0]):
+        for b in range(Ki.shape[1]):
+            if not np.isfinite(Ki[a, b]):
+                return K, False
+    return Ki, True
+
+
+@njit(cache=True)
 def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
            p0: np.ndarray, prm: np.ndarray) -> tuple:
     """
@@ -1144,7 +1162,8 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
     Each iteration guesses from ``y = p − w / diag(A)`` the loaded normal rows and the
     friction rows on their bounds ``±μ p_n`` or inside them, and solves that guess's
     linear system (``w = 0`` on the loaded normal rows and the friction rows inside)
-    by a proximal LU solve, refined on its factors. ``ok``: within
+    by a proximal LU solve, refined on its factors (beyond :data:`NEWTON_LAPACK_ROWS`
+    unknowns LAPACK's inverse, refined the same way). ``ok``: within
     ``P_PIVOT_TOLERANCE``.
     """
     m = q.shape[0]
@@ -1194,7 +1213,13 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
             Kp = K.copy()
             for a in range(nu):
                 Kp[a, a] += prm[P_PROXIMAL] * dmax
-            LU, piv, ok = lu_factor(Kp)
+            lapack = nu > NEWTON_LAPACK_ROWS
+            if lapack:
+                Ki, ok = _inverse(Kp)
+                LU, piv = Ki, column   # (unread: of their types)
+            else:
+                LU, piv, ok = lu_factor(Kp)
+                Ki = LU
             if not ok:
                 return p, False
             step = np.zeros(nu)
@@ -1206,7 +1231,7 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
                     for b in range(nu):
                         v -= K[a, b] * zs[b]
                     rhs[a] = v
-                step = step + lu_solve(LU, piv, rhs)
+                step = step + (Ki @ rhs if lapack else lu_solve(LU, piv, rhs))
             z = z + step
         p = np.zeros(m)
         for j in range(m):
