@@ -33,6 +33,12 @@ They import only one another, numba, numpy and math; never the classes of
 ``convex``
     GJK, EPA and the features of convex shapes: the pairs without a closed form (a
     cylinder on a box or on a cylinder).
+``contact_step``
+    A whole step of free bodies with contact: the rows, the Delassus operator by its
+    3 × 3 blocks, the contact LCP island by island, impacts located, depths projected.
+``sparse_box``
+    The box QP of a block-sparse operator by MPRGP (issue 21, not yet a path of the
+    step): the inner solve for islands too large to factor densely.
 
 :mod:`..kernel_cache` treats every module of this package as one unit.
 """
