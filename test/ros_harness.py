@@ -2,19 +2,23 @@
 Helpers for tests through real DDS: the node in its own process, a client in this one.
 
 Each test gets its own random ``ROS_DOMAIN_ID`` and localhost-only discovery,
-so tests are isolated from each other and from anything else on the machine.
+so tests are isolated from each other and from anything else on the machine; the id is
+held by a lock file while the test runs, so that two suites run at once on one machine
+(two CI jobs, a developer's run beside CI) never draw the same one.
 Every wait is on an event (a message, a service reply, a process exit) with a
 deadline, never a fixed sleep.
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 from pathlib import Path
 import random
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from typing import Callable, Optional
 
@@ -162,9 +166,41 @@ class Client:
         rclpy.try_shutdown(context=self.context)
 
 
+#: The domain ids this process holds: id -> its lock file, open (released on close or exit).
+_HELD: dict = {}
+
+
 def random_domain() -> int:
-    """Return a DDS domain id unlikely to be in use (Fast DDS allows 0 to 232)."""
-    return random.SystemRandom().randint(11, 200)
+    """
+    Return a random DDS domain id that no other test on this machine holds, and hold it.
+
+    Fast DDS allows 0 to 232; these draw from 11 to 200. Each id is held by an exclusive
+    ``flock`` on a file of its own in the temporary directory, until
+    :func:`release_domain` or this process's exit (the kernel drops the lock then, so a
+    killed run leaves none behind). Two suites at once on one machine each drew from the
+    same 190 ids, and met on one (a node's messages reaching the other suite's test).
+    """
+    directory = Path(tempfile.gettempdir()) / 'rigid_body_sim-dds-domains'
+    directory.mkdir(exist_ok=True)
+    ids = list(range(11, 201))
+    random.SystemRandom().shuffle(ids)
+    for domain in ids:
+        lock = open(directory / f'{domain}.lock', 'w')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:   # (held by another test, here or in another process)
+            lock.close()
+            continue
+        _HELD[domain] = lock
+        return domain
+    raise RuntimeError(f'every DDS domain id from 11 to 200 is held ({directory})')
+
+
+def release_domain(domain: int) -> None:
+    """Let other tests draw ``domain`` again (:func:`random_domain`)."""
+    lock = _HELD.pop(domain, None)
+    if lock is not None:
+        lock.close()
 
 
 def ros_session(tmp_path):
@@ -198,6 +234,7 @@ def ros_session(tmp_path):
         r.client.close()
         for node in r.nodes:
             node.close()
+        release_domain(domain)
 
 
 def python() -> str:
