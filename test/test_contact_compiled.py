@@ -462,16 +462,13 @@ def test_the_box_lcp_carries_its_factor_from_call_to_call_and_solves_to_rounding
     assert meta[1] == 1 and meta[2] > 0
 
 
-def _random_contact_lcp(rng):
+def _sphere_rows(rng, nb, nc, r=0.05):
     """
-    Return ``(A, q, mu)``: the contact rows of a few spheres touching one another and the world.
+    Return ``(G, minv)``: ``nc`` contacts of ``nb`` spheres (radius ``r``, 1 kg) at random.
 
-    ``nb`` spheres (radius 0.05 m, 1 kg) and ``nc`` contacts between random pairs (or a
-    sphere and the world) along random normals, each a normal and two tangent rows on
-    the relative velocity of the touching points; ``A = G M⁻¹ Gᵀ``, ``q = G v`` at a
-    random velocity (falling at 1 cm/s). More rows than freedoms: redundant contacts.
+    Each between a random pair (or a sphere and the world) along a random normal: a normal
+    and two tangent rows on the relative velocity of the touching points.
     """
-    nb, nc, r = int(rng.integers(2, 6)), int(rng.integers(4, 16)), 0.05
     G = np.zeros((3 * nc, 6 * nb))
     for k in range(nc):
         a = int(rng.integers(nb))
@@ -488,35 +485,31 @@ def _random_contact_lcp(rng):
         if b >= 0:
             G[3 * k:3 * k + 3, 6 * b:6 * b + 3] = -F
             G[3 * k:3 * k + 3, 6 * b + 3:6 * b + 6] = -np.cross(r * n, F)
-    minv = np.tile(np.array([1.0] * 3 + [1.0 / (0.4 * r * r)] * 3), nb)
+    return G, np.tile(np.array([1.0] * 3 + [1.0 / (0.4 * r * r)] * 3), nb)
+
+
+def _random_contact_lcp(rng):
+    """
+    Return ``(A, q, mu)``: the contact rows of a few spheres touching one another and the world.
+
+    ``nb`` spheres and ``nc`` contacts (:func:`_sphere_rows`); ``A = G M⁻¹ Gᵀ``, ``q = G v``
+    at a random velocity (falling at 1 cm/s). More rows than freedoms: redundant contacts.
+    """
+    nb, nc = int(rng.integers(2, 6)), int(rng.integers(4, 16))
+    G, minv = _sphere_rows(rng, nb, nc)
     v = 0.01 * rng.standard_normal(6 * nb)
     v[2::6] -= 0.01
     return (G * minv) @ G.T, G @ v, np.full(nc, rng.choice([0.3, 0.5, 1.0]))
 
 
-def _loaded_contact_lcp(rng, nb=40, nc=60, r=0.05):
+def _loaded_contact_lcp(rng, nb=40, nc=60):
     """
-    Return ``(A, q, mu)``: ``nc`` contacts of ``nb`` spheres, as :func:`_random_contact_lcp`.
+    Return ``(A, q, mu)``: ``nc`` contacts of ``nb`` spheres (:func:`_sphere_rows`).
 
     Every normal row approaching (``q_n`` −5 to −15 mm/s), the tangents' ``q`` 4 mm/s:
     most contacts loaded, so Newton's systems have over a hundred unknowns.
     """
-    G = np.zeros((3 * nc, 6 * nb))
-    for k in range(nc):
-        a = int(rng.integers(nb))
-        b = int(rng.integers(-1, nb - 1))
-        b = b + 1 if b >= a else b
-        n = rng.standard_normal(3)
-        n /= np.linalg.norm(n)
-        t1 = np.cross(n, (1.0, 0.0, 0.0) if abs(n[0]) < 0.9 else (0.0, 1.0, 0.0))
-        t1 /= np.linalg.norm(t1)
-        F = np.stack([n, t1, np.cross(n, t1)])
-        G[3 * k:3 * k + 3, 6 * a:6 * a + 3] = F
-        G[3 * k:3 * k + 3, 6 * a + 3:6 * a + 6] = np.cross(-r * n, F)
-        if b >= 0:
-            G[3 * k:3 * k + 3, 6 * b:6 * b + 3] = -F
-            G[3 * k:3 * k + 3, 6 * b + 3:6 * b + 6] = -np.cross(r * n, F)
-    minv = np.tile(np.array([1.0] * 3 + [1.0 / (0.4 * r * r)] * 3), nb)
+    G, minv = _sphere_rows(rng, nb, nc)
     q = np.empty(3 * nc)
     q[0::3] = -0.01 * (0.5 + rng.random(nc))
     q[1::3], q[2::3] = 0.004 * rng.standard_normal((2, nc))
