@@ -550,6 +550,72 @@ def test_newtons_large_systems_through_lapack_are_the_python_paths():
     assert large >= 3   # (the LAPACK branch met)
 
 
+def test_islands_too_large_to_factor_are_solved_by_their_blocks_to_the_contact_conditions():
+    # An island of more than SPARSE_CONTACTS contacts is solved by its blocks alone: the
+    # friction boxes' proximal fixed point with MPRGP inside, to SPARSE_RESIDUAL of the
+    # rows' velocity scale. The threshold at 0 sends every island there; on eight random
+    # sphere contacts (90 contacts on 60 spheres, redundant: A singular), each of the
+    # three kinds of solve a step asks for meets the contact conditions, by the Python
+    # path's own residual, as the dense path does:
+    # - with friction (mu = 0.5): the solutions are a set, and the residual is the test;
+    # - frictionless, normal rows alone (the impacts' kind): the velocity jump G M⁻¹ Gᵀ p
+    #   is unique, and two impulses within a residual are apart in the energy norm by
+    #   (p₁ − p₂)ᵀ A (p₁ − p₂) = (p₁ − p₂)ᵀ (w₁ − w₂) ≤ p₁·w₁ + p₂·w₂ + p₁·w₂⁻ + p₂·w₁⁻
+    #   (w⁻ the negative parts; zero at exact solutions), plus that sum's rounding;
+    # - normal rows as equalities (the depth projection's linear system, q = G v in A's
+    #   range): every |w| within the residual.
+    from rigid_body_sim.core import contact_step as cs
+    from rigid_body_sim.core.kernels import contact_step as kern
+    sim = Simulation([RigidBody('s', 1.0, (0.004,) * 3)], [Gravity()], dt=1e-3,
+                     shapes=[CollisionShape('plane', None),
+                             CollisionShape('sphere', 's', radius=0.1)])
+    dense = sim.contact.kernel_parameters()
+    sparse = dense.copy()
+    sparse[kern.P_SPARSE_CONTACTS] = 0
+    eps = np.finfo(float).eps
+    nb, nc = 60, 90
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        G, minv = _sphere_rows(rng, nb, nc)
+        v = 0.01 * rng.standard_normal(6 * nb)
+        v[2::6] -= 0.01
+        A, q, mu = (G * minv) @ G.T, G @ v, np.full(nc, 0.5)
+        D = kern.blocks(A)
+        _, count = kern.islands(D)
+        none, every = np.zeros(nc, dtype=bool), np.ones(nc, dtype=bool)
+        An, qn = A[0::3, 0::3], q[0::3]
+        jumps = []
+        for prm in (dense, sparse):
+            cnt = np.zeros(len(kern.COUNTERS))
+            p, ok = kern.solve_rows(D, q, mu, np.zeros(3 * nc), False, none, False, none,
+                                    prm, cnt)
+            assert ok and cnt[kern.C_FAILURES] == 0
+            assert cnt[kern.C_SPARSE] == (count if prm is sparse else 0)
+            scale = float(np.max(np.abs(A) @ np.abs(p) + np.abs(q)))
+            assert cs._residual(A, q, p, mu, False) <= cs.SPARSE_RESIDUAL * scale
+            # Frictionless impacts.
+            p, ok = kern.solve_rows(D, q, mu, np.zeros(3 * nc), True, none, False, none,
+                                    prm, cnt)
+            pn = p[0::3]
+            assert ok and cnt[kern.C_FAILURES] == 0 and np.all(pn >= 0.0)
+            assert np.all(p[1::3] == 0.0) and np.all(p[2::3] == 0.0)
+            w = An @ pn + qn
+            scale = float(np.max(np.abs(An) @ np.abs(pn) + np.abs(qn)))
+            assert np.max(np.abs(np.minimum(pn * np.diag(An), w))) <= cs.SPARSE_RESIDUAL * scale
+            jumps.append((pn, w))
+            # The projection's equalities.
+            p, ok = kern.solve_rows(D, q, mu, np.zeros(3 * nc), True, every, True, none,
+                                    prm, cnt)
+            pn = p[0::3]
+            assert ok and cnt[kern.C_FAILURES] == 0
+            scale = float(np.max(np.abs(An) @ np.abs(pn) + np.abs(qn)))
+            assert np.max(np.abs(An @ pn + qn)) <= cs.SPARSE_RESIDUAL * scale
+        (p1, w1), (p2, w2) = jumps
+        bound = p1 @ w1 + p2 @ w2 + p1 @ np.maximum(-w2, 0.0) + p2 @ np.maximum(-w1, 0.0)
+        rounding = nc * eps * (np.abs(p1) + np.abs(p2)) @ np.abs(An) @ (np.abs(p1) + np.abs(p2))
+        assert (p1 - p2) @ An @ (p1 - p2) <= abs(bound) + rounding
+
+
 @pytest.mark.parametrize('newton', [True, False])
 def test_lcps_the_fixed_point_cannot_solve_are_solved_as_in_the_python_path(
         newton, monkeypatch):

@@ -750,6 +750,18 @@ def test_joints_added_and_removed_at_run_time_change_which_bodies_collide():
     assert pairs() > 0 and sim.constraint_names == []
 
 
+def _box_walls(wall):
+    """Return the ground and four walls (planes, μ = 0.5) ``wall`` from the vertical axis."""
+    s2 = math.sqrt(0.5)
+    return [CollisionShape('plane', None, friction=0.5, name='ground')] + [
+        CollisionShape('plane', None, position_body=pos, orientation_xyzw=q, friction=0.5,
+                       name=name)
+        for name, pos, q in (('x+', (wall, 0, 0), (0, -s2, 0, s2)),
+                             ('x-', (-wall, 0, 0), (0, s2, 0, s2)),
+                             ('y+', (0, wall, 0), (s2, 0, 0, s2)),
+                             ('y-', (0, -wall, 0), (-s2, 0, 0, s2)))]
+
+
 def _poured(count=27, r=0.05, e=0.3):
     """Return spheres in a grid above the ground, in a box of four walls (planes), and its size."""
     side = round(count ** (1 / 3))
@@ -763,34 +775,17 @@ def _poured(count=27, r=0.05, e=0.3):
             -half + (i + 0.5) * 2.2 * r + jitter[0], -half + (j + 0.5) * 2.2 * r + jitter[1],
             r + 0.02 + level * 2.2 * r)))
     wall = half + 0.02
-    s2 = math.sqrt(0.5)
-    shapes = [CollisionShape('plane', None, friction=0.5, name='ground')] + [
-        CollisionShape('plane', None, position_body=pos, orientation_xyzw=q, friction=0.5,
-                       name=name)
-        for name, pos, q in (('x+', (wall, 0, 0), (0, -s2, 0, s2)),
-                             ('x-', (-wall, 0, 0), (0, s2, 0, s2)),
-                             ('y+', (0, wall, 0), (s2, 0, 0, s2)),
-                             ('y-', (0, -wall, 0), (-s2, 0, 0, s2)))]
-    shapes += [CollisionShape('sphere', b.name, radius=r, friction=0.5, restitution=e)
-               for b in bodies]
+    shapes = _box_walls(wall) + [
+        CollisionShape('sphere', b.name, radius=r, friction=0.5, restitution=e) for b in bodies]
     return Simulation(bodies, [Gravity()], integrator='rkmk4', dt=1e-3, shapes=shapes), wall
 
 
-@pytest.mark.parametrize('compiled, steps', [(True, 300), (False, 120)])
-def test_spheres_poured_into_a_box_gain_no_energy_and_stay_inside(compiled, steps):
-    # 27 spheres (three layers, e = 0.3, μ = 0.5) dropped into a box of four walls: they
-    # collapse onto each other, tens of impacts a step at first. The energy never rises
-    # above its start, and in no step by more than a projection can add (each sphere
-    # raised by at most the deepest depth projected: N m g d), no sphere
-    # leaves the box or sinks into the ground beyond the depth bound, and a step's end
-    # leaves no overlap deeper than 1e-4 m (steps cut at 32 events stand and are
-    # projected). This was the case that found overlaps left by one step masking every
-    # impact of the next (the step stood unlocated) and held contacts jamming the
-    # projection: energy rose by 80 % in 1 s and spheres went through the walls.
-    # Both paths: the compiled steps, and the Python path (through the collapse, ~0.09 s).
-    sim, wall = _poured()
-    sim.contact.compiled = compiled
-    r, count = 0.05, 27
+def _stepped_inside(sim, wall, steps, r=0.05):
+    """
+    Step spheres of radius ``r`` in a box; return the energies and the deepest overlap left.
+
+    Each step, every sphere must stay inside the walls and above the ground to 1e-4 m.
+    """
     energy = [sim.diagnostics().total_energy]
     deepest = 0.0
     for _ in range(steps):
@@ -800,11 +795,80 @@ def test_spheres_poured_into_a_box_gain_no_energy_and_stay_inside(compiled, step
         pos = sim.state.pos_com_world
         assert np.all(np.abs(pos[:, :2]) <= wall - r + 1e-4)
         assert np.all(pos[:, 2] >= r - 1e-4)
+    return energy, deepest
+
+
+@pytest.mark.parametrize('compiled, steps, sparse', [(True, 300, False), (False, 120, False),
+                                                     (True, 300, True)])
+def test_spheres_poured_into_a_box_gain_no_energy_and_stay_inside(compiled, steps, sparse):
+    # 27 spheres (three layers, e = 0.3, μ = 0.5) dropped into a box of four walls: they
+    # collapse onto each other, tens of impacts a step at first. The energy never rises
+    # above its start, and in no step by more than a projection can add (each sphere
+    # raised by at most the deepest depth projected: N m g d), no sphere
+    # leaves the box or sinks into the ground beyond the depth bound, and a step's end
+    # leaves no overlap deeper than 1e-4 m (steps cut at 32 events stand and are
+    # projected). This was the case that found overlaps left by one step masking every
+    # impact of the next (the step stood unlocated) and held contacts jamming the
+    # projection: energy rose by 80 % in 1 s and spheres went through the walls.
+    # Both paths: the compiled steps, and the Python path (through the collapse, ~0.09 s);
+    # and the compiled steps with every island solved as one too large to factor (by its
+    # blocks alone, to SPARSE_RESIDUAL: the 1000 spheres' path), without a failure.
+    sim, wall = _poured()
+    sim.contact.compiled = compiled
+    if sparse:
+        sim.contact.sparse_contacts = 0
+    count = 27
+    energy, deepest = _stepped_inside(sim, wall, steps)
     rises = np.diff(energy)
     assert np.max(rises) <= count * 1.0 * G * sim.contact.counters['max_projected'] + 1e-9
     assert max(energy) <= energy[0] + 1e-9 and energy[-1] < 0.95 * energy[0]
     assert deepest <= 1e-4
     assert sim.contact.counters['compiled_steps'] == (steps if compiled else 0)
+    counters = sim.contact.counters
+    if sparse:
+        assert counters['lcp_sparse'] == counters['lcp_solves'] > 0
+        assert counters['lcp_failures'] == 0
+    else:
+        assert counters['lcp_sparse'] == 0
+
+
+def _packed(side=10, r=0.05, gap=1e-4):
+    """Return ``side³`` spheres packed in a box, each ``gap`` from its neighbours, and the wall."""
+    rng = np.random.default_rng(2)
+    pitch = 2.0 * r + gap
+    half = 0.5 * side * pitch
+    bodies = []
+    for k in range(side ** 3):
+        i, j, level = k % side, (k // side) % side, k // side // side
+        jitter = 0.25 * gap * (rng.random(2) - 0.5)
+        bodies.append(RigidBody(f's{k}', 1.0, (0.4 * r * r,) * 3, position_world=(
+            -half + (i + 0.5) * pitch + jitter[0], -half + (j + 0.5) * pitch + jitter[1],
+            r + gap + level * pitch)))
+    shapes = _box_walls(half) + [
+        CollisionShape('sphere', b.name, radius=r, friction=0.5, restitution=0.3)
+        for b in bodies]
+    return Simulation(bodies, [Gravity()], integrator='rkmk4', dt=1e-3, shapes=shapes), half
+
+
+def test_a_thousand_spheres_settling_in_a_box_are_one_island_solved_by_its_blocks():
+    # 1000 spheres (10 × 10 × 10, 0.05 m, 1 kg, μ = 0.5, e = 0.3) packed in a box of
+    # four walls, each 0.1 mm from its neighbours, the walls and the ground: within 5 ms
+    # every gap closes (√(2 gap / g) = 4.5 ms) and the pack is one island of some 4,000
+    # contacts (12,000 rows: 1.1 GB as a dense matrix), solved by its blocks alone
+    # (SPARSE_CONTACTS). Over 30 steps it gains no energy (a projection adds at most
+    # N m g d, d the deepest depth projected), no sphere leaves the box or sinks into the
+    # ground beyond the depth bound, no overlap deeper than 1e-4 m is left, and every
+    # solve meets the contact conditions to SPARSE_RESIDUAL (no failure counted).
+    sim, half = _packed()
+    count = 1000
+    energy, deepest = _stepped_inside(sim, half, 30)
+    counters = sim.contact.counters
+    assert np.max(np.diff(energy)) <= count * 1.0 * G * counters['max_projected'] + 1e-9
+    assert max(energy) <= energy[0] + 1e-9
+    assert deepest <= 1e-4
+    assert counters['compiled_steps'] == 30
+    assert counters['lcp_sparse'] > 0 and counters['lcp_failures'] == 0
+    assert len(sim.contact.detect(sim.state).depth) > 3000
 
 
 def test_a_ball_bounces_by_newtons_law_down_to_the_bounce_speed_and_then_rests():

@@ -965,6 +965,8 @@ def test_contacts_markers_and_diagnostics_report_the_cores_contacts(ros, tmp_pat
     # One contact's three rows are independent: the fixed point solves them alone.
     assert int(values['contact_lcp_solves_total']) >= 1
     assert values['contact_lcp_newton_total'] == values['contact_lcp_pivoted_total'] == '0'
+    # (An island of one contact: far below the size solved by its blocks alone.)
+    assert values['contact_lcp_sparse_total'] == values['contact_lcp_pgs_total'] == '0'
     # A ball resting on the ground: its steps at rest are the compiled kernel's.
     assert int(values['contact_compiled_steps_total']) >= 1
     assert float(values['contact_depth_left_max_m']) == 0.0

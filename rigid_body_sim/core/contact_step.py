@@ -155,6 +155,24 @@ FRICTION_ITERATIONS = 60
 STALL_ITERATIONS = 2
 #: The proximal regularization, relative to the Delassus operator's largest diagonal.
 PROXIMAL = 1e-6
+#: Islands of more contacts than this are solved by their Delassus operator's blocks alone
+#: (the compiled steps: :func:`.kernels.contact_step.solve_large_island`), where the
+#: dense path's factors cost ``O(rows³)`` and its matrix ``O(rows²)`` (a pile of a
+#: thousand spheres: one island of some 2,500 contacts, 7,500 rows, 450 MB dense). The
+#: Python path solves every island densely.
+SPARSE_CONTACTS = 500
+#: The large islands' proximal regularization, relative to the largest diagonal: at
+#: 1e-5 and below the fixed point diverged on a tall pile of 1000 spheres (the boxes
+#: that hold leave directions only ρ bounds), at 1e-3 it stalled on one (measured).
+SPARSE_PROXIMAL = 1e-4
+#: Relative to the rows' velocity scale (as :data:`RESIDUAL_TOLERANCE`): a large
+#: island's solve ends when the contact conditions hold to this.
+SPARSE_RESIDUAL = 1e-10
+#: Most iterations of a large island's fixed point, and of MPRGP within each.
+SPARSE_ITERATIONS = 100
+SPARSE_INNER = 20000
+#: Most sweeps of projected Gauss–Seidel where a large island's fixed point fails.
+PGS_SWEEPS = 5000
 #: Most guesses of Newton's method on the rows' natural map (:func:`_newton`); measured
 #: on a pile's sliding islands of 60 contacts: 2 to 8 from the fixed point's first iterate.
 NEWTON_ITERATIONS = 10
@@ -346,6 +364,9 @@ class ContactSteps:
         #: (:meth:`_step_rows`): the bounce speed; 0 under the accuracy knob (every
         #: closure located).
         self.unlocated = BOUNCE_SPEED
+        #: The compiled steps solve islands of more contacts by their blocks alone
+        #: (:data:`SPARSE_CONTACTS`).
+        self.sparse_contacts = SPARSE_CONTACTS
         self._seen: Optional[tuple] = None
         self._frames_seen: Optional[tuple] = None
         self._lazy: Optional[tuple] = None
@@ -381,7 +402,7 @@ class ContactSteps:
                          'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
                          'held_rates': 0, 'immovable_rows': 0, 'compiled_steps': 0,
                          'stepped_responses': 0, 'projection_left': 0.0,
-                         'lcp_pivoted': 0, 'lcp_newton': 0}
+                         'lcp_pivoted': 0, 'lcp_newton': 0, 'lcp_sparse': 0, 'lcp_pgs': 0}
 
     @property
     def record(self) -> ContactRecord:
@@ -1114,7 +1135,8 @@ class ContactSteps:
         d = self.detector
         key = self._kernel_key
         if key is not None and key[0] is model and key[1] is d.excluded \
-                and key[2] == (self.location, self.rate, self.bounce, self.unlocated):
+                and key[2] == (self.location, self.rate, self.bounce, self.unlocated,
+                               self.sparse_contacts):
             return self._kernel_args
         n = len(self.sim.bodies.names)
         wrench = model[2]
@@ -1125,7 +1147,8 @@ class ContactSteps:
                float(d.margin), d.hulls, d.hull_at)
         self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), self.kernel_parameters())
         self._kernel_key = (model, d.excluded,
-                            (self.location, self.rate, self.bounce, self.unlocated))
+                            (self.location, self.rate, self.bounce, self.unlocated,
+                             self.sparse_contacts))
         return self._kernel_args
 
     def kernel_parameters(self) -> np.ndarray:
@@ -1148,6 +1171,11 @@ class ContactSteps:
         prm[kern.P_PIVOT_REGULARIZATION_1], prm[kern.P_PIVOT_REGULARIZATION_2] = \
             PIVOT_REGULARIZATIONS
         prm[kern.P_BOUNCE], prm[kern.P_UNLOCATED] = self.bounce, self.unlocated
+        prm[kern.P_SPARSE_CONTACTS] = self.sparse_contacts
+        prm[kern.P_SPARSE_PROXIMAL] = SPARSE_PROXIMAL
+        prm[kern.P_SPARSE_RESIDUAL] = SPARSE_RESIDUAL
+        prm[kern.P_SPARSE_ITERATIONS] = SPARSE_ITERATIONS
+        prm[kern.P_SPARSE_INNER], prm[kern.P_PGS_SWEEPS] = SPARSE_INNER, PGS_SWEEPS
         return prm
 
     def _buffers(self) -> tuple:

@@ -854,6 +854,8 @@ class SimNode(Node):
             values['contact_lcp_solves_total'] = str(c['lcp_solves'])
             values['contact_lcp_newton_total'] = str(c['lcp_newton'])
             values['contact_lcp_pivoted_total'] = str(c['lcp_pivoted'])
+            values['contact_lcp_sparse_total'] = str(c['lcp_sparse'])
+            values['contact_lcp_pgs_total'] = str(c['lcp_pgs'])
             values['contact_impacts_total'] = str(c['impacts'])
             values['contact_events_capped_total'] = str(c['events_capped'])
             values['contact_compiled_steps_total'] = str(c['compiled_steps'])

@@ -49,6 +49,7 @@ from .contact import all_bounds, broad_phase, narrow_phase, plane_pairs, shape_f
 from .free_step import FINITE, free_step, HAS_POSITION_FORCES, outputs, state_parts
 from .layout import O_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_KIND, W_POINT, W_TORQUE, WRENCH_APPLIED
 from .so3 import quat_exp_multiply, quat_matrix
+from .sparse_box import block_product, mprgp
 
 #: Slots of the tolerances ``prm`` (the constants of :mod:`..contact_step`).
 (P_LOCATION, P_RATE, P_FRICTION_TOLERANCE, P_FRICTION_ITERATIONS, P_PROXIMAL,
@@ -56,15 +57,16 @@ from .so3 import quat_exp_multiply, quat_matrix
  P_MAX_BOUNCES, P_MAX_LOCATION_ITERATIONS, P_RESIDUAL_TOLERANCE, P_PROJECTION_PASSES,
  P_PIVOT_TOLERANCE, P_PIVOT_REGULARIZATION_1, P_PIVOT_REGULARIZATION_2,
  P_BOUNCE, P_UNLOCATED, P_STALL_ITERATIONS, P_NEWTON_ITERATIONS, P_NEWTON_REFINEMENTS,
- P_WIDTH) = range(23)
+ P_SPARSE_CONTACTS, P_SPARSE_PROXIMAL, P_SPARSE_RESIDUAL, P_SPARSE_ITERATIONS,
+ P_SPARSE_INNER, P_PGS_SWEEPS, P_WIDTH) = range(29)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
             'max_depth', 'projections', 'max_projected', 'projection_left', 'lcp_pivoted',
-            'lcp_newton')
+            'lcp_newton', 'lcp_sparse', 'lcp_pgs')
 (C_SOLVES, C_ITERATIONS_MAX, C_FAILURES, C_COMPLEMENTARITY, C_CORRECTIONS, C_HELD,
  C_IMPACTS, C_LOCATED, C_CAPPED, C_MAX_DEPTH, C_PROJECTIONS, C_MAX_PROJECTED,
- C_PROJECTION_LEFT, C_PIVOTED, C_NEWTON) = range(15)
+ C_PROJECTION_LEFT, C_PIVOTED, C_NEWTON, C_SPARSE, C_PGS) = range(17)
 #: The counters that are maxima (the others are sums).
 MAXIMA = ('lcp_iterations_max', 'complementarity_max', 'max_depth', 'max_projected',
           'projection_left')
@@ -406,16 +408,10 @@ def _block_nonzero(A: np.ndarray, k: int, m: int) -> bool:
 def block_affine(D: tuple, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Return ``A p + q`` of :func:`delassus`'s blocks ``D`` (each row's sum in column order)."""
     ptr, col, blk = D
-    c = ptr.shape[0] - 1
-    w = np.empty(3 * c)
-    for k in range(c):
-        for a in range(3):
-            acc = 0.0
-            for e in range(ptr[k], ptr[k + 1]):
-                m = col[e]
-                for b in range(3):
-                    acc += blk[e, a, b] * p[3 * m + b]
-            w[3 * k + a] = acc + q[3 * k + a]
+    w = np.empty(3 * (ptr.shape[0] - 1))
+    block_product(ptr, col, blk, 0.0, p, w)   # (+ 0 p: exact, p finite)
+    for a in range(w.shape[0]):
+        w[a] += q[a]
     return w
 
 
@@ -918,6 +914,16 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
     for g in range(count):
         idx = members[begin[g]:begin[g + 1]]
         n = idx.shape[0]
+        if n > prm[P_SPARSE_CONTACTS]:   # (too large to factor: by its blocks alone)
+            p, ok = solve_large_island(_island_blocks(D, idx, label, at, g, normal_only),
+                                       q, mu[idx], start, idx, normal_only, equal[idx],
+                                       has_equal, sliding[idx], prm, cnt)
+            if not ok:
+                return np.zeros(m), False
+            for x in range(n):
+                for a in range(step3):
+                    out[3 * idx[x] + a] = p[3 * x + a]
+            continue
         nr = step3 * n
         # A_sym = (A + Aᵀ) / 2, each block's halves added where they land (halving is
         # exact: the same values as halving the sum).
@@ -946,6 +952,215 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
             for a in range(step3):
                 out[3 * idx[x] + a] = p[step3 * x + a]
     return out, True
+
+
+@njit(cache=True)
+def _island_blocks(D: tuple, idx: np.ndarray, label: np.ndarray, at: np.ndarray, g: int,
+                   normal_only: bool) -> tuple:
+    """
+    Return island ``g``'s symmetric part ``(A + Aᵀ) / 2`` by its blocks ``(ptr, col, blk)``.
+
+    Its contacts ``idx`` (increasing; ``at`` each contact's place in its island) numbered
+    by their place; each entry the dense path's (:func:`solve_rows`: the halves of a
+    block and of its transpose added). ``normal_only``: the normal rows' entries alone,
+    the friction rows' zero.
+    """
+    ptr, col, blk = D
+    n = idx.shape[0]
+    sptr = np.zeros(n + 1, dtype=np.int64)
+    for x in range(n):
+        k = idx[x]
+        inside = 0
+        for e in range(ptr[k], ptr[k + 1]):
+            if label[col[e]] == g:
+                inside += 1
+        sptr[x + 1] = sptr[x] + inside
+    scol = np.empty(sptr[n], dtype=np.int64)
+    sblk = np.zeros((sptr[n], 3, 3))
+    for x in range(n):
+        k = idx[x]
+        e2 = sptr[x]
+        for e in range(ptr[k], ptr[k + 1]):
+            j = col[e]
+            if label[j] != g:   # (a block of zeros)
+                continue
+            # The block (j, k): contact j's columns increase, so by bisection.
+            lo, hi = ptr[j], ptr[j + 1] - 1
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if col[mid] < k:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            scol[e2] = at[j]
+            for a in range(1 if normal_only else 3):
+                for b in range(1 if normal_only else 3):
+                    sblk[e2, a, b] = 0.5 * blk[e, a, b] + 0.5 * blk[lo, b, a]
+            e2 += 1
+    return sptr, scol, sblk
+
+
+@njit(cache=True)
+def _block_scale(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, q: np.ndarray,
+                 p: np.ndarray) -> float:
+    """Return :func:`_row_scale` of an operator by its blocks: the largest ``|A| |p| + |q|``."""
+    out = 0.0
+    for k in range(ptr.shape[0] - 1):
+        for a in range(3):
+            acc = abs(q[3 * k + a])
+            for e in range(ptr[k], ptr[k + 1]):
+                for b in range(3):
+                    acc += abs(blk[e, a, b]) * abs(p[3 * col[e] + b])
+            out = max(out, acc)
+    return out
+
+
+@njit(cache=True)
+def _block_residual(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, diag: np.ndarray,
+                    q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal_only: bool,
+                    sliding: np.ndarray, tol: float, equal: np.ndarray,
+                    has_equal: bool) -> float:
+    """Return :func:`residual` of an operator by its blocks (three rows a contact)."""
+    w = np.empty(q.shape[0])
+    block_product(ptr, col, blk, 0.0, p, w)
+    for a in range(w.shape[0]):
+        w[a] += q[a]
+    if not normal_only:
+        return _residual(w, diag, q, p, mu, False, sliding, tol, equal, has_equal)
+    c = q.shape[0] // 3   # (the normal rows alone, one a contact)
+    wn, dn, qn, pn = np.empty(c), np.empty(c), np.empty(c), np.empty(c)
+    for k in range(c):
+        wn[k], dn[k], qn[k], pn[k] = w[3 * k], diag[3 * k], q[3 * k], p[3 * k]
+    return _residual(wn, dn, qn, pn, mu, True, sliding, tol, equal, has_equal)
+
+
+@njit(cache=True)
+def _friction_boxes(p: np.ndarray, mu: np.ndarray, sliding: np.ndarray, normal_only: bool,
+                    lo: np.ndarray, hi: np.ndarray) -> None:
+    """Set the friction rows' boxes ``±μ max(p_n, 0)`` (sliding: the second row's zero)."""
+    for k in range(mu.shape[0]):
+        half = 0.0 if normal_only else mu[k] * max(p[3 * k], 0.0)
+        for col in range(1, 3):
+            half_a = 0.0 if col == 2 and sliding[k] else half
+            lo[3 * k + col], hi[3 * k + col] = -half_a, half_a
+
+
+@njit(cache=True)
+def solve_large_island(B: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
+                       idx: np.ndarray, normal_only: bool, equal: np.ndarray, has_equal: bool,
+                       sliding: np.ndarray, prm: np.ndarray, cnt: np.ndarray) -> tuple:
+    """
+    Return ``(p, ok)``: an island too large to factor, by its blocks alone.
+
+    ``B`` the island's symmetric operator by its blocks (:func:`_island_blocks`); ``q``,
+    ``start`` all the rows' (the island's contacts ``idx``); ``mu``, ``equal``,
+    ``sliding`` the island's; ``p`` its rows, three a contact (``normal_only``: the
+    friction rows zero). The friction boxes' proximal fixed point as :func:`solve_island`,
+    each iteration's box QP of ``A + ρ I`` by MPRGP (:func:`.sparse_box.mprgp`) to a
+    tolerance tied to the iteration's last change (its error in ``p`` is at most the
+    tolerance over ``ρ``), with ``ρ`` ``P_SPARSE_PROXIMAL`` of the largest diagonal (the
+    dense path's ``P_PROXIMAL`` lets the fixed point diverge on a tall pile, whose fixed
+    boxes leave directions only ``ρ`` bounds). It ends when the contact conditions hold
+    to ``P_SPARSE_RESIDUAL`` of the rows' velocity scale (:func:`residual`, on the
+    blocks); if ``P_SPARSE_ITERATIONS`` do not reach that, projected Gauss–Seidel on the
+    blocks goes on from the iterate (``P_PGS_SWEEPS`` sweeps, counted ``C_PGS``), and
+    what it leaves is a counted failure. ``ok`` False: a row no impulse moves (given back,
+    as :func:`solve_island`).
+    """
+    ptr, col, blk = B
+    n = idx.shape[0]
+    nr = 3 * n
+    diag = np.zeros(nr)
+    for x in range(n):
+        for e in range(ptr[x], ptr[x + 1]):
+            if col[e] == x:
+                for a in range(3):
+                    diag[3 * x + a] = blk[e, a, a]
+    dmax = 0.0
+    for a in range(nr):
+        dmax = max(dmax, diag[a])
+    for a in range(nr):
+        if (not normal_only or a % 3 == 0) and not diag[a] > 1e-12 * dmax:
+            return np.zeros(nr), False
+    qr, p, lo, hi, qp = np.empty(nr), np.empty(nr), np.empty(nr), np.empty(nr), np.empty(nr)
+    for x in range(n):
+        for a in range(3):
+            qr[3 * x + a] = q[3 * idx[x] + a]
+            p[3 * x + a] = 0.0 if normal_only and a else start[3 * idx[x] + a]
+        lo[3 * x], hi[3 * x] = (-np.inf if has_equal and equal[x] else 0.0), np.inf
+    qmax = 0.0
+    for a in range(nr):
+        qmax = max(qmax, abs(qr[a]))
+    rho = prm[P_SPARSE_PROXIMAL] * dmax
+    tol = prm[P_FRICTION_TOLERANCE]
+    count = not has_equal
+    cap = int(prm[P_SPARSE_INNER])
+    last = qmax / dmax   # (the impulses' scale before the first change)
+    converged, res, it = False, np.inf, 0
+    while it < int(prm[P_SPARSE_ITERATIONS]):
+        it += 1
+        _friction_boxes(p, mu, sliding, normal_only, lo, hi)
+        for a in range(nr):
+            p[a] = min(max(p[a], lo[a]), hi[a])
+            qp[a] = qr[a] - rho * p[a]
+        target = prm[P_SPARSE_RESIDUAL] * _block_scale(ptr, col, blk, qr, p)
+        f, _, _, _ = mprgp(ptr, col, blk, rho, qp, lo, hi, p, max(0.25 * target, 0.1 * rho *
+                                                                  last), cap)
+        change = 0.0
+        for a in range(nr):
+            change = max(change, abs(f[a] - p[a]))
+            p[a] = f[a]
+        last = change
+        res = _block_residual(ptr, col, blk, diag, qr, p, mu, normal_only, sliding, tol,
+                              equal, has_equal)
+        if res <= prm[P_SPARSE_RESIDUAL] * _block_scale(ptr, col, blk, qr, p):
+            converged = True
+            break
+    if not converged:
+        cnt[C_PGS] += 1
+        sweeps = int(prm[P_PGS_SWEEPS])
+        for sweep in range(sweeps):
+            _pgs_sweep(ptr, col, blk, diag, qr, p, mu, sliding, normal_only, lo)
+            if sweep % 10 == 9 or sweep == sweeps - 1:
+                res = _block_residual(ptr, col, blk, diag, qr, p, mu, normal_only, sliding,
+                                      tol, equal, has_equal)
+                if res <= prm[P_SPARSE_RESIDUAL] * _block_scale(ptr, col, blk, qr, p):
+                    converged = True
+                    break
+    cnt[C_SOLVES] += 1
+    cnt[C_SPARSE] += 1
+    cnt[C_ITERATIONS_MAX] = max(cnt[C_ITERATIONS_MAX], it)
+    if not converged:
+        cnt[C_FAILURES] += 1
+    if count:
+        cnt[C_COMPLEMENTARITY] = max(cnt[C_COMPLEMENTARITY], res)
+    return p, True
+
+
+@njit(cache=True)
+def _pgs_sweep(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, diag: np.ndarray,
+               q: np.ndarray, p: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
+               normal_only: bool, lo: np.ndarray) -> None:
+    """
+    Take one projected Gauss–Seidel sweep of the contact rows on their blocks, in place.
+
+    Each row in turn moved to where its velocity ``w = A p + q`` vanishes, projected into
+    its box (the normal rows' lower bounds ``lo``; the friction rows' ``±μ p_n`` at the
+    sweep's own ``p_n``).
+    """
+    for x in range(ptr.shape[0] - 1):
+        for a in range(1 if normal_only else 3):
+            i = 3 * x + a
+            w = q[i]
+            for e in range(ptr[x], ptr[x + 1]):
+                for b in range(3):
+                    w += blk[e, a, b] * p[3 * col[e] + b]
+            v = p[i] - w / diag[i]
+            if a == 0:
+                p[i] = max(v, lo[i])
+            else:
+                half = 0.0 if a == 2 and sliding[x] else mu[x] * max(p[3 * x], 0.0)
+                p[i] = min(max(v, -half), half)
 
 
 @njit(cache=True)
@@ -1462,10 +1677,22 @@ def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal
     m = q.shape[0]
     if not m:
         return 0.0
-    w = _affine(A, p, q)
+    diag = np.empty(m)
+    for a in range(m):
+        diag[a] = A[a, a]
+    return _residual(_affine(A, p, q), diag, q, p, mu, normal_only, sliding, tol, equal,
+                     has_equal)
+
+
+@njit(cache=True)
+def _residual(w: np.ndarray, diag: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,
+              normal_only: bool, sliding: np.ndarray, tol: float, equal: np.ndarray,
+              has_equal: bool) -> float:
+    """Return :func:`residual` of the rows' velocities ``w = A p + q`` and ``A``'s diagonal."""
+    m = q.shape[0]
     pmax, qmax, dmax = 0.0, 0.0, 0.0
     for a in range(m):
-        pmax, qmax, dmax = max(pmax, abs(p[a])), max(qmax, abs(q[a])), max(dmax, A[a, a])
+        pmax, qmax, dmax = max(pmax, abs(p[a])), max(qmax, abs(q[a])), max(dmax, diag[a])
     out = 0.0
     step = 1 if normal_only else 3
     for k in range(m // step):
@@ -1473,7 +1700,7 @@ def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal
         if has_equal and equal[k]:
             out = max(out, abs(w[a]))
         else:
-            out = max(out, abs(min(p[a] * A[a, a], w[a])))
+            out = max(out, abs(min(p[a] * diag[a], w[a])))
     if normal_only:
         return out
     slack = 2.0 * (tol * pmax + 64.0 * EPS * qmax / dmax)
@@ -1485,11 +1712,11 @@ def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal
             f, v = p[3 * k + col], w[3 * k + col]
             if abs(f) < bound - slack:   # (the natural map: its slip, or its force's gap)
                 gap = bound + f if v > 0.0 else bound - f
-                out = max(out, min(abs(v), gap * A[3 * k + col, 3 * k + col]))
+                out = max(out, min(abs(v), gap * diag[3 * k + col]))
             elif bound > 0.0:
                 out = max(out, max(f * v, 0.0) / bound)
             if abs(f) > bound + slack:
-                out = max(out, (abs(f) - bound) * A[3 * k + col, 3 * k + col])
+                out = max(out, (abs(f) - bound) * diag[3 * k + col])
     return out
 
 
@@ -1558,6 +1785,13 @@ def _local(pt: np.ndarray, k: int, i: int, pos: np.ndarray, R: np.ndarray) -> tu
 
 
 @njit(cache=True)
+def _by_key(keys: np.ndarray) -> tuple:
+    """Return ``(order, keys[order])``: a stable sort (equal keys in their first order)."""
+    order = np.argsort(keys, kind='mergesort')
+    return order, keys[order]
+
+
+@njit(cache=True)
 def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarray,
           r_pt: np.ndarray, r_pos: np.ndarray, r_R: np.ndarray, which: np.ndarray,
           c_sa: np.ndarray, c_sb: np.ndarray, c_ba: np.ndarray, c_pt: np.ndarray,
@@ -1580,6 +1814,7 @@ def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarra
     if r == 0 or c == 0:
         return nearest, continuing, continuing_also
     has_also = also.shape[0] == r
+    order, keys = _by_key(c_sa * count + c_sb)
     for i in range(r):
         in_also = has_also and also[i]
         if not which[i] and not in_also:
@@ -1588,9 +1823,10 @@ def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarra
         key = r_sa[g] * count + r_sb[g]
         s0, s1, s2 = _local(r_pt, g, r_ba[g], r_pos, r_R)
         best = np.inf
-        for j in range(c):
-            if c_sa[j] * count + c_sb[j] != key:
-                continue
+        for t in range(np.searchsorted(keys, key), c):   # (the same pair's, j increasing)
+            if keys[t] != key:
+                break
+            j = order[t]
             n0, n1, n2 = _local(c_pt, j, c_ba[j], pos, R)
             d2 = (s0 - n0) ** 2 + (s1 - n1) ** 2 + (s2 - n2) ** 2
             rad = radius[c_sa[j]]
@@ -1983,11 +2219,16 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     start = np.zeros(3 * c)
     w_sa, w_sb, w_pt, w_pn = warm
     pt0 = con[5]
+    shapes = shape_mu.shape[0] + 1   # (as the pairs' keys of :func:`match`)
+    order, keys = _by_key(w_sa * shapes + w_sb)
     for k in range(c):
         j = sel[k]
-        for x in range(w_pn.shape[0]):
-            if w_sa[x] == con[1][j] and w_sb[x] == con[2][j] and (
-                    (w_pt[x, 0] - pt0[j, 0]) ** 2 + (w_pt[x, 1] - pt0[j, 1]) ** 2
+        key = con[1][j] * shapes + con[2][j]
+        for u in range(np.searchsorted(keys, key), keys.shape[0]):   # (the first near)
+            if keys[u] != key:
+                break
+            x = order[u]
+            if ((w_pt[x, 0] - pt0[j, 0]) ** 2 + (w_pt[x, 1] - pt0[j, 1]) ** 2
                     + (w_pt[x, 2] - pt0[j, 2]) ** 2) <= WARM_RADIUS2:
                 start[3 * k] = w_pn[x]
                 break

@@ -59,6 +59,15 @@ def _scaled_product(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, rho: floa
 
 
 @njit(cache=True)
+def _gradient(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, rho: float, s: np.ndarray,
+              y: np.ndarray, qs: np.ndarray, tmp: np.ndarray, g: np.ndarray) -> None:
+    """Set ``g`` the scaled gradient ``D S D y + D q`` afresh (``qs = D q``)."""
+    _scaled_product(ptr, col, blk, rho, s, y, tmp, g)
+    for i in range(y.shape[0]):
+        g[i] += qs[i]
+
+
+@njit(cache=True)
 def _split(y: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, alpha: float,
            phi: np.ndarray) -> tuple:
     """
@@ -151,9 +160,7 @@ def mprgp(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, rho: float, q: np.n
         ls[i], hs[i], qs[i] = lo[i] / s[i], hi[i] / s[i], q[i] * s[i]
         ys[i] = min(max(start[i] / s[i], ls[i]), hs[i])
     g, p, Ap, phi, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    _scaled_product(ptr, col, blk, rho, s, ys, tmp, g)
-    for i in range(n):
-        g[i] += qs[i]
+    _gradient(ptr, col, blk, rho, s, ys, qs, tmp, g)
     _split(ys, g, ls, hs, alpha, phi)
     for i in range(n):
         p[i] = phi[i]
@@ -198,9 +205,7 @@ def mprgp(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, rho: float, q: np.n
                 _split(ys, g, ls, hs, alpha, phi)
                 for i in range(n):
                     ys[i] = min(max(ys[i] - alpha * phi[i], ls[i]), hs[i])
-                _scaled_product(ptr, col, blk, rho, s, ys, tmp, g)
-                for i in range(n):
-                    g[i] += qs[i]
+                _gradient(ptr, col, blk, rho, s, ys, qs, tmp, g)
                 since = 0
                 _split(ys, g, ls, hs, alpha, phi)
                 for i in range(n):
@@ -232,9 +237,7 @@ def mprgp(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, rho: float, q: np.n
                 for i in range(n):
                     g[i] -= a_cg * Ap[i]
             else:
-                _scaled_product(ptr, col, blk, rho, s, ys, tmp, g)
-                for i in range(n):
-                    g[i] += qs[i]
+                _gradient(ptr, col, blk, rho, s, ys, qs, tmp, g)
                 since = 0
             _split(ys, g, ls, hs, alpha, phi)
             for i in range(n):
@@ -243,9 +246,7 @@ def mprgp(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, rho: float, q: np.n
         if reached <= tol or since >= REFRESH:
             # (measured on a fresh gradient: the recurrence's drift is not convergence;
             # the search direction is kept)
-            _scaled_product(ptr, col, blk, rho, s, ys, tmp, g)
-            for i in range(n):
-                g[i] += qs[i]
+            _gradient(ptr, col, blk, rho, s, ys, qs, tmp, g)
             since = 0
             reached = _projected(ys, g, ls, hs, s)
     f = np.empty(n)
