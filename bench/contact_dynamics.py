@@ -15,7 +15,11 @@ cone, the Newton solver, semi-implicit Euler), from the same state:
   each other and settle (tens of closures a step at first; ours locates those faster
   than the bounce speed, 1 cm/s);
 * **100 spheres poured into a box**: the same, four layers of 25, walls 0.59 m apart
-  (hundreds of closures a step while the pile settles).
+  (hundreds of closures a step while the pile settles);
+* **1000 spheres poured into a box**: the same, ten layers of 100, walls 1.14 m apart,
+  the first 0.3 s alone (:data:`PILE_SECONDS`: the fall and the first collapse, each
+  step ours seconds): its pile is one island of thousands of contacts, which ours solves
+  by its blocks alone (``SPARSE_CONTACTS``).
 
 Reported per scene: the mean wall time of a step over the run (the whole step: detection,
 contact forces, integration; ours with the compiled contact steps, up to 100 steps a call,
@@ -53,7 +57,10 @@ except ImportError:   # (bench/requirements.txt)
 OUT = Path(__file__).resolve().parent / 'out'
 G, DT = 9.81, 1e-3
 #: The piles' scenes (spheres of radius 0.05 m poured into a box): their names by count.
-PILES = {27: '27 spheres poured into a box', 100: '100 spheres poured into a box'}
+PILES = {27: '27 spheres poured into a box', 100: '100 spheres poured into a box',
+         1000: '1000 spheres poured into a box'}
+#: The scenes run for less than the others' time, s.
+PILE_SECONDS = {PILES[1000]: 0.3}
 #: Steps per ``step(n)`` call in the batched runs.
 CHUNK = 100
 #: The scenes but the piles: ours (step(100)) and MuJoCo run alternately this many times,
@@ -159,6 +166,7 @@ def run_ours(bodies, shapes, friction, steps, compiled=True, chunk=1) -> dict:
             deepest = max(deepest, float(np.max(depth, initial=0.0)))
     return {'step': wall / steps, 'depth': deepest, 'pos': sim.state.pos_com_world.copy(),
             'p0': p0, 'failures': sim.contact.counters['lcp_failures'],
+            'sparse': sim.contact.counters['lcp_sparse'],
             'compiled': sim.contact.counters['compiled_steps'] / steps}
 
 
@@ -201,13 +209,13 @@ def error(name: str, r: dict) -> float:
 def run(seconds: float) -> list:
     """Run each scene in both; return the table's rows."""
     rows = []
-    steps = int(round(seconds / DT))
     # The compiled kernels load from numba's cache at their first call (about 0.1 s):
     # outside the timed runs.
     bodies, shapes, _, friction = scenes()['box slide']
     run_ours(bodies, shapes, friction, 3)
     for name, (bodies, shapes, body_xml, friction) in scenes().items():
         pile = name in PILES.values()
+        steps = int(round(min(seconds, PILE_SECONDS.get(name, seconds)) / DT))
         ours_runs, mj_runs = [], []
         for _ in range(1 if pile else REPEATS):   # (a pile: tens of seconds a run, once)
             ours_runs.append(run_ours(bodies, shapes, friction, steps, chunk=CHUNK))
@@ -220,11 +228,11 @@ def run(seconds: float) -> list:
         # (The 100 spheres one step a call: the step(100) run's cost again, a step's
         # hundreds of milliseconds dwarfing the call's overhead; the piles in Python
         # alone: minutes, every impact located. Neither run.)
-        ours['one'] = None if name == PILES[100] else run_ours(
+        ours['one'] = None if name in (PILES[100], PILES[1000]) else run_ours(
             bodies, shapes, friction, steps)['step']
         ours['python'] = None if pile else run_ours(
             bodies, shapes, friction, steps, compiled=False)['step']
-        rows.append({'scene': name, 'ours': ours, 'mj': mj})
+        rows.append({'scene': name, 'ours': ours, 'mj': mj, 'seconds': steps * DT})
         print(f'  {name}: ours {ours["step"] * 1e6:.0f} us/step, depth {ours["depth"]:.1e} m, '
               f'error {error(name, ours):+.2e} m'
               + ('' if mj is None else f'; MuJoCo {mj["step"] * 1e6:.1f} us/step, depth '
@@ -234,10 +242,11 @@ def run(seconds: float) -> list:
 
 def table(rows: list) -> str:
     """Markdown table of :func:`run`."""
-    lines = ['| scene | ours, step(100), us/step | ours, step(), us/step | ours, Python path, '
-             'us/step | steps compiled | MuJoCo, us/step | ours step(100) / MuJoCo | '
-             'deepest (ours), m | deepest (MuJoCo), m | error (ours), m | error (MuJoCo), m |',
-             '|---|---|---|---|---|---|---|---|---|---|---|']
+    lines = ['| scene | run, s | ours, step(100), us/step | ours, step(), us/step | '
+             'ours, Python path, us/step | steps compiled | MuJoCo, us/step | '
+             'ours step(100) / MuJoCo | deepest (ours), m | deepest (MuJoCo), m | '
+             'error (ours), m | error (MuJoCo), m | ours: LCPs failed, by blocks |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
         o, m = r['ours'], r['mj']
         mj = ('-', '-', '-', '-') if m is None else (
@@ -245,10 +254,11 @@ def table(rows: list) -> str:
             f'{error(r["scene"], m):+.2e}')
         python = '-' if o['python'] is None else f'{o["python"] * 1e6:.0f}'
         one = '-' if o['one'] is None else f'{o["one"] * 1e6:.1f}'
-        lines.append(f'| {r["scene"]} | {o["step"] * 1e6:.1f} | {one} | '
+        lines.append(f'| {r["scene"]} | {r["seconds"]:g} | {o["step"] * 1e6:.1f} | '
+                     f'{one} | '
                      f'{python} | {100 * o["compiled"]:.1f} % | {mj[0]} | '
                      f'{mj[1]} | {o["depth"]:.1e} | {mj[2]} | {error(r["scene"], o):+.2e} | '
-                     f'{mj[3]} |')
+                     f'{mj[3]} | {o["failures"]}, {o["sparse"]} |')
     return '\n'.join(lines) + (
         "\n\nErrors: the sphere's rest height offset, the slide's stop distance less "
         "`v² / (2 μ g)`, the stack's largest box displacement, the piles' deepest excursion "
@@ -257,14 +267,17 @@ def table(rows: list) -> str:
         "the step's first-order stop (the slide: at most `μ g dt² / 2` = 2.5e-6 m) and to "
         'rounding. Ours three ways: `step(100)` (the compiled kernel takes up to 100 steps a '
         "call), `step()` one step a call (a node's loop: the Python call and its checks each "
-        'step; not run on the 100 spheres, whose steps cost a thousand times the call), and '
+        'step; not run on the 100 and 1000 spheres, whose steps cost a thousand times the '
+        'call), and '
         'every step in Python (`ContactSteps.compiled = False`: the reference, and '
         'what scenes with joints still pay; not run on the piles). "steps compiled": the '
         'share the kernel took; '
         'the rest (a row no force moves) ran in Python. '
         'MuJoCo: one `mj_step` call a step. Ours `step(100)` and MuJoCo: the fastest of '
         f'{REPEATS} runs taken alternately, the piles one run each (the machine is shared: '
-        'its other load only adds time).')
+        'its other load only adds time). "LCPs failed, by blocks": ours\' contact solves '
+        'that stopped short of their tolerance (counted, never hidden), and those of islands '
+        'of more than 500 contacts, solved by their blocks alone.')
 
 
 def main(argv=None) -> int:

@@ -171,6 +171,10 @@ SPARSE_RESIDUAL = 1e-10
 #: Most iterations of a large island's fixed point, and of MPRGP within each.
 SPARSE_ITERATIONS = 100
 SPARSE_INNER = 20000
+#: The iterates Anderson's acceleration of a large island's fixed point fits (0: none):
+#: on random redundant contacts of 600 rows it took 29 iterations where the plain fixed
+#: point took 162 (measured).
+SPARSE_HISTORY = 5
 #: Most sweeps of projected Gauss–Seidel where a large island's fixed point fails.
 PGS_SWEEPS = 5000
 #: Most guesses of Newton's method on the rows' natural map (:func:`_newton`); measured
@@ -1176,6 +1180,7 @@ class ContactSteps:
         prm[kern.P_SPARSE_RESIDUAL] = SPARSE_RESIDUAL
         prm[kern.P_SPARSE_ITERATIONS] = SPARSE_ITERATIONS
         prm[kern.P_SPARSE_INNER], prm[kern.P_PGS_SWEEPS] = SPARSE_INNER, PGS_SWEEPS
+        prm[kern.P_SPARSE_HISTORY] = SPARSE_HISTORY
         return prm
 
     def _buffers(self) -> tuple:

@@ -58,7 +58,7 @@ from .sparse_box import block_product, mprgp
  P_PIVOT_TOLERANCE, P_PIVOT_REGULARIZATION_1, P_PIVOT_REGULARIZATION_2,
  P_BOUNCE, P_UNLOCATED, P_STALL_ITERATIONS, P_NEWTON_ITERATIONS, P_NEWTON_REFINEMENTS,
  P_SPARSE_CONTACTS, P_SPARSE_PROXIMAL, P_SPARSE_RESIDUAL, P_SPARSE_ITERATIONS,
- P_SPARSE_INNER, P_PGS_SWEEPS, P_WIDTH) = range(29)
+ P_SPARSE_INNER, P_PGS_SWEEPS, P_SPARSE_HISTORY, P_WIDTH) = range(30)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
@@ -1097,6 +1097,11 @@ def solve_large_island(B: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarra
     cap = int(prm[P_SPARSE_INNER])
     last = qmax / dmax   # (the impulses' scale before the first change)
     converged, res, it = False, np.inf, 0
+    # Anderson's acceleration of the fixed point p ↦ F(p) (F: the boxes set at p, the
+    # proximal box QP solved): the last ``depth`` iterates and their images.
+    depth = int(prm[P_SPARSE_HISTORY])
+    X, FX = np.empty((depth + 1, nr)), np.empty((depth + 1, nr))
+    held = 0
     while it < int(prm[P_SPARSE_ITERATIONS]):
         it += 1
         _friction_boxes(p, mu, sliding, normal_only, lo, hi)
@@ -1106,13 +1111,27 @@ def solve_large_island(B: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarra
         target = prm[P_SPARSE_RESIDUAL] * _block_scale(ptr, col, blk, qr, p)
         f, _, _, _ = mprgp(ptr, col, blk, rho, qp, lo, hi, p, max(0.25 * target, 0.1 * rho *
                                                                   last), cap)
-        change = 0.0
+        last = 0.0
         for a in range(nr):
-            change = max(change, abs(f[a] - p[a]))
-            p[a] = f[a]
-        last = change
-        res = _block_residual(ptr, col, blk, diag, qr, p, mu, normal_only, sliding, tol,
+            last = max(last, abs(f[a] - p[a]))
+        res = _block_residual(ptr, col, blk, diag, qr, f, mu, normal_only, sliding, tol,
                               equal, has_equal)
+        if depth > 0:
+            if held == depth + 1:
+                for j in range(depth):
+                    X[j], FX[j] = X[j + 1], FX[j + 1]
+            else:
+                held += 1
+            X[held - 1], FX[held - 1] = p, f
+            if held > 1:
+                cand = _anderson(X[:held], FX[:held])
+                _into_boxes(cand, lo, mu, sliding, normal_only)
+                r_cand = _block_residual(ptr, col, blk, diag, qr, cand, mu, normal_only,
+                                         sliding, tol, equal, has_equal)
+                if r_cand < res:   # (kept only where it is nearer a solution)
+                    f, res = cand, r_cand
+        for a in range(nr):
+            p[a] = f[a]
         if res <= prm[P_SPARSE_RESIDUAL] * _block_scale(ptr, col, blk, qr, p):
             converged = True
             break
@@ -1135,6 +1154,46 @@ def solve_large_island(B: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarra
     if count:
         cnt[C_COMPLEMENTARITY] = max(cnt[C_COMPLEMENTARITY], res)
     return p, True
+
+
+@njit(cache=True)
+def _anderson(X: np.ndarray, FX: np.ndarray) -> np.ndarray:
+    """
+    Return Anderson's extrapolation of the fixed point's last iterates ``X`` and images ``FX``.
+
+    ``F(x_k) − Σ γ_j ΔF_j`` with ``γ`` the least-squares fit of the residuals' differences
+    ``Δ(F(x) − x)`` to the last residual (Walker and Ni, SIAM J. Numer. Anal. 49, 2011);
+    the last image itself where that fit fails.
+    """
+    k, n = X.shape[0] - 1, X.shape[1]
+    dG, dF = np.empty((n, k)), np.empty((n, k))
+    g = np.empty(n)
+    for i in range(n):
+        g[i] = FX[k, i] - X[k, i]
+        for j in range(k):
+            dG[i, j] = (FX[j + 1, i] - X[j + 1, i]) - (FX[j, i] - X[j, i])
+            dF[i, j] = FX[j + 1, i] - FX[j, i]
+    out = FX[k].copy()
+    try:
+        gamma = np.linalg.lstsq(dG, g)[0]
+    except Exception:   # (LAPACK's SVD did not converge: no extrapolation)
+        return out
+    for i in range(n):
+        for j in range(k):
+            out[i] -= dF[i, j] * gamma[j]
+    return out
+
+
+@njit(cache=True)
+def _into_boxes(p: np.ndarray, lo: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
+                normal_only: bool) -> None:
+    """Project ``p`` into the contact rows' boxes: normals above ``lo``, friction ``±μ p_n``."""
+    for k in range(mu.shape[0]):
+        p[3 * k] = max(p[3 * k], lo[3 * k])
+        half = 0.0 if normal_only else mu[k] * max(p[3 * k], 0.0)
+        for col in range(1, 3):
+            half_a = 0.0 if col == 2 and sliding[k] else half
+            p[3 * k + col] = min(max(p[3 * k + col], -half_a), half_a)
 
 
 @njit(cache=True)
