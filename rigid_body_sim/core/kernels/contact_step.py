@@ -2497,8 +2497,9 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
         if pas == 0 and deep:
             cnt[C_MAX_DEPTH] = max(cnt[C_MAX_DEPTH], dmax)
         pick = np.zeros(con[0], dtype=np.bool_)
+        reach = max(loc, dmax)   # (those apart by less than the deepest: ``_settle``)
         for j in range(con[0]):
-            pick[j] = held[j] or con[7][j] >= -loc
+            pick[j] = held[j] or con[7][j] >= -reach
         idx = _where(pick)
         pr = _make_rows(ctx, y, con, idx)
         m = idx.shape[0]
