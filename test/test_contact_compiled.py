@@ -373,6 +373,74 @@ def test_the_box_lcp_reads_each_row_of_its_matrix_by_its_non_zeros():
     assert pattern(np.zeros((0, 0))).tolist() == [1]
 
 
+def _envelope(S, order):
+    """Return the envelope of S's rows in ``order``: each row's span left of its diagonal."""
+    P = S[np.ix_(order, order)] != 0
+    return sum(k - int(np.argmax(P[k, :k + 1])) for k in range(len(order)))
+
+
+def test_a_fresh_factor_takes_the_rows_in_an_order_of_small_envelope():
+    # envelope_order is reverse Cuthill-McKee on pattern(S)'s graph: a permutation of the
+    # rows, each connected part's rows together. A path (a tridiagonal S) shuffled comes
+    # back as a path: every row's first non-zero one left of its diagonal (envelope n -
+    # parts). A 3-D lattice of contacts (each meeting its 6 neighbours, 6 x 6 x 6,
+    # shuffled) is brought back within the bandwidth of its own layered numbering (a
+    # row's neighbours at most a layer, 36 rows, away): envelope <= 36 a row (21 found),
+    # where the shuffled order's is about a third of the rows (77): more than 3 times
+    # smaller (a factor's cost, the sum of the rows' envelopes squared, some 13 times).
+    from rigid_body_sim.core.kernels.contact_step import envelope_order, pattern
+    rng = np.random.default_rng(5)
+    n = 40
+    T = np.eye(n) * 2.0
+    for k in range(n - 1):
+        if k != 19:   # (two parts: rows 0-19 and 20-39)
+            T[k, k + 1] = T[k + 1, k] = -1.0
+    shuffle = rng.permutation(n)
+    S = T[np.ix_(shuffle, shuffle)]
+    order = envelope_order(pattern(S))
+    assert sorted(order) == list(range(n))
+    assert _envelope(S, order) == n - 2
+    side = 6
+    m = side ** 3
+    C = np.eye(m) * 6.0
+    for i in range(m):
+        x, y, z = i % side, (i // side) % side, i // side ** 2
+        for j, ok in ((i + 1, x + 1 < side), (i + side, y + 1 < side),
+                      (i + side * side, z + 1 < side)):
+            if ok:
+                C[i, j] = C[j, i] = -1.0
+    shuffle = rng.permutation(m)
+    S = C[np.ix_(shuffle, shuffle)]
+    order = envelope_order(pattern(S))
+    assert sorted(order) == list(range(m))
+    assert _envelope(S, order) <= side * side * m
+    assert _envelope(S, np.arange(m)) > 3 * _envelope(S, order)
+    assert envelope_order(pattern(np.zeros((0, 0)))).shape == (0,)
+
+
+def test_lapacks_lu_solves_as_a_backward_stable_solve_and_refuses_a_singular_matrix():
+    # lapack_lu (dgetrf on K's transpose's C order) and lapack_lu_solve (its factors read
+    # by columns): K x = b to a backward error of a few n eps (partial pivoting's bound,
+    # growth small for these random matrices), for sizes across the loops' threshold;
+    # a K with an exactly zero pivot (as the loops' LU) or not finite is not ok.
+    from rigid_body_sim.core.kernels.contact_step import lapack_lu, lapack_lu_solve
+    rng = np.random.default_rng(2)
+    eps = np.finfo(float).eps
+    for n in (1, 2, 7, 25, 64, 130):
+        K = rng.standard_normal((n, n))
+        b = rng.standard_normal(n)
+        F, piv, ok = lapack_lu(K)
+        assert ok
+        x = lapack_lu_solve(F, piv, b)
+        backward = np.max(np.abs(K @ x - b)) / (np.max(np.abs(K).sum(axis=1)) * np.max(np.abs(x)))
+        assert backward <= 4 * n * eps
+    K = rng.standard_normal((5, 5))
+    K[:, 3] = 0.0   # (a zero pivot, exactly: LAPACK's singular case)
+    assert not lapack_lu(K)[2]
+    K[3, 2] = np.nan
+    assert not lapack_lu(K)[2]
+
+
 def test_the_delassus_operator_is_stored_by_the_blocks_of_contacts_sharing_a_body():
     # delassus gives A = G M⁻¹ Gᵀ by its 3 × 3 blocks: contact k's columns must be
     # exactly the contacts sharing a body with it (a static side, index ≥ n, shares

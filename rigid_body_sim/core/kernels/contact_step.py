@@ -42,7 +42,8 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from numba import njit, types
+from numba.np.linalg import _LAPACK, F_INT_nptype
 import numpy as np
 
 from .contact import all_bounds, broad_phase, narrow_phase, plane_pairs, shape_frames
@@ -78,13 +79,12 @@ DONE, BAIL, GROW, FULL = 0, 1, 2, 3
 AT_LOWER, FREE, AT_UPPER = -1, 0, 1
 ROUNDING_ULPS = 64.0
 EPS = 2.220446049250313e-16
-#: Up to this many rows ``A p + q`` is a loop, beyond a BLAS call (whose overhead is most
-#: of a small product's cost).
-AFFINE_LOOP_ROWS = 48
-#: Beyond this many unknowns Newton's linear solves go through LAPACK's inverse (blocked:
-#: three times the loops' LU's flops, and faster beyond about 50 unknowns, 1.6 times at
-#: 100 and 4 at 300, measured with one BLAS thread); up to it, the loops' LU.
-NEWTON_LAPACK_ROWS = 64
+#: Beyond this many unknowns Newton's linear solves factor by LAPACK's ``dgetrf``
+#: (:func:`lapack_lu`: blocked), up to it by the loops' LU (:func:`lu_factor`: no call's
+#: overhead). A factor and four solves, random dense systems, one BLAS thread, this
+#: machine's Xeon: 24 unknowns 11.7 µs by the loops, 11.0 by LAPACK; 48: 38.7 and 25.6;
+#: 100: 269 and 112; 400: 14.6 ms and 2.5.
+NEWTON_LAPACK_ROWS = 24
 #: The squared distance (m²) within which a contact takes the last step's normal impulse.
 WARM_RADIUS2 = 1e-6
 
@@ -455,7 +455,9 @@ def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
       every iteration (``O(n³)``); the caller may pass the factor of its last call
       (the friction boxes' fixed point calls this with the same ``S`` and nearly the
       same free rows), brought to this call's free rows the same way, or factored
-      afresh where more than a quarter of them differ, or after ``n`` updates;
+      afresh where more than a quarter of them differ, or after ``n`` updates; a fresh
+      factor takes its rows in reverse Cuthill–McKee order (:func:`envelope_order`), the
+      factor's envelope (what its loops run over) a pile's few neighbours wide;
     * a solve that moves no row out of its box is refined once against ``S`` before it
       is taken (the factor's updates perturb it by rounding; one step of refinement
       brings the solution back to ``S``'s own);
@@ -474,7 +476,9 @@ def solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     n = q.shape[0]
     work = np.empty((6, n))
     marks = np.empty((3, n), dtype=np.int64)
-    return _solve_box(S, q, lo, hi, start, L, order, first, meta, work, marks, pattern(S))
+    pat = pattern(S)
+    return _solve_box(S, q, lo, hi, start, L, order, first, meta, work, marks, pat,
+                      envelope_order(pat))
 
 
 @njit(cache=True)
@@ -505,10 +509,58 @@ def pattern(S: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def envelope_order(pat: np.ndarray) -> np.ndarray:
+    """
+    Return the rows of :func:`pattern` ``pat``'s matrix in reverse Cuthill–McKee order.
+
+    Breadth first from a row of least degree in each connected part, each row's rows not
+    yet met taken by increasing degree (ties: the lower row), and the whole reversed
+    (Cuthill & McKee 1969, reversed by George 1971). The box solves factor their free
+    rows in this order (:func:`_refactor`): a Cholesky factor's envelope is then the
+    width of the contact graph's levels, a few contacts in a pile, where in the rows'
+    own order (the detector's) it spans most of an island.
+    """
+    n = pat[0] - 1
+    deg = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        deg[i] = pat[i + 1] - pat[i]
+    seen = np.zeros(n, dtype=np.bool_)
+    out = np.empty(n, dtype=np.int64)
+    head, tail = 0, 0
+    while tail < n:
+        s = -1
+        for i in range(n):
+            if not seen[i] and (s < 0 or deg[i] < deg[s]):
+                s = i
+        seen[s] = True
+        out[tail] = s
+        tail += 1
+        while head < tail:
+            v = out[head]
+            head += 1
+            t0 = tail
+            for t in range(pat[v], pat[v + 1]):
+                u = pat[t]
+                if not seen[u]:
+                    seen[u] = True
+                    out[tail] = u
+                    tail += 1
+            for a in range(t0 + 1, tail):   # (by degree, then row: an insertion sort)
+                x = out[a]
+                b = a - 1
+                while b >= t0 and (deg[out[b]] > deg[x]
+                                   or (deg[out[b]] == deg[x] and out[b] > x)):
+                    out[b + 1] = out[b]
+                    b -= 1
+                out[b + 1] = x
+    return out[::-1].copy()
+
+
+@njit(cache=True)
 def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                start: np.ndarray, L: np.ndarray, order: np.ndarray, first: np.ndarray,
                meta: np.ndarray, work: np.ndarray, marks: np.ndarray,
-               pat: np.ndarray) -> tuple:
+               pat: np.ndarray, perm: np.ndarray) -> tuple:
     """
     Return :func:`solve_box` with its work arrays passed: ``work`` (6, n), ``marks`` (3, n).
 
@@ -521,7 +573,8 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     the refinement's residual, the bound rows' ``w``) and every update of the right
     sides runs over its non-zeros alone, in increasing column (the sums the dense loops
     formed, but for the refinement's, whose order of terms is the columns', not the
-    factor's).
+    factor's). ``perm``: the order a fresh factor takes its free rows in
+    (:func:`envelope_order` of ``pat``).
     """
     n = q.shape[0]
     f, rhs, x, r, target, rb = work[0], work[1], work[2], work[3], work[4], work[5]
@@ -564,12 +617,12 @@ def _solve_box(S: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                     fresh = True
                     break
     if fresh:
-        _refactor(S, state, L, order, first, meta)
+        _refactor(S, state, L, order, first, meta, perm)
     cap = 10 * (n + 1)
     stale = True
     for it in range(1, cap + 1):
         if meta[1] == 0 and it > 1:
-            _refactor(S, state, L, order, first, meta)
+            _refactor(S, state, L, order, first, meta, perm)
             stale = True
         nf = meta[0]
         nb = 0
@@ -709,10 +762,11 @@ def _blocking(order: np.ndarray, nf: int, target: np.ndarray, f: np.ndarray, lo:
 
 @njit(cache=True)
 def _refactor(S: np.ndarray, state: np.ndarray, L: np.ndarray, order: np.ndarray,
-              first: np.ndarray, meta: np.ndarray) -> None:
-    """Factor the free rows (``state`` FREE, in index order) afresh into ``L``; ``meta`` set."""
+              first: np.ndarray, meta: np.ndarray, perm: np.ndarray) -> None:
+    """Factor the free rows (``state`` FREE, in ``perm``'s order) afresh into ``L``, ``meta``."""
     nf = 0
-    for i in range(state.shape[0]):
+    for a in range(perm.shape[0]):
+        i = perm[a]
         if state[i] == FREE:
             order[nf] = i
             nf += 1
@@ -1261,6 +1315,7 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
             Ap[a, b] = Ar[a, b]
         Ap[a, a] += rho
     pat = pattern(Ap)   # (the box solves' sums run over its non-zeros)
+    perm = envelope_order(pat)
     for a in range(nr):
         p[a] = start[a]
         lo[a], hi[a] = 0.0, np.inf
@@ -1307,7 +1362,7 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
                 qp[a] = qr[a] - rho * p[a]
             # (The proximal centre is the last iterate, p; sp only where the solve starts.)
             f, ok, _ = _solve_box(Ap, qp, lo, hi, sp, L, order, first, meta, work, marks,
-                                  pat)
+                                  pat, perm)
             change, scale = 0.0, 0.0
             for a in range(nr):
                 change = max(change, abs(f[a] - p[a]))
@@ -1323,14 +1378,16 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
                 converged = True
                 break
             if ok and stalled >= 2:
-                if residual(Ar, qr, p, mu, normal_only, sliding, tol, equal, has_equal) \
-                        <= prm[P_RESIDUAL_TOLERANCE] * _row_scale(Ar, qr, p) + 2.0 * rho * change:
+                left = residual(Ar, qr, p, mu, normal_only, sliding, tol, equal, has_equal,
+                                pat)
+                if left <= prm[P_RESIDUAL_TOLERANCE] * _row_scale(Ar, qr, p, pat) \
+                        + 2.0 * rho * change:
                     converged = True
                     break
             if early and ok and stalled >= stall:
                 if not newton_tried:
                     newton_tried = True
-                    solved, solved_ok = newton(Ar, qr, mu, sliding, p, prm)
+                    solved, solved_ok = _newton(Ar, qr, mu, sliding, p, prm, pat)
                     if solved_ok:
                         p, converged = solved, True
                         cnt[C_NEWTON] += 1
@@ -1342,16 +1399,16 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
         if converged or not pivots:
             break
         # An iterate within what a pivoted solve must reach stands (``solve_island``).
-        converged = residual(Ar, qr, p, mu, False, sliding, tol, equal, False) \
-            <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, p)
+        converged = residual(Ar, qr, p, mu, False, sliding, tol, equal, False, pat) \
+            <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, p, pat)
         if converged or pivot_tried:
             break
         pivot_tried = True
         # Lemke's pivoting on the pyramid (``_pyramid``).
         for reg in (prm[P_PIVOT_REGULARIZATION_1], prm[P_PIVOT_REGULARIZATION_2]):
             pivoted, ok = pyramid(Ar, qr, mu, sliding, reg)
-            if ok and residual(Ar, qr, pivoted, mu, False, sliding, tol, equal, False) \
-                    <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, pivoted):
+            if ok and residual(Ar, qr, pivoted, mu, False, sliding, tol, equal, False, pat) \
+                    <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, pivoted, pat):
                 p, converged = pivoted, True
                 cnt[C_PIVOTED] += 1
                 break
@@ -1365,7 +1422,7 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
     if not has_equal:
         cnt[C_COMPLEMENTARITY] = max(cnt[C_COMPLEMENTARITY],
                                      residual(Ar, qr, p, mu, normal_only, sliding, tol,
-                                              equal, False))
+                                              equal, False, pat))
     return p.copy(), True
 
 
@@ -1413,23 +1470,74 @@ def lu_solve(LU: np.ndarray, piv: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x
 
 
+#: LAPACK's ``dgetrf`` (LU by partial pivoting, blocked), through numba's own binding of
+#: scipy's LAPACK (the one ``np.linalg`` uses in compiled code; a symbol, not an address, so
+#: the kernels that call it stay cached); ``ord('d')``: its double-precision kind.
+_GETRF = _LAPACK().numba_xxgetrf(types.float64)
+_DOUBLE = ord('d')
+
+
 @njit(cache=True)
-def _inverse(K: np.ndarray) -> tuple:
-    """Return ``(K⁻¹, ok)`` by LAPACK (``ok`` False: ``K`` singular, or not finite)."""
-    try:
-        Ki = np.linalg.inv(K.T).T   # (LAPACK's result is column-major: its transpose's)
-    except Exception:
-        return K, False
-    for a in range(Ki.shape[0]):
-        for b in range(Ki.shape[1]):
-            if not np.isfinite(Ki[a, b]):
-                return K, False
-    return Ki, True
+def lapack_lu(K: np.ndarray) -> tuple:
+    """
+    Return ``(F, pivots, ok)``: ``K = P L U`` by LAPACK's ``dgetrf`` (``ok``: ``U`` regular).
+
+    ``F`` is the factors in LAPACK's column-major order read as a C array: ``F[j, i]`` is
+    the factors' ``(i, j)`` entry (``L`` unit lower, ``U`` upper); ``pivots`` LAPACK's row
+    interchanges, from 0 (for :func:`lapack_lu_solve`).
+    """
+    n = K.shape[0]
+    F = K.T.copy()   # (C order of Kᵀ: column-major order of K)
+    ipiv = np.empty(n, dtype=F_INT_nptype)
+    if n == 0:
+        return F, np.zeros(0, dtype=np.int64), True
+    for a in range(n):
+        for b in range(n):
+            if not np.isfinite(F[a, b]):
+                return F, np.zeros(n, dtype=np.int64), False
+    info = _GETRF(_DOUBLE, n, n, F.ctypes, n, ipiv.ctypes)
+    piv = np.empty(n, dtype=np.int64)
+    for a in range(n):
+        piv[a] = ipiv[a] - 1
+    ok = info == 0
+    for a in range(n):
+        ok = ok and np.isfinite(F[a, a]) and F[a, a] != 0.0
+    return F, piv, ok
+
+
+@njit(cache=True)
+def lapack_lu_solve(F: np.ndarray, piv: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Return ``x`` with ``K x = b`` from :func:`lapack_lu`'s factors (by their columns)."""
+    n = b.shape[0]
+    x = b.copy()
+    for i in range(n):
+        j = piv[i]
+        if j != i:
+            x[i], x[j] = x[j], x[i]
+    for j in range(n):   # (L: its column j is F[j, j + 1:])
+        xj = x[j]
+        if xj != 0.0:
+            for i in range(j + 1, n):
+                x[i] -= F[j, i] * xj
+    for j in range(n - 1, -1, -1):   # (U: its column j is F[j, :j + 1])
+        x[j] /= F[j, j]
+        xj = x[j]
+        if xj != 0.0:
+            for i in range(j):
+                x[i] -= F[j, i] * xj
+    return x
 
 
 @njit(cache=True)
 def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
            p0: np.ndarray, prm: np.ndarray) -> tuple:
+    """Return :func:`_newton` (``A``'s :func:`pattern` found here)."""
+    return _newton(A, q, mu, sliding, p0, prm, pattern(A))
+
+
+@njit(cache=True)
+def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
+            p0: np.ndarray, prm: np.ndarray, pat: np.ndarray) -> tuple:
     """
     Return ``(p, ok)``: Newton's method on the rows' natural map, as ``_newton``.
 
@@ -1437,8 +1545,8 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
     friction rows on their bounds ``±μ p_n`` or inside them, and solves that guess's
     linear system (``w = 0`` on the loaded normal rows and the friction rows inside)
     by a proximal LU solve, refined on its factors (beyond :data:`NEWTON_LAPACK_ROWS`
-    unknowns LAPACK's inverse, refined the same way). ``ok``: within
-    ``P_PIVOT_TOLERANCE``.
+    unknowns LAPACK's, :func:`lapack_lu`, refined the same way). ``ok``: within
+    ``P_PIVOT_TOLERANCE``. ``pat``: ``A``'s :func:`pattern` (its products run over it).
     """
     m = q.shape[0]
     c = m // 3
@@ -1448,7 +1556,7 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
     column = np.full(m, -1, dtype=np.int64)
     tol, no_equal = prm[P_FRICTION_TOLERANCE], np.zeros(c, dtype=np.bool_)
     for guess in range(int(prm[P_NEWTON_ITERATIONS])):
-        w = _affine(A, p, q)
+        w = _sparse_affine(A, pat, p, q)
         for k in range(c):
             n = 3 * k
             yn = p[n] - w[n] / A[n, n]
@@ -1489,11 +1597,9 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
                 Kp[a, a] += prm[P_PROXIMAL] * dmax
             lapack = nu > NEWTON_LAPACK_ROWS
             if lapack:
-                Ki, ok = _inverse(Kp)
-                LU, piv = Ki, column   # (unread: of their types)
+                LU, piv, ok = lapack_lu(Kp)
             else:
                 LU, piv, ok = lu_factor(Kp)
-                Ki = LU
             if not ok:
                 return p, False
             step = np.zeros(nu)
@@ -1505,7 +1611,8 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
                     for b in range(nu):
                         v -= K[a, b] * zs[b]
                     rhs[a] = v
-                step = step + (Ki @ rhs if lapack else lu_solve(LU, piv, rhs))
+                step = step + (lapack_lu_solve(LU, piv, rhs) if lapack
+                               else lu_solve(LU, piv, rhs))
             z = z + step
         p = np.zeros(m)
         for j in range(m):
@@ -1514,8 +1621,8 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
         for j in range(m):
             if kind[j] == 2 or kind[j] == -2:
                 p[j] = (1.0 if kind[j] > 0 else -1.0) * mu[j // 3] * p[3 * (j // 3)]
-        if residual(A, q, p, mu, False, sliding, tol, no_equal, False) \
-                <= prm[P_PIVOT_TOLERANCE] * _row_scale(A, q, p):
+        if residual(A, q, p, mu, False, sliding, tol, no_equal, False, pat) \
+                <= prm[P_PIVOT_TOLERANCE] * _row_scale(A, q, p, pat):
             return p, True
         same = guess > 0
         for j in range(m):
@@ -1528,13 +1635,13 @@ def newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
 
 
 @njit(cache=True)
-def _row_scale(A: np.ndarray, q: np.ndarray, p: np.ndarray) -> float:
-    """Return the rows' velocity scale at ``p``: the largest ``|A| |p| + |q|``."""
+def _row_scale(A: np.ndarray, q: np.ndarray, p: np.ndarray, pat: np.ndarray) -> float:
+    """Return the rows' velocity scale at ``p``: the largest ``|A| |p| + |q|`` (``pat``: A's)."""
     out = 0.0
     for a in range(q.shape[0]):
         wa = abs(q[a])
-        for b in range(q.shape[0]):
-            wa += abs(A[a, b]) * abs(p[b])
+        for t in range(pat[a], pat[a + 1]):
+            wa += abs(A[a, pat[t]]) * abs(p[pat[t]])
         out = max(out, wa)
     return out
 
@@ -1715,32 +1822,35 @@ def _lcp_error(M: np.ndarray, q: np.ndarray, z: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def _affine(A: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Return ``A p + q``: a loop for a few rows (a BLAS call's overhead is the most of it)."""
+def _sparse_affine(A: np.ndarray, pat: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Return ``A p + q`` over ``A``'s :func:`pattern` ``pat`` (its non-zeros, by column)."""
     m = q.shape[0]
-    if m > AFFINE_LOOP_ROWS:
-        return A @ p + q
     w = np.empty(m)
     for a in range(m):
         acc = 0.0
-        for b in range(m):
-            acc += A[a, b] * p[b]
+        for t in range(pat[a], pat[a + 1]):
+            acc += A[a, pat[t]] * p[pat[t]]
         w[a] = acc + q[a]
     return w
 
 
 @njit(cache=True)
 def residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray, normal_only: bool,
-             sliding: np.ndarray, tol: float, equal: np.ndarray, has_equal: bool) -> float:
-    """Return how far the contact conditions are from holding (m/s), as the Python path."""
+             sliding: np.ndarray, tol: float, equal: np.ndarray, has_equal: bool,
+             pat: np.ndarray) -> float:
+    """
+    Return how far the contact conditions are from holding (m/s), as the Python path.
+
+    ``pat``: ``A``'s :func:`pattern`.
+    """
     m = q.shape[0]
     if not m:
         return 0.0
     diag = np.empty(m)
     for a in range(m):
         diag[a] = A[a, a]
-    return _residual(_affine(A, p, q), diag, q, p, mu, normal_only, sliding, tol, equal,
-                     has_equal)
+    return _residual(_sparse_affine(A, pat, p, q), diag, q, p, mu, normal_only, sliding,
+                     tol, equal, has_equal)
 
 
 @njit(cache=True)
