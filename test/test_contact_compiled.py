@@ -618,6 +618,55 @@ def test_newtons_large_systems_through_lapack_are_the_python_paths():
     assert large >= 3   # (the LAPACK branch met)
 
 
+def test_islands_too_large_to_pivot_are_solved_by_their_blocks_to_a_pivoted_solves_bar():
+    # Where the fixed point and Newton's method fail on an island of more than
+    # PIVOT_CONTACTS contacts, the compiled solve goes on by the island's blocks
+    # (_by_blocks) instead of Lemke's pivoting, and takes its result only where it meets
+    # the bar a pivoted one must: PIVOT_TOLERANCE of the rows' velocity scale. On random
+    # loaded contacts (60 on 40 spheres, redundant): (1) from no impulse, _by_blocks
+    # meets that bar (by the Python path's residual) on each problem with a solution
+    # (Newton's method finds one), else says it did not; (2) solve_island with the
+    # threshold at 0 (no island pivoted) takes the blocks' path on the problems where the
+    # fixed point and Newton's method fail, never pivots; where neither the blocks nor
+    # pivoting (threshold 60, as the Python path) meet the bar, the two end on the same
+    # impulses: a refused result changes nothing.
+    from rigid_body_sim.core import contact_step as cs
+    from rigid_body_sim.core.kernels import contact_step as kern
+    sim = Simulation([RigidBody('s', 1.0, (0.004,) * 3)], [Gravity()], dt=1e-3,
+                     shapes=[CollisionShape('plane', None),
+                             CollisionShape('sphere', 's', radius=0.1)])
+    prm = sim.contact.kernel_parameters()
+    assert prm[kern.P_PIVOT_CONTACTS] == cs.PIVOT_CONTACTS
+    never, always = prm.copy(), prm.copy()
+    never[kern.P_PIVOT_CONTACTS], always[kern.P_PIVOT_CONTACTS] = 0, 60
+    met, taken = 0, 0
+    for seed in range(12):
+        A, q, mu = _loaded_contact_lcp(np.random.default_rng(seed))
+        m, c = len(q), len(mu)
+        none = np.zeros(c, dtype=bool)
+        pat = kern.pattern(A)
+        cnt = np.zeros(len(kern.COUNTERS))
+        p, ok = kern._by_blocks(A, q, mu, np.zeros(m), none, none, prm, pat, cnt)
+        scale = float(np.max(np.abs(A) @ np.abs(p) + np.abs(q)))
+        assert ok == (cs._residual(A, q, p, mu, False) <= cs.PIVOT_TOLERANCE * scale)
+        solvable = kern.newton(A, q, mu, none, np.zeros(m), prm)[1]
+        assert ok or not solvable
+        met += ok
+        results = []
+        for table in (never, always):
+            cnt = np.zeros(len(kern.COUNTERS))
+            results.append((kern.solve_island(A, q, mu, np.zeros(m), False, none, False, none,
+                                              table, cnt)[0], cnt))
+        (p0, cnt0), (p1, cnt1) = results
+        assert cnt0[kern.C_PIVOTED] == 0
+        taken += cnt0[kern.C_SPARSE]
+        if cnt0[kern.C_SPARSE] and not cnt1[kern.C_PIVOTED]:
+            scale = float(np.max(np.abs(A) @ np.abs(p0) + np.abs(q)))
+            if cs._residual(A, q, p0, mu, False) > cs.PIVOT_TOLERANCE * scale:
+                np.testing.assert_array_equal(p0, p1)
+    assert met >= 6 and taken >= 1   # (solutions found by the blocks; the path taken)
+
+
 def test_islands_too_large_to_factor_are_solved_by_their_blocks_to_the_contact_conditions():
     # An island of more than SPARSE_CONTACTS contacts is solved by its blocks alone: the
     # friction boxes' proximal fixed point with MPRGP inside, to SPARSE_RESIDUAL of the

@@ -155,6 +155,19 @@ FRICTION_ITERATIONS = 60
 STALL_ITERATIONS = 2
 #: The proximal regularization, relative to the Delassus operator's largest diagonal.
 PROXIMAL = 1e-6
+#: The compiled steps pivot (Lemke's, on the pyramid: :func:`_pyramid`) an island of at most
+#: this many contacts whose fixed point and Newton's method fail; a larger one they solve
+#: instead by its blocks (:func:`.kernels.contact_step.solve_large_island`, counted in
+#: ``lcp_sparse``), its result taken where it meets the bar a pivoted one must
+#: (:data:`PIVOT_TOLERANCE`), else the fixed point goes on as after a failed pivoting. A
+#: pivoted solve's tableau has about seven columns a contact, and its cost grows as their
+#: cube: 0.37 s for an island of 190 contacts of the 100-sphere pour, a hundred times its
+#: Newton solve; pivoting every island took two fifths of that pour's run time (perf).
+#: The pour's first second, compiled, this Xeon (one sample each: a pile is chaotic, and
+#: each threshold's run takes its own path): every island pivoted 138-167 s, 48 LCP failures;
+#: 128 contacts 125 s, 18; 64: 89-92 s, 19; 32: 103-108 s, 4; 16: 90 s, 8. The Python
+#: path pivots every island.
+PIVOT_CONTACTS = 32
 #: Islands of more contacts than this are solved by their Delassus operator's blocks alone
 #: (the compiled steps: :func:`.kernels.contact_step.solve_large_island`), where the
 #: dense path's factors cost ``O(rows³)`` and its matrix ``O(rows²)`` (a pile of a
@@ -1181,6 +1194,7 @@ class ContactSteps:
         prm[kern.P_SPARSE_ITERATIONS] = SPARSE_ITERATIONS
         prm[kern.P_SPARSE_INNER], prm[kern.P_PGS_SWEEPS] = SPARSE_INNER, PGS_SWEEPS
         prm[kern.P_SPARSE_HISTORY] = SPARSE_HISTORY
+        prm[kern.P_PIVOT_CONTACTS] = PIVOT_CONTACTS
         return prm
 
     def _buffers(self) -> tuple:

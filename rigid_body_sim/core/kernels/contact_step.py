@@ -22,7 +22,8 @@ for function:
   and leave, and kept from one iteration to the next), warm-started
   from the last step's normal impulses (where that fixed point stalls, Newton's method
   on the rows' natural map, :func:`newton`, then Lemke's pivoting on the pyramid:
-  :func:`pyramid`); sticking contacts that begin to slip turned
+  :func:`pyramid`, or, for an island of more than ``P_PIVOT_CONTACTS`` contacts, its
+  blocks' fixed point: :func:`_by_blocks`); sticking contacts that begin to slip turned
   to their slip (:func:`slip_turn`); the step with the forces held, its model
   checked at the end's geometry (each contact found again: :func:`match`) and
   corrected up to ``MODEL_CORRECTIONS`` times;
@@ -59,7 +60,7 @@ from .sparse_box import block_product, mprgp
  P_PIVOT_TOLERANCE, P_PIVOT_REGULARIZATION_1, P_PIVOT_REGULARIZATION_2,
  P_BOUNCE, P_UNLOCATED, P_STALL_ITERATIONS, P_NEWTON_ITERATIONS, P_NEWTON_REFINEMENTS,
  P_SPARSE_CONTACTS, P_SPARSE_PROXIMAL, P_SPARSE_RESIDUAL, P_SPARSE_ITERATIONS,
- P_SPARSE_INNER, P_PGS_SWEEPS, P_SPARSE_HISTORY, P_WIDTH) = range(30)
+ P_SPARSE_INNER, P_PGS_SWEEPS, P_SPARSE_HISTORY, P_PIVOT_CONTACTS, P_WIDTH) = range(31)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
@@ -1404,14 +1405,22 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
         if converged or pivot_tried:
             break
         pivot_tried = True
-        # Lemke's pivoting on the pyramid (``_pyramid``).
-        for reg in (prm[P_PIVOT_REGULARIZATION_1], prm[P_PIVOT_REGULARIZATION_2]):
-            pivoted, ok = pyramid(Ar, qr, mu, sliding, reg)
-            if ok and residual(Ar, qr, pivoted, mu, False, sliding, tol, equal, False, pat) \
-                    <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, pivoted, pat):
-                p, converged = pivoted, True
-                cnt[C_PIVOTED] += 1
-                break
+        if nr // 3 > prm[P_PIVOT_CONTACTS]:
+            # Too large to pivot (a pivoted solve's cost grows as the cube of the contacts:
+            # 0.37 s at 190): the fixed point by the island's blocks, to the bar a
+            # pivoted solve must meet (``P_PIVOT_CONTACTS``).
+            p_b, converged = _by_blocks(Ar, qr, mu, p, equal, sliding, prm, pat, cnt)
+            if converged:
+                p = p_b
+        else:
+            # Lemke's pivoting on the pyramid (``_pyramid``).
+            for reg in (prm[P_PIVOT_REGULARIZATION_1], prm[P_PIVOT_REGULARIZATION_2]):
+                pivoted, ok = pyramid(Ar, qr, mu, sliding, reg)
+                left = residual(Ar, qr, pivoted, mu, False, sliding, tol, equal, False, pat)
+                if ok and left <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, pivoted, pat):
+                    p, converged = pivoted, True
+                    cnt[C_PIVOTED] += 1
+                    break
         if converged or not exited:
             break
         early = False   # (the pivoting failed: the fixed point goes on from its iterate)
@@ -1424,6 +1433,31 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
                                      residual(Ar, qr, p, mu, normal_only, sliding, tol,
                                               equal, False, pat))
     return p.copy(), True
+
+
+@njit(cache=True)
+def _by_blocks(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, p: np.ndarray,
+               equal: np.ndarray, sliding: np.ndarray, prm: np.ndarray, pat: np.ndarray,
+               cnt: np.ndarray) -> tuple:
+    """
+    Return ``(p, ok)``: a dense island :func:`solve_island` may not pivot, by its blocks.
+
+    :func:`solve_large_island` on :func:`blocks` of ``Ar`` from the fixed point's iterate
+    ``p``; ``ok``: its result meets the bar a pivoted solve must (``P_PIVOT_TOLERANCE``
+    of the rows' velocity scale, by the dense residual). Counted as a solve by blocks
+    (``C_SPARSE``; ``C_PGS`` where it went on by projected Gauss–Seidel), not as a
+    second solve or failure: the caller counts its own.
+    """
+    c = qr.shape[0] // 3
+    own = np.zeros(cnt.shape[0])
+    out, ok = solve_large_island(blocks(Ar), qr, mu, p, np.arange(c), False, equal, False,
+                                 sliding, prm, own)
+    cnt[C_SPARSE] += 1
+    cnt[C_PGS] += own[C_PGS]
+    if not ok:
+        return p, False
+    return out, residual(Ar, qr, out, mu, False, sliding, prm[P_FRICTION_TOLERANCE], equal,
+                         False, pat) <= prm[P_PIVOT_TOLERANCE] * _row_scale(Ar, qr, out, pat)
 
 
 @njit(cache=True)
