@@ -276,8 +276,9 @@ def table(rows: list) -> str:
         'MuJoCo: one `mj_step` call a step. Ours `step(100)` and MuJoCo: the fastest of '
         f'{REPEATS} runs taken alternately, the piles one run each (the machine is shared: '
         'its other load only adds time). "LCPs failed, by blocks": ours\' contact solves '
-        'that stopped short of their tolerance (counted, never hidden), and those of islands '
-        'of more than 500 contacts, solved by their blocks alone.')
+        'that stopped short of their tolerance (counted, never hidden), and the solves by '
+        "an island's blocks: of islands of more than 500 contacts, and of those of more "
+        "than 32 that the fixed point and Newton's method left (in place of pivoting).")
 
 
 def main(argv=None) -> int:
