@@ -1406,9 +1406,10 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
             break
         pivot_tried = True
         if nr // 3 > prm[P_PIVOT_CONTACTS]:
-            # Too large to pivot (a pivoted solve's cost grows as the cube of the contacts:
-            # 0.37 s at 190): the fixed point by the island's blocks, to the bar a
-            # pivoted solve must meet (``P_PIVOT_CONTACTS``).
+            # Too large to pivot (more than ``P_PIVOT_CONTACTS`` contacts: a pivoted
+            # solve's cost grows as their cube, 0.37 s at 190): the fixed point by the
+            # island's blocks, held to the bar a pivoted solve must meet
+            # (``P_PIVOT_TOLERANCE``).
             p_b, converged = _by_blocks(Ar, qr, mu, p, equal, sliding, prm, pat, cnt)
             if converged:
                 p = p_b
