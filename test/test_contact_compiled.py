@@ -300,6 +300,66 @@ def test_compiled_steps_repeat_bit_for_bit(name):
     assert all(np.array_equal(runs[0], r) for r in runs[1:])
 
 
+def _arrays(tree):
+    """Yield the arrays of a tree of tuples, lists and objects' attributes."""
+    if isinstance(tree, np.ndarray):
+        yield tree
+    elif isinstance(tree, (tuple, list)):
+        for item in tree:
+            yield from _arrays(item)
+    elif hasattr(tree, '__dict__'):
+        yield from _arrays(list(vars(tree).values()))
+
+
+@pytest.mark.parametrize('name', ['bouncing ball', 'sphere pile', 'tipping box', 'stack'])
+def test_the_compiled_steps_give_back_no_view_of_their_uncounted_arrays(name):
+    # The kernel passes its arguments on as views without reference counts (views.raw_tree):
+    # one returned to Python would come back as an array owning nothing (no base, not
+    # its own data), its memory freed with the simulation's buffers. Every array the
+    # kernel gives back (state, warm start, the record read by contacts()) must own its
+    # memory or hold the object that does, after each call of a run through impacts,
+    # rest, slip and tipping.
+    sim, _, steps = _pair(name, 'rkmk4')
+    checked = 0
+    for _ in range(10):
+        sim.step(steps // 10)
+        for a in _arrays([sim.state.y, sim.contact._warm, sim.contact._lazy]):
+            assert a.flags.owndata or a.base is not None, (a.shape, a.dtype)
+            checked += 1
+    assert sim.contact.counters['compiled_steps'] == 10 * (steps // 10)
+    assert checked >= 10 * 8
+
+
+def test_raw_trees_view_their_arrays_in_place_and_refuse_what_is_not_arrays_or_numbers():
+    # raw_tree: the same types, the same data, shapes and strides (any layout), written
+    # through in place; a tree holding anything counted but arrays is refused at typing.
+    import numba
+    from rigid_body_sim.core.kernels.views import raw_tree
+
+    @numba.njit
+    def fill(tree):
+        a, (b, c, k) = raw_tree(tree)
+        for i in range(a.shape[0]):
+            a[i] += c * k
+        b[1, :] = a[:b.shape[1]]
+        return a.strides[0], b.strides[0], b.strides[1]
+
+    base = np.arange(12.0)
+    a, b = base[::3], np.zeros((3, 8))[:, ::2]
+    strides = fill((a, (b, 0.5, 4)))
+    assert strides == (a.strides[0], b.strides[0], b.strides[1])
+    np.testing.assert_array_equal(base[::3], [2.0, 5.0, 8.0, 11.0])
+    np.testing.assert_array_equal(b[1], [2.0, 5.0, 8.0, 11.0])
+    assert not b[0].any() and not b[2].any()
+
+    @numba.njit
+    def bad(tree):
+        return raw_tree(tree)[0][0]
+
+    with pytest.raises(numba.core.errors.TypingError):
+        bad((numba.typed.List([1.0]), 2.0))
+
+
 def _definite(rng, n, band):
     """Return a random symmetric positive definite (n, n): banded (a stack's rows) or dense."""
     G = rng.standard_normal((n, n + 10))

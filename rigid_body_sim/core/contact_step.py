@@ -107,7 +107,7 @@ from .dynamics import STEPS
 from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
 from .kernels import contact_step as kern
 from .kernels.free_step import HAS_POSITION_FORCES, state_outputs
-from .kernels.layout import O_WIDTH, W_BODY, W_FORCE, W_TORQUE, W_WIDTH
+from .kernels.layout import B_INV_MASS, B_MOMENTS, O_WIDTH, W_BODY, W_FORCE, W_TORQUE, W_WIDTH
 from .rotation import cross, exp_quat, quat_multiply, quat_to_matrix
 from .shapes import ContactDetector, Contacts, ROW
 
@@ -1102,7 +1102,7 @@ class ContactSteps:
         self._set_forces(None)
         dt = sim.dt
         model = dyn.kernel_model(start.time + 0.5 * dt)
-        wbuf, det, out, prm = self._kernel_arguments(model)
+        wbuf, det, out, prm, minv = self._kernel_arguments(model)
         integ = sim.integrator
         cnt = np.zeros(len(kern.COUNTERS))
         before = dyn.defer_effect_work() if dyn.effects else None
@@ -1112,7 +1112,7 @@ class ContactSteps:
                 (model[0], model[1], wbuf), len(model[2]), model[3], integ._kick_buffer,
                 dyn.tally, STEPS, integ._ws, dyn.bodies.outputs_cache.frames, out, det,
                 self._buffers(), self._mu, self._e, self._radius, self._warm, prm, cnt,
-                self._log)
+                self._log, minv)
             if code not in (kern.GROW, kern.FULL) or taken:
                 break
             if code == kern.GROW:
@@ -1148,7 +1148,7 @@ class ContactSteps:
         return taken, new
 
     def _kernel_arguments(self, model: tuple) -> tuple:
-        """Return the kernel's ``wbuf``, ``det``, ``out`` and ``prm`` (kept while they hold)."""
+        """Return the kernel's ``wbuf``, ``det``, ``out``, ``prm``, ``minv`` (kept while valid)."""
         d = self.detector
         key = self._kernel_key
         if key is not None and key[0] is model and key[1] is d.excluded \
@@ -1162,7 +1162,11 @@ class ContactSteps:
         det = (d.kind, d.size, d.c_body, d.R_body, d.body, d.group, d.mask, d._solids,
                d._planes, d._solid_body, d._solid_group, d._solid_mask, d.excluded, d.live,
                float(d.margin), d.hulls, d.hull_at)
-        self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), self.kernel_parameters())
+        body = model[0]
+        minv = np.empty((n, 6))   # (per body: 1/m three times, then 1/J by principal axis)
+        minv[:, :3] = body[:, B_INV_MASS:B_INV_MASS + 1]
+        minv[:, 3:] = 1.0 / body[:, B_MOMENTS:B_MOMENTS + 3]
+        self._kernel_args = (wbuf, det, np.zeros((n, O_WIDTH)), self.kernel_parameters(), minv)
         self._kernel_key = (model, d.excluded,
                             (self.location, self.rate, self.bounce, self.unlocated,
                              self.sparse_contacts))

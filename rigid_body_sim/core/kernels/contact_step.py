@@ -52,6 +52,7 @@ from .free_step import FINITE, free_step, HAS_POSITION_FORCES, outputs, state_pa
 from .layout import O_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_KIND, W_POINT, W_TORQUE, WRENCH_APPLIED
 from .so3 import quat_exp_multiply, quat_matrix
 from .sparse_box import block_product, mprgp
+from .views import raw_tree
 
 #: Slots of the tolerances ``prm`` (the constants of :mod:`..contact_step`).
 (P_LOCATION, P_RATE, P_FRICTION_TOLERANCE, P_FRICTION_ITERATIONS, P_PROXIMAL,
@@ -2066,7 +2067,7 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
                   kick: np.ndarray, counts: np.ndarray, steps_slot: int, ws: np.ndarray,
                   frames: np.ndarray, out: np.ndarray, det: tuple, buf: tuple,
                   shape_mu: np.ndarray, shape_e: np.ndarray, radius: np.ndarray, warm: tuple,
-                  prm: np.ndarray, cnt: np.ndarray, log: np.ndarray) -> tuple:
+                  prm: np.ndarray, cnt: np.ndarray, log: np.ndarray, minv: np.ndarray) -> tuple:
     """
     Take up to ``n_steps`` contact steps from ``y0`` at time ``t0``; stop at a ``BAIL``.
 
@@ -2081,15 +2082,11 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
     ``(sel, force, contacts at its start, its start's state buffer, its time)`` and the
     rows of ``log`` written.
     """
-    body = model[0]
-    n = body.shape[0]
-    minv = np.empty((n, 6))
-    for i in range(n):
-        for a in range(3):
-            minv[i, a] = body[i, 1]
-            minv[i, 3 + a] = 1.0 / body[i, 2 + a]
-    ctx = (method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out, det,
-           buf, shape_mu, shape_e, radius, prm, minv, dt)
+    # (Every helper takes ctx; its ~40 arrays, as raw views, are passed on uncounted.
+    # All are arguments, alive for the call; none is returned.)
+    ctx = raw_tree((method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out,
+                    det, buf, shape_mu, shape_e, radius, prm, minv, dt))
+    cnt, log = raw_tree((cnt, log))
     y, t = y0, t0
     record = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
     # A step's end's contacts are the next one's start's.
