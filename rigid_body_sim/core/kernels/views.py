@@ -2,8 +2,9 @@
 Views of arrays for compiled kernels: without reference counting, and by address.
 
 A kernel's many small calls would otherwise spend as much time counting
-references to the arrays they pass on (:func:`raw`, :func:`raw_slice`) and
-unboxing array arguments (:class:`Pinned`, :func:`pinned`) as on arithmetic.
+references to the arrays they pass on (:func:`raw`, :func:`raw_slice`,
+:func:`raw_tree`) and unboxing array arguments (:class:`Pinned`, :func:`pinned`)
+as on arithmetic.
 Under ``NUMBA_DISABLE_JIT=1`` they are ordinary numpy views.
 """
 
