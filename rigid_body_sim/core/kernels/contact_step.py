@@ -944,6 +944,8 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
     part (``normal_only``: of its normal rows alone) is gathered from its blocks straight
     into the dense matrix its solve factors, ``O(blocks)`` beside that matrix's zeroing.
     """
+    # (Its arguments, alive for the call, passed on uncounted; p is a new array.)
+    D, q, mu, start, equal, sliding = raw_tree((D, q, mu, start, equal, sliding))
     ptr, col, blk = D
     c = ptr.shape[0] - 1
     m = q.shape[0]
@@ -2122,7 +2124,7 @@ def _detect_ctx(ctx: tuple, y: np.ndarray) -> tuple:
 @njit(cache=True)
 def _make_rows(ctx: tuple, y: np.ndarray, con: tuple, sel: np.ndarray) -> tuple:
     """Return the rows of contacts ``sel`` of ``con`` at ``y`` (:func:`rows`), and their bodies."""
-    c0, sa, sb, ba, bb, pt, nr, dp = con
+    c0, sa, sb, ba, bb, pt, nr, dp = raw_tree(con)   # (new rows: nothing of con returned)
     pos, quat, vel, om = state_parts(y)
     R = rotations(quat)
     frame, la, lb, mu, e, sliding, vn, Ga, Gb = rows(pos, vel, om, R, sel, ba, bb, pt, nr, sa,
@@ -2168,6 +2170,8 @@ def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
 
     (A caller with no second set of rows passes ``which`` as ``also``.)
     """
+    # (match's arrays are new: every argument passed on uncounted)
+    r_con, r_sel, r_y, which, con, y, also = raw_tree((r_con, r_sel, r_y, which, con, y, also))
     _, sa0, sb0, ba0, _, pt0, _, _ = r_con
     _, sa1, sb1, ba1, _, pt1, _, _ = con
     pos0, quat0, _, _ = state_parts(r_y)
@@ -2284,6 +2288,7 @@ def _in_margin(ctx: tuple, y: np.ndarray, con: tuple) -> tuple:
 
     Those touching while ``P_UNLOCATED`` is 0, else every contact of ``con``.
     """
+    y, con = raw_tree((y, con))   # (the rows are new arrays)
     if ctx[15][P_UNLOCATED] <= 0.0:
         return _make_rows(ctx, y, con, _where(con[7] >= -ctx[15][P_LOCATION]))
     return _make_rows(ctx, y, con, np.arange(con[0]))
@@ -2299,6 +2304,7 @@ def _step_rows(ctx: tuple, con: tuple, near: tuple) -> tuple:
     slower than it (their rows ask the step to close at most their gap: ``_held``).
     """
     prm = ctx[15]
+    con = raw_tree(con)   # (read only; near, which may be returned, is not borrowed)
     slow = prm[P_UNLOCATED]
     if slow <= 0.0:
         return _subset(near, _where(near[7] <= prm[P_RATE]))
@@ -2317,6 +2323,7 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
 
     ``code`` FULL: the log cannot take these impacts; BAIL: a row no impulse moves.
     """
+    con, r = raw_tree((con, r))   # (y, which may be returned, is not borrowed)
     sel, frame, la, lb, mu, e, sliding, vn_, Ga, Gb, ba, bb = r
     prm, minv = ctx[15], ctx[16]
     rate = prm[P_RATE]
@@ -2379,7 +2386,12 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     (method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out, det, buf,
      shape_mu, shape_e, radius, prm, minv, dt) = ctx
     wbuf = model[2]
-    sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
+    # The arguments the result holds (con, y0, sel in the record; warm when the step is
+    # not taken) stay counted; the rest are read through uncounted views (alive for the
+    # call). A subset of the rows (below) is this function's own: counted.
+    sel = r[0]
+    _, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = raw_tree(r)
+    cv = raw_tree(con)
     c = sel.shape[0]
     n = minv.shape[0]
     rate = prm[P_RATE]
@@ -2394,7 +2406,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         # is an event located (``_held_step``).
         keep = np.ones(c, dtype=np.bool_)
         for k in range(c):
-            if con[7][sel[k]] < -prm[P_LOCATION]:
+            if cv[7][sel[k]] < -prm[P_LOCATION]:
                 keep[k] = q[3 * k] >= -2.0 * prm[P_UNLOCATED]
         if not np.all(keep):
             kept = _where(keep)
@@ -2415,16 +2427,16 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     # closes at most g (``_held_step``).
     shift = np.zeros(3 * c)
     for k in range(c):
-        if con[7][sel[k]] < -prm[P_LOCATION]:
-            shift[3 * k] = max(0.0, -2.0 * con[7][sel[k]] / h + vn[k])
+        if cv[7][sel[k]] < -prm[P_LOCATION]:
+            shift[3 * k] = max(0.0, -2.0 * cv[7][sel[k]] / h + vn[k])
     start = np.zeros(3 * c)
-    w_sa, w_sb, w_pt, w_pn = warm
-    pt0 = con[5]
+    w_sa, w_sb, w_pt, w_pn = raw_tree(warm)
+    pt0 = cv[5]
     shapes = shape_mu.shape[0] + 1   # (as the pairs' keys of :func:`match`)
     order, keys = _by_key(w_sa * shapes + w_sb)
     for k in range(c):
         j = sel[k]
-        key = con[1][j] * shapes + con[2][j]
+        key = cv[1][j] * shapes + cv[2][j]
         for u in range(np.searchsorted(keys, key), keys.shape[0]):   # (the first near)
             if keys[u] != key:
                 break
@@ -2452,7 +2464,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     pos0, quat0, _, _ = state_parts(y0)
     R0 = rotations(quat0)
     count = shape_mu.shape[0] + 1
-    sa_r, sb_r, pt_r = con[1][sel], con[2][sel], con[5][sel]
+    sa_r, sb_r, pt_r = cv[1][sel], cv[2][sel], cv[5][sel]
     new = free
     nw, fl = n_applied, flags
     force = np.zeros((c, 3))
@@ -2517,6 +2529,7 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndar
     ``y0`` already; ``ov``: the overlaps ``y0`` has that are not rows (not new).
     """
     prm = ctx[15]
+    con, sel, ov = raw_tree((con, sel, ov))   # (y0, which may be returned, is not borrowed)
     loc, rate = prm[P_LOCATION], prm[P_RATE]
     margin = ctx[10][14]
     g0, code = _new_depth(ctx, con, sel, ov, y0, con, y0, margin)
@@ -2577,6 +2590,7 @@ def _known(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y: np.
     ``loaded`` (:func:`_loaded`; :func:`_accept`'s held contacts, matched in the same
     pass; ``loaded`` of no rows: none).
     """
+    r_con, r_sel, ov, r_y, con, y, loaded = raw_tree((r_con, r_sel, ov, r_y, con, y, loaded))
     every = np.ones(r_sel.shape[0], dtype=np.bool_)
     _, known, held = _continuing(ctx, r_con, r_sel, r_y, every, con, y, loaded)
     if ov.shape[0]:
@@ -2591,6 +2605,7 @@ def _known(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y: np.
 def _new_depth(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y: np.ndarray,
                con: tuple, y: np.ndarray, margin: float) -> tuple:
     """Return the deepest depth of new contacts (−margin: none), and DONE."""
+    r_con, r_sel, ov, r_y, con, y = raw_tree((r_con, r_sel, ov, r_y, con, y))
     cont = _known(ctx, r_con, r_sel, ov, r_y, con, y, np.zeros(0, dtype=np.bool_))[0]
     out = -np.inf
     for j in range(con[0]):
@@ -2617,6 +2632,8 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
     """
     prm, minv = ctx[15], ctx[16]
     loc = prm[P_LOCATION]
+    # (record and held0 are read, never returned: passed on uncounted; y and con may be)
+    record, held0 = raw_tree((record, held0))
     sel, force, r_con, r_y, _ = record
     active = _loaded(record)
     held = held0 if have_held else _continuing(ctx, r_con, sel, r_y, active, con, y, active)[1]
@@ -2717,7 +2734,7 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
 @njit(cache=True)
 def _loaded(record: tuple) -> np.ndarray:
     """Return per row of a step's ``record`` whether its force pushes (its contact loaded)."""
-    sel, force, r_con, _, _ = record
+    sel, force, r_con, _, _ = raw_tree(record)
     nr = r_con[6]
     active = np.zeros(sel.shape[0], dtype=np.bool_)
     for k in range(sel.shape[0]):
@@ -2729,7 +2746,8 @@ def _loaded(record: tuple) -> np.ndarray:
 @njit(cache=True)
 def _normal_rates(y: np.ndarray, con: tuple, sel: np.ndarray) -> np.ndarray:
     """Return the normal rates of contacts ``sel`` of ``con`` at ``y`` (:func:`rows`'s ``vn``)."""
-    _, _, _, ba, bb, pt, nr, _ = con
+    _, _, _, ba, bb, pt, nr, _ = raw_tree(con)
+    sel = raw_tree(sel)
     pos, quat, vel, om = state_parts(y)
     R = rotations(quat)
     vn = np.empty(sel.shape[0])
@@ -2802,6 +2820,9 @@ def _rows_at(sa: np.ndarray, sb: np.ndarray, ba: np.ndarray, bb: np.ndarray, pt:
              Gb: np.ndarray, con1: tuple, pos: np.ndarray, R: np.ndarray, radius: np.ndarray,
              count: int) -> tuple:
     """Return the rows' ``G`` at the end's geometry, as ``ContactSteps.rows_at``."""
+    # (the rows' G are new arrays: every argument passed on uncounted)
+    (sa, sb, ba, bb, pt, pos0, R0, frame, Ga, Gb, con1, pos, R, radius) = raw_tree(
+        (sa, sb, ba, bb, pt, pos0, R0, frame, Ga, Gb, con1, pos, R, radius))
     c1, sa1, sb1, ba1, bb1, pt1, nr1, dp1 = con1
     c = sa.shape[0]
     n = pos.shape[0]
