@@ -181,11 +181,12 @@ def point_velocity(pos: np.ndarray, vel: np.ndarray, om: np.ndarray, R: np.ndarr
 def rows(pos: np.ndarray, vel: np.ndarray, om: np.ndarray, R: np.ndarray, sel: np.ndarray,
          ba_all: np.ndarray, bb_all: np.ndarray, pt_all: np.ndarray, nr_all: np.ndarray,
          sa_all: np.ndarray, sb_all: np.ndarray, shape_mu: np.ndarray, shape_e: np.ndarray,
-         rate: float) -> tuple:
+         rate: float, ba: np.ndarray, bb: np.ndarray) -> tuple:
     """
     Return the rows of contacts ``sel`` at the state, as ``ContactSteps.rows``.
 
-    ``(frame, lever_a, lever_b, mu, e, sliding, vn, Ga, Gb)``.
+    ``(frame, lever_a, lever_b, mu, e, sliding, vn, Ga, Gb)``; ``ba``, ``bb``: the
+    contacts' bodies, ``ba_all[sel]`` and ``bb_all[sel]`` (the caller's, kept).
 
     ``frame`` (c, 3, 3) rows ``n, t₁, t₂``; ``Ga``, ``Gb`` (3c, 6): each row on body
     a's and body b's velocities (``v`` world, ``Ω`` principal; ``Gb`` zero for the world).
@@ -218,7 +219,7 @@ def rows(pos: np.ndarray, vel: np.ndarray, om: np.ndarray, R: np.ndarray, sel: n
         frame[k, 2, 0], frame[k, 2, 1], frame[k, 2, 2] = x0, x1, x2
         mu[k] = math.sqrt(shape_mu[sa_all[j]] * shape_mu[sb_all[j]])
         e[k] = max(shape_e[sa_all[j]], shape_e[sb_all[j]])
-    Ga, Gb = jacobian(frame, ba_all[sel], bb_all[sel], la, lb, R, pos.shape[0])
+    Ga, Gb = jacobian(frame, ba, bb, la, lb, R, pos.shape[0])
     return frame, la, lb, mu, e, sliding, vn, Ga, Gb
 
 
@@ -237,6 +238,16 @@ def any_tangent(nrm: np.ndarray) -> tuple:
 
 
 @njit(cache=True)
+def _jacobian_row(G: np.ndarray, row: int, sign: float, d0: float, d1: float, d2: float,
+                  r0: float, r1: float, r2: float, R: np.ndarray, i: int) -> None:
+    """Set ``G[row]``: the row of direction ``d`` at lever ``r`` on body ``i``, times ``sign``."""
+    x0, x1, x2 = _cross(r0, r1, r2, d0, d1, d2)
+    G[row, 0], G[row, 1], G[row, 2] = sign * d0, sign * d1, sign * d2
+    for m in range(3):
+        G[row, 3 + m] = sign * (R[i, 0, m] * x0 + R[i, 1, m] * x1 + R[i, 2, m] * x2)
+
+
+@njit(cache=True)
 def jacobian(frame: np.ndarray, ba: np.ndarray, bb: np.ndarray, la: np.ndarray,
              lb: np.ndarray, R: np.ndarray, n: int) -> tuple:
     """Return ``Ga``, ``Gb`` (3c, 6): row ``d``, lever ``r``: ``(d, Rᵀ (r × d))``, b's negated."""
@@ -251,12 +262,8 @@ def jacobian(frame: np.ndarray, ba: np.ndarray, bb: np.ndarray, la: np.ndarray,
             G = Ga if side == 0 else Gb
             sign = 1.0 if side == 0 else -1.0
             for a in range(3):
-                d = frame[k, a]
-                x0, x1, x2 = _cross(r[0], r[1], r[2], d[0], d[1], d[2])
-                row = 3 * k + a
-                for m in range(3):
-                    G[row, m] = sign * d[m]
-                    G[row, 3 + m] = sign * (R[i, 0, m] * x0 + R[i, 1, m] * x1 + R[i, 2, m] * x2)
+                _jacobian_row(G, 3 * k + a, sign, frame[k, a, 0], frame[k, a, 1],
+                              frame[k, a, 2], r[0], r[1], r[2], R, i)
     return Ga, Gb
 
 
@@ -954,6 +961,20 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
     if count == 0:   # (no rows: the empty solve, counted as the Python path's)
         return solve_island(np.zeros((0, 0)), np.zeros(0), mu, np.zeros(0), normal_only,
                             equal, has_equal, sliding, prm, cnt)
+    if count == 1 and not normal_only and c <= prm[P_SPARSE_CONTACTS]:
+        # One island of every contact (a body on the ground, a stack): the general path
+        # below with its index arrays the identity, and without them (five allocations
+        # fewer, and the island's solution is the rows' own).
+        Ar = np.zeros((m, m))
+        for k in range(c):
+            for e in range(ptr[k], ptr[k + 1]):
+                z = col[e]
+                for a in range(3):
+                    for b in range(3):
+                        v = 0.5 * blk[e, a, b]
+                        Ar[3 * k + a, 3 * z + b] += v
+                        Ar[3 * z + b, 3 * k + a] += v
+        return solve_island(Ar, q, mu, start, normal_only, equal, has_equal, sliding, prm, cnt)
     # The contacts of each island, increasing: members[begin[g]:begin[g + 1]].
     begin = np.zeros(count + 1, dtype=np.int64)
     for k in range(c):
@@ -1991,11 +2012,28 @@ def _local(pt: np.ndarray, k: int, i: int, pos: np.ndarray, R: np.ndarray) -> tu
             R[i, 0, 2] * d0 + R[i, 1, 2] * d1 + R[i, 2, 2] * d2)
 
 
+#: Up to this many keys :func:`_by_key` sorts by insertion (no work array; numba's
+#: mergesort allocates two): the same order, the only stable one.
+INSERTION_KEYS = 16
+
+
 @njit(cache=True)
 def _by_key(keys: np.ndarray) -> tuple:
     """Return ``(order, keys[order])``: a stable sort (equal keys in their first order)."""
-    order = np.argsort(keys, kind='mergesort')
-    return order, keys[order]
+    c = keys.shape[0]
+    if c > INSERTION_KEYS:
+        order = np.argsort(keys, kind='mergesort')
+        return order, keys[order]
+    order = np.empty(c, dtype=np.int64)
+    sorted_keys = np.empty(c, dtype=keys.dtype)
+    for j in range(c):
+        key = keys[j]
+        u = j
+        while u > 0 and sorted_keys[u - 1] > key:   # (strictly: equal keys keep their order)
+            sorted_keys[u], order[u] = sorted_keys[u - 1], order[u - 1]
+            u -= 1
+        sorted_keys[u], order[u] = key, j
+    return order, sorted_keys
 
 
 @njit(cache=True)
@@ -2092,13 +2130,17 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
                     det, buf, shape_mu, shape_e, radius, prm, minv, dt))
     cnt, log = raw_tree((cnt, log))
     y, t = y0, t0
-    record = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t0)
+    # (made once a call, not once a step: the record of no rows, and a step's counters)
+    no_sel, no_force = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    cnt_step = np.zeros(cnt.shape[0])
+    record = (no_sel, no_force, _no_contacts(0), y0, t0)
     # A step's end's contacts are the next one's start's.
     found, have = _no_contacts(0), False
     n_log = 0
     for taken in range(n_steps):
         t_end = base + (steps0 + taken + 1) * dt
-        res = _step(y, t, t_end, ctx, warm, cnt, found, have, log, n_log)
+        res = _step(y, t, t_end, ctx, warm, cnt, found, have, log, n_log, no_sel, no_force,
+                    cnt_step)
         code, y_new, warm_new, rec, found, n_new = res
         if code != DONE:
             return taken, code, y, warm, record, n_log
@@ -2129,9 +2171,11 @@ def _make_rows(ctx: tuple, y: np.ndarray, con: tuple, sel: np.ndarray) -> tuple:
     c0, sa, sb, ba, bb, pt, nr, dp = raw_tree(con)   # (new rows: nothing of con returned)
     pos, quat, vel, om = state_parts(y)
     R = rotations(quat)
+    ba_s, bb_s = ba[sel], bb[sel]
     frame, la, lb, mu, e, sliding, vn, Ga, Gb = rows(pos, vel, om, R, sel, ba, bb, pt, nr, sa,
-                                                     sb, ctx[12], ctx[13], ctx[15][P_RATE])
-    return sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba[sel], bb[sel]
+                                                     sb, ctx[12], ctx[13], ctx[15][P_RATE],
+                                                     ba_s, bb_s)
+    return sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba_s, bb_s
 
 
 @njit(cache=True)
@@ -2194,16 +2238,18 @@ def _stopped(code: int, y0: np.ndarray, t0: float, warm: tuple, found: tuple,
 @njit(cache=True)
 def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
           cnt_total: np.ndarray, found: tuple, have: bool, log: np.ndarray,
-          n_log: int) -> tuple:
+          n_log: int, no_sel: np.ndarray, no_force: np.ndarray, cnt: np.ndarray) -> tuple:
     """
     Take one step, as ``ContactSteps.step``: ``(code, y, warm, record, contacts at y, n_log)``.
 
-    ``found``: the contacts at ``y0`` when ``have`` (the last step's end's).
+    ``found``: the contacts at ``y0`` when ``have`` (the last step's end's); ``no_sel``,
+    ``no_force``: empty arrays for a record of no rows; ``cnt``: room for the step's
+    counters (overwritten; added to ``cnt_total`` when the step is taken).
     """
     prm, dt = ctx[15], ctx[17]
     loc, unlocated = prm[P_LOCATION], prm[P_UNLOCATED]
     max_events, max_bounces = int(prm[P_MAX_EVENTS]), int(prm[P_MAX_BOUNCES])
-    cnt = np.zeros(cnt_total.shape[0])
+    cnt[:] = 0.0
     con = found if have else _detect_ctx(ctx, y0)
     if con[0] < 0:
         return _stopped(GROW, y0, t0, warm, found, n_log)
@@ -2211,7 +2257,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     events, bounces = 0, 0
     first = True
     # (a record of no rows; the first pass's trial step sets it before it is read)
-    record = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), con, y0, t0)
+    record = (no_sel, no_force, con, y0, t0)
     while True:
         h = dt if first else t_end - t
         if not first and h <= 4.0 * EPS * abs(t_end):
@@ -2406,11 +2452,15 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     if c:
         # A contact apart closing faster than twice P_UNLOCATED at the free step's end
         # is an event located (``_held_step``).
-        keep = np.ones(c, dtype=np.bool_)
+        drop = False
         for k in range(c):
-            if cv[7][sel[k]] < -prm[P_LOCATION]:
-                keep[k] = q[3 * k] >= -2.0 * prm[P_UNLOCATED]
-        if not np.all(keep):
+            if cv[7][sel[k]] < -prm[P_LOCATION] and not q[3 * k] >= -2.0 * prm[P_UNLOCATED]:
+                drop = True
+        if drop:
+            keep = np.ones(c, dtype=np.bool_)
+            for k in range(c):
+                if cv[7][sel[k]] < -prm[P_LOCATION]:
+                    keep[k] = q[3 * k] >= -2.0 * prm[P_UNLOCATED]
             kept = _where(keep)
             r = _subset(r, kept)
             sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
@@ -2840,27 +2890,29 @@ def _rows_at(sa: np.ndarray, sb: np.ndarray, ba: np.ndarray, bb: np.ndarray, pt:
         nrm = nr1[j]
         # t₁ turned with body b (the world: as it was), then onto the new normal.
         u = frame[k, 1]
-        v = np.empty(3)
-        for x in range(3):
-            v[x] = R0[b, 0, x] * u[0] + R0[b, 1, x] * u[1] + R0[b, 2, x] * u[2]
-        t = np.empty(3)
-        for x in range(3):
-            t[x] = R[b, x, 0] * v[0] + R[b, x, 1] * v[1] + R[b, x, 2] * v[2]
-        s = t[0] * nrm[0] + t[1] * nrm[1] + t[2] * nrm[2]
-        for x in range(3):
-            t[x] -= s * nrm[x]
-        s = math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
-        fr = np.empty((1, 3, 3))
-        for x in range(3):
-            fr[0, 0, x], fr[0, 1, x] = nrm[x], t[x] / s
-        fr[0, 2, 0], fr[0, 2, 1], fr[0, 2, 2] = _cross(nrm[0], nrm[1], nrm[2], fr[0, 1, 0],
-                                                       fr[0, 1, 1], fr[0, 1, 2])
-        la, lb = np.zeros((1, 3)), np.zeros((1, 3))
-        for x in range(3):
-            la[0, x] = pt1[j, x] - pos[ba[k], x]
-            if b < n:
-                lb[0, x] = pt1[j, x] - pos[b, x]
-        ga, gb = jacobian(fr, ba[k:k + 1], bb[k:k + 1], la, lb, R, n)
-        for a in range(3):
-            G1a[3 * k + a], G1b[3 * k + a] = ga[a], gb[a]
+        v0 = R0[b, 0, 0] * u[0] + R0[b, 1, 0] * u[1] + R0[b, 2, 0] * u[2]
+        v1 = R0[b, 0, 1] * u[0] + R0[b, 1, 1] * u[1] + R0[b, 2, 1] * u[2]
+        v2 = R0[b, 0, 2] * u[0] + R0[b, 1, 2] * u[1] + R0[b, 2, 2] * u[2]
+        t0 = R[b, 0, 0] * v0 + R[b, 0, 1] * v1 + R[b, 0, 2] * v2
+        t1 = R[b, 1, 0] * v0 + R[b, 1, 1] * v1 + R[b, 1, 2] * v2
+        t2 = R[b, 2, 0] * v0 + R[b, 2, 1] * v1 + R[b, 2, 2] * v2
+        s = t0 * nrm[0] + t1 * nrm[1] + t2 * nrm[2]
+        t0, t1, t2 = t0 - s * nrm[0], t1 - s * nrm[1], t2 - s * nrm[2]
+        s = math.sqrt(t0 ** 2 + t1 ** 2 + t2 ** 2)
+        t0, t1, t2 = t0 / s, t1 / s, t2 / s
+        x0, x1, x2 = _cross(nrm[0], nrm[1], nrm[2], t0, t1, t2)
+        # The three rows (n, t₁, t₂) on each body, as :func:`jacobian` writes them (in
+        # place: no arrays a contact).
+        for side in range(2):
+            i = ba[k] if side == 0 else b
+            G = G1a if side == 0 else G1b
+            if i >= n:
+                for a in range(3):
+                    G[3 * k + a] = 0.0
+                continue
+            sign = 1.0 if side == 0 else -1.0
+            r0, r1, r2 = pt1[j, 0] - pos[i, 0], pt1[j, 1] - pos[i, 1], pt1[j, 2] - pos[i, 2]
+            _jacobian_row(G, 3 * k, sign, nrm[0], nrm[1], nrm[2], r0, r1, r2, R, i)
+            _jacobian_row(G, 3 * k + 1, sign, t0, t1, t2, r0, r1, r2, R, i)
+            _jacobian_row(G, 3 * k + 2, sign, x0, x1, x2, r0, r1, r2, R, i)
     return G1a, G1b

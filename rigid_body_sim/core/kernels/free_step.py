@@ -59,8 +59,7 @@ from .layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MOMENTS, B_W
                      W_IN_BODY, W_KIND, W_POINT, W_TORQUE, W_WIDTH, WRENCH_APPLIED)
 from .methods import (Method, ONE_STEP, RK4_A, RK4_B_DENOMINATOR, RK4_B_HAT_NUMERATORS,
                       RK4_B_NUMERATORS, TRIPLE_JUMP)
-from .so3 import (_matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply,
-                  quat_matrix)
+from .so3 import _matrix, dexpinv, normalize_quaternions, positive_product, quat_exp_multiply
 from .views import Pinned, pinned, pinned_int, raw, raw_slice
 
 HAS_POSITION_FORCES, HAS_DAMPING, HAS_DRIVES, HAS_DRIVE_DAMPING = 1, 2, 4, 8
@@ -78,21 +77,21 @@ def position_wrench(quat: np.ndarray, body: np.ndarray, gforce: np.ndarray,
     """
     force[:] = gforce
     torque[:] = 0.0
-    if wrench.shape[0] == 0:
-        return
-    R = np.empty((3, 3))
     for e in range(wrench.shape[0]):
         if wrench[e, W_KIND] != WRENCH_APPLIED:
             continue   # a joint drive (.drives)
         i = int(wrench[e, W_BODY])
-        quat_matrix(quat[i], R)
+        # (the rotation as nine numbers, quat_matrix's arithmetic: no (3, 3) array a call)
+        R00, R01, R02, R10, R11, R12, R20, R21, R22 = _matrix(quat[i, 0], quat[i, 1],
+                                                              quat[i, 2], quat[i, 3])
         f0, f1, f2 = wrench[e, W_FORCE], wrench[e, W_FORCE + 1], wrench[e, W_FORCE + 2]
         t0, t1, t2 = wrench[e, W_TORQUE], wrench[e, W_TORQUE + 1], wrench[e, W_TORQUE + 2]
         r0, r1, r2 = wrench[e, W_POINT], wrench[e, W_POINT + 1], wrench[e, W_POINT + 2]
         if wrench[e, W_IN_BODY] != 0.0:
             # Principal-frame force at a principal-frame point: torque τ + r × f.
-            for a in range(3):
-                force[i, a] += R[a, 0] * f0 + R[a, 1] * f1 + R[a, 2] * f2
+            force[i, 0] += R00 * f0 + R01 * f1 + R02 * f2
+            force[i, 1] += R10 * f0 + R11 * f1 + R12 * f2
+            force[i, 2] += R20 * f0 + R21 * f1 + R22 * f2
             torque[i, 0] += t0 + (r1 * f2 - r2 * f1)
             torque[i, 1] += t1 + (r2 * f0 - r0 * f2)
             torque[i, 2] += t2 + (r0 * f1 - r1 * f0)
@@ -101,14 +100,15 @@ def position_wrench(quat: np.ndarray, body: np.ndarray, gforce: np.ndarray,
             force[i, 1] += f1
             force[i, 2] += f2
             # World torque τ + (R r) × f, then into the principal frame.
-            w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
-            w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
-            w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
+            w0 = R00 * r0 + R01 * r1 + R02 * r2
+            w1 = R10 * r0 + R11 * r1 + R12 * r2
+            w2 = R20 * r0 + R21 * r1 + R22 * r2
             c0 = t0 + (w1 * f2 - w2 * f1)
             c1 = t1 + (w2 * f0 - w0 * f2)
             c2 = t2 + (w0 * f1 - w1 * f0)
-            for a in range(3):
-                torque[i, a] += R[0, a] * c0 + R[1, a] * c1 + R[2, a] * c2
+            torque[i, 0] += R00 * c0 + R10 * c1 + R20 * c2
+            torque[i, 1] += R01 * c0 + R11 * c1 + R21 * c2
+            torque[i, 2] += R02 * c0 + R12 * c1 + R22 * c2
 
 
 @njit(cache=True)
