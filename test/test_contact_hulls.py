@@ -520,3 +520,40 @@ def test_a_tilted_hundred_gon_touches_at_its_lowest_vertex_though_its_cap_keeps_
     assert depths.max() == pytest.approx(1e-5, abs=1e-15)
     lowest = (_vertices(rec) @ R.T)[np.argmin((_vertices(rec) @ R.T)[:, 2])]
     np.testing.assert_allclose(points[np.argmax(depths)][:2], lowest[:2], atol=1e-15)
+
+
+@pytest.mark.parametrize('theta_deg', [60.0, 89.0, 89.25, 89.45])
+def test_a_cube_corner_past_a_thin_plates_edge_is_at_its_distance_from_the_edge(theta_deg):
+    # A 0.2 x 0.2 x 0.001 plate (a hull of 8 vertices) and a cube hull turned so that its
+    # corner P points at the plate's top edge, g beyond it along u, theta from the plate's
+    # side face: the closed form is a point's distance to a box, g, with the witness
+    # points P and its foot E on the edge, the contact at their middle, the normal u. The
+    # plate's side (1 mm, under the 1e-3 m margin) lies within the margin of its top, but
+    # its plane is nearly along u: taken as the feature, the gap along the normal to it
+    # divided the normal's error by cos(90° − theta) (3.1e-7 m at 89.45°); the feature is
+    # the edge at the top (the face most along u, as a box's).
+    # Bound: EPA's normal on a corner and an edge (the inflated pair is curved there, of
+    # radius eps = margin + 1e-3 of the size = 1.1e-3 m) is within sqrt(2 tol / eps) =
+    # 4.3e-6 rad, tol = 1e-13 of the size (measured: 3.9e-6); the gap and the point move
+    # by g times it at most (a line's point seen along the normal, or a plane within 45°
+    # of it), measured 2.3e-9 m at most over 0-89.9°. 1e-5 rad leaves room for another
+    # CPU's last bits: g * 1e-5, 9e-9 m.
+    half = np.array([0.1, 0.1, 0.0005])
+    plate = hull_record(np.array(list(itertools.product(*[[-h, h] for h in half]))))
+    cube = hull_record(np.array(list(itertools.product([-0.05, 0.05], repeat=3))))
+    theta = math.radians(theta_deg)
+    u = np.array([math.cos(theta), 0.0, math.sin(theta)])
+    E = np.array([0.1, 0.013, 0.0005])
+    corner = np.full(3, -1.0) / math.sqrt(3)
+    R = Rotation.align_vectors([-u], [corner])[0].as_matrix()
+    for g in (5e-4, 9e-4):
+        P = E + g * u
+        a = (HULL, P - R @ (0.05 * math.sqrt(3) * corner), R, cube)
+        for swap in (False, True):
+            b = (HULL, np.zeros(3), np.eye(3), plate)
+            points, normals, depths = _collide(b, a) if swap else _collide(a, b)
+            assert len(depths) == 1, (g, swap)
+            bound = g * 1e-5
+            assert depths[0] == pytest.approx(-g, abs=bound), (g, swap)
+            np.testing.assert_allclose(points[0], 0.5 * (P + E), rtol=0, atol=bound)
+            np.testing.assert_allclose(normals[0], -u if swap else u, rtol=0, atol=1e-5)

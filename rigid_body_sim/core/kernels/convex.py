@@ -788,11 +788,15 @@ def _hull_feature(c: np.ndarray, R: np.ndarray, rec: np.ndarray, d: np.ndarray, 
     Return :func:`feature` of a hull (its record ``rec``).
 
     The part of the hull within ``tol`` of its top along ``d``, seen through the faces
-    at its top vertex: of those with three or more corners within it, the one most
-    along ``d``, by those corners (a face tilted past ``tol`` over its width keeps the
-    corners that touch, in order: a convex polygon still); else of those with two, the
-    most along ``d``, by those two (an edge); else the top vertex. (A face elsewhere may
-    lie more along ``d`` and still not hold the deepest point.)
+    at its top vertex: the one most along ``d`` if three or more of its corners lie
+    within it, by those corners (a face tilted past ``tol`` over its width keeps the
+    corners that touch, in order: a convex polygon still); else the edge from the top
+    vertex to its highest neighbour, if within it; else the top vertex. As a box's
+    feature: a face other than the one most along ``d`` is never a polygon, though it
+    lie within ``tol`` (a side thinner than ``tol``: its plane, far from ``d``, would
+    turn a small error of the normal into a large one of the gap; its edge at the top
+    is the feature). (A face elsewhere may lie more along ``d`` and still not hold the
+    deepest point.)
     """
     nv, nf = int(rec[H_NV]), int(rec[H_NF])
     l0 = R[0, 0] * d[0] + R[1, 0] * d[1] + R[2, 0] * d[2]   # d in the hull's frame
@@ -802,28 +806,40 @@ def _hull_feature(c: np.ndarray, R: np.ndarray, rec: np.ndarray, d: np.ndarray, 
     o = H_VERTS + 3 * top
     high = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
     starts = H_VERTS + 3 * nv
-    best, best_near, most = -1, 0, -math.inf
+    best, most = -1, -math.inf   # the face at the top vertex most along d
+    side, side_h = -1, -math.inf   # the top vertex's highest neighbour along a face's edge
     for f in range(nf):
         o = int(rec[starts + f])
-        near, at_top = 0, False
-        for q in range(int(rec[o + 3])):
+        k = int(rec[o + 3])
+        at = -1
+        for q in range(k):
+            if int(rec[o + 4 + q]) == top:
+                at = q
+        if at < 0:
+            continue
+        for q in ((at + 1) % k, (at + k - 1) % k):
             i = int(rec[o + 4 + q])
-            at_top = at_top or i == top
             v = H_VERTS + 3 * i
+            h = rec[v] * l0 + rec[v + 1] * l1 + rec[v + 2] * l2
+            if h > side_h:
+                side, side_h = i, h
+        nd = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
+        if nd > most:
+            best, most = f, nd
+    near = 0
+    if best >= 0:
+        o = int(rec[starts + best])
+        for q in range(int(rec[o + 3])):
+            v = H_VERTS + 3 * int(rec[o + 4 + q])
             if rec[v] * l0 + rec[v + 1] * l1 + rec[v + 2] * l2 >= high - tol:
                 near += 1
-        if not at_top:
-            continue
-        near = min(near, 3)   # (three or more: a patch; two: an edge)
-        nd = rec[o] * l0 + rec[o + 1] * l1 + rec[o + 2] * l2
-        if near >= 2 and (near > best_near or near == best_near and nd > most):
-            best, best_near, most = f, near, nd
-    if best < 0:
-        for r in range(3):
-            pts[0, r] = (c[r] + R[r, 0] * rec[H_VERTS + 3 * top]
-                         + R[r, 1] * rec[H_VERTS + 3 * top + 1]
-                         + R[r, 2] * rec[H_VERTS + 3 * top + 2])
-        return F_POINT, 1, 0.0
+    if near < 3:
+        m = 1 if side < 0 or side_h < high - tol else 2
+        for q in range(m):
+            v = rec[H_VERTS + 3 * (top if q == 0 else side):]
+            for r in range(3):
+                pts[q, r] = c[r] + R[r, 0] * v[0] + R[r, 1] * v[1] + R[r, 2] * v[2]
+        return (F_POINT if m == 1 else F_SEGMENT), m, 0.0
     o = int(rec[starts + best])
     m = 0
     for q in range(int(rec[o + 3])):
@@ -832,8 +848,6 @@ def _hull_feature(c: np.ndarray, R: np.ndarray, rec: np.ndarray, d: np.ndarray, 
             for r in range(3):
                 pts[m, r] = c[r] + R[r, 0] * v[0] + R[r, 1] * v[1] + R[r, 2] * v[2]
             m += 1
-    if m == 2:
-        return F_SEGMENT, 2, 0.0
     for r in range(3):
         normal[r] = R[r, 0] * rec[o] + R[r, 1] * rec[o + 1] + R[r, 2] * rec[o + 2]
     return F_POLYGON, m, 0.0
