@@ -31,7 +31,7 @@ from rigid_body_sim.core.kernels.contact import BOX, CAPSULE, collide, CYLINDER,
 from rigid_body_sim.core.kernels.convex import CORNERS as CORNERS_MOST, H_NF, H_NV, H_VERTS
 from rigid_body_sim.core.shapes import CollisionShape
 from scipy.spatial.transform import Rotation
-from test_contact_convex import _reference_overlap
+from test_contact_convex import _reference_overlap, _signed_distance
 
 G = 9.81
 CORNERS = np.array(list(itertools.product([-0.1, 0.1], [-0.2, 0.2], [-0.05, 0.05])))
@@ -557,3 +557,52 @@ def test_a_cube_corner_past_a_thin_plates_edge_is_at_its_distance_from_the_edge(
             assert depths[0] == pytest.approx(-g, abs=bound), (g, swap)
             np.testing.assert_allclose(points[0], 0.5 * (P + E), rtol=0, atol=bound)
             np.testing.assert_allclose(normals[0], -u if swap else u, rtol=0, atol=1e-5)
+
+
+def _capsule_distance(shape, x):
+    """Return the signed distance of x to a capsule: to its axis segment, less its radius."""
+    _, c, R, size = shape
+    t = min(max((np.asarray(x) - c) @ R[:, 2], -size[1]), size[1])
+    return float(np.linalg.norm(x - c - t * R[:, 2]) - size[0])
+
+
+@pytest.mark.parametrize('about', ['normal', 'across'])
+def test_a_capsule_nearly_along_a_cube_hulls_edge_touches_on_both_surfaces(about):
+    # A capsule (radius 0.05, half length 0.1) along the top edge of a 0.2 m cube hull at
+    # x = z = 0.1, the normal n between its two faces, turned by 0 to 3 mrad about n (its
+    # line's sight along n crosses the edge's: they meet along n only there) or across it
+    # (one end lower), 1e-4 deep or 5e-4 apart at its middle. Within the margin of
+    # parallel (5 mrad for these lengths), both ends of the overlap are contacts. Each
+    # contact's two surface points (point ∓ depth/2 n) lie on the capsule (its distance
+    # to the axis less the radius) and on the cube (a box's signed distance) to rounding
+    # of coordinates of 0.2 m, 1e-15 m (measured 3.5e-17; the end's point on the
+    # capsule's line put it up to 1.1e-4 m off the cube at 3 mrad), and the deepest is
+    # the pair's depth (the capsule's axis and the edge pass closest at the middle or at
+    # the lower end: there its point lies on both lines), to the same.
+    cube = hull_record(np.array(list(itertools.product([-0.1, 0.1], repeat=3))))
+    box = (BOX, np.zeros(3), np.eye(3), np.full(3, 0.1))
+    n = np.array([1.0, 0.0, 1.0]) / math.sqrt(2)
+    axis = n if about == 'normal' else np.cross(n, [0.0, 1.0, 0.0])
+    lying = Rotation.from_euler('x', -90, degrees=True).as_matrix()   # its z axis along +y
+    for phi in np.linspace(0.0, 3e-3, 7):
+        R = Rotation.from_rotvec(phi * axis).as_matrix() @ lying
+        for depth in (1e-4, -5e-4):
+            capsule = (CAPSULE, np.array([0.1, 0.02, 0.1]) + (0.05 - depth) * n, R,
+                       np.array([0.05, 0.1, 0.0]))
+            # The pair's depth: the capsule's radius less its axis' distance to the cube,
+            # least (a convex function along the axis) at an end of the stretch of the
+            # axis over the edge (an axis end, or its point nearest a corner), or where
+            # their sights cross (the middle, turned about n).
+            along = [min(max((np.array([0.1, y, 0.1]) - capsule[1]) @ R[:, 2], -0.1), 0.1)
+                     for y in (-0.1, 0.1)] + [-0.1, 0.0, 0.1]
+            want = 0.05 - min(_signed_distance(box, capsule[1] + t * R[:, 2]) for t in along)
+            for a, b in ((capsule, (HULL, np.zeros(3), np.eye(3), cube)),
+                         ((HULL, np.zeros(3), np.eye(3), cube), capsule)):
+                points, normals, depths = _collide(a, b)
+                assert len(depths) >= 2, (phi, depth)
+                for p, m, d in zip(points, normals, depths):
+                    for shape, x in ((a, p - 0.5 * d * m), (b, p + 0.5 * d * m)):
+                        off = _capsule_distance(shape, x) if shape[0] == CAPSULE else \
+                            _signed_distance(box, x)
+                        assert abs(off) <= 1e-15, (phi, depth, off)
+                assert depths.max() == pytest.approx(want, abs=1e-15), (phi, depth)

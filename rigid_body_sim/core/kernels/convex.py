@@ -39,8 +39,11 @@ points, the first its deepest) are the contacts, each at the gap between the two
 features along the normal (each lifted onto its own feature's plane or line), at
 most :data:`.contact.MANIFOLD` of them (the contact module's reduction). A point on a
 flat feature is that point at its gap to the feature's plane; a point on a line, or two
-crossed lines, where they pass closest along the normal; two points (a rim on a rim),
-the shapes' support points along it. A cylinder's mantle on a box's corner or on a
+crossed lines, where they pass closest along the normal; two lines side by side (a
+capsule's or a mantle's on an edge), the ends of their overlap and where their sights
+along the normal cross, each the curved side's point seen along the normal from the
+other line's (two edges whose sights cross: where they pass closest); two points (a
+rim on a rim), the shapes' support points along it. A cylinder's mantle on a box's corner or on a
 line along its axis takes the radial normal through it (exact where EPA's is only
 near it).
 """
@@ -1016,6 +1019,53 @@ def _onto(ft: int, pts: np.ndarray, normal: np.ndarray, p: np.ndarray, n: np.nda
 
 
 @njit(cache=True)
+def _onto_round(kind: int, c: np.ndarray, R: np.ndarray, size: np.ndarray, p: np.ndarray,
+                n: np.ndarray, side: float, out: np.ndarray) -> bool:
+    """
+    Write the point of a capsule's or a cylinder's curved side seen from ``p`` along ``n``.
+
+    ``side``: +1 when the shape lies beyond ``p`` along ``n`` (it is shape ``a``: its
+    side facing −n, the nearer crossing), −1 when it lies behind (``b``: the farther
+    one). A capsule's point past its axis' end is on that end's ball. Returns False,
+    ``out`` untouched, when the line through ``p`` along ``n`` misses the side (a
+    cylinder's: past its rim).
+    """
+    r, hl = size[0], size[1]
+    u0, u1, u2 = R[0, 2], R[1, 2], R[2, 2]
+    e0, e1, e2 = c[0], c[1], c[2]
+    for end in range(2):   # the mantle (about the infinite axis), then an end's ball
+        w0, w1, w2 = p[0] - e0, p[1] - e1, p[2] - e2
+        m0, m1, m2 = n[0], n[1], n[2]
+        if end == 0:   # across the axis
+            wu = w0 * u0 + w1 * u1 + w2 * u2
+            mu = m0 * u0 + m1 * u1 + m2 * u2
+            w0, w1, w2 = w0 - wu * u0, w1 - wu * u1, w2 - wu * u2
+            m0, m1, m2 = m0 - mu * u0, m1 - mu * u1, m2 - mu * u2
+        # |w + t m| = r: a t² + 2 b t + cc = 0, its roots in the stable form.
+        a = m0 * m0 + m1 * m1 + m2 * m2
+        b = w0 * m0 + w1 * m1 + w2 * m2
+        cc = w0 * w0 + w1 * w1 + w2 * w2 - r * r
+        disc = b * b - a * cc
+        if a <= 0.0 or disc < 0.0:
+            return False
+        q = -(b + math.copysign(math.sqrt(disc), b))
+        if q == 0.0:
+            return False
+        t1, t2 = q / a, cc / q
+        t = min(t1, t2) if side > 0.0 else max(t1, t2)
+        x0, x1, x2 = p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]
+        s = (x0 - c[0]) * u0 + (x1 - c[1]) * u1 + (x2 - c[2]) * u2
+        if end == 1 or abs(s) <= hl:
+            out[0], out[1], out[2] = x0, x1, x2
+            return True
+        if kind != CAPSULE:
+            return False
+        sg = 1.0 if s >= 0.0 else -1.0
+        e0, e1, e2 = e0 + sg * hl * u0, e1 + sg * hl * u1, e2 + sg * hl * u2
+    return False
+
+
+@njit(cache=True)
 def _lift(ft: int, pts: np.ndarray, normal: np.ndarray, xy: np.ndarray, x: float, y: float,
           o: np.ndarray, t1: np.ndarray, t2: np.ndarray, n: np.ndarray,
           out: np.ndarray) -> None:
@@ -1241,6 +1291,10 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
         cand[0, 3] = gap
         return 1
     scale = max(sa[0], sa[1], sa[2], sb[0], sb[1], sb[2])
+    # A line curved across (a capsule's side, a cylinder's mantle) beside another line.
+    round_a = fa == F_SEGMENT and fb == F_SEGMENT and (ka == CAPSULE or ka == CYLINDER)
+    round_b = fa == F_SEGMENT and fb == F_SEGMENT and (kb == CAPSULE or kb == CYLINDER)
+    sight = False
     if fa == F_SEGMENT and fb == F_SEGMENT:
         ua = np.empty(3)
         ub = np.empty(3)
@@ -1252,9 +1306,13 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
         c2 = ua[0] * ub[1] - ua[1] * ub[0]
         la = math.sqrt(ua[0] ** 2 + ua[1] ** 2 + ua[2] ** 2)
         lb = math.sqrt(ub[0] ** 2 + ub[1] ** 2 + ub[2] ** 2)
-        if math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) * min(la, lb) > margin * la * lb:
+        # Their sights along n cross past rounding (over the shorter's length).
+        sight = abs(c0 * n[0] + c1 * n[1] + c2 * n[2]) * min(la, lb) > 1e-12 * scale * la * lb
+        if math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) * min(la, lb) > margin * la * lb \
+                or sight and not (round_a or round_b):
             # Crossed lines (their ends' heights differ past the margin): one point, where
-            # they pass closest.
+            # they pass closest. So too two sharp lines (edges) whose sight along n
+            # crosses past rounding: their ends meet along n nowhere on the surfaces.
             xa_, xb_ = np.empty(3), np.empty(3)
             _closest_lines(pa, ua, pb, ub, xa_, xb_)
             return _one(xa_, xb_, n, margin, cand)
@@ -1295,6 +1353,8 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
             return 0
         for s in (lo, hi):
             nc = _add(xy, nc, xa[0, 0] + s * ex, xa[0, 1] + s * ey)
+        if sight:   # where their sights cross, the lines meet along n: the deepest
+            nc = _crossings(fa, xa, ma, ra, fb, xb, mb, rb, xy, nc)
     else:
         for q in range(ma):   # a's corners in b's region (a segment's ends included)
             if _inside(fb, xb, mb, rb, xa[q, 0], xa[q, 1], tol):
@@ -1321,6 +1381,14 @@ def manifold(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
         else:
             _lift(fa, pa, na, xa, xy[q, 0], xy[q, 1], o, t1, t2, n, xa3)
             _lift(fb, pb, nb, xb, xy[q, 0], xy[q, 1], o, t1, t2, n, xb3)
+            # Two lines side by side meet along n only where their sights cross: at an
+            # end of their overlap the curved shape's own surface, seen along n from the
+            # other line's point, is the point (its line is only where it touches). (Where
+            # that misses it, past a cylinder's rim, the line's point.)
+            if round_a:
+                _onto_round(ka, ca, Ra, sa, xb3, n, 1.0, xa3)
+            elif round_b:
+                _onto_round(kb, cb, Rb, sb, xa3, n, -1.0, xb3)
         gap = n[0] * (xa3[0] - xb3[0]) + n[1] * (xa3[1] - xb3[1]) + n[2] * (xa3[2] - xb3[2])
         if gap > margin:
             continue
