@@ -14,7 +14,9 @@ polytope algorithm (EPA) finds that least value for a body that holds the origin
 (``ε``: the margin plus :data:`INFLATE` of the shapes' size), which holds the origin
 whenever the gap is below ``ε``: its least support is the overlap plus ``ε``, with the
 same normal. GJK first tells whether ``D'`` holds the origin (if not, the gap passes
-the margin: no contact) and gives EPA its first tetrahedron. Inflating keeps ``D'`` a
+the margin: no contact) and gives EPA its first tetrahedron (where its iterations run
+out undecided, the origin within ``ε`` of its simplex, EPA from that simplex decides:
+its polytope holds the origin only where ``D'`` does). Inflating keeps ``D'`` a
 solid (never flat), so EPA starts and ends well conditioned even for shapes exactly
 touching, where GJK's own normal would come from a vector of rounding size.
 
@@ -292,7 +294,8 @@ def _gjk(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int, cb: n
     when it holds the origin (the simplex ``idx[:m]`` of ``V``'s rows then holds it, or
     has it on its boundary), 2 when it lies within ``reach``: ``v`` is then its point
     nearest the origin, the simplex ``idx[:m]`` with weights ``lam`` the support points
-    it combines.
+    it combines. 3 when :data:`GJK_ITERATIONS` ran out undecided: ``v`` and the simplex
+    are its last (``D'`` lies within ``|v|``, or holds the origin).
     """
     scale = max(sa[0], sa[1], sa[2], sb[0], sb[1], sb[2])
     d0, d1, d2 = ca[0] - cb[0], ca[1] - cb[1], ca[2] - cb[2]
@@ -344,7 +347,7 @@ def _gjk(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int, cb: n
                 lam[keep] = lam[j]
                 keep += 1
         m = keep
-    return 2, m
+    return 3, m
 
 
 @njit(cache=True)
@@ -379,6 +382,12 @@ def penetration(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int
         if got >= 0:
             return got == 1
     status, m = _gjk(ka, ca, Ra, sa, kb, cb, Rb, sb, eps, 0.0, V, PA, PB, idx, lam, v)
+    if status == 3 and v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= eps * eps:
+        # GJK ran out of iterations within eps of the origin, undecided: EPA from its
+        # simplex. Its polytope lies in D', so it holds the origin (a contact) only where
+        # D' does; else a face of it passes the origin (a negative distance) and EPA
+        # finds no contact.
+        status = 1
     if status != 1:   # D' lies off the origin: the gap passes eps > margin
         return False
     return _epa(ka, ca, Ra, sa, kb, cb, Rb, sb, eps, margin, V, PA, PB, idx, m, result)
@@ -408,6 +417,8 @@ def _rounded(ka: int, ca: np.ndarray, Ra: np.ndarray, sa: np.ndarray, kb: int,
                      lam, v)
     if status == 0:
         return 0
+    if status == 3:   # (its distance undecided: EPA on the whole shapes)
+        return -1
     dist = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     scale = max(sa[0], sa[1], sa[2], sb[0], sb[1], sb[2])
     if status == 1 or dist <= 1e-9 * scale:
