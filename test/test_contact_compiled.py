@@ -678,6 +678,66 @@ def test_newtons_large_systems_through_lapack_are_the_python_paths():
     assert large >= 3   # (the LAPACK branch met)
 
 
+def _finger_on_a_sliding_box(slip):
+    """
+    Return ``(A, q, mu, sliding)``: a finger pushing a box that slides on the ground.
+
+    A 0.2 m cube of 1 kg slides along x at 0.1 m/s on its four corners (sliding rows:
+    friction along t₁ alone), under gravity's impulse over 1 ms; a finger on the middle
+    of its −x face comes on at 1 cm/s more than the box, and moves down along the face
+    at ``slip`` m/s. The ground forbids the box's point under the finger to move down
+    (to first order, tipping included), so that finger's vertical friction row cannot
+    stick: 15 rows of rank 6, with μ 0.5 everywhere.
+    """
+    minv = np.array([1.0] * 3 + [150.0] * 3)   # (I = m (0.2² + 0.2²) / 12 = 1/150)
+    points, frames = [], []
+    for sx in (-1.0, 1.0):
+        for sy in (-1.0, 1.0):
+            points.append((0.1 * sx, 0.1 * sy, -0.1))
+            frames.append(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+    points.append((-0.1, 0.0, 0.0))
+    frames.append(np.eye(3))
+    G = np.zeros((15, 6))
+    for k, (lever, F) in enumerate(zip(points, frames)):
+        G[3 * k:3 * k + 3, :3] = F
+        G[3 * k:3 * k + 3, 3:] = np.cross(np.array(lever), F)   # F (ω × l) = (l × F) ω
+    q = G @ np.array([0.1, 0.0, -9.81e-3, 0.0, 0.0, 0.0])
+    q[12] -= 0.1 + 0.01
+    q[14] += slip
+    return (G * minv) @ G.T, q, np.full(5, 0.5), np.array([True] * 4 + [False])
+
+
+@pytest.mark.parametrize('slip', [1e-9, 1e-6])
+def test_newton_puts_a_contact_on_its_bound_where_redundant_rows_forbid_it_to_stick(slip):
+    # The guess "the finger sticks" repeats (its y inside the bound) and its system has
+    # no exact solution: the finger's vertical friction row must slide. Closed form: the
+    # finger's normal impulse p brings the box to the finger's speed against the ground's
+    # friction μ (m g h + μ p) (its vertical friction −μ p loads the ground), so
+    # p (1 − μ²) = m 0.01 + μ m g h, and the finger's vertical friction is −μ p (opposing
+    # the box's slip up the finger). Both paths meet the bar of a pivoted solve and that
+    # closed form to the proximal solve's rounding (as the LAPACK test above). Before the
+    # guess took a bound, Newton's method failed here (residual 7e-10 against a bar of
+    # 1.4e-11 at 1e-9 m/s), as on the Panda pushing a box at μ 0.5.
+    from rigid_body_sim.core import contact_step as cs
+    from rigid_body_sim.core.kernels import contact_step as kern
+    sim = Simulation([RigidBody('s', 1.0, (0.004,) * 3)], [Gravity()], dt=1e-3,
+                     shapes=[CollisionShape('plane', None),
+                             CollisionShape('sphere', 's', radius=0.1)])
+    prm = sim.contact.kernel_parameters()
+    A, q, mu, sliding = _finger_on_a_sliding_box(slip)
+    m = len(q)
+    pushed = (0.01 + 0.5 * 9.81e-3) / (1.0 - 0.25)
+    tol = m * np.finfo(float).eps / cs.PROXIMAL * pushed
+    for p, ok in (cs._newton(A, q, mu, sliding, np.zeros(m, dtype=bool), np.zeros(m)),
+                  kern.newton(A, q, mu, sliding, np.zeros(m), prm)):
+        assert ok
+        scale = float(np.max(np.abs(A) @ np.abs(p) + np.abs(q)))
+        assert cs._residual(A, q, p, mu, False, sliding) <= cs.PIVOT_TOLERANCE * scale
+        assert abs(p[12] - pushed) <= tol
+        assert abs(p[14] + 0.5 * pushed) <= tol
+        assert abs(p[13]) <= tol
+
+
 def test_islands_too_large_to_pivot_are_solved_by_their_blocks_to_a_pivoted_solves_bar():
     # Where the fixed point and Newton's method fail on an island of more than
     # PIVOT_CONTACTS contacts, the compiled solve goes on by the island's blocks

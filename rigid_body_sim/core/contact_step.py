@@ -1640,7 +1640,12 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.n
     their bounds (a semi-smooth Newton step, or a primal–dual active-set step). Where
     the guess holds, the solution does, to rounding. The guesses may cycle (friction
     makes the rows' matrix no P-matrix: measured, a cycle of three guesses in a poured
-    pile of 125 spheres), or repeat: then it fails and the caller pivots. Redundant
+    pile of 125 spheres): then it fails and the caller pivots. A guess that repeats
+    without meeting the bar has no exact solution (redundant rows ask a contact to
+    stick where the others forbid its motion: a finger's tangent along the face of a box
+    the ground holds): its friction row inside the bound that keeps the most slip is
+    put on the bound opposing that slip (Coulomb's sliding, at that slip) and held there
+    while the natural map would put it inside; with none left to put, it fails. Redundant
     contacts make the system singular (their load sharing is not
     unique): each solve is proximal, ``(K + ρ I) δ = r`` with ``ρ`` :data:`PROXIMAL` of
     the diagonal, refined :data:`NEWTON_REFINEMENTS` times on the same factors, so the
@@ -1658,6 +1663,7 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.n
     present[2::3] &= mu > 0.0
     owner = np.arange(m) // 3
     previous = None
+    forced = np.zeros(m, dtype=int)
     for _ in range(NEWTON_ITERATIONS):
         w = A @ p + q
         y = p - w / d
@@ -1669,6 +1675,7 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.n
         for col in (1, 2):
             yt = y[col::3]
             on = np.where(yt >= bound, 2, np.where(yt <= -bound, -2, 1))
+            on = np.where((on == 1) & (forced[col::3] != 0), forced[col::3], on)
             kind[col::3] = np.where(present[col::3] & load, on, 0)
         unknown = np.flatnonzero(kind == 1)
         T = np.zeros((m, len(unknown)))
@@ -1694,7 +1701,21 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.n
                 <= PIVOT_TOLERANCE * float(np.max(np.abs(A) @ np.abs(p) + np.abs(q))):
             return p, True
         if previous is not None and np.array_equal(kind, previous):
-            return p, False
+            # The guess repeats and its system has no exact solution: redundant rows ask
+            # a contact to stick that the others let slip (a finger's tangent along the
+            # ground's normal). Its friction row inside the bound that keeps the most
+            # slip goes on the bound opposing the slip (Coulomb's sliding), and stays
+            # there while the natural map puts it inside.
+            w = A @ p + q
+            inside = np.flatnonzero((kind == 1) & (np.arange(m) % 3 != 0) & (forced == 0))
+            if not len(inside):
+                return p, False
+            j = inside[np.argmax(np.abs(w[inside]))]
+            if w[j] == 0.0:
+                return p, False
+            forced[j] = -2 if w[j] > 0.0 else 2
+            previous = None
+            continue
         previous = kind
     return p, False
 

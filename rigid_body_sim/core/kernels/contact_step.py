@@ -1613,6 +1613,8 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
     kind = np.zeros(m, dtype=np.int64)
     previous = np.zeros(m, dtype=np.int64)
     column = np.full(m, -1, dtype=np.int64)
+    forced = np.zeros(m, dtype=np.int64)
+    first = 0   # (the first guess a repeat of which ends the method)
     tol, no_equal = prm[P_FRICTION_TOLERANCE], np.zeros(c, dtype=np.bool_)
     for guess in range(int(prm[P_NEWTON_ITERATIONS])):
         w = _sparse_affine(A, pat, p, q)
@@ -1628,7 +1630,8 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
                     kind[t] = 0
                 else:
                     yt = p[t] - w[t] / A[t, t]
-                    kind[t] = 2 if yt >= bound else (-2 if yt <= -bound else 1)
+                    kind[t] = 2 if yt >= bound else (-2 if yt <= -bound else (
+                        forced[t] if forced[t] != 0 else 1))
         nu = 0
         for j in range(m):
             if kind[j] == 1:
@@ -1683,13 +1686,23 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: np.ndarray,
         if residual(A, q, p, mu, False, sliding, tol, no_equal, False, pat) \
                 <= prm[P_PIVOT_TOLERANCE] * _row_scale(A, q, p, pat):
             return p, True
-        same = guess > 0
+        same = guess > first
         for j in range(m):
             if kind[j] != previous[j]:
                 same = False
             previous[j] = kind[j]
         if same:
-            return p, False
+            # A repeated guess without an exact solution: its inside friction row that
+            # keeps the most slip goes on the bound opposing it, as ``_newton``.
+            w = _sparse_affine(A, pat, p, q)
+            j_most, most = -1, 0.0
+            for j in range(m):
+                if kind[j] == 1 and j % 3 != 0 and forced[j] == 0 and abs(w[j]) > most:
+                    j_most, most = j, abs(w[j])
+            if j_most < 0:
+                return p, False
+            forced[j_most] = -2 if w[j_most] > 0.0 else 2
+            first = guess + 1
     return p, False
 
 
