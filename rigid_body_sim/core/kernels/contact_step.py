@@ -963,17 +963,12 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
                             equal, has_equal, sliding, prm, cnt)
     if count == 1 and not normal_only and c <= prm[P_SPARSE_CONTACTS]:
         # One island of every contact (a body on the ground, a stack): the general path
-        # below with its index arrays the identity, and without them (five allocations
-        # fewer, and the island's solution is the rows' own).
+        # below with the identity for its index arrays, which it does not make (five
+        # allocations fewer, and the island's solution is the rows' own).
         Ar = np.zeros((m, m))
         for k in range(c):
             for e in range(ptr[k], ptr[k + 1]):
-                z = col[e]
-                for a in range(3):
-                    for b in range(3):
-                        v = 0.5 * blk[e, a, b]
-                        Ar[3 * k + a, 3 * z + b] += v
-                        Ar[3 * z + b, 3 * k + a] += v
+                _gather_block(Ar, blk, e, k, col[e], 3)
         return solve_island(Ar, q, mu, start, normal_only, equal, has_equal, sliding, prm, cnt)
     # The contacts of each island, increasing: members[begin[g]:begin[g + 1]].
     begin = np.zeros(count + 1, dtype=np.int64)
@@ -1004,8 +999,7 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
                     out[3 * idx[x] + a] = p[3 * x + a]
             continue
         nr = step3 * n
-        # A_sym = (A + Aᵀ) / 2, each block's halves added where they land (halving is
-        # exact: the same values as halving the sum).
+        # A_sym = (A + Aᵀ) / 2, gathered block by block (_gather_block).
         Ar = np.zeros((nr, nr))
         qr = np.empty(nr)
         sr = np.empty(nr)
@@ -1017,12 +1011,7 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
             for e in range(ptr[k], ptr[k + 1]):
                 if label[col[e]] != g:   # (a block of zeros)
                     continue
-                z = at[col[e]]
-                for a in range(step3):
-                    for b in range(step3):
-                        v = 0.5 * blk[e, a, b]
-                        Ar[step3 * x + a, step3 * z + b] += v
-                        Ar[step3 * z + b, step3 * x + a] += v
+                _gather_block(Ar, blk, e, x, at[col[e]], step3)
         p, ok = solve_island(Ar, qr, mu[idx], sr, normal_only, equal[idx], has_equal,
                              sliding[idx], prm, cnt)
         if not ok:
@@ -1031,6 +1020,22 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
             for a in range(step3):
                 out[3 * idx[x] + a] = p[step3 * x + a]
     return out, True
+
+
+@njit(cache=True)
+def _gather_block(Ar: np.ndarray, blk: np.ndarray, e: int, x: int, z: int, step3: int) -> None:
+    """
+    Add half of block ``e`` and half of its transpose to the dense ``Ar``.
+
+    The block's rows are contact ``x``'s, its columns ``z``'s (their first ``step3``;
+    ``Ar`` has ``step3`` rows a contact): ``(A + Aᵀ) / 2`` gathered block by block
+    (halving is exact: the same values as halving the sum).
+    """
+    for a in range(step3):
+        for b in range(step3):
+            v = 0.5 * blk[e, a, b]
+            Ar[step3 * x + a, step3 * z + b] += v
+            Ar[step3 * z + b, step3 * x + a] += v
 
 
 @njit(cache=True)
@@ -2435,6 +2440,17 @@ def _unheld(code: int, y0: np.ndarray, t: float, flags: int, warm: tuple) -> tup
 
 
 @njit(cache=True)
+def _located_later(depth: float, rate: float, prm: np.ndarray) -> bool:
+    """
+    Return if a row leaves the held step, to be located as an event (``_held_step``).
+
+    Its contact is apart (``depth`` below ``−P_LOCATION``) and closes faster than twice
+    ``P_UNLOCATED`` (``rate``, its normal velocity at the free step's end).
+    """
+    return depth < -prm[P_LOCATION] and not rate >= -2.0 * prm[P_UNLOCATED]
+
+
+@njit(cache=True)
 def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, warm: tuple,
           cnt: np.ndarray) -> tuple:
     """
@@ -2465,16 +2481,16 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     if c:
         # A contact apart closing faster than twice P_UNLOCATED at the free step's end
         # is an event located (``_held_step``).
-        drop = False
+        drops = 0
         for k in range(c):
-            if cv[7][sel[k]] < -prm[P_LOCATION] and not q[3 * k] >= -2.0 * prm[P_UNLOCATED]:
-                drop = True
-        if drop:
-            keep = np.ones(c, dtype=np.bool_)
+            drops += _located_later(cv[7][sel[k]], q[3 * k], prm)
+        if drops:
+            kept = np.empty(c - drops, dtype=np.int64)
+            x = 0
             for k in range(c):
-                if cv[7][sel[k]] < -prm[P_LOCATION]:
-                    keep[k] = q[3 * k] >= -2.0 * prm[P_UNLOCATED]
-            kept = _where(keep)
+                if not _located_later(cv[7][sel[k]], q[3 * k], prm):
+                    kept[x] = k
+                    x += 1
             r = _subset(r, kept)
             sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba, bb = r
             c = sel.shape[0]
