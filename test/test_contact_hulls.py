@@ -139,6 +139,49 @@ def test_a_meshs_scale_must_be_non_zero_and_scales_its_hull():
     assert err.value.field == 'scale'
 
 
+def test_a_part_far_from_its_links_origin_is_bounded_and_sized_by_its_own_box():
+    # A 2 cm cube drawn 0.5 m from its link's origin along each axis (a URDF mesh in its
+    # link's frame). Its size was measured about that origin: half extents of 0.51 m,
+    # a broad-phase box 50 times the part's, and contacts counted as one within 0.13 m.
+    # Now: its own half extents (0.01 m) about its own centre, its hull as given still
+    # (what bounds and users read), no broad-phase pair with a sphere 0.3 m away, and
+    # the contacts of the same cube made about its centre and placed there, to the
+    # rounding of 0.5 m coordinates (1e-15 m).
+    from rigid_body_sim.core.bodies import RigidBody as Body
+    from rigid_body_sim.core.shapes import ContactDetector
+    from test_contact_detection import outputs
+    cube = np.array(list(itertools.product([-0.01, 0.01], repeat=3)))
+    off = np.array([0.5, 0.5, 0.5])
+    far = CollisionShape('mesh', 'a', mesh=cube + off)
+    np.testing.assert_allclose(far.dimensions(), [0.01] * 3, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(far.hull_centre, off, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(far.hull, hull_record(cube + off))
+    sphere = CollisionShape('sphere', 'b', radius=0.05, position_body=(0.3, 0.3, 0.3))
+    det = ContactDetector([far, sphere], ['a', 'b'])
+    out = outputs([Body('a', 1.0, (1, 1, 1)), Body('b', 1.0, (1, 1, 1))])
+    assert len(det.detect(out).depth) == 0
+    assert det.counters['pairs_tested'] == 0
+    # Turned in its link and the link turned, resting 1 mm into the ground on a corner.
+    turn = Rotation.from_rotvec([0.3, -0.2, 0.5])
+    link = Rotation.from_rotvec([-0.1, 0.4, 0.2])
+    where = np.array([0.1, -0.2, 0.05])
+    made = [CollisionShape('mesh', 'a', mesh=cube + off, position_body=where,
+                           orientation_xyzw=turn.as_quat()),
+            CollisionShape('mesh', 'a', mesh=cube, position_body=where + turn.apply(off),
+                           orientation_xyzw=turn.as_quat())]
+    corners = link.apply(turn.apply(cube + off) + where)
+    height = -1e-3 - float(np.min(corners[:, 2]))
+    body = Body('a', 1.0, (1, 1, 1), position_world=(0.0, 0.0, height),
+                orientation_xyzw=link.as_quat())
+    found = [ContactDetector([s, CollisionShape('plane', None)], ['a']).detect(outputs([body]))
+             for s in made]
+    assert len(found[0].depth) == 1
+    for field in ('point', 'normal', 'depth'):
+        np.testing.assert_allclose(getattr(found[0], field), getattr(found[1], field),
+                                   rtol=0, atol=1e-15)
+    np.testing.assert_allclose(found[0].depth, [1e-3], rtol=0, atol=1e-15)
+
+
 def test_stl_binary_and_ascii_and_obj_files_give_the_same_hull(tmp_path):
     tri = hull_triangles(hull_record(CORNERS))
     binary = bytearray(b'\0' * 80 + struct.pack('<I', len(tri)))

@@ -1049,8 +1049,10 @@ def test_collision_markers_draw_every_collision_shape_on_request(ros, tmp_path, 
             assert [got.scale.x, got.scale.y, got.scale.z] == [0.1, 0.2, 0.3]
         elif name == 'wedge/mesh':
             assert got.type == Marker.TRIANGLE_LIST and len(got.points) == 12
+            # (about the hull's own centre, (0.1, 0.1, 0.1) in the body, where centre[k] is)
             corners = {(p.x, p.y, p.z) for p in got.points}
-            assert corners == {(0, 0, 0), (0.2, 0, 0), (0, 0.2, 0), (0, 0, 0.2)}
+            assert corners == {(-0.1, -0.1, -0.1), (0.1, -0.1, -0.1), (-0.1, 0.1, -0.1),
+                               (-0.1, -0.1, 0.1)}
         elif name == 'rod/capsule':
             assert got.type == Marker.CYLINDER and got.scale.z == 0.4
             ends = [drawn[m + 2 * k + e] for e in (0, 1)]

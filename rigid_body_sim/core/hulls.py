@@ -106,6 +106,26 @@ def hull_triangles(rec: np.ndarray) -> np.ndarray:
     return np.array(out).reshape(-1, 3, 3)
 
 
+def centred_hull(rec: np.ndarray) -> tuple:
+    """
+    Return ``(record, centre)``: a packed hull about its vertices' box's centre.
+
+    ``centre`` (3,) is that box's centre in the shape's frame; the record's vertices are
+    moved by ``−centre`` and its half extents (``[0:3]``) are the box's about it. The
+    broad phase's bounds and the contacts' size scale are then the part's own: a 2 cm
+    part 0.5 m from its link's origin (as URDF meshes often are, drawn in the link's
+    frame) is a 2 cm box, not a 1 m one about the origin.
+    """
+    nv = int(rec[H_NV])
+    v = rec[H_VERTS:H_VERTS + 3 * nv].reshape(nv, 3)
+    centre = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    out = rec.copy()
+    moved = v - centre
+    out[H_VERTS:H_VERTS + 3 * nv] = moved.ravel()
+    out[:3] = np.max(np.abs(moved), axis=0)
+    return out, centre
+
+
 #: Qhull's merging of coplanar facets, relative to the vertices' size (float32's rounding
 #: of coordinates is 6e-8 of it: 1e-6 with room; a face bent by less is one face).
 MERGE = 1e-6

@@ -33,7 +33,7 @@ from typing import Any, NamedTuple, Optional, Sequence
 import numpy as np
 
 from .errors import SpecError
-from .hulls import hull_record, read_vertices
+from .hulls import centred_hull, hull_record, read_vertices
 from .kernels.contact import all_bounds, broad_phase, narrow_phase, plane_pairs, Shape, \
     shape_frames
 from .rotation import quat_to_matrix
@@ -159,7 +159,9 @@ class CollisionShape:
                 except (TypeError, ValueError):
                     raise SpecError('mesh', f'expected a file name or vertices (N, 3), got '
                                             f'{self.mesh!r}') from None
-            object.__setattr__(self, '_hull', hull_record(verts * scale, 'mesh'))
+            rec = hull_record(verts * scale, 'mesh')
+            object.__setattr__(self, '_hull', rec)
+            object.__setattr__(self, '_centred', centred_hull(rec))
         if not 0.0 <= conv['restitution'] <= 1.0:
             raise SpecError('restitution', f'must be in [0, 1], got {self.restitution!r}')
         if not isinstance(self.collide, (bool, np.bool_)):
@@ -177,9 +179,12 @@ class CollisionShape:
             object.__setattr__(self, key, value)
         if not self.name:
             object.__setattr__(self, 'name', f'{self.body or "world"}/{self.kind}')
+        # (a mesh's row is its hull's about that hull's own centre: centred_hull)
+        centre = np.asarray(self.position_body) if self.kind != 'mesh' else \
+            self.position_body + quat_to_matrix(self.orientation_xyzw) @ self._centred[1]
         object.__setattr__(self, '_row', (
             float(self.collide), float(KINDS[self.kind]), *self.dimensions(),
-            *self.position_body, *self.orientation_xyzw, float(self.group), float(self.mask),
+            *centre, *self.orientation_xyzw, float(self.group), float(self.mask),
             self.friction, self.restitution))
 
     def row(self) -> tuple:
@@ -196,8 +201,23 @@ class CollisionShape:
         """Return a mesh's convex hull, packed (:func:`.hulls.hull_record`); None: a primitive."""
         return getattr(self, '_hull', None)
 
+    @property
+    def centred_hull(self) -> Optional[np.ndarray]:
+        """
+        Return a mesh's hull about its own centre (:func:`.hulls.centred_hull`).
+
+        The record the detector and the markers use, at :attr:`hull_centre` (None: a
+        primitive).
+        """
+        return self._centred[0] if self.kind == 'mesh' else None
+
+    @property
+    def hull_centre(self) -> Optional[np.ndarray]:
+        """Return the centre of a mesh's hull's box (3,) m, shape frame (None: a primitive)."""
+        return self._centred[1] if self.kind == 'mesh' else None
+
     def dimensions(self) -> np.ndarray:
-        """Return the kernels' size (3,): radius; half extents (a hull's about its origin)..."""
+        """Return the kernels' size (3,): radius; half extents (a hull's about its centre)..."""
         if self.kind == 'sphere':
             return np.array([self.radius, 0.0, 0.0])
         if self.kind == 'box':
@@ -205,7 +225,7 @@ class CollisionShape:
         if self.kind in ('capsule', 'cylinder'):
             return np.array([self.radius, 0.5 * self.length, 0.0])
         if self.kind == 'mesh':
-            return np.array(self.hull[:3])
+            return np.array(self.centred_hull[:3])
         return np.zeros(3)
 
 
@@ -283,7 +303,7 @@ class ContactDetector:
         # The hulls' records, one after another (their rows' starts in hull_at).
         records, at, self.hull_at = [], 0, np.full(m, -1, dtype=np.int64)
         for row in np.flatnonzero(self.kind == int(Shape.HULL)):
-            rec = self.shapes[live[row]].hull
+            rec = self.shapes[live[row]].centred_hull   # (its row's centre: its own)
             self.hull_at[row] = at
             records.append(rec)
             at += len(rec)
@@ -337,7 +357,7 @@ class ContactDetector:
         return not (e < len(self.excluded) and self.excluded[e] == code)
 
     def frames(self, out: np.ndarray) -> tuple:
-        """Return the shapes' centres (m, 3) and rotations (m, 3, 3) in the world at ``out``."""
+        """Return the shapes' centres (m, 3; a mesh's: its hull's) and rotations at ``out``."""
         m = len(self.live)
         c, R = np.empty((m, 3)), np.empty((m, 3, 3))
         shape_frames(out, self.body, self.c_body, self.R_body, c, R)

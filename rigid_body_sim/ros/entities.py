@@ -293,7 +293,7 @@ class Entities:
 
         Axis-aligned in the entity's frame (its base link's for a robot, at the current
         configuration), from each shape's support function (exact for boxes, spheres,
-        capsules and cylinders; a mesh by the box of its hull about its origin); None
+        capsules and cylinders; a mesh by its hull's vertices); None
         when the entity has no shape.
         """
         e = self.get(name)

@@ -339,7 +339,7 @@ class Outputs:
                     ends = (c + half, c - half)
             elif shape.kind == 'mesh':
                 kind, scale = Marker.TRIANGLE_LIST, [1.0, 1.0, 1.0]
-                points = [conv.point(p) for p in hull_triangles(shape.hull).reshape(-1, 3)]
+                points = [conv.point(p) for p in hull_triangles(shape.centred_hull).reshape(-1, 3)]
             else:   # a plane: its normal is its z axis
                 kind, scale = Marker.CUBE, [PLANE_MARKER_SIDE, PLANE_MARKER_SIDE,
                                             PLANE_MARKER_THICKNESS]
