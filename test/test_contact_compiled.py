@@ -743,13 +743,16 @@ def test_islands_too_large_to_pivot_are_solved_by_their_blocks_to_a_pivoted_solv
     # PIVOT_CONTACTS contacts, the compiled solve goes on by the island's blocks
     # (_by_blocks) instead of Lemke's pivoting, and takes its result only where it meets
     # the bar a pivoted one must: PIVOT_TOLERANCE of the rows' velocity scale. On random
-    # loaded contacts (60 on 40 spheres, redundant): (1) from no impulse, _by_blocks
+    # loaded contacts (60 on 40 spheres, redundant; 40 seeds): (1) from no impulse, _by_blocks
     # meets that bar (by the Python path's residual) on each problem with a solution
     # (Newton's method finds one), else says it did not; (2) solve_island with the
     # threshold at 0 (no island pivoted) takes the blocks' path on the problems where the
     # fixed point and Newton's method fail, never pivots; where neither the blocks nor
     # pivoting (threshold 60, as the Python path) meet the bar, the two end on the same
-    # impulses: a refused result changes nothing.
+    # impulses: a refused result changes nothing; (3) with pivoting the last resort
+    # (PIVOT_LAST_CONTACTS 60, PIVOT_CONTACTS 0) and blocks made to fail (one iteration,
+    # no Gauss–Seidel), an island that takes the blocks' path is pivoted after them, and
+    # meets the bar wherever pivoting first does.
     from rigid_body_sim.core import contact_step as cs
     from rigid_body_sim.core.kernels import contact_step as kern
     sim = Simulation([RigidBody('s', 1.0, (0.004,) * 3)], [Gravity()], dt=1e-3,
@@ -757,10 +760,14 @@ def test_islands_too_large_to_pivot_are_solved_by_their_blocks_to_a_pivoted_solv
                              CollisionShape('sphere', 's', radius=0.1)])
     prm = sim.contact.kernel_parameters()
     assert prm[kern.P_PIVOT_CONTACTS] == cs.PIVOT_CONTACTS
-    never, always = prm.copy(), prm.copy()
+    assert prm[kern.P_PIVOT_LAST_CONTACTS] == cs.PIVOT_LAST_CONTACTS
+    never, always, last = prm.copy(), prm.copy(), prm.copy()
     never[kern.P_PIVOT_CONTACTS], always[kern.P_PIVOT_CONTACTS] = 0, 60
-    met, taken = 0, 0
-    for seed in range(12):
+    never[kern.P_PIVOT_LAST_CONTACTS] = always[kern.P_PIVOT_LAST_CONTACTS] = 0
+    last[kern.P_PIVOT_CONTACTS], last[kern.P_PIVOT_LAST_CONTACTS] = 0, 60
+    last[kern.P_SPARSE_ITERATIONS], last[kern.P_PGS_SWEEPS] = 1, 0
+    met, taken, rescued = 0, 0, 0
+    for seed in range(40):
         A, q, mu = _loaded_contact_lcp(np.random.default_rng(seed))
         m, c = len(q), len(mu)
         none = np.zeros(c, dtype=bool)
@@ -773,18 +780,24 @@ def test_islands_too_large_to_pivot_are_solved_by_their_blocks_to_a_pivoted_solv
         assert ok or not solvable
         met += ok
         results = []
-        for table in (never, always):
+        for table in (never, always, last):
             cnt = np.zeros(len(kern.COUNTERS))
             results.append((kern.solve_island(A, q, mu, np.zeros(m), False, none, False, none,
                                               table, cnt)[0], cnt))
-        (p0, cnt0), (p1, cnt1) = results
+        (p0, cnt0), (p1, cnt1), (p2, cnt2) = results
         assert cnt0[kern.C_PIVOTED] == 0
+        if cnt0[kern.C_SPARSE] and cnt1[kern.C_PIVOTED]:
+            assert cnt2[kern.C_SPARSE] and not cnt2[kern.C_FAILURES]
+            scale = float(np.max(np.abs(A) @ np.abs(p2) + np.abs(q)))
+            assert cs._residual(A, q, p2, mu, False) <= cs.PIVOT_TOLERANCE * scale
+            rescued += cnt2[kern.C_PIVOTED] > 0
         taken += cnt0[kern.C_SPARSE]
         if cnt0[kern.C_SPARSE] and not cnt1[kern.C_PIVOTED]:
             scale = float(np.max(np.abs(A) @ np.abs(p0) + np.abs(q)))
             if cs._residual(A, q, p0, mu, False) > cs.PIVOT_TOLERANCE * scale:
                 np.testing.assert_array_equal(p0, p1)
     assert met >= 6 and taken >= 1   # (solutions found by the blocks; the path taken)
+    assert rescued >= 1   # (the last resort met)
 
 
 def test_islands_too_large_to_factor_are_solved_by_their_blocks_to_the_contact_conditions():

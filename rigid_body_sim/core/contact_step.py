@@ -168,6 +168,15 @@ PROXIMAL = 1e-6
 #: 128 contacts 125 s, 18; 64: 89-92 s, 19; 32: 103-108 s, 4; 16: 90 s, 8. The Python
 #: path pivots every island.
 PIVOT_CONTACTS = 32
+#: The compiled steps pivot an island of more than :data:`PIVOT_CONTACTS` contacts and at
+#: most this many as their last resort, where its blocks fail too (else a failure,
+#: counted). Rare, and dear: the 100-sphere pour's first second (``bench/
+#: contact_dynamics.py``'s pile: 140,000 to 180,000 solves) failed 4 that way, islands of
+#: 15, 34, 87 and 96 contacts; pivoting solved the last three within the bar, in 4, 53 and
+#: 75 ms (compiled, this Xeon). Over four jitters of that pour (a pile is chaotic: each
+#: run takes its own path) the failures went from 4, 9, 13, 7 to 6, 5, 9, 4 (33 to 24),
+#: their wall times within the host's noise (measured).
+PIVOT_LAST_CONTACTS = 128
 #: Islands of more contacts than this are solved by their Delassus operator's blocks alone
 #: (the compiled steps: :func:`.kernels.contact_step.solve_large_island`), where the
 #: dense path's factors cost ``O(rows³)`` and its matrix ``O(rows²)`` (a pile of a
@@ -1199,6 +1208,7 @@ class ContactSteps:
         prm[kern.P_SPARSE_INNER], prm[kern.P_PGS_SWEEPS] = SPARSE_INNER, PGS_SWEEPS
         prm[kern.P_SPARSE_HISTORY] = SPARSE_HISTORY
         prm[kern.P_PIVOT_CONTACTS] = PIVOT_CONTACTS
+        prm[kern.P_PIVOT_LAST_CONTACTS] = PIVOT_LAST_CONTACTS
         return prm
 
     def _buffers(self) -> tuple:

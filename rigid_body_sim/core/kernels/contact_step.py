@@ -23,7 +23,8 @@ for function:
   from the last step's normal impulses (where that fixed point stalls, Newton's method
   on the rows' natural map, :func:`newton`, then Lemke's pivoting on the pyramid:
   :func:`pyramid`, or, for an island of more than ``P_PIVOT_CONTACTS`` contacts, its
-  blocks' fixed point: :func:`_by_blocks`); sticking contacts that begin to slip turned
+  blocks' fixed point: :func:`_by_blocks`, then pivoting if that fails and the island
+  has at most ``P_PIVOT_LAST_CONTACTS``); sticking contacts that begin to slip turned
   to their slip (:func:`slip_turn`); the step with the forces held, its model
   checked at the end's geometry (each contact found again: :func:`match`) and
   corrected up to ``MODEL_CORRECTIONS`` times;
@@ -61,7 +62,8 @@ from .views import raw_tree
  P_PIVOT_TOLERANCE, P_PIVOT_REGULARIZATION_1, P_PIVOT_REGULARIZATION_2,
  P_BOUNCE, P_UNLOCATED, P_STALL_ITERATIONS, P_NEWTON_ITERATIONS, P_NEWTON_REFINEMENTS,
  P_SPARSE_CONTACTS, P_SPARSE_PROXIMAL, P_SPARSE_RESIDUAL, P_SPARSE_ITERATIONS,
- P_SPARSE_INNER, P_PGS_SWEEPS, P_SPARSE_HISTORY, P_PIVOT_CONTACTS, P_WIDTH) = range(31)
+ P_SPARSE_INNER, P_PGS_SWEEPS, P_SPARSE_HISTORY, P_PIVOT_CONTACTS, P_PIVOT_LAST_CONTACTS,
+ P_WIDTH) = range(32)
 #: The counters of :class:`..contact_step.ContactSteps` this kernel adds to, in ``cnt``'s order.
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
@@ -1435,15 +1437,17 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
             break
         pivot_tried = True
         if nr // 3 > prm[P_PIVOT_CONTACTS]:
-            # Too large to pivot (more than ``P_PIVOT_CONTACTS`` contacts: a pivoted
+            # Too large to pivot first (more than ``P_PIVOT_CONTACTS`` contacts: a pivoted
             # solve's cost grows as their cube, 0.37 s at 190): the fixed point by the
             # island's blocks, held to the bar a pivoted solve must meet
             # (``P_PIVOT_TOLERANCE``).
             p_b, converged = _by_blocks(Ar, qr, mu, p, equal, sliding, prm, pat, cnt)
             if converged:
                 p = p_b
-        else:
-            # Lemke's pivoting on the pyramid (``_pyramid``).
+        if not converged and nr // 3 <= max(prm[P_PIVOT_CONTACTS],
+                                            prm[P_PIVOT_LAST_CONTACTS]):
+            # Lemke's pivoting on the pyramid (``_pyramid``): first, or where the blocks
+            # failed, last.
             for reg in (prm[P_PIVOT_REGULARIZATION_1], prm[P_PIVOT_REGULARIZATION_2]):
                 pivoted, ok = pyramid(Ar, qr, mu, sliding, reg)
                 left = residual(Ar, qr, pivoted, mu, False, sliding, tol, equal, False, pat)
