@@ -16,7 +16,9 @@ import math
 import numpy as np
 import pytest
 
-from rigid_body_sim.core import Gravity, RigidBody, Simulation
+from rigid_body_sim.core import contact_step, Gravity, RigidBody, Simulation
+from rigid_body_sim.core.bodies import State
+from rigid_body_sim.core.constraints import Constraint
 from rigid_body_sim.core.contact_step import FRICTION_TOLERANCE
 from rigid_body_sim.core.shapes import CollisionShape
 
@@ -204,6 +206,101 @@ def test_each_compiled_step_is_the_python_paths_from_the_same_state(name, integr
     assert cf['compiled_steps'] == steps and cs['compiled_steps'] == 0
     assert cs['impacts'] > 0
 
+
+
+def _jointed(name):
+    """Return a scene with a joint whose steps run in Python, and its steps."""
+    if name == 'hinged box striking the ground':
+        # On a 0.5 m arm from a hinge 0.5 m up, about y: the box (10 cm, 1 kg) swings
+        # down into the ground and slides along it. Its friction rows along y are rows no
+        # impulse moves (the hinge holds the box in y): given to the kernel as bound rows.
+        body = _cube('box', 0.05, 1.0, (0.5, 0, 0.5))
+        joint = Constraint('hinge', 'hinge', 'box', None, anchor_world=(0, 0, 0.5),
+                           axis_world=(0, 1, 0))
+        half, steps = 0.05, 800
+    else:   # 'box on a ball joint': 0.5 m cube, 1 kg, dropped 1 mm; the joint 1 m away
+        body = _cube('box', 0.25, 1.0, (0, 0, 0.251))
+        joint = Constraint('arm', 'ball', 'box', None, anchor_world=(-1.0, 0, 0.25))
+        half, steps = 0.25, 600
+    sim = Simulation([body], [Gravity()], 'rkmk4', 1e-3, [joint],
+                     shapes=[CollisionShape('plane', None, friction=0.5),
+                             CollisionShape('box', 'box', size=(2 * half,) * 3,
+                                            friction=0.5)])
+    return sim, half, steps
+
+
+@pytest.mark.parametrize('name', ['hinged box striking the ground', 'box on a ball joint'])
+def test_steps_with_joints_solve_their_lcps_by_the_compiled_solve_as_the_python_path(
+        name, monkeypatch):
+    # Scenes with joints take their steps in Python; with ``compiled`` they solve their
+    # LCPs by the kernel's solve (``ContactSteps._compiled_island``), without by the
+    # Python solve. Each step from the same state (the Python path's): both meet the
+    # same tolerance, so they part by at most FRICTION_TOLERANCE of the largest impulse,
+    # twice (as the test above): over the mass that is of the step's velocity change or
+    # of g dt; the impulse's lever r over the smallest moment J takes it to Ω (r m / J of
+    # the velocity's bound, r the box's half diagonal).
+    calls = []
+    solve = contact_step.kern.solve_island
+    monkeypatch.setattr(contact_step.kern, 'solve_island',
+                        lambda *a: calls.append(1) or solve(*a))
+    fast, half, steps = _jointed(name)
+    slow = _jointed(name)[0]
+    slow.contact.compiled = False
+    lever = math.sqrt(3.0) * half
+    moment = float(np.min(fast.bodies.moments))
+    for k in range(steps):
+        fast.state, fast._steps = slow.state, slow._steps
+        fast.contact._warm = slow.contact._warm
+        before = slow.state.vel_com_world
+        fast.step()
+        n_calls = len(calls)
+        slow.step()
+        assert len(calls) == n_calls   # (the Python path's solves are its own)
+        a, b = fast.state, slow.state
+        change = float(np.max(np.abs(b.vel_com_world - before))) + G * fast.dt
+        v_tol = max(1e-11, 2 * FRICTION_TOLERANCE * change)
+        np.testing.assert_allclose(a.pos_com_world, b.pos_com_world, rtol=0,
+                                   atol=max(1e-13, fast.dt * v_tol))
+        np.testing.assert_allclose(a.vel_com_world, b.vel_com_world, rtol=0, atol=v_tol)
+        np.testing.assert_allclose(a.ang_vel_principal, b.ang_vel_principal, rtol=0,
+                                   atol=v_tol * lever / moment)
+    cf, cs = fast.contact.counters, slow.contact.counters
+    assert cf['compiled_steps'] == 0 and cf['lcp_solves'] == len(calls) > 100
+    for key in ('lcp_solves', 'lcp_failures', 'immovable_rows', 'impacts'):
+        assert cf[key] == cs[key], key
+    if name.startswith('hinged'):
+        assert cs['immovable_rows'] > 0
+    # (the largest residual of the same problems, of iterates that part as above: by the
+    # rows' velocities their impulses' difference moves, at rest of g dt)
+    assert cf['complementarity_max'] <= cs['complementarity_max'] \
+        + 2 * FRICTION_TOLERANCE * G * fast.dt
+
+
+def test_the_response_of_bodies_held_by_joints_projects_its_columns_as_one_by_one():
+    # ``response`` projects every column (and zero velocities) through the joints in one
+    # pass (``Solver.project_velocity_sets``): the same kernel calls on the same numbers
+    # as projecting each column's state by ``project_velocities``, so the same bits.
+    sim = _jointed('box on a ball joint')[0]
+    sim.step(50)
+    solver, state = sim.dynamics.solver, sim.state
+    n = len(sim.bodies.names)
+    G_rows = np.random.default_rng(3).normal(size=(9, 6 * n))
+    Y = sim.contact.response(state, G_rows)
+    inv = np.concatenate([np.repeat(sim.bodies.inv_mass[:, None], 3, axis=1),
+                          1.0 / np.asarray(sim.bodies.moments)], axis=1).reshape(-1)
+    zero = np.zeros((n, 3))
+
+    def projected(v, w):
+        out = solver.project_velocities(State(state.time, state.pos_com_world,
+                                              state.quat_principal_world, v, w))
+        return np.hstack(out).reshape(-1)
+
+    base = projected(zero, zero)
+    for r in range(len(G_rows)):
+        col = (inv * G_rows[r]).reshape(n, 6)
+        assert np.array_equal(Y[:, r], projected(col[:, :3], col[:, 3:]) - base)
+    # (and the joint takes its share: the box alone would answer M⁻¹ Gᵀ)
+    assert not np.allclose(Y, (inv[:, None] * G_rows.T))
 
 def _net_wrenches(sim, con):
     """Return each body's net contact force and torque about its centre (n, 6)."""

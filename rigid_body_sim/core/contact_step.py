@@ -400,10 +400,14 @@ class ContactSteps:
         self._overlaps: Optional[ContactRows] = None
         self.record = ContactRecord()
         #: Take the steps of scenes of free bodies in the compiled kernel
-        #: (:meth:`compiled_steps`); False: every step in Python (the reference).
+        #: (:meth:`compiled_steps`), and the LCPs of the steps that run in Python (joints,
+        #: the knob) by its solve (:meth:`_compiled_island`); False: every step in Python,
+        #: solves included (the reference).
         self.compiled = True
         self._kernel_key: Optional[tuple] = None
         self._kernel_args: tuple = ()
+        self._island_key: Optional[tuple] = None
+        self._island_prm = np.zeros(0)
         self._scratch: Optional[tuple] = None
         #: The kernel's impacts, a row each: time, shapes a and b, approach, rebound.
         self._log = np.zeros((IMPACT_LOG, 5))
@@ -585,17 +589,14 @@ class ContactSteps:
         solver = self.sim.dynamics.solver
         if not len(solver.constraints):
             return Y
-        zero = np.zeros((n, 3))
-        base = solver.project_velocities(State(state.time, state.pos_com_world,
-                                               state.quat_principal_world, zero, zero))
-        base = _stack(*base)
-        for r in range(Y.shape[1]):
-            col = Y[:, r].reshape(n, 6)
-            projected = solver.project_velocities(State(
-                state.time, state.pos_com_world, state.quat_principal_world,
-                col[:, :3], col[:, 3:]))
-            Y[:, r] = _stack(*projected) - base
-        return Y
+        # The projection is affine: each column's, less that of zero velocities (the
+        # first set), all in one pass (:meth:`.Solver.project_velocity_sets`).
+        sets = np.zeros((Y.shape[1] + 1, n, 6))
+        sets[1:] = Y.T.reshape(Y.shape[1], n, 6)
+        vel, om = sets[:, :, :3].copy(), sets[:, :, 3:].copy()
+        solver.project_velocity_sets(state, vel, om)
+        out = np.concatenate([vel, om], axis=2).reshape(len(sets), 6 * n)
+        return (out[1:] - out[0]).T   # (Fortran order, as the free bodies' Y above)
 
     # -- the LCP of the rows --------------------------------------------------------------
 
@@ -657,6 +658,8 @@ class ContactSteps:
         m = len(q)
         if not m:
             return np.zeros(0)
+        if self.compiled and symmetric:
+            return self._compiled_island(A, q, mu, start, normal_only, equal, sliding)
         rows = np.arange(m) if not normal_only else np.arange(0, m, 3)
         # A row no impulse moves (a point on an axle fixed to the world) carries none: a
         # contact whose normal row is one is left out, a friction row that is one is
@@ -777,6 +780,75 @@ class ContactSteps:
         out = np.zeros(m)
         out[rows] = p
         return out
+
+    def _compiled_island(self, A: np.ndarray, q: np.ndarray, mu: np.ndarray,
+                         start: Optional[np.ndarray], normal_only: bool,
+                         equal: Optional[np.ndarray], sliding: Optional[np.ndarray]
+                         ) -> np.ndarray:
+        """
+        Return :meth:`solve_island`'s impulses by the compiled kernel's solve.
+
+        The steps that run in Python (scenes with joints, the knob; ``compiled`` True)
+        solve their islands by ``kernels.contact_step.solve_island``: the same method
+        (the proximal fixed point, Newton's method, Lemke's pivoting, the blocks of a
+        large island) with its active-set solves by an updated Cholesky factor, and
+        counted alike. Rows no impulse moves (a joint's axis along a friction row) are
+        taken as :meth:`solve_island` takes them: a contact whose normal row is one is
+        left out; a friction row that is one carries nothing: the kernel is given it
+        apart from the others (its row and column zero but the diagonal, which is the
+        largest of the rows', and its velocity zero), so that its impulse solves to zero
+        within any bound.
+        """
+        m = len(q)
+        rows = np.arange(0, m, 3) if normal_only else np.arange(m)
+        A_r = A[np.ix_(rows, rows)]
+        diag = np.diag(A_r)
+        dmax = float(np.max(diag, initial=0.0))
+        movable = diag > 1e-12 * dmax
+        out = np.zeros(m)
+        per = 1 if normal_only else 3
+        kept = np.flatnonzero(movable[0::per])   # (the contacts whose normal row moves)
+        if not np.all(movable):
+            self.counters['immovable_rows'] += int(np.count_nonzero(~movable))
+            if not len(kept):
+                return out
+        sub = (per * kept[:, None] + np.arange(per)).ravel()
+        A_k = A_r[np.ix_(sub, sub)]
+        A_k = 0.5 * (A_k + A_k.T)   # (symmetric to rounding: G M̄⁻¹ Gᵀ)
+        q_k = np.array(q[rows][sub], dtype=float)
+        p0 = np.zeros(len(sub)) if start is None else np.array(start[rows][sub], dtype=float)
+        mu_k = np.array(mu[kept], dtype=float)
+        sl = np.zeros(len(kept), dtype=bool) if sliding is None \
+            else np.array(sliding[kept], dtype=bool)
+        eq = np.zeros(len(kept), dtype=bool) if equal is None \
+            else np.array(equal[kept], dtype=bool)
+        if not normal_only:
+            for r in np.flatnonzero(~movable[sub]):
+                A_k[r, :], A_k[:, r] = 0.0, 0.0
+                A_k[r, r], q_k[r], p0[r] = dmax, 0.0, 0.0
+        cnt = np.zeros(len(kern.COUNTERS))
+        p, ok = kern.solve_island(np.ascontiguousarray(A_k), q_k, mu_k, p0, bool(normal_only),
+                                  eq, equal is not None, sl, self._island_parameters(), cnt)
+        if not ok:   # (none: every row given moves, or is one apart)
+            raise RuntimeError('the compiled solve was given a row no impulse moves')
+        self._add_counters(cnt)
+        out[rows[sub]] = p
+        return out
+
+    def _island_parameters(self) -> np.ndarray:
+        """Return :meth:`kernel_parameters` (kept while the tolerances are the same)."""
+        key = (self.location, self.rate, self.bounce, self.unlocated, self.sparse_contacts)
+        if self._island_key != key:
+            self._island_prm, self._island_key = self.kernel_parameters(), key
+        return self._island_prm
+
+    def _add_counters(self, cnt: np.ndarray) -> None:
+        """Add the kernel's counters ``cnt`` (``kern.COUNTERS``' order) to :attr:`counters`."""
+        for name, value in zip(kern.COUNTERS, cnt.tolist()):
+            if name in kern.MAXIMA:
+                self.counters[name] = max(self.counters[name], type(self.counters[name])(value))
+            elif value:
+                self.counters[name] += int(value)
 
     # -- a step ---------------------------------------------------------------------------
 
@@ -1137,11 +1209,7 @@ class ContactSteps:
         integ._kick_at = None
         if not taken:
             return 0, start
-        for name, value in zip(kern.COUNTERS, cnt.tolist()):
-            if name in kern.MAXIMA:
-                self.counters[name] = max(self.counters[name], type(self.counters[name])(value))
-            elif value:
-                self.counters[name] += int(value)
+        self._add_counters(cnt)
         self.counters['compiled_steps'] += taken
         shapes = self.detector.shapes
         for time, a, b, approach, rebound in self._log[:logged].tolist():

@@ -809,6 +809,28 @@ class ConstraintSolver:
             vel[b], om[b] = v, w
         return vel, om
 
+    def project_velocity_sets(self, state: State, vel: np.ndarray, om: np.ndarray) -> None:
+        """
+        Project ``k`` sets of velocities at ``state``'s positions, in place.
+
+        ``vel``, ``om`` (k, n, 3): each set as :meth:`project_velocities` projects a
+        state's (``state``'s own velocities are not read), in order, with the
+        kernels' setup, targets and settings fetched once for all of them.
+        """
+        setup = self.kernel_setup()
+        self.targets_at(state.time)
+        setup.geometry_of[0] = None
+        par = self._settings()
+        pos, quat = state.pos_com_world, state.quat_principal_world
+        for comp in setup.components:
+            b = comp.bodies
+            p, q = np.ascontiguousarray(pos[b]), np.ascontiguousarray(quat[b])
+            for k in range(vel.shape[0]):
+                v, w = np.ascontiguousarray(vel[k][b]), np.ascontiguousarray(om[k][b])
+                component_project_velocities(p, q, v, w, comp.inertia, par, int(comp.solve),
+                                             *comp.packed, False, self.counters.tally)
+                vel[k][b], om[k][b] = v, w
+
     # -- reaction wrenches -----------------------------------------------------------------
 
     def reactions(self, dynamics: Dynamics, state: State) -> dict:

@@ -11,7 +11,8 @@ chain long enough for the tree solve and a ring (a closed loop: the tree solve
 of a spanning tree and the Schur complement of the loop-closing rows); the
 complementarity problems' projected Gauss–Seidel sweeps on a small problem; one
 collision shape of each kind, all touching (:mod:`.shapes`); a box resting on the
-ground (:mod:`.kernels.contact_step`).
+ground (:mod:`.kernels.contact_step`), free and hinged (the LCP solve of the steps that
+run in Python).
 """
 
 from __future__ import annotations
@@ -67,6 +68,14 @@ def warm_up() -> float:
                          shapes=[CollisionShape('plane'),
                                  CollisionShape('box', 'box', size=(0.5, 0.5, 0.5))])
     resting.step(3)
+    # Contact with joints: a box held by a ball joint 1 m away, resting on the ground (the
+    # steps in Python, their LCPs by the compiled solve).
+    held = Simulation([RigidBody('box', 1.0, (1.0, 1.0, 1.0), position_world=(0, 0, 0.25))],
+                      [Gravity()], 'rkmk4', 1e-3,
+                      [Constraint('arm', 'ball', 'box', None, anchor_world=(-1.0, 0, 0.25))],
+                      shapes=[CollisionShape('plane'),
+                              CollisionShape('box', 'box', size=(0.5, 0.5, 0.5))])
+    held.step(3)
     return time.perf_counter() - start
 
 
