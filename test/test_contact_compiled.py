@@ -207,7 +207,6 @@ def test_each_compiled_step_is_the_python_paths_from_the_same_state(name, integr
     assert cs['impacts'] > 0
 
 
-
 def _jointed(name):
     """Return a scene with a joint whose steps run in Python, and its steps."""
     if name == 'hinged box striking the ground':
@@ -301,6 +300,7 @@ def test_the_response_of_bodies_held_by_joints_projects_its_columns_as_one_by_on
         assert np.array_equal(Y[:, r], projected(col[:, :3], col[:, 3:]) - base)
     # (and the joint takes its share: the box alone would answer M⁻¹ Gᵀ)
     assert not np.allclose(Y, (inv[:, None] * G_rows.T))
+
 
 def _net_wrenches(sim, con):
     """Return each body's net contact force and torque about its centre (n, 6)."""

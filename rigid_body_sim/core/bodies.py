@@ -153,17 +153,14 @@ def top_axes(moments: np.ndarray) -> np.ndarray:
         The axis (0, 1, 2) whose moment differs from the other two's, or −1.
 
     """
-    moments = np.asarray(moments, dtype=float)
-    out = np.full(len(moments), -1)
-    for i, m in enumerate(moments):
-        tol = ISOTROPY_RTOL * m.max()
-        if m.max() - m.min() <= tol:
-            continue   # isotropic
-        gaps = [abs(m[(a + 1) % 3] - m[(a + 2) % 3]) for a in range(3)]
-        a = int(np.argmin(gaps))
-        if gaps[a] <= tol:
-            out[i] = a
-    return out
+    moments = np.asarray(moments, dtype=float).reshape(-1, 3)
+    high = moments.max(axis=1)
+    tol = ISOTROPY_RTOL * high
+    # gaps[:, a]: the other two moments' difference (the smallest: the first of equals)
+    gaps = np.abs(moments[:, [1, 2, 0]] - moments[:, [2, 0, 1]])
+    axis = np.argmin(gaps, axis=1)
+    top = (high - moments.min(axis=1) > tol) & (gaps[np.arange(len(moments)), axis] <= tol)
+    return np.where(top, axis, -1)   # (isotropic, or no two moments equal: −1)
 
 
 @dataclass(frozen=True)
