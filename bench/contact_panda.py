@@ -15,7 +15,7 @@ pusher's friction 0 or 0.5 (two variants).
 
 * Ours: the joints on exact drives (joint 1 an exact velocity drive at ω, the others
   exact position drives), contact as hard rows (``rkmk4``), every step in Python (a
-  scene with joints).
+  scene with joints), its LCPs by the compiled solve.
 * MuJoCo 4.0: position actuators on the 7 joints (kp 1e4 N m/rad, kv 200 N m s/rad;
   joint 1's target ramps as ω t), ``implicitfast`` (its recommended integrator for
   actuated robots), soft contacts at their defaults; friction combined as ours (the

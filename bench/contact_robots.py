@@ -2,8 +2,9 @@
 Contact with robots (issue 21): URDF robots standing and pushing, their cost and quality.
 
 Scenes with joints take every contact step in Python (the compiled contact steps are for
-free bodies), so these are the costs a robot scene pays today. ``dt`` 1 ms, gravity 9.81,
-a ground of friction 0.8 (the gantry's 0.4):
+free bodies), their LCPs solved by the compiled solve (but a servo scene's, whose
+stepped operator is not symmetric), so these are the costs a robot scene pays today.
+``dt`` 1 ms, gravity 9.81, a ground of friction 0.8 (the gantry's 0.4):
 
 * **quadruped, exact drives**: ``test/urdf/quadruped.urdf`` (17.5 kg, four legs of a hip
   and a knee, ball feet) standing, its joints held by exact position drives;
@@ -159,7 +160,9 @@ def table(rows: list) -> str:
                      f'{r["iterations"]} | {r["failures"]} | {r["residual"]:.1e} | '
                      f'{r["depth"]:.1e} | {r["stepped"]:.2f} | {r["error"]} |')
     return '\n'.join(lines) + (
-        '\n\nEvery step in Python (scenes with joints). "stepped operators a step": how '
+        '\n\nEvery step in Python (scenes with joints), its LCPs by the compiled solve '
+        "where their operator is symmetric (the servos' stepped operators: the Python "
+        'solve). "stepped operators a step": how '
         "often a step's contact operator was built from the step's own response (servos: "
         'a trial step per row; twice in a step where contacts turn to slip or stick). The '
         "servo quadruped is still settling at the end (its servos' modes decay about as "

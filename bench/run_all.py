@@ -334,8 +334,9 @@ def sections(quick: bool, node_args: list) -> list:
             f'./dev.sh python bench/contact_robots.py{q}', [T('contact_robots.md')],
             about='URDF robots touching the ground: a quadruped standing on exact drives and '
                   'on servos, ANYmal B standing, a gantry pushing a box; every step in '
-                  "Python (scenes with joints), the LCPs' iterations, failures and "
-                  "residual, the deepest penetration and each scene's error.")),
+                  'Python (scenes with joints; the LCPs of symmetric operators by the '
+                  "compiled solve), the LCPs' iterations, failures and residual, the "
+                  "deepest penetration and each scene's error.")),
         ('skip_mujoco', 'contact_panda', ['--quick'] if quick else [], report.Section(
             'The Panda pushing a box, beside MuJoCo',
             f'./dev.sh python bench/contact_panda.py{q}', [T('contact_panda.md')],
