@@ -178,21 +178,8 @@ def test_each_compiled_step_is_the_python_paths_from_the_same_state(name, integr
     # change, or of g dt for a body the contact holds still. Positions: dt times that.
     fast, slow, steps = _pair(name, integrator)
     for k in range(steps):
-        fast.state, fast._steps = slow.state, slow._steps
-        fast.contact._warm = slow.contact._warm
         impacts = len(slow.contact.impacts)
-        fast.contact.impacts.clear()
-        fast.contact.impacts.extend(slow.contact.impacts)
-        before = slow.state.vel_com_world
-        fast.step()
-        slow.step()
-        a, b = fast.state, slow.state
-        assert fast.time == slow.time
-        change = float(np.max(np.abs(b.vel_com_world - before))) + G * fast.dt
-        v_tol = max(1e-11, 2 * FRICTION_TOLERANCE * change)
-        np.testing.assert_allclose(a.pos_com_world, b.pos_com_world, rtol=0,
-                                   atol=max(1e-13, fast.dt * v_tol))
-        np.testing.assert_allclose(a.vel_com_world, b.vel_com_world, rtol=0, atol=v_tol)
+        a, b, _ = _step_both_from_the_slow_state(fast, slow)
         # (Ω of a 5 cm sphere, J = 1e-3 kg m²: an impulse's rounding over J, levered.)
         np.testing.assert_allclose(a.ang_vel_principal, b.ang_vel_principal, rtol=0,
                                    atol=1e-9)
@@ -248,22 +235,12 @@ def test_steps_with_joints_solve_their_lcps_by_the_compiled_solve_as_the_python_
     lever = math.sqrt(3.0) * half
     moment = float(np.min(fast.bodies.moments))
     for k in range(steps):
-        fast.state, fast._steps = slow.state, slow._steps
-        fast.contact._warm = slow.contact._warm
-        before = slow.state.vel_com_world
-        fast.step()
-        n_calls = len(calls)
-        slow.step()
-        assert len(calls) == n_calls   # (the Python path's solves are its own)
-        a, b = fast.state, slow.state
-        change = float(np.max(np.abs(b.vel_com_world - before))) + G * fast.dt
-        v_tol = max(1e-11, 2 * FRICTION_TOLERANCE * change)
-        np.testing.assert_allclose(a.pos_com_world, b.pos_com_world, rtol=0,
-                                   atol=max(1e-13, fast.dt * v_tol))
-        np.testing.assert_allclose(a.vel_com_world, b.vel_com_world, rtol=0, atol=v_tol)
+        a, b, v_tol = _step_both_from_the_slow_state(fast, slow)
         np.testing.assert_allclose(a.ang_vel_principal, b.ang_vel_principal, rtol=0,
                                    atol=v_tol * lever / moment)
     cf, cs = fast.contact.counters, slow.contact.counters
+    # (every kernel solve the compiled path's: as many as it counted, the Python path as
+    # many of its own)
     assert cf['compiled_steps'] == 0 and cf['lcp_solves'] == len(calls) > 100
     for key in ('lcp_solves', 'lcp_failures', 'immovable_rows', 'impacts'):
         assert cf[key] == cs[key], key
@@ -300,6 +277,30 @@ def test_the_response_of_bodies_held_by_joints_projects_its_columns_as_one_by_on
         assert np.array_equal(Y[:, r], projected(col[:, :3], col[:, 3:]) - base)
     # (and the joint takes its share: the box alone would answer M⁻¹ Gᵀ)
     assert not np.allclose(Y, (inv[:, None] * G_rows.T))
+
+
+def _step_both_from_the_slow_state(fast, slow):
+    """
+    Step ``fast`` from ``slow``'s state (its warm start and impacts too), and ``slow``.
+
+    Checks their positions and velocities against the bound of the two tests above;
+    returns ``(fast's state, slow's state, the velocities' bound)``.
+    """
+    fast.state, fast._steps = slow.state, slow._steps
+    fast.contact._warm = slow.contact._warm
+    fast.contact.impacts.clear()
+    fast.contact.impacts.extend(slow.contact.impacts)
+    before = slow.state.vel_com_world
+    fast.step()
+    slow.step()
+    a, b = fast.state, slow.state
+    assert fast.time == slow.time
+    change = float(np.max(np.abs(b.vel_com_world - before))) + G * fast.dt
+    v_tol = max(1e-11, 2 * FRICTION_TOLERANCE * change)
+    np.testing.assert_allclose(a.pos_com_world, b.pos_com_world, rtol=0,
+                               atol=max(1e-13, fast.dt * v_tol))
+    np.testing.assert_allclose(a.vel_com_world, b.vel_com_world, rtol=0, atol=v_tol)
+    return a, b, v_tol
 
 
 def _net_wrenches(sim, con):

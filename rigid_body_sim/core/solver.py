@@ -822,14 +822,16 @@ class ConstraintSolver:
         setup.geometry_of[0] = None
         par = self._settings()
         pos, quat = state.pos_com_world, state.quat_principal_world
+        tally = self.counters.tally
         for comp in setup.components:
             b = comp.bodies
             p, q = np.ascontiguousarray(pos[b]), np.ascontiguousarray(quat[b])
-            for k in range(vel.shape[0]):
-                v, w = np.ascontiguousarray(vel[k][b]), np.ascontiguousarray(om[k][b])
-                component_project_velocities(p, q, v, w, comp.inertia, par, int(comp.solve),
-                                             *comp.packed, False, self.counters.tally)
-                vel[k][b], om[k][b] = v, w
+            v, w = np.ascontiguousarray(vel[:, b]), np.ascontiguousarray(om[:, b])
+            solve, packed = int(comp.solve), comp.packed
+            for k in range(len(v)):   # (each set's rows: C-contiguous views)
+                component_project_velocities(p, q, v[k], w[k], comp.inertia, par, solve,
+                                             *packed, False, tally)
+            vel[:, b], om[:, b] = v, w
 
     # -- reaction wrenches -----------------------------------------------------------------
 
