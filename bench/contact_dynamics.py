@@ -269,8 +269,9 @@ def table(rows: list) -> str:
         "call), `step()` one step a call (a node's loop: the Python call and its checks each "
         'step; not run on the 100 and 1000 spheres, whose steps cost a thousand times the '
         'call), and '
-        'every step in Python (`ContactSteps.compiled = False`: the reference, and '
-        'what scenes with joints still pay; not run on the piles). "steps compiled": the '
+        'every step in Python (`ContactSteps.compiled = False`: the reference, its LCPs '
+        'solved in Python too; scenes with joints step in Python, their LCPs by the '
+        'compiled solve; not run on the piles). "steps compiled": the '
         'share the kernel took; '
         'the rest (a row no force moves) ran in Python. '
         'MuJoCo: one `mj_step` call a step. Ours `step(100)` and MuJoCo: the fastest of '
