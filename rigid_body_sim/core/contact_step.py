@@ -653,7 +653,9 @@ class ContactSteps:
         Newton's method on the rows' natural map (:func:`_newton`, counted in
         ``lcp_newton``), exact where it converges; if that fails and the fixed point
         would not reach its tolerance within :data:`FRICTION_ITERATIONS`, it is pivoted
-        at once (and goes on iterating if that fails).
+        at once (and goes on iterating if that fails). With :attr:`compiled` and
+        ``symmetric``, the compiled kernel's solve of the same method takes it
+        (:meth:`_compiled_island`).
         """
         m = len(q)
         if not m:

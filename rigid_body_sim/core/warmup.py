@@ -11,8 +11,8 @@ chain long enough for the tree solve and a ring (a closed loop: the tree solve
 of a spanning tree and the Schur complement of the loop-closing rows); the
 complementarity problems' projected Gauss–Seidel sweeps on a small problem; one
 collision shape of each kind, all touching (:mod:`.shapes`); a box resting on the
-ground (:mod:`.kernels.contact_step`), free and hinged (the LCP solve of the steps that
-run in Python).
+ground (:mod:`.kernels.contact_step`), free and held by a joint (the LCP solve of the
+steps that run in Python).
 """
 
 from __future__ import annotations
