@@ -27,7 +27,7 @@ from typing import Any, ClassVar, Optional, Sequence
 import numpy as np
 
 from . import rotation as so3
-from .bodies import BodySet, top_axes
+from .bodies import BodySet
 from .errors import SpecError
 from .kernels.free_step import HAS_DAMPING, HAS_POSITION_FORCES
 from .kernels.layout import (B_ANISOTROPIC, B_C_ANG, B_C_LIN, B_INV_MASS, B_MASS, B_MOMENTS,
@@ -137,7 +137,7 @@ class KernelModel:
         self.body[:, B_MASS], self.body[:, B_INV_MASS] = bodies.mass, bodies.inv_mass
         self.body[:, B_MOMENTS:B_MOMENTS + 3] = bodies.moments
         self.body[bodies.anisotropic, B_ANISOTROPIC] = 1.0
-        top = top_axes(bodies.moments)
+        top = bodies.top_axes()
         self.body[top >= 0, B_ANISOTROPIC] = ROTOR_TOP + top[top >= 0]
         self.gforce = np.zeros((n, 3))
         self.wrench_rows: list = []
