@@ -1050,3 +1050,83 @@ def test_lcps_the_fixed_point_cannot_solve_are_solved_as_in_the_python_path(
         assert solved['lcp_newton'] >= 10
     else:
         assert solved['lcp_newton'] == 0 and solved['lcp_pivoted'] >= 10
+
+
+def _one_contact_lcp(rng):
+    """
+    Return ``(A, q, mu, sliding)``: one contact of a body with the world, at random.
+
+    A body of 1 to 3 kg and principal moments 0.01 to 0.1 kg m² (its axes the world's)
+    touches the world at a point ``l`` from its centre (up to 0.2 m), along a random
+    normal: the rows ``F (v + ω × l)``, ``A = G M⁻¹ Gᵀ`` (the normal and friction rows
+    coupled through the lever), ``q = G v`` at a random velocity of 1 cm/s to 1 m/s,
+    approaching or leaving; ``μ`` one of 0, 0.2, 1 and 10.
+    """
+    m, J = 1.0 + 2.0 * rng.random(), 0.01 + 0.09 * rng.random(3)
+    n = rng.standard_normal(3)
+    n /= np.linalg.norm(n)
+    t1 = np.cross(n, (1.0, 0.0, 0.0) if abs(n[0]) < 0.9 else (0.0, 1.0, 0.0))
+    t1 /= np.linalg.norm(t1)
+    F = np.stack([n, t1, np.cross(n, t1)])
+    lever = 0.2 * rng.uniform(-1.0, 1.0, 3)
+    G = np.hstack([F, np.cross(lever, F)])
+    v = rng.standard_normal(6) * 10.0 ** rng.uniform(-2.0, 0.0)
+    A = (G * np.concatenate([[1.0 / m] * 3, 1.0 / J])) @ G.T
+    return 0.5 * (A + A.T), G @ v, np.array([rng.choice([0.0, 0.2, 1.0, 10.0])]), \
+        np.array([rng.random() < 0.3])
+
+
+def test_one_contact_is_solved_by_its_cases_to_the_pivoted_impulses():
+    # A body alone on the ground (the sphere's and the box's corner's island of one
+    # contact) is solved by its cases, apart, pressed with each friction row inside or
+    # on its bound (_one_contact, both paths), not by the fixed point. On 600 random
+    # contacts (_one_contact_lcp) its impulses must be Lemke's on the pyramid
+    # (contact_step._pyramid, unregularized: exact, no iteration) to 1e-9 of the scale
+    # (as the pivoted solves are compared above; the largest impulse, or for a contact
+    # apart the one that would stop its rows, |q| over A's diagonal); the kernel's and
+    # the Python path's the same to 1e-10 of it (the same linear system of at most 3
+    # unknowns, Cramer's rule and LAPACK's, whose rounding is the system's condition,
+    # under 1e4 here, times ε). Every kind of case occurs: apart, frictionless,
+    # sticking, on one bound (sliding), on two (a pyramid's corner); and with μ = 10 a
+    # contact with two solutions (seed 13's 291st), where the least normal impulse is
+    # taken, as the fixed point from zero and the pivoting take it.
+    from rigid_body_sim.core.kernels import contact_step as kern
+    sim = Simulation([RigidBody('s', 1.0, (0.004,) * 3, position_world=(0, 0, 1))], [Gravity()],
+                     dt=1e-3, shapes=[CollisionShape('plane', None),
+                                      CollisionShape('sphere', 's', radius=0.1)])
+    contact = sim.contact
+    prm = contact.kernel_parameters()
+    kinds = {'apart': 0, 'frictionless': 0, 'sticking': 0, 'one bound': 0, 'two bounds': 0}
+    by_cases = 0
+    for seed in (11, 13):
+        rng = np.random.default_rng(seed)
+        for _ in range(300):
+            A, q, mu, sliding = _one_contact_lcp(rng)
+            cnt = np.zeros(len(kern.COUNTERS))
+            p, ok = kern.solve_rows(kern.blocks(A), q, mu, np.zeros(3), False,
+                                    np.zeros(1, dtype=bool), False, sliding, prm, cnt)
+            assert ok and cnt[kern.C_SOLVES] == 1 and cnt[kern.C_FAILURES] == 0
+            by_cases += cnt[kern.C_ITERATIONS_MAX] == 1
+            contact.compiled = False
+            p_py = contact.solve(A, q, mu, sliding=sliding)
+            contact.compiled = True
+            pivoted, pivot_ok = contact_step._pyramid(A, q, mu, sliding,
+                                                      np.zeros(3, dtype=bool), 0.0)
+            assert pivot_ok
+            scale = max(float(np.max(np.abs(p))), float(np.max(np.abs(pivoted))),
+                        float(np.max(np.abs(q))) / float(np.max(np.diag(A))))
+            np.testing.assert_allclose(p, pivoted, rtol=0, atol=1e-9 * scale)
+            np.testing.assert_allclose(p, p_py, rtol=0, atol=1e-10 * scale)
+            bound = mu[0] * p[0]
+            on = [abs(p[t]) >= bound * (1.0 - 1e-9) for t in (1, 2)
+                  if not (t == 2 and sliding[0])]
+            if p[0] == 0.0:
+                kinds['apart'] += 1
+            elif mu[0] == 0.0:
+                kinds['frictionless'] += 1
+            else:
+                kinds[('sticking', 'one bound', 'two bounds')[int(sum(on))]] += 1
+    # Every solve took one iteration: the cases' (the fixed point needs two where the
+    # contact is pressed, its first moving from zero; apart, it stops at its first).
+    assert by_cases == 600
+    assert min(kinds.values()) >= 10, kinds

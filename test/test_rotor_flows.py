@@ -68,6 +68,13 @@ def test_top_axes_and_body_codes():
     sim = Simulation([rod, box, ball], [], 'lie_poisson2', 1e-3)
     codes = sim.dynamics.kernel_model(0.0)[0][:, B_ANISOTROPIC]
     assert codes.tolist() == [ROTOR_TOP + 0, 1.0, 0.0]
+    # The body set keeps its tops' axes (the model is rebuilt after every wrench) while
+    # the moments are the same, and finds them again when they change.
+    bodies = sim.bodies
+    assert bodies.top_axes() is bodies.top_axes()
+    assert bodies.top_axes().tolist() == top_axes(bodies.moments).tolist() == [0, -1, -1]
+    bodies.moments[2] = (0.5, 2.0, 2.0)   # (the ball made a top: its axis 0)
+    assert bodies.top_axes().tolist() == [0, -1, 0]
 
 
 # -- the half-angle form ------------------------------------------------------------------

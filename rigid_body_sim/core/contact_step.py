@@ -653,7 +653,9 @@ class ContactSteps:
         Newton's method on the rows' natural map (:func:`_newton`, counted in
         ``lcp_newton``), exact where it converges; if that fails and the fixed point
         would not reach its tolerance within :data:`FRICTION_ITERATIONS`, it is pivoted
-        at once (and goes on iterating if that fails). With :attr:`compiled` and
+        at once (and goes on iterating if that fails). An island of one contact (a body
+        alone on the ground) is solved by its cases, exactly (:func:`_one_contact`),
+        where one meets the contact conditions. With :attr:`compiled` and
         ``symmetric``, the compiled kernel's solve of the same method takes it
         (:meth:`_compiled_island`).
         """
@@ -684,6 +686,19 @@ class ContactSteps:
         A_r, q_r = A[np.ix_(rows, rows)], q[rows]
         if symmetric:
             A_r = 0.5 * (A_r + A_r.T)   # (symmetric to rounding: G M̄⁻¹ Gᵀ)
+        cnt = self.counters
+        if len(rows) == 3 and not normal_only and equal is None and not np.any(pinned):
+            # One contact (a body alone on the ground): its cases, exact (_one_contact).
+            one = _one_contact(A_r, q_r, float(mu[0]),
+                               bool(sliding is not None and sliding[0]))
+            if one is not None:
+                cnt['lcp_solves'] += 1
+                cnt['lcp_iterations_max'] = max(cnt['lcp_iterations_max'], 1)
+                cnt['complementarity_max'] = max(cnt['complementarity_max'],
+                                                 _residual(A_r, q_r, one, mu, False, sliding))
+                out = np.zeros(m)
+                out[rows] = one
+                return out
         rho = PROXIMAL * float(np.max(np.diag(A_r)))
         # What the impulses' rounding is (of q over A's scale). A target inconsistent
         # across redundant rows (the joints' velocity error) moves them along their null
@@ -704,7 +719,6 @@ class ContactSteps:
         pivots = not normal_only and equal is None
         converged, it, stalled, last, early, pivot_tried = False, 0, 0, np.inf, pivots, False
         newton_tried = False
-        cnt = self.counters
         while True:
             exited = False
             while it < FRICTION_ITERATIONS:
@@ -1799,6 +1813,44 @@ def _newton(A: np.ndarray, q: np.ndarray, mu: np.ndarray, sliding: Optional[np.n
             continue
         previous = kind
     return p, False
+
+
+def _one_contact(A: np.ndarray, q: np.ndarray, mu: float, sliding: bool
+                 ) -> Optional[np.ndarray]:
+    """
+    Return one contact's impulses (3,) solved exactly by their cases, or None.
+
+    As ``kernels.contact_step._one_contact``: apart (``p = 0``), and pressed
+    (``w_n = 0``) with each friction row inside its bound (``w_t = 0``) or on it
+    (``p_t = ±μ p_n``; ``sliding``: ``t₂`` held at zero); of those whose impulses meet
+    the contact conditions to :data:`RESIDUAL_TOLERANCE` of the rows' scale, the one of
+    least normal impulse (a large ``μ`` coupled through the lever can admit two). None:
+    none does (the fixed point solves it).
+    """
+    mus, slid = np.array([mu]), np.array([sliding])
+    cases = [None] + [(s1, s2) for s1 in (0, 1, -1) for s2 in ((0,) if sliding else (0, 1, -1))]
+    best = None
+    for case in cases:
+        p = np.zeros(3)
+        if case is not None:
+            v = np.array([1.0, case[0] * mu, 0.0 if sliding else case[1] * mu])
+            free = [t for t in (1, 2) if case[t - 1] == 0 and not (t == 2 and sliding)]
+            rows = [0] + free
+            M = np.column_stack([A[rows] @ v] + [A[rows, t] for t in free])
+            try:
+                x = np.linalg.solve(M, -q[rows])
+            except np.linalg.LinAlgError:
+                continue
+            p = x[0] * v
+            p[free] = x[1:]
+            if not p[0] > 0.0 or (best is not None and not p[0] < best[0]):
+                continue
+        if _residual(A, q, p, mus, False, slid) \
+                <= RESIDUAL_TOLERANCE * float(np.max(np.abs(A) @ np.abs(p) + np.abs(q))):
+            best = p
+            if case is None:
+                break   # (apart: no impulse is less)
+    return best
 
 
 def _residual(A: np.ndarray, q: np.ndarray, p: np.ndarray, mu: np.ndarray,

@@ -1308,6 +1308,116 @@ def _pgs_sweep(ptr: np.ndarray, col: np.ndarray, blk: np.ndarray, diag: np.ndarr
                 p[i] = min(max(v, -half), half)
 
 
+#: :func:`pattern` of a dense 3 × 3 matrix (:func:`_one_contact`).
+_DENSE3 = np.array([4, 7, 10, 13, 0, 1, 2, 0, 1, 2, 0, 1, 2], dtype=np.int64)
+
+
+@njit(cache=True)
+def _one_contact(A: np.ndarray, q: np.ndarray, mu: float, sliding: bool, prm: np.ndarray,
+                 cnt: np.ndarray) -> tuple:
+    """
+    Return ``(p, ok)``: one contact's three rows solved exactly, by their cases.
+
+    The cases: apart (``p = 0``, where ``q_n ≥ 0``), and pressed (``w_n = 0``) with
+    each friction row inside its bound (``w_t = 0``) or on it (``p_t = ±μ p_n``,
+    ``w_t`` opposing it; ``sliding``: ``t₂`` held at zero). Each is a linear system
+    of at most three unknowns (Cramer's rule). Of those whose impulses meet the
+    contact conditions to :data:`RESIDUAL_TOLERANCE` of the rows' scale
+    (:func:`residual`, the fixed point's own exit) the one of least normal impulse is
+    taken: a large ``μ`` with the friction rows coupled to the normal one through
+    the lever can admit two (a body pressed and sticking, or barely pressed and
+    sliding on the pyramid's corner), where the fixed point from zero reaches the
+    least (measured on random contacts). ``ok`` False: none does (a system singular
+    to rounding), and the fixed point solves it. Counted as one iteration of a solve.
+    """
+    p = np.zeros(3)
+    best = np.zeros(3)
+    best_left, found = 0.0, False
+    pat = _DENSE3   # (A dense: its zeros add nothing to the sums)
+    no = np.zeros(1, dtype=np.bool_)
+    mus = np.full(1, mu)
+    sl = np.full(1, sliding)
+    tol, bar = prm[P_FRICTION_TOLERANCE], prm[P_RESIDUAL_TOLERANCE]
+    n2 = 1 if sliding else 3
+    for case in range(1 + 3 * n2):
+        if case > 0:
+            # statuses: 0 inside its bound, 1 on +μ p_n, 2 on −μ p_n
+            s1, s2 = (case - 1) // n2, (case - 1) % n2
+            v1 = 0.0 if s1 == 0 else (mu if s1 == 1 else -mu)
+            v2 = 0.0 if s2 == 0 or sliding else (mu if s2 == 1 else -mu)
+            free1, free2 = s1 == 0, s2 == 0 and not sliding
+            # Unknowns p_n (its column A e_n + v₁ A e₁ + v₂ A e₂) and the free rows' p_t;
+            # equations: w_n = 0 and w_t = 0 of the free rows.
+            c00 = A[0, 0] + v1 * A[0, 1] + v2 * A[0, 2]
+            c10 = A[1, 0] + v1 * A[1, 1] + v2 * A[1, 2]
+            c20 = A[2, 0] + v1 * A[2, 1] + v2 * A[2, 2]
+            if free1 and free2:
+                det = (c00 * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+                       - A[0, 1] * (c10 * A[2, 2] - A[1, 2] * c20)
+                       + A[0, 2] * (c10 * A[2, 1] - A[1, 1] * c20))
+                if det == 0.0:
+                    continue
+                b0, b1, b2 = -q[0], -q[1], -q[2]
+                pn = (b0 * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+                      - A[0, 1] * (b1 * A[2, 2] - A[1, 2] * b2)
+                      + A[0, 2] * (b1 * A[2, 1] - A[1, 1] * b2)) / det
+                x1 = (c00 * (b1 * A[2, 2] - A[1, 2] * b2)
+                      - b0 * (c10 * A[2, 2] - A[1, 2] * c20)
+                      + A[0, 2] * (c10 * b2 - b1 * c20)) / det
+                x2 = (c00 * (A[1, 1] * b2 - b1 * A[2, 1])
+                      - A[0, 1] * (c10 * b2 - b1 * c20)
+                      + b0 * (c10 * A[2, 1] - A[1, 1] * c20)) / det
+                p[0], p[1], p[2] = pn, x1, x2
+            elif free1 or free2:
+                t = 1 if free1 else 2
+                ct0 = A[0, t]
+                ctt = A[t, t]
+                cr0 = c10 if t == 1 else c20
+                det = c00 * ctt - ct0 * cr0
+                if det == 0.0:
+                    continue
+                pn = (-q[0] * ctt + ct0 * q[t]) / det
+                xt = (-c00 * q[t] + cr0 * q[0]) / det
+                p[0] = pn
+                p[1] = xt if t == 1 else v1 * pn
+                p[2] = xt if t == 2 else v2 * pn
+            else:
+                if c00 == 0.0:
+                    continue
+                pn = -q[0] / c00
+                p[0], p[1], p[2] = pn, v1 * pn, v2 * pn
+            if not 0.0 < p[0] or (found and not p[0] < best[0]):
+                continue
+            # A plain look before the residual: a free row within 1e-6 of its bound, a
+            # row on its bound not slipping along it by more than 1e-6 of the scale.
+            loose = 0.0
+            for a in range(3):
+                loose = max(loose, abs(q[a]) + abs(A[a, 0] * p[0]) + abs(A[a, 1] * p[1])
+                            + abs(A[a, 2] * p[2]))
+            loose *= 1e-6
+            bound = mu * p[0] * (1.0 + 1e-6)
+            plain = True
+            for a, v, free in ((1, v1, free1), (2, v2, free2)):
+                if free:
+                    plain = plain and abs(p[a]) <= bound + loose / A[a, a]
+                elif v != 0.0:
+                    w = A[a, 0] * p[0] + A[a, 1] * p[1] + A[a, 2] * p[2] + q[a]
+                    plain = plain and (w if v > 0.0 else -w) <= loose
+            if not plain:
+                continue
+        left = residual(A, q, p, mus, False, sl, tol, no, False, pat)
+        if left <= bar * _row_scale(A, q, p, pat):
+            best[:] = p
+            best_left, found = left, True
+            if case == 0:
+                break   # (apart: no impulse is less)
+    if found:
+        cnt[C_SOLVES] += 1
+        cnt[C_ITERATIONS_MAX] = max(cnt[C_ITERATIONS_MAX], 1.0)
+        cnt[C_COMPLEMENTARITY] = max(cnt[C_COMPLEMENTARITY], best_left)
+    return best, found
+
+
 @njit(cache=True)
 def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarray,
                  normal_only: bool, equal: np.ndarray, has_equal: bool, sliding: np.ndarray,
@@ -1320,7 +1430,8 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
     start) its rows'; ``p`` the same rows'. ``equal`` (c,): the contacts whose normal row
     is an equality (the projections; ``has_equal`` False: none, and the residual is
     counted); ``sliding`` (c,) contacts with one friction row. ``ok`` False: a row no
-    impulse moves (the Python path's case, given back).
+    impulse moves (the Python path's case, given back). An island of one contact is
+    solved by its cases where one holds (:func:`_one_contact`).
     """
     nr = qr.shape[0]
     # The work arrays, three allocations (a small island's solve is mostly their cost).
@@ -1333,6 +1444,11 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
     for k in range(nr):
         if not Ar[k, k] > 1e-12 * dmax:
             return np.zeros(nr), False
+    if nr == 3 and not normal_only and not has_equal:
+        # One contact (a body alone on the ground): its cases, exact (``_one_contact``).
+        p1, ok1 = _one_contact(Ar, qr, mu[0], sliding[0], prm, cnt)
+        if ok1:
+            return p1, True
     Ap, L = mats[0], mats[1]
     p, lo, hi, qp, sp = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
     work = vecs[5:]
@@ -2326,8 +2442,8 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
             for j in range(con[0]):
                 deep0[j] = con[7][j] > loc and not cont0[j]
         ov = _where(deep0)
-        code, trial, nw, fl, warm, record, con_trial = _held(ctx, state, t, con, rows_, h,
-                                                             warm, cnt)
+        code, trial, nw, fl, warm, record, con_trial, matched = _held(ctx, state, t, con,
+                                                                      rows_, h, warm, cnt)
         if code != DONE:
             return _stopped(GROW if code == GROW else BAIL, y0, t0, warm, found, n_log)
         held_sel = record[0]   # (the rows held: those apart that the step closes slowly)
@@ -2337,7 +2453,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         held_end, have_held = deep0, False   # (an array of its type, not read)
         if events < max_events:
             cont, held_end = _known(ctx, con, held_sel, ov, state, con_trial, trial,
-                                    _loaded(record))
+                                    _loaded(record), matched)
             have_held = True
             for j in range(con_trial[0]):
                 if not cont[j] and con_trial[7][j] > loc:
@@ -2454,7 +2570,14 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
 def _unheld(code: int, y0: np.ndarray, t: float, flags: int, warm: tuple) -> tuple:
     """Return :func:`_held`'s result for a step it could not take (``code``)."""
     none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), _no_contacts(0), y0, t)
-    return code, y0, 0, flags, warm, none, _no_contacts(0)
+    return code, y0, 0, flags, warm, none, _no_contacts(0), _unmatched()
+
+
+@njit(cache=True, inline='always')
+def _unmatched() -> tuple:
+    """Return :func:`_held`'s ``matched`` of no match made."""
+    none = np.zeros(0, dtype=np.bool_)
+    return none, none, False
 
 
 @njit(cache=True, inline='always')
@@ -2474,9 +2597,10 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     """
     Take the trial step with the rows' forces held, as ``ContactSteps._held_step``.
 
-    Returns ``(code, new, nw, flags, warm, record, contacts at new)``: ``nw`` and
+    Returns ``(code, new, nw, flags, warm, record, contacts at new, matched)``: ``nw`` and
     ``flags`` the wrench rows the forces left in ``wbuf`` (the location's partial steps
-    hold them).
+    hold them); ``matched`` :func:`_known`'s match of the rows on the contacts at ``new``
+    where the model's check made it (``(known, held, True)``; else not made, False).
     """
     (method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out, det, buf,
      shape_mu, shape_e, radius, prm, minv, dt) = ctx
@@ -2520,7 +2644,8 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     if c == 0:
         con1 = _detect_ctx(ctx, free)
         code = GROW if con1[0] < 0 else DONE
-        return code, free, n_applied, flags, warm, (sel, np.zeros((0, 3)), con, y0, t), con1
+        return (code, free, n_applied, flags, warm, (sel, np.zeros((0, 3)), con, y0, t), con1,
+                _unmatched())
     D = delassus(Ga, Gb, ba, bb, minv)
     # A row of a contact apart by its gap g asks v_n⁺ ≥ min(0, −2 g / h − v_n): the step
     # closes at most g (``_held_step``).
@@ -2532,14 +2657,22 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     w_sa, w_sb, w_pt, w_pn = raw_tree(warm)
     pt0 = cv[5]
     shapes = shape_mu.shape[0] + 1   # (as the pairs' keys of :func:`match`)
-    order, keys = _by_key(w_sa * shapes + w_sb)
+    # (a few of the last rows scanned in their order, as :func:`match` does)
+    n_warm = w_sa.shape[0]
+    few = n_warm <= INSERTION_KEYS
+    order, keys = (w_sa[:0], w_sa[:0]) if few else _by_key(w_sa * shapes + w_sb)
     for k in range(c):
         j = sel[k]
         key = cv[1][j] * shapes + cv[2][j]
-        for u in range(np.searchsorted(keys, key), keys.shape[0]):   # (the first near)
-            if keys[u] != key:
-                break
-            x = order[u]
+        for u in range(0 if few else np.searchsorted(keys, key), n_warm):   # (the first near)
+            if few:
+                x = u
+                if w_sa[x] * shapes + w_sb[x] != key:
+                    continue
+            else:
+                if keys[u] != key:
+                    break
+                x = order[u]
             if ((w_pt[x, 0] - pt0[j, 0]) ** 2 + (w_pt[x, 1] - pt0[j, 1]) ** 2
                     + (w_pt[x, 2] - pt0[j, 2]) ** 2) <= WARM_RADIUS2:
                 start[3 * k] = w_pn[x]
@@ -2569,6 +2702,8 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     force = np.zeros((c, 3))
     con1 = con   # (a placeholder of its type; set below before it is returned)
     have1 = False
+    loaded = np.empty(c, dtype=np.bool_)
+    known1 = held1 = loaded   # (placeholders of their type, returned only with have1)
     corrections = int(prm[P_MODEL_CORRECTIONS])
     for correction in range(corrections + 1):
         any_p = False
@@ -2591,8 +2726,13 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
             return _unheld(GROW, y0, t, flags, warm)
         have1 = True
         npos, nquat, nvel, nom = state_parts(new)
-        G1a, G1b = _rows_at(sa_r, sb_r, ba, bb, pt_r, pos0, R0, frame, Ga, Gb, con1, npos,
-                            rotations(nquat), radius, count)
+        # (the rows loaded, as _loaded of the step's record: its forces are these)
+        for k in range(c):
+            j = sel[k]
+            loaded[k] = (force[k, 0] * cv[6][j, 0] + force[k, 1] * cv[6][j, 1]
+                         + force[k, 2] * cv[6][j, 2]) > 0.0
+        G1a, G1b, known1, held1 = _rows_at(sa_r, sb_r, ba, bb, pt_r, pos0, R0, frame, Ga, Gb,
+                                           con1, npos, rotations(nquat), radius, count, loaded)
         w1 = apply_rows(G1a, G1b, ba, bb, nvel, nom)
         model_w = block_affine(D, p, q)
         off, qmax = 0.0, 0.0
@@ -2614,7 +2754,7 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     for k in range(c):
         w_pn[k] = p[3 * k]
     warm = (sa_r, sb_r, pt_r, w_pn)   # (indexed by sel: arrays of their own)
-    return DONE, new, nw, fl, warm, (sel, force, con, y0, t), con1
+    return DONE, new, nw, fl, warm, (sel, force, con, y0, t), con1, (known1, held1, have1)
 
 
 @njit(cache=True)
@@ -2652,7 +2792,8 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndar
             return GROW, y0, 0.0
         g, code = _new_depth(ctx, con, sel, ov, y0, con_t, trial, margin)
         if abs(g) <= loc:
-            cont = _known(ctx, con, sel, ov, y0, con_t, trial, np.zeros(0, dtype=np.bool_))[0]
+            cont = _known(ctx, con, sel, ov, y0, con_t, trial, np.zeros(0, dtype=np.bool_),
+                          _unmatched())[0]
             fresh = np.zeros(con_t[0], dtype=np.bool_)
             for j in range(con_t[0]):
                 fresh[j] = con_t[7][j] >= -loc and not cont[j]
@@ -2681,16 +2822,20 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndar
 
 @njit(cache=True, inline='always')
 def _known(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y: np.ndarray,
-           con: tuple, y: np.ndarray, loaded: np.ndarray) -> tuple:
+           con: tuple, y: np.ndarray, loaded: np.ndarray, matched: tuple) -> tuple:
     """
     Tell per contact of ``con`` at ``y`` whether it continues a row or an overlap ``ov``.
 
     Returns ``(known, held)``: ``held`` per contact whether it continues a row of
     ``loaded`` (:func:`_loaded`; :func:`_accept`'s held contacts, matched in the same
-    pass; ``loaded`` of no rows: none).
+    pass; ``loaded`` of no rows: none). ``matched``: the rows' match made already
+    (:func:`_held`'s), or not (:func:`_unmatched`).
     """
-    every = np.ones(r_sel.shape[0], dtype=np.bool_)
-    _, known, held = _continuing(ctx, r_con, r_sel, r_y, every, con, y, loaded)
+    if matched[2]:
+        known, held = matched[0], matched[1]
+    else:
+        every = np.ones(r_sel.shape[0], dtype=np.bool_)
+        _, known, held = _continuing(ctx, r_con, r_sel, r_y, every, con, y, loaded)
     if ov.shape[0]:
         every = np.ones(ov.shape[0], dtype=np.bool_)
         also = _continuing(ctx, r_con, ov, r_y, every, con, y, every)[1]
@@ -2704,7 +2849,8 @@ def _new_depth(ctx: tuple, r_con: tuple, r_sel: np.ndarray, ov: np.ndarray, r_y:
                con: tuple, y: np.ndarray, margin: float) -> tuple:
     """Return the deepest depth of new contacts (−margin: none), and DONE."""
     r_con, r_sel, ov, r_y, con, y = raw_tree((r_con, r_sel, ov, r_y, con, y))
-    cont = _known(ctx, r_con, r_sel, ov, r_y, con, y, np.zeros(0, dtype=np.bool_))[0]
+    cont = _known(ctx, r_con, r_sel, ov, r_y, con, y, np.zeros(0, dtype=np.bool_),
+                  _unmatched())[0]
     out = -np.inf
     for j in range(con[0]):
         if not cont[j]:
@@ -2916,17 +3062,22 @@ def _contact_wrenches(wbuf: np.ndarray, k: int, n: int, ba: np.ndarray, bb: np.n
 def _rows_at(sa: np.ndarray, sb: np.ndarray, ba: np.ndarray, bb: np.ndarray, pt: np.ndarray,
              pos0: np.ndarray, R0: np.ndarray, frame: np.ndarray, Ga: np.ndarray,
              Gb: np.ndarray, con1: tuple, pos: np.ndarray, R: np.ndarray, radius: np.ndarray,
-             count: int) -> tuple:
-    """Return the rows' ``G`` at the end's geometry, as ``ContactSteps.rows_at``."""
+             count: int, also: np.ndarray) -> tuple:
+    """
+    Return the rows' ``G`` at the end's geometry, as ``ContactSteps.rows_at``.
+
+    With them, per contact of ``con1`` whether it continues a row, and a row of ``also``
+    (:func:`match`'s; what :func:`_known` would match of the same rows and contacts).
+    """
     # (the rows' G are new arrays: every argument passed on uncounted)
-    (sa, sb, ba, bb, pt, pos0, R0, frame, Ga, Gb, con1, pos, R, radius) = raw_tree(
-        (sa, sb, ba, bb, pt, pos0, R0, frame, Ga, Gb, con1, pos, R, radius))
+    (sa, sb, ba, bb, pt, pos0, R0, frame, Ga, Gb, con1, pos, R, radius, also) = raw_tree(
+        (sa, sb, ba, bb, pt, pos0, R0, frame, Ga, Gb, con1, pos, R, radius, also))
     c1, sa1, sb1, ba1, bb1, pt1, nr1, dp1 = con1
     c = sa.shape[0]
     n = pos.shape[0]
     every = np.ones(c, dtype=np.bool_)
-    nearest, _, _ = match(np.arange(c), sa, sb, ba, pt, pos0, R0, every, sa1, sb1, ba1, pt1,
-                          pos, R, radius, count, every)
+    nearest, known, held = match(np.arange(c), sa, sb, ba, pt, pos0, R0, every, sa1, sb1, ba1,
+                                 pt1, pos, R, radius, count, also)
     G1a, G1b = Ga.copy(), Gb.copy()
     for k in range(c):
         j = nearest[k]
@@ -2961,4 +3112,4 @@ def _rows_at(sa: np.ndarray, sb: np.ndarray, ba: np.ndarray, bb: np.ndarray, pt:
             _jacobian_row(G, 3 * k, sign, nrm[0], nrm[1], nrm[2], r0, r1, r2, R, i)
             _jacobian_row(G, 3 * k + 1, sign, t0, t1, t2, r0, r1, r2, R, i)
             _jacobian_row(G, 3 * k + 2, sign, x0, x1, x2, r0, r1, r2, R, i)
-    return G1a, G1b
+    return G1a, G1b, known, held
