@@ -25,9 +25,11 @@ Reported per scene: the mean wall time of a step over the run (the whole step: d
 contact forces, integration; ours with the compiled contact steps, up to 100 steps a call,
 one a call, and in Python alone; ours up to 100 steps a call and MuJoCo the fastest of
 :data:`REPEATS` runs taken alternately, but the piles'), the deepest penetration over the
-run's last half (rest: ours' detector's depth; MuJoCo's ``-contact.dist``), and the
-scene's own error: the sphere's rest height's offset, the slide's stop distance against
-``v² / (2 μ g)``, the stack's largest displacement of a box from where it started.
+run's last half (rest: ours' detector's depth, read after each call; MuJoCo's
+``-contact.dist``, after each step), the most depth any step of ours left (its counter
+``projection_left``), and the scene's own error: the sphere's rest height's offset, the
+slide's stop distance against ``v² / (2 μ g)``, the stack's largest displacement of a box
+from where it started.
 
 Run: ``./dev.sh python bench/contact_dynamics.py [--quick]`` (``bench/requirements.txt``
 for MuJoCo; ``--quick``: 1 s runs, else 2 s). Prints the table and writes
@@ -167,6 +169,7 @@ def run_ours(bodies, shapes, friction, steps, compiled=True, chunk=1) -> dict:
     return {'step': wall / steps, 'depth': deepest, 'pos': sim.state.pos_com_world.copy(),
             'p0': p0, 'failures': sim.contact.counters['lcp_failures'],
             'sparse': sim.contact.counters['lcp_sparse'],
+            'left': sim.contact.counters['projection_left'],
             'compiled': sim.contact.counters['compiled_steps'] / steps}
 
 
@@ -245,8 +248,9 @@ def table(rows: list) -> str:
     lines = ['| scene | run, s | ours, step(100), us/step | ours, step(), us/step | '
              'ours, Python path, us/step | steps compiled | MuJoCo, us/step | '
              'ours step(100) / MuJoCo | deepest (ours), m | deepest (MuJoCo), m | '
-             'error (ours), m | error (MuJoCo), m | ours: LCPs failed, by blocks |',
-             '|---|---|---|---|---|---|---|---|---|---|---|---|---|']
+             'error (ours), m | error (MuJoCo), m | ours: LCPs failed, by blocks | '
+             'ours: depth left by a step, m |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
         o, m = r['ours'], r['mj']
         mj = ('-', '-', '-', '-') if m is None else (
@@ -258,7 +262,7 @@ def table(rows: list) -> str:
                      f'{one} | '
                      f'{python} | {100 * o["compiled"]:.1f} % | {mj[0]} | '
                      f'{mj[1]} | {o["depth"]:.1e} | {mj[2]} | {error(r["scene"], o):+.2e} | '
-                     f'{mj[3]} | {o["failures"]}, {o["sparse"]} |')
+                     f'{mj[3]} | {o["failures"]}, {o["sparse"]} | {o["left"]:.1e} |')
     return '\n'.join(lines) + (
         "\n\nErrors: the sphere's rest height offset, the slide's stop distance less "
         "`v² / (2 μ g)`, the stack's largest box displacement, the piles' deepest excursion "
@@ -279,7 +283,11 @@ def table(rows: list) -> str:
         'its other load only adds time). "LCPs failed, by blocks": ours\' contact solves '
         'that stopped short of their tolerance (counted, never hidden), and the solves by '
         "an island's blocks: of islands of more than 500 contacts, and of those of more "
-        "than 32 that the fixed point and Newton's method left (in place of pivoting).")
+        "than 32 that the fixed point and Newton's method left (in place of pivoting). "
+        '"deepest (ours)" is read after each call (every 100 steps), MuJoCo\'s after every '
+        'step; "depth left by a step" is the most any step of the whole run left '
+        "(ours' counter `projection_left`: depth its projection passes did not remove, "
+        'counted, never hidden).')
 
 
 def main(argv=None) -> int:
