@@ -130,13 +130,22 @@ def detect(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, d
                          depths, owner)
     if count > depths.shape[0]:
         return _no_contacts(-1)
-    sa, sb = np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64)
-    ba, bb = np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64)
+    # (two allocations, the contacts' arrays views of them: each a C-contiguous run)
+    ints = np.empty(4 * count, dtype=np.int64)
+    sa, sb = ints[:count], ints[count:2 * count]
+    ba, bb = ints[2 * count:3 * count], ints[3 * count:]
     for j in range(count):
         a, b = every[owner[j], 0], every[owner[j], 1]
         sa[j], sb[j], ba[j], bb[j] = live[a], live[b], body[a], body[b]
-    return (count, sa, sb, ba, bb, points[:count].copy(), normals[:count].copy(),
-            depths[:count].copy())
+    floats = np.empty(7 * count)
+    pt, nr = floats[:3 * count].reshape((count, 3)), floats[3 * count:6 * count].reshape(
+        (count, 3))
+    dp = floats[6 * count:]
+    for j in range(count):
+        for a in range(3):
+            pt[j, a], nr[j, a] = points[j, a], normals[j, a]
+        dp[j] = depths[j]
+    return count, sa, sb, ba, bb, pt, nr, dp
 
 
 @njit(cache=True)
@@ -194,9 +203,13 @@ def rows(pos: np.ndarray, vel: np.ndarray, om: np.ndarray, R: np.ndarray, sel: n
     a's and body b's velocities (``v`` world, ``Ω`` principal; ``Gb`` zero for the world).
     """
     c = sel.shape[0]
-    frame = np.empty((c, 3, 3))
-    la, lb = np.zeros((c, 3)), np.zeros((c, 3))
-    mu, e, vn = np.empty(c), np.empty(c), np.empty(c)
+    # (one allocation for the float arrays, each a C-contiguous run of it; every entry is
+    # written below, G's by _jacobian_into)
+    fl = np.empty(54 * c)
+    frame = fl[:9 * c].reshape((c, 3, 3))
+    la, lb = fl[9 * c:12 * c].reshape((c, 3)), fl[12 * c:15 * c].reshape((c, 3))
+    mu, e, vn = fl[15 * c:16 * c], fl[16 * c:17 * c], fl[17 * c:18 * c]
+    Ga, Gb = fl[18 * c:36 * c].reshape((3 * c, 6)), fl[36 * c:].reshape((3 * c, 6))
     sliding = np.zeros(c, dtype=np.bool_)
     for k in range(c):
         j = sel[k]
@@ -221,7 +234,7 @@ def rows(pos: np.ndarray, vel: np.ndarray, om: np.ndarray, R: np.ndarray, sel: n
         frame[k, 2, 0], frame[k, 2, 1], frame[k, 2, 2] = x0, x1, x2
         mu[k] = math.sqrt(shape_mu[sa_all[j]] * shape_mu[sb_all[j]])
         e[k] = max(shape_e[sa_all[j]], shape_e[sb_all[j]])
-    Ga, Gb = jacobian(frame, ba, bb, la, lb, R, pos.shape[0])
+    _jacobian_into(frame, ba, bb, la, lb, R, pos.shape[0], Ga, Gb)
     return frame, la, lb, mu, e, sliding, vn, Ga, Gb
 
 
@@ -254,11 +267,24 @@ def jacobian(frame: np.ndarray, ba: np.ndarray, bb: np.ndarray, la: np.ndarray,
              lb: np.ndarray, R: np.ndarray, n: int) -> tuple:
     """Return ``Ga``, ``Gb`` (3c, 6): row ``d``, lever ``r``: ``(d, Rᵀ (r × d))``, b's negated."""
     c = frame.shape[0]
-    Ga, Gb = np.zeros((3 * c, 6)), np.zeros((3 * c, 6))
-    for k in range(c):
+    Ga, Gb = np.empty((3 * c, 6)), np.empty((3 * c, 6))
+    _jacobian_into(frame, ba, bb, la, lb, R, n, Ga, Gb)
+    return Ga, Gb
+
+
+@njit(cache=True)
+def _jacobian_into(frame: np.ndarray, ba: np.ndarray, bb: np.ndarray, la: np.ndarray,
+                   lb: np.ndarray, R: np.ndarray, n: int, Ga: np.ndarray,
+                   Gb: np.ndarray) -> None:
+    """Write :func:`jacobian`'s ``Ga``, ``Gb`` into the given (3c, 6) arrays (the world's: 0)."""
+    for k in range(frame.shape[0]):
         for side in range(2):
             i = ba[k] if side == 0 else bb[k]
             if i >= n:
+                G = Ga if side == 0 else Gb
+                for a in range(3):
+                    for x in range(6):
+                        G[3 * k + a, x] = 0.0
                 continue
             r = la[k] if side == 0 else lb[k]
             G = Ga if side == 0 else Gb
@@ -266,7 +292,6 @@ def jacobian(frame: np.ndarray, ba: np.ndarray, bb: np.ndarray, la: np.ndarray,
             for a in range(3):
                 _jacobian_row(G, 3 * k + a, sign, frame[k, a, 0], frame[k, a, 1],
                               frame[k, a, 2], r[0], r[1], r[2], R, i)
-    return Ga, Gb
 
 
 @njit(cache=True)
@@ -304,8 +329,11 @@ def delassus(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
     """
     n = minv.shape[0]
     c = ba.shape[0]
-    # The contacts on each body, increasing: on_body[start[i]:start[i + 1]].
-    start = np.zeros(n + 1, dtype=np.int64)
+    # The contacts on each body, increasing: on_body[start[i]:start[i + 1]] (the three
+    # work arrays one allocation).
+    work = np.empty(2 * n + 1 + 2 * c, dtype=np.int64)
+    start, fill = work[:n + 1], work[n + 1:2 * n + 1]
+    start[:] = 0
     for k in range(c):
         for side in range(2):
             i = ba[k] if side == 0 else bb[k]
@@ -313,8 +341,8 @@ def delassus(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
                 start[i + 1] += 1
     for i in range(n):
         start[i + 1] += start[i]
-    on_body = np.empty(start[n], dtype=np.int64)
-    fill = start[:n].copy()
+    on_body = work[2 * n + 1:2 * n + 1 + start[n]]
+    fill[:] = start[:n]
     for k in range(c):
         for side in range(2):
             i = ba[k] if side == 0 else bb[k]
@@ -910,7 +938,10 @@ def islands(D: tuple) -> tuple:
     """
     ptr, col, blk = D
     c = ptr.shape[0] - 1
-    parent = np.arange(c)
+    work = np.empty(2 * c, dtype=np.int64)   # (parent and label: one allocation)
+    parent, label = work[:c], work[c:]
+    for k in range(c):
+        parent[k] = k
     for k in range(c):
         for e in range(ptr[k], ptr[k + 1]):
             j = col[e]
@@ -929,7 +960,7 @@ def islands(D: tuple) -> tuple:
                     rj = parent[rj]
                 if rk != rj:
                     parent[max(rk, rj)] = min(rk, rj)
-    label = np.full(c, -1, dtype=np.int64)
+    label[:] = -1
     count = 0
     for k in range(c):
         r = k
@@ -1330,13 +1361,17 @@ def _one_contact(A: np.ndarray, q: np.ndarray, mu: float, sliding: bool, prm: np
     least (measured on random contacts). ``ok`` False: none does (a system singular
     to rounding), and the fixed point solves it. Counted as one iteration of a solve.
     """
-    p = np.zeros(3)
-    best = np.zeros(3)
+    # (one float and one flag array: p, the best p, w = A p + q, A's diagonal, μ; the
+    # equality flag and the sliding flag)
+    fl = np.zeros(13)
+    p, best, wv, diag, mus = fl[:3], fl[3:6], fl[6:9], fl[9:12], fl[12:]
+    flags = np.zeros(2, dtype=np.bool_)
+    no, sl = flags[:1], flags[1:]
+    mus[0], sl[0] = mu, sliding
+    for a in range(3):
+        diag[a] = A[a, a]
     best_left, found = 0.0, False
     pat = _DENSE3   # (A dense: its zeros add nothing to the sums)
-    no = np.zeros(1, dtype=np.bool_)
-    mus = np.full(1, mu)
-    sl = np.full(1, sliding)
     tol, bar = prm[P_FRICTION_TOLERANCE], prm[P_RESIDUAL_TOLERANCE]
     n2 = 1 if sliding else 3
     for case in range(1 + 3 * n2):
@@ -1405,7 +1440,10 @@ def _one_contact(A: np.ndarray, q: np.ndarray, mu: float, sliding: bool, prm: np
                     plain = plain and (w if v > 0.0 else -w) <= loose
             if not plain:
                 continue
-        left = residual(A, q, p, mus, False, sl, tol, no, False, pat)
+        # (:func:`residual`, its arrays this function's)
+        for a in range(3):
+            wv[a] = A[a, 0] * p[0] + A[a, 1] * p[1] + A[a, 2] * p[2] + q[a]
+        left = _residual(wv, diag, q, p, mus, False, sl, tol, no, False)
         if left <= bar * _row_scale(A, q, p, pat):
             best[:] = p
             best_left, found = left, True
@@ -1415,7 +1453,7 @@ def _one_contact(A: np.ndarray, q: np.ndarray, mu: float, sliding: bool, prm: np
         cnt[C_SOLVES] += 1
         cnt[C_ITERATIONS_MAX] = max(cnt[C_ITERATIONS_MAX], 1.0)
         cnt[C_COMPLEMENTARITY] = max(cnt[C_COMPLEMENTARITY], best_left)
-    return best, found
+    return best, found   # (a view of fl: fl lives as long as it)
 
 
 @njit(cache=True)
@@ -1434,10 +1472,6 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
     solved by its cases where one holds (:func:`_one_contact`).
     """
     nr = qr.shape[0]
-    # The work arrays, three allocations (a small island's solve is mostly their cost).
-    mats = np.empty((2, nr, nr))
-    vecs = np.empty((11, nr))
-    ints = np.empty((5, nr), dtype=np.int64)
     dmax = 0.0
     for k in range(nr):
         dmax = max(dmax, Ar[k, k])
@@ -1449,6 +1483,10 @@ def solve_island(Ar: np.ndarray, qr: np.ndarray, mu: np.ndarray, start: np.ndarr
         p1, ok1 = _one_contact(Ar, qr, mu[0], sliding[0], prm, cnt)
         if ok1:
             return p1, True
+    # The work arrays, three allocations (a small island's solve is mostly their cost).
+    mats = np.empty((2, nr, nr))
+    vecs = np.empty((11, nr))
+    ints = np.empty((5, nr), dtype=np.int64)
     Ap, L = mats[0], mats[1]
     p, lo, hi, qp, sp = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
     work = vecs[5:]
@@ -2192,15 +2230,12 @@ def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarra
     """
     r, c = r_sel.shape[0], c_sa.shape[0]
     nearest = np.full(r, -1, dtype=np.int64)
-    continuing = np.zeros(c, dtype=np.bool_)
-    continuing_also = np.zeros(c, dtype=np.bool_)
+    flags = np.zeros(2 * c, dtype=np.bool_)   # (both flags' arrays: one allocation)
+    continuing, continuing_also = flags[:c], flags[c:]
     if r == 0 or c == 0:
         return nearest, continuing, continuing_also
     has_also = also.shape[0] == r
-    # A few contacts are scanned in their order (the same pairs' in the same order as the
-    # sorted keys give them, without the two arrays of the sort).
-    few = c <= INSERTION_KEYS
-    order, keys = (c_sa[:0], c_sa[:0]) if few else _by_key(c_sa * count + c_sb)
+    few, order, keys = _pair_index(c_sa, c_sb, count)
     for i in range(r):
         in_also = has_also and also[i]
         if not which[i] and not in_also:
@@ -2209,16 +2244,11 @@ def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarra
         key = r_sa[g] * count + r_sb[g]
         s0, s1, s2 = _local(r_pt, g, r_ba[g], r_pos, r_R)
         best = np.inf
-        for t in range(0 if few else np.searchsorted(keys, key), c):
-            # (the same pair's, j increasing)
-            if few:
-                j = t
-                if c_sa[j] * count + c_sb[j] != key:
-                    continue
-            else:
-                if keys[t] != key:
-                    break
-                j = order[t]
+        t = _pair_first(key, few, keys)
+        while True:   # (the same pair's, j increasing)
+            j, t = _pair_next(key, t, few, order, keys, c_sa, c_sb, count)
+            if j < 0:
+                break
             n0, n1, n2 = _local(c_pt, j, c_ba[j], pos, R)
             d2 = (s0 - n0) ** 2 + (s1 - n1) ** 2 + (s2 - n2) ** 2
             rad = radius[c_sa[j]]
@@ -2230,6 +2260,43 @@ def match(r_sel: np.ndarray, r_sa: np.ndarray, r_sb: np.ndarray, r_ba: np.ndarra
                     if d2 < best:
                         best, nearest[i] = d2, j
     return nearest, continuing, continuing_also
+
+
+@njit(cache=True, inline='always')
+def _pair_index(sa: np.ndarray, sb: np.ndarray, count: int) -> tuple:
+    """
+    Return ``(few, order, keys)``: entries ``(sa, sb)`` by their pair's key ``sa count + sb``.
+
+    A few (up to :data:`INSERTION_KEYS`) are scanned in their order, which gives the same
+    pairs in the same order as the sorted keys, without the sort's two arrays
+    (:func:`_pair_next`); more are sorted (:func:`_by_key`).
+    """
+    few = sa.shape[0] <= INSERTION_KEYS
+    order, keys = (sa[:0], sa[:0]) if few else _by_key(sa * count + sb)
+    return few, order, keys
+
+
+@njit(cache=True, inline='always')
+def _pair_first(key: int, few: bool, keys: np.ndarray) -> int:
+    """Return where the scan for pair ``key`` of :func:`_pair_index` starts."""
+    return 0 if few else np.searchsorted(keys, key)
+
+
+@njit(cache=True, inline='always')
+def _pair_next(key: int, t: int, few: bool, order: np.ndarray, keys: np.ndarray,
+               sa: np.ndarray, sb: np.ndarray, count: int) -> tuple:
+    """Return ``(j, t)``: the next entry of pair ``key`` from scan place ``t`` (−1: none)."""
+    c = sa.shape[0]
+    while t < c:
+        if few:
+            if sa[t] * count + sb[t] == key:
+                return t, t + 1
+            t += 1
+        else:
+            if keys[t] != key:
+                return -1, c
+            return order[t], t + 1
+    return -1, c
 
 
 # -- a step ---------------------------------------------------------------------------------
@@ -2288,6 +2355,7 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
     y, t = y0, t0
     # (made once a call, not once a step: the record of no rows, and a step's counters)
     no_sel, no_force = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    no_flags = np.zeros(0, dtype=np.bool_)
     cnt_step = np.zeros(cnt.shape[0])
     record = (no_sel, no_force, _no_contacts(0), y0, t0)
     # A step's end's contacts are the next one's start's.
@@ -2296,7 +2364,7 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
     for taken in range(n_steps):
         t_end = base + (steps0 + taken + 1) * dt
         res = _step(y, t, t_end, ctx, warm, cnt, found, have, log, n_log, no_sel, no_force,
-                    cnt_step)
+                    no_flags, cnt_step)
         code, y_new, warm_new, rec, found, n_new = res
         if code != DONE:
             return taken, code, y, warm, record, n_log
@@ -2392,13 +2460,15 @@ def _stopped(code: int, y0: np.ndarray, t0: float, warm: tuple, found: tuple,
 @njit(cache=True)
 def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
           cnt_total: np.ndarray, found: tuple, have: bool, log: np.ndarray,
-          n_log: int, no_sel: np.ndarray, no_force: np.ndarray, cnt: np.ndarray) -> tuple:
+          n_log: int, no_sel: np.ndarray, no_force: np.ndarray, no_flags: np.ndarray,
+          cnt: np.ndarray) -> tuple:
     """
     Take one step, as ``ContactSteps.step``: ``(code, y, warm, record, contacts at y, n_log)``.
 
     ``found``: the contacts at ``y0`` when ``have`` (the last step's end's); ``no_sel``,
-    ``no_force``: empty arrays for a record of no rows; ``cnt``: room for the step's
-    counters (overwritten; added to ``cnt_total`` when the step is taken).
+    ``no_force``, ``no_flags``: empty arrays (a record of no rows, no overlaps, no
+    flags); ``cnt``: room for the step's counters (overwritten; added to ``cnt_total``
+    when the step is taken).
     """
     prm, dt = ctx[15], ctx[17]
     loc, unlocated = prm[P_LOCATION], prm[P_UNLOCATED]
@@ -2415,8 +2485,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     while True:
         h = dt if first else t_end - t
         if not first and h <= 4.0 * EPS * abs(t_end):
-            code, new, con_new = _accept(ctx, state, record, cnt, con,
-                                         np.zeros(0, dtype=np.bool_), False)
+            code, new, con_new = _accept(ctx, state, record, cnt, con, no_flags, False)
             break
         first = False
         near = _in_margin(ctx, state, con)
@@ -2434,14 +2503,16 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
                 state = state2
                 near = _in_margin(ctx, state, con)
         rows_ = _step_rows(ctx, con, near)
-        # The overlaps the (partial) step starts from that are not rows (``_overlapping``).
-        deep0 = np.zeros(con[0], dtype=np.bool_)
+        # The overlaps the (partial) step starts from that are not rows (``_overlapping``;
+        # none where no contact is deep: no arrays made).
+        ov = no_sel
         if _deepest(con[7]) > loc:
             every = np.ones(rows_[0].shape[0], dtype=np.bool_)
             cont0 = _continuing(ctx, con, rows_[0], state, every, con, state, every)[1]
+            deep0 = np.zeros(con[0], dtype=np.bool_)
             for j in range(con[0]):
                 deep0[j] = con[7][j] > loc and not cont0[j]
-        ov = _where(deep0)
+            ov = _where(deep0)
         code, trial, nw, fl, warm, record, con_trial, matched = _held(ctx, state, t, con,
                                                                       rows_, h, warm, cnt)
         if code != DONE:
@@ -2450,7 +2521,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
         hit_depth = -np.inf
         # (the contacts at the trial's end that continue loaded rows, matched with the new
         # contacts' match and handed to _accept)
-        held_end, have_held = deep0, False   # (an array of its type, not read)
+        held_end, have_held = no_flags, False   # (an array of its type, not read)
         if events < max_events:
             cont, held_end = _known(ctx, con, held_sel, ov, state, con_trial, trial,
                                     _loaded(record), matched)
@@ -2491,8 +2562,24 @@ def _in_margin(ctx: tuple, y: np.ndarray, con: tuple) -> tuple:
     Those touching while ``P_UNLOCATED`` is 0, else every contact of ``con``.
     """
     if ctx[15][P_UNLOCATED] <= 0.0:
-        return _make_rows(ctx, y, con, _where(con[7] >= -ctx[15][P_LOCATION]))
+        return _make_rows(ctx, y, con, _at_least(con[7], -ctx[15][P_LOCATION]))
     return _make_rows(ctx, y, con, np.arange(con[0]))
+
+
+@njit(cache=True, inline='always')
+def _at_least(x: np.ndarray, bound: float) -> np.ndarray:
+    """Return the indices where ``x >= bound`` (no mask array made)."""
+    k = 0
+    for j in range(x.shape[0]):
+        if x[j] >= bound:
+            k += 1
+    out = np.empty(k, dtype=np.int64)
+    k = 0
+    for j in range(x.shape[0]):
+        if x[j] >= bound:
+            out[k] = j
+            k += 1
+    return out
 
 
 @njit(cache=True, inline='always')
@@ -2509,10 +2596,18 @@ def _step_rows(ctx: tuple, con: tuple, near: tuple) -> tuple:
     if slow <= 0.0:
         return _subset(near, _where(near[7] <= prm[P_RATE]))
     sel, vn = near[0], near[7]
-    keep = np.zeros(sel.shape[0], dtype=np.bool_)
+    kept = 0
     for k in range(sel.shape[0]):
-        keep[k] = con[7][sel[k]] >= -prm[P_LOCATION] or vn[k] >= -slow
-    return _subset(near, _where(keep))
+        kept += con[7][sel[k]] >= -prm[P_LOCATION] or vn[k] >= -slow
+    if kept == sel.shape[0]:   # (all of them: no index array)
+        return near
+    keep = np.empty(kept, dtype=np.int64)
+    kept = 0
+    for k in range(sel.shape[0]):
+        if con[7][sel[k]] >= -prm[P_LOCATION] or vn[k] >= -slow:
+            keep[kept] = k
+            kept += 1
+    return _subset(near, keep)
 
 
 @njit(cache=True)
@@ -2648,37 +2743,34 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
                 _unmatched())
     D = delassus(Ga, Gb, ba, bb, minv)
     # A row of a contact apart by its gap g asks v_n⁺ ≥ min(0, −2 g / h − v_n): the step
-    # closes at most g (``_held_step``).
-    shift = np.zeros(3 * c)
+    # closes at most g (``_held_step``). (shift, the warm start and q + shift: one
+    # allocation.)
+    vecs = np.zeros(9 * c)
+    shift, start, q_shift = vecs[:3 * c], vecs[3 * c:6 * c], vecs[6 * c:]
     for k in range(c):
         if cv[7][sel[k]] < -prm[P_LOCATION]:
             shift[3 * k] = max(0.0, -2.0 * cv[7][sel[k]] / h + vn[k])
-    start = np.zeros(3 * c)
+    for x in range(3 * c):
+        q_shift[x] = q[x] + shift[x]
     w_sa, w_sb, w_pt, w_pn = raw_tree(warm)
     pt0 = cv[5]
     shapes = shape_mu.shape[0] + 1   # (as the pairs' keys of :func:`match`)
-    # (a few of the last rows scanned in their order, as :func:`match` does)
-    n_warm = w_sa.shape[0]
-    few = n_warm <= INSERTION_KEYS
-    order, keys = (w_sa[:0], w_sa[:0]) if few else _by_key(w_sa * shapes + w_sb)
+    few, order, keys = _pair_index(w_sa, w_sb, shapes)
     for k in range(c):
         j = sel[k]
         key = cv[1][j] * shapes + cv[2][j]
-        for u in range(0 if few else np.searchsorted(keys, key), n_warm):   # (the first near)
-            if few:
-                x = u
-                if w_sa[x] * shapes + w_sb[x] != key:
-                    continue
-            else:
-                if keys[u] != key:
-                    break
-                x = order[u]
+        u = _pair_first(key, few, keys)
+        while True:   # (the first near)
+            x, u = _pair_next(key, u, few, order, keys, w_sa, w_sb, shapes)
+            if x < 0:
+                break
             if ((w_pt[x, 0] - pt0[j, 0]) ** 2 + (w_pt[x, 1] - pt0[j, 1]) ** 2
                     + (w_pt[x, 2] - pt0[j, 2]) ** 2) <= WARM_RADIUS2:
                 start[3 * k] = w_pn[x]
                 break
-    no_equal = np.zeros(c, dtype=np.bool_)
-    p, ok = solve_rows(D, q + shift, mu, start, False, no_equal, False, sliding, prm, cnt)
+    bools = np.zeros(2 * c, dtype=np.bool_)   # (no equal rows, the rows loaded)
+    no_equal, loaded = bools[:c], bools[c:]
+    p, ok = solve_rows(D, q_shift, mu, start, False, no_equal, False, sliding, prm, cnt)
     if not ok:
         return _unheld(BAIL, y0, t, flags, warm)
     w = block_affine(D, p, q)
@@ -2696,13 +2788,11 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     pos0, quat0, _, _ = state_parts(y0)
     R0 = rotations(quat0)
     count = shape_mu.shape[0] + 1
-    sa_r, sb_r, pt_r = cv[1][sel], cv[2][sel], cv[5][sel]
     new = free
     nw, fl = n_applied, flags
     force = np.zeros((c, 3))
     con1 = con   # (a placeholder of its type; set below before it is returned)
     have1 = False
-    loaded = np.empty(c, dtype=np.bool_)
     known1 = held1 = loaded   # (placeholders of their type, returned only with have1)
     corrections = int(prm[P_MODEL_CORRECTIONS])
     for correction in range(corrections + 1):
@@ -2731,10 +2821,11 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
             j = sel[k]
             loaded[k] = (force[k, 0] * cv[6][j, 0] + force[k, 1] * cv[6][j, 1]
                          + force[k, 2] * cv[6][j, 2]) > 0.0
-        G1a, G1b, known1, held1 = _rows_at(sa_r, sb_r, ba, bb, pt_r, pos0, R0, frame, Ga, Gb,
-                                           con1, npos, rotations(nquat), radius, count, loaded)
+        G1a, G1b, known1, held1 = _rows_at(sel, cv, ba, bb, pos0, R0, frame, Ga, Gb, con1,
+                                           npos, rotations(nquat), radius, count, loaded)
         w1 = apply_rows(G1a, G1b, ba, bb, nvel, nom)
-        model_w = block_affine(D, p, q)
+        # (the first model is the slip turn's w where nothing turned: the same p and q)
+        model_w = w if correction == 0 and not turned else block_affine(D, p, q)
         off, qmax = 0.0, 0.0
         for x in range(3 * c):
             off = max(off, abs(w1[x] - model_w[x]))
@@ -2750,10 +2841,19 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
         con1 = _detect_ctx(ctx, new)
         if con1[0] < 0:
             return _unheld(GROW, y0, t, flags, warm)
-    w_pn = np.empty(c)
+    # The warm start of the next step, indexed by sel: arrays of their own (two
+    # allocations).
+    ints = np.empty(2 * c, dtype=np.int64)
+    sa_r, sb_r = ints[:c], ints[c:]
+    floats = np.empty(4 * c)
+    pt_r, w_pn = floats[:3 * c].reshape((c, 3)), floats[3 * c:]
     for k in range(c):
+        j = sel[k]
+        sa_r[k], sb_r[k] = cv[1][j], cv[2][j]
+        for a in range(3):
+            pt_r[k, a] = cv[5][j, a]
         w_pn[k] = p[3 * k]
-    warm = (sa_r, sb_r, pt_r, w_pn)   # (indexed by sel: arrays of their own)
+    warm = (sa_r, sb_r, pt_r, w_pn)
     return DONE, new, nw, fl, warm, (sel, force, con, y0, t), con1, (known1, held1, have1)
 
 
@@ -3027,7 +3127,8 @@ def _merge(total: np.ndarray, cnt: np.ndarray) -> None:
 def _contact_wrenches(wbuf: np.ndarray, k: int, n: int, ba: np.ndarray, bb: np.ndarray,
                       la: np.ndarray, lb: np.ndarray, force: np.ndarray) -> int:
     """Write the contact forces as world wrenches after the ``k`` applied rows; return the rows."""
-    f, t = np.zeros((n + 1, 3)), np.zeros((n + 1, 3))
+    ft = np.zeros((2, n + 1, 3))   # (forces and torques: one allocation)
+    f, t = ft[0], ft[1]
     for c in range(force.shape[0]):
         a, b = ba[c], bb[c]
         x0, x1, x2 = _cross(la[c, 0], la[c, 1], la[c, 2], force[c, 0], force[c, 1], force[c, 2])
@@ -3059,26 +3160,31 @@ def _contact_wrenches(wbuf: np.ndarray, k: int, n: int, ba: np.ndarray, bb: np.n
 
 
 @njit(cache=True)
-def _rows_at(sa: np.ndarray, sb: np.ndarray, ba: np.ndarray, bb: np.ndarray, pt: np.ndarray,
+def _rows_at(sel: np.ndarray, con: tuple, ba: np.ndarray, bb: np.ndarray,
              pos0: np.ndarray, R0: np.ndarray, frame: np.ndarray, Ga: np.ndarray,
              Gb: np.ndarray, con1: tuple, pos: np.ndarray, R: np.ndarray, radius: np.ndarray,
              count: int, also: np.ndarray) -> tuple:
     """
     Return the rows' ``G`` at the end's geometry, as ``ContactSteps.rows_at``.
 
-    With them, per contact of ``con1`` whether it continues a row, and a row of ``also``
-    (:func:`match`'s; what :func:`_known` would match of the same rows and contacts).
+    The rows: contacts ``sel`` of ``con`` (at ``pos0``, ``R0``), on bodies ``ba``,
+    ``bb``. With their ``G``, per contact of ``con1`` whether it continues a row, and a
+    row of ``also`` (:func:`match`'s; what :func:`_known` would match of the same rows
+    and contacts).
     """
     # (the rows' G are new arrays: every argument passed on uncounted)
-    (sa, sb, ba, bb, pt, pos0, R0, frame, Ga, Gb, con1, pos, R, radius, also) = raw_tree(
-        (sa, sb, ba, bb, pt, pos0, R0, frame, Ga, Gb, con1, pos, R, radius, also))
+    (sel, con, ba, bb, pos0, R0, frame, Ga, Gb, con1, pos, R, radius, also) = raw_tree(
+        (sel, con, ba, bb, pos0, R0, frame, Ga, Gb, con1, pos, R, radius, also))
     c1, sa1, sb1, ba1, bb1, pt1, nr1, dp1 = con1
-    c = sa.shape[0]
+    c = sel.shape[0]
     n = pos.shape[0]
     every = np.ones(c, dtype=np.bool_)
-    nearest, known, held = match(np.arange(c), sa, sb, ba, pt, pos0, R0, every, sa1, sb1, ba1,
-                                 pt1, pos, R, radius, count, also)
-    G1a, G1b = Ga.copy(), Gb.copy()
+    nearest, known, held = match(sel, con[1], con[2], con[3], con[5], pos0, R0, every, sa1,
+                                 sb1, ba1, pt1, pos, R, radius, count, also)
+    G1 = np.empty((2, 3 * c, 6))   # (both copies: one allocation)
+    G1a, G1b = G1[0], G1[1]
+    G1a[:] = Ga
+    G1b[:] = Gb
     for k in range(c):
         j = nearest[k]
         if j < 0:
