@@ -329,10 +329,11 @@ def delassus(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
     """
     n = minv.shape[0]
     c = ba.shape[0]
-    # The contacts on each body, increasing: on_body[start[i]:start[i + 1]] (the three
-    # work arrays one allocation).
-    work = np.empty(2 * n + 1 + 2 * c, dtype=np.int64)
+    # The contacts on each body, increasing: on_body[start[i]:start[i + 1]] (the work
+    # arrays one allocation: start, fill, each contact's column count, on_body).
+    work = np.empty(2 * n + 1 + 3 * c, dtype=np.int64)
     start, fill = work[:n + 1], work[n + 1:2 * n + 1]
+    counts = work[2 * n + 1:2 * n + 1 + c]
     start[:] = 0
     for k in range(c):
         for side in range(2):
@@ -341,7 +342,7 @@ def delassus(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
                 start[i + 1] += 1
     for i in range(n):
         start[i + 1] += start[i]
-    on_body = work[2 * n + 1:2 * n + 1 + start[n]]
+    on_body = work[2 * n + 1 + c:2 * n + 1 + c + start[n]]
     fill[:] = start[:n]
     for k in range(c):
         for side in range(2):
@@ -349,11 +350,17 @@ def delassus(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
             if i < n:
                 on_body[fill[i]] = k
                 fill[i] += 1
-    # Each contact's columns: the merge of its two bodies' lists (counted, then filled).
-    ptr = np.zeros(c + 1, dtype=np.int64)
+    # Each contact's columns: the merge of its two bodies' lists (counted, then filled;
+    # ptr and col one allocation).
+    total = 0
     for k in range(c):
-        ptr[k + 1] = ptr[k] + _merged(on_body, start, ba[k], bb[k], n, ptr[:0])
-    col = np.empty(ptr[c], dtype=np.int64)
+        counts[k] = _merged(on_body, start, ba[k], bb[k], n, on_body[:0])
+        total += counts[k]
+    pc = np.empty(c + 1 + total, dtype=np.int64)
+    ptr, col = pc[:c + 1], pc[c + 1:]
+    ptr[0] = 0
+    for k in range(c):
+        ptr[k + 1] = ptr[k] + counts[k]
     blk = np.zeros((ptr[c], 3, 3))
     for k in range(c):
         _merged(on_body, start, ba[k], bb[k], n, col[ptr[k]:ptr[k + 1]])
@@ -990,7 +997,10 @@ def solve_rows(D: tuple, q: np.ndarray, mu: np.ndarray, start: np.ndarray,
     c = ptr.shape[0] - 1
     m = q.shape[0]
     step3 = 1 if normal_only else 3
-    label, count = islands(D)
+    if c == 1:   # (one contact: one island, no union-find's array)
+        label, count = ptr[:1], 1
+    else:
+        label, count = islands(D)
     if count == 0:   # (no rows: the empty solve, counted as the Python path's)
         return solve_island(np.zeros((0, 0)), np.zeros(0), mu, np.zeros(0), normal_only,
                             equal, has_equal, sliding, prm, cnt)
@@ -2142,7 +2152,6 @@ def slip_turn(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndar
     slack = 2.0 * tol * pmax
     frame2, sliding2 = frame, sliding   # (copied at the first turn)
     turned = False
-    s, f = np.zeros(3), np.zeros(3)
     for k in range(c):
         if sliding[k]:
             continue
@@ -2150,16 +2159,21 @@ def slip_turn(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndar
         if not bound > 0.0:
             continue
         on = abs(p[3 * k + 1]) >= bound - slack or abs(p[3 * k + 2]) >= bound - slack
-        for x in range(3):
-            s[x] = w[3 * k + 1] * frame[k, 1, x] + w[3 * k + 2] * frame[k, 2, x]
-            f[x] = p[3 * k + 1] * frame[k, 1, x] + p[3 * k + 2] * frame[k, 2, x]
-        speed = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
-        size = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        # The slip s and the friction f in the world (scalars: no arrays a contact).
+        s0, s1, s2 = (w[3 * k + 1] * frame[k, 1, 0] + w[3 * k + 2] * frame[k, 2, 0],
+                      w[3 * k + 1] * frame[k, 1, 1] + w[3 * k + 2] * frame[k, 2, 1],
+                      w[3 * k + 1] * frame[k, 1, 2] + w[3 * k + 2] * frame[k, 2, 2])
+        f0, f1, f2 = (p[3 * k + 1] * frame[k, 1, 0] + p[3 * k + 2] * frame[k, 2, 0],
+                      p[3 * k + 1] * frame[k, 1, 1] + p[3 * k + 2] * frame[k, 2, 1],
+                      p[3 * k + 1] * frame[k, 1, 2] + p[3 * k + 2] * frame[k, 2, 2])
+        speed = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        size = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
         beyond = size > bound + slack
         if beyond and speed <= rate:
-            for x in range(3):
-                s[x] = -f[x] / max(size, 1e-300) * rate * 2.0
-            speed = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
+            s0 = -f0 / max(size, 1e-300) * rate * 2.0
+            s1 = -f1 / max(size, 1e-300) * rate * 2.0
+            s2 = -f2 / max(size, 1e-300) * rate * 2.0
+            speed = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
         if not ((on and speed > rate) or beyond):
             continue
         if not turned:
@@ -2167,8 +2181,7 @@ def slip_turn(frame: np.ndarray, mu: np.ndarray, sliding: np.ndarray, p: np.ndar
         turned = True
         sliding2[k] = True
         nrm = frame[k, 0]
-        for x in range(3):
-            frame2[k, 1, x] = s[x] / speed
+        frame2[k, 1, 0], frame2[k, 1, 1], frame2[k, 1, 2] = s0 / speed, s1 / speed, s2 / speed
         x0, x1, x2 = _cross(nrm[0], nrm[1], nrm[2], frame2[k, 1, 0], frame2[k, 1, 1],
                             frame2[k, 1, 2])
         frame2[k, 2, 0], frame2[k, 2, 1], frame2[k, 2, 2] = x0, x1, x2
@@ -2489,7 +2502,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
             break
         first = False
         near = _in_margin(ctx, state, con)
-        touching = near if unlocated <= 0.0 else _subset(near, _where(con[7] >= -loc))
+        touching = near if unlocated <= 0.0 else _touching(near, con, loc)
         if touching[0].shape[0] and events < max_events:
             code, state2, hit, n_log = _impact(ctx, state, t, con, touching,
                                                bounces >= max_bounces, cnt, log, n_log)
@@ -2580,6 +2593,24 @@ def _at_least(x: np.ndarray, bound: float) -> np.ndarray:
             out[k] = j
             k += 1
     return out
+
+
+@njit(cache=True, inline='always')
+def _touching(near: tuple, con: tuple, loc: float) -> tuple:
+    """Return the rows ``near`` of contacts of ``con`` touching (depth ``>= −loc``)."""
+    sel = near[0]
+    kept = 0
+    for k in range(sel.shape[0]):
+        kept += con[7][sel[k]] >= -loc
+    if kept == sel.shape[0]:   # (all of them: no index array)
+        return near
+    keep = np.empty(kept, dtype=np.int64)
+    kept = 0
+    for k in range(sel.shape[0]):
+        if con[7][sel[k]] >= -loc:
+            keep[kept] = k
+            kept += 1
+    return _subset(near, keep)
 
 
 @njit(cache=True, inline='always')
@@ -2979,7 +3010,11 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
     # (record and held0 are read, never returned: passed on uncounted; y and con may be)
     record, held0 = raw_tree((record, held0))
     sel, force, r_con, r_y, _ = record
-    active = _loaded(record)
+    # (the loaded rows, made where a match needs them: not where held0 is given and
+    # nothing is projected)
+    active, have_active = held0, False
+    if not have_held:
+        active, have_active = _loaded(record), True
     held = held0 if have_held else _continuing(ctx, r_con, sel, r_y, active, con, y, active)[1]
     for pas in range(int(prm[P_PROJECTION_PASSES]) + 1):
         deep = lifted = False
@@ -3038,6 +3073,8 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
         con = _detect_ctx(ctx, y)
         if con[0] < 0:
             return GROW, y, con
+        if not have_active:
+            active, have_active = _loaded(record), True
         held = _continuing(ctx, r_con, sel, r_y, active, con, y, active)[1]
     hs = _where(held)
     nh = hs.shape[0]
