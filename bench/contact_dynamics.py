@@ -2,8 +2,10 @@
 Contact dynamics (issue 21): per-step cost, penetration and drift beside MuJoCo, same scenes.
 
 Five scenes on a ground plane, ``dt`` 1 ms, gravity 9.81, each run side by side in
-ours and MuJoCo 4 (its defaults: soft contacts with ``solref`` 0.02 s, the pyramidal
-cone, the Newton solver, semi-implicit Euler), from the same state:
+ours and MuJoCo 4, each with its defaults (ours: the ``lie_poisson2`` integrator,
+second order, hard contact rows; MuJoCo: soft contacts with ``solref`` 0.02 s, the
+pyramidal cone, the Newton solver, semi-implicit Euler, first order), from the same
+state:
 
 * **sphere drop**: a 0.1 m sphere of 1 kg dropped from 0.5 m (0.4 m of gap), no
   restitution, friction 0.5: it lands at 0.286 s and rests;
@@ -23,8 +25,10 @@ cone, the Newton solver, semi-implicit Euler), from the same state:
 
 Reported per scene: the mean wall time of a step over the run (the whole step: detection,
 contact forces, integration; ours with the compiled contact steps, up to 100 steps a call,
-one a call, and in Python alone; ours up to 100 steps a call and MuJoCo the fastest of
-:data:`REPEATS` runs taken alternately, but the piles'), the deepest penetration over the
+one a call, and in Python alone, and with ``rkmk4`` (fourth order, four force evaluations
+a step) up to 100 steps a call but in the piles; ours up to 100 steps a call and MuJoCo
+the fastest of :data:`REPEATS` runs taken alternately, but the piles'), the deepest
+penetration over the
 run's last half (rest: ours' detector's depth, read after each call; MuJoCo's
 ``-contact.dist``, after each step), the most depth any step of ours left (its counter
 ``projection_left``), and the scene's own error: the sphere's rest height's offset, the
@@ -68,6 +72,10 @@ CHUNK = 100
 #: The scenes but the piles: ours (step(100)) and MuJoCo run alternately this many times,
 #: the fastest of each kept (a shared machine's other load only ever adds time).
 REPEATS = 5
+#: Our integrator in the runs: the simulator's default (``Simulation``'s), as MuJoCo runs
+#: with its own; :data:`FOURTH_ORDER` beside it.
+INTEGRATOR = 'lie_poisson2'
+FOURTH_ORDER = 'rkmk4'
 
 
 def cube(half: float, mass: float) -> tuple:
@@ -147,14 +155,15 @@ def pile(count: int) -> tuple:
                   for p in spots), 0.5)
 
 
-def run_ours(bodies, shapes, friction, steps, compiled=True, chunk=1) -> dict:
+def run_ours(bodies, shapes, friction, steps, compiled=True, chunk=1,
+             integrator=INTEGRATOR) -> dict:
     """
     Run our simulation; return cost, depth over the last half, and the final state.
 
     ``compiled`` False: every step in Python (``ContactSteps.compiled``); ``chunk``:
     steps per ``step(n)`` call (the depth is read after each call).
     """
-    sim = Simulation(bodies, [Gravity()], integrator='rkmk4', dt=DT,
+    sim = Simulation(bodies, [Gravity()], integrator=integrator, dt=DT,
                      shapes=[CollisionShape('plane', None, friction=friction)] + shapes)
     sim.contact.compiled = compiled
     p0 = sim.state.pos_com_world.copy()
@@ -219,14 +228,18 @@ def run(seconds: float) -> list:
     for name, (bodies, shapes, body_xml, friction) in scenes().items():
         pile = name in PILES.values()
         steps = int(round(min(seconds, PILE_SECONDS.get(name, seconds)) / DT))
-        ours_runs, mj_runs = [], []
+        ours_runs, mj_runs, fourth = [], [], []
         for _ in range(1 if pile else REPEATS):   # (a pile: tens of seconds a run, once)
             ours_runs.append(run_ours(bodies, shapes, friction, steps, chunk=CHUNK))
+            if not pile:
+                fourth.append(run_ours(bodies, shapes, friction, steps, chunk=CHUNK,
+                                       integrator=FOURTH_ORDER)['step'])
             if mujoco is not None:
                 mj_runs.append(run_mujoco(body_xml, friction, steps,
                                           (1.0, 0.0, 0.0) if name == 'box slide' else None))
         # (Each run of a scene is the same arithmetic: only the time differs.)
         ours = min(ours_runs, key=lambda r: r['step'])
+        ours['fourth'] = min(fourth) if fourth else None
         mj = min(mj_runs, key=lambda r: r['step']) if mj_runs else None
         # (The 100 spheres one step a call: the step(100) run's cost again, a step's
         # hundreds of milliseconds dwarfing the call's overhead; the piles in Python
@@ -246,11 +259,12 @@ def run(seconds: float) -> list:
 def table(rows: list) -> str:
     """Markdown table of :func:`run`."""
     lines = ['| scene | run, s | ours, step(100), us/step | ours, step(), us/step | '
-             'ours, Python path, us/step | steps compiled | MuJoCo, us/step | '
+             'ours, Python path, us/step | ours, rkmk4, step(100), us/step | '
+             'steps compiled | MuJoCo, us/step | '
              'ours step(100) / MuJoCo | deepest (ours), m | deepest (MuJoCo), m | '
              'error (ours), m | error (MuJoCo), m | ours: LCPs failed, by blocks | '
              'ours: depth left by a step, m |',
-             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
         o, m = r['ours'], r['mj']
         mj = ('-', '-', '-', '-') if m is None else (
@@ -258,16 +272,21 @@ def table(rows: list) -> str:
             f'{error(r["scene"], m):+.2e}')
         python = '-' if o['python'] is None else f'{o["python"] * 1e6:.0f}'
         one = '-' if o['one'] is None else f'{o["one"] * 1e6:.1f}'
+        fourth = '-' if o['fourth'] is None else f'{o["fourth"] * 1e6:.1f}'
         lines.append(f'| {r["scene"]} | {r["seconds"]:g} | {o["step"] * 1e6:.1f} | '
                      f'{one} | '
-                     f'{python} | {100 * o["compiled"]:.1f} % | {mj[0]} | '
+                     f'{python} | {fourth} | {100 * o["compiled"]:.1f} % | {mj[0]} | '
                      f'{mj[1]} | {o["depth"]:.1e} | {mj[2]} | {error(r["scene"], o):+.2e} | '
                      f'{mj[3]} | {o["failures"]}, {o["sparse"]} | {o["left"]:.1e} |')
     return '\n'.join(lines) + (
         "\n\nErrors: the sphere's rest height offset, the slide's stop distance less "
         "`v² / (2 μ g)`, the stack's largest box displacement, the piles' deepest excursion "
         'of a sphere beyond a wall or the ground (its centre past `wall − r`; negative: '
-        'inside). Ours is exact in the first three to '
+        f'inside). Ours runs its default integrator (`{INTEGRATOR}`, second order; '
+        f'`{FOURTH_ORDER}`, fourth order, four force evaluations a step, in its own '
+        'column, not run on the piles: in the first three scenes the two agree to rounding, '
+        'their forces constant over a step), MuJoCo its own (semi-implicit Euler, first '
+        'order). Ours is exact in the first three to '
         "the step's first-order stop (the slide: at most `μ g dt² / 2` = 2.5e-6 m) and to "
         'rounding. Ours three ways: `step(100)` (the compiled kernel takes up to 100 steps a '
         "call), `step()` one step a call (a node's loop: the Python call and its checks each "

@@ -574,6 +574,14 @@ def test_a_fresh_factor_takes_the_rows_in_an_order_of_small_envelope():
     assert _envelope(S, order) <= side * side * m
     assert _envelope(S, np.arange(m)) > 3 * _envelope(S, order)
     assert envelope_order(pattern(np.zeros((0, 0)))).shape == (0,)
+    # A dense S (a small island's: every row meets every other) is ordered without the
+    # search: the search from row 0 would meet the others in order, reversed. One a zero
+    # pair short of dense (the search's) comes out the same.
+    for n in (1, 3, 12):
+        assert list(envelope_order(pattern(np.ones((n, n))))) == list(range(n))[::-1]
+    S = np.ones((4, 4))
+    S[0, 3] = S[3, 0] = 0.0
+    assert list(envelope_order(pattern(S))) == [3, 2, 1, 0]
 
 
 def test_lapacks_lu_solves_as_a_backward_stable_solve_and_refuses_a_singular_matrix():

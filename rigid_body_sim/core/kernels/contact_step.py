@@ -567,6 +567,13 @@ def envelope_order(pat: np.ndarray) -> np.ndarray:
     own order (the detector's) it spans most of an island.
     """
     n = pat[0] - 1
+    if pat[n] - pat[0] == n * n:
+        # Dense (a box's four contacts, any small island): every row of degree n, so the
+        # order is 0, 1, …, n − 1 (the first row, then the others by row), reversed.
+        dense = np.empty(n, dtype=np.int64)
+        for i in range(n):
+            dense[i] = n - 1 - i
+        return dense
     deg = np.empty(n, dtype=np.int64)
     for i in range(n):
         deg[i] = pat[i + 1] - pat[i]
