@@ -2605,16 +2605,27 @@ def _at_least(x: np.ndarray, bound: float) -> np.ndarray:
 @njit(cache=True, inline='always')
 def _touching(near: tuple, con: tuple, loc: float) -> tuple:
     """Return the rows ``near`` of contacts of ``con`` touching (depth ``>= −loc``)."""
-    sel = near[0]
+    return _rows_within(near, con, loc, -np.inf)
+
+
+@njit(cache=True, inline='always')
+def _rows_within(near: tuple, con: tuple, loc: float, slow: float) -> tuple:
+    """
+    Return the rows ``near`` whose contact of ``con`` touches or closes slowly.
+
+    Touching: depth ``>= −loc``; closing slowly: normal rate ``>= −slow`` (``slow``
+    −inf: touching alone). All of them: ``near`` itself, no index array made.
+    """
+    sel, vn = near[0], near[7]
     kept = 0
     for k in range(sel.shape[0]):
-        kept += con[7][sel[k]] >= -loc
-    if kept == sel.shape[0]:   # (all of them: no index array)
+        kept += con[7][sel[k]] >= -loc or vn[k] >= -slow
+    if kept == sel.shape[0]:
         return near
     keep = np.empty(kept, dtype=np.int64)
     kept = 0
     for k in range(sel.shape[0]):
-        if con[7][sel[k]] >= -loc:
+        if con[7][sel[k]] >= -loc or vn[k] >= -slow:
             keep[kept] = k
             kept += 1
     return _subset(near, keep)
@@ -2633,19 +2644,7 @@ def _step_rows(ctx: tuple, con: tuple, near: tuple) -> tuple:
     slow = prm[P_UNLOCATED]
     if slow <= 0.0:
         return _subset(near, _where(near[7] <= prm[P_RATE]))
-    sel, vn = near[0], near[7]
-    kept = 0
-    for k in range(sel.shape[0]):
-        kept += con[7][sel[k]] >= -prm[P_LOCATION] or vn[k] >= -slow
-    if kept == sel.shape[0]:   # (all of them: no index array)
-        return near
-    keep = np.empty(kept, dtype=np.int64)
-    kept = 0
-    for k in range(sel.shape[0]):
-        if con[7][sel[k]] >= -prm[P_LOCATION] or vn[k] >= -slow:
-            keep[kept] = k
-            kept += 1
-    return _subset(near, keep)
+    return _rows_within(near, con, prm[P_LOCATION], slow)
 
 
 @njit(cache=True)
