@@ -970,6 +970,8 @@ def test_contacts_markers_and_diagnostics_report_the_cores_contacts(ros, tmp_pat
     # A ball resting on the ground: its steps at rest are the compiled kernel's.
     assert int(values['contact_compiled_steps_total']) >= 1
     assert float(values['contact_depth_left_max_m']) == 0.0
+    # Every step ends at most the location tolerance (1e-10 m) deep.
+    assert 0.0 <= float(values['contact_depth_end_max_m']) <= 1e-10
 
 
 CUBE_URDF = """<robot name="cube">

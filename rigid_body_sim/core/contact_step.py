@@ -432,7 +432,7 @@ class ContactSteps:
                          'complementarity_max': 0.0, 'max_depth': 0.0,
                          'projections': 0, 'max_projected': 0.0, 'model_corrections': 0,
                          'held_rates': 0, 'immovable_rows': 0, 'compiled_steps': 0,
-                         'stepped_responses': 0, 'projection_left': 0.0,
+                         'stepped_responses': 0, 'projection_left': 0.0, 'end_depth': 0.0,
                          'lcp_pivoted': 0, 'lcp_newton': 0, 'lcp_sparse': 0, 'lcp_pgs': 0}
 
     @property
@@ -1535,7 +1535,7 @@ class ContactSteps:
         the loaded contacts' normal velocities, where they are off zero by less than
         :data:`HOLD_RATE` (the model's error, not the physics: the LCP ended them at
         zero), are set to zero by the same mass-weighted projection. Counted: the
-        deepest depth, the projections, the rates held.
+        deepest depth, the projections, the rates held, the deepest depth it ends with.
         """
         self._set_forces(None)
         con = self.detect(new)
@@ -1569,11 +1569,12 @@ class ContactSteps:
                 self.counters['max_depth'] = max(self.counters['max_depth'],
                                                  float(np.max(con.depth)))
             # The rows: the contacts touching or overlapping, and those apart by less
-            # than the deepest overlap, as rows that may not close (a push that takes one
-            # overlap out would otherwise drive a neighbour that nearly touches into
-            # another: in a pile of 1000 spheres each pass left new overlaps, and the
-            # steps' leftovers grew to 4 mm).
-            reach = max(self.location, float(np.max(con.depth)))
+            # than the deepest overlap or the widest lift, as rows that may not close (a
+            # push that takes one overlap out would otherwise drive a neighbour that
+            # nearly touches into another: in a pile of 1000 spheres each pass left new
+            # overlaps, and the steps' leftovers grew to 4 mm; and a lifted loaded
+            # contact pulled back drove neighbours 1e-7 m apart 8e-5 m deep).
+            reach = max(self.location, float(np.max(con.depth)), left)
             select = held | (con.depth >= -reach)
             rows = self.rows(new, con, select=select)
             Y = self.response(new, rows.G)
@@ -1597,6 +1598,9 @@ class ContactSteps:
                         new.ang_vel_principal)
             con = self.detect(new)
             held = self._continuing(rec.rows, active, con, new)
+        # (the deepest overlap a step ends with: what a user sees of penetration)
+        self.counters['end_depth'] = max(self.counters['end_depth'],
+                                         float(np.max(con.depth, initial=0.0)))
         if not np.any(held):
             return new
         rows = self.rows(new, con, select=held)

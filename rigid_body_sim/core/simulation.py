@@ -1688,8 +1688,9 @@ class Simulation:
         contact LCPs solved, their most iterations, failures and largest residual (m/s),
         the deepest penetration a step left and the projections that took it out (steps
         projected, the largest depth projected, the largest depth or lift the projection's
-        passes left: ``projection_left``), the contact operators built from trial steps
-        (``stepped_responses``).
+        passes left: ``projection_left``), the deepest overlap any step ended with (after
+        its projection: ``end_depth``, the penetration a user sees), the contact operators
+        built from trial steps (``stepped_responses``).
         Empty without collision shapes.
         """
         if self.contact is None:

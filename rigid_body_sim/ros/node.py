@@ -848,6 +848,7 @@ class SimNode(Node):
             values['contacts'] = str(len(contacts['normal_force']))
             values['contact_depth_max_m'] = f'{float(np.max(contacts["depth"], initial=0.0)):.3g}'
             values['contact_depth_left_max_m'] = f'{c["max_depth"]:.3g}'
+            values['contact_depth_end_max_m'] = f'{c["end_depth"]:.3g}'
             values['contact_complementarity_residual_max'] = f'{c["complementarity_max"]:.3g}'
             values['contact_lcp_iterations_max'] = str(c['lcp_iterations_max'])
             values['contact_lcp_failures_total'] = str(c['lcp_failures'])
@@ -878,7 +879,7 @@ class SimNode(Node):
                if sim.constraint_names else '')
             + ('  ' if sim.constraint_names and contacts else '')
             + (f'contacts={len(contacts["normal_force"])}  '
-               f'depth_left_max={contacts["counters"]["max_depth"]:.1e} m'
+               f'depth_end_max={contacts["counters"]["end_depth"]:.1e} m'
                if contacts else '')
             + (f'  overruns={w.overruns}' if w.overruns else '') + f'  [{summary}]')
         self._new_window(now)

@@ -68,13 +68,13 @@ from .views import raw_tree
 COUNTERS = ('lcp_solves', 'lcp_iterations_max', 'lcp_failures', 'complementarity_max',
             'model_corrections', 'held_rates', 'impacts', 'located_steps', 'events_capped',
             'max_depth', 'projections', 'max_projected', 'projection_left', 'lcp_pivoted',
-            'lcp_newton', 'lcp_sparse', 'lcp_pgs')
+            'lcp_newton', 'lcp_sparse', 'lcp_pgs', 'end_depth')
 (C_SOLVES, C_ITERATIONS_MAX, C_FAILURES, C_COMPLEMENTARITY, C_CORRECTIONS, C_HELD,
  C_IMPACTS, C_LOCATED, C_CAPPED, C_MAX_DEPTH, C_PROJECTIONS, C_MAX_PROJECTED,
- C_PROJECTION_LEFT, C_PIVOTED, C_NEWTON, C_SPARSE, C_PGS) = range(17)
+ C_PROJECTION_LEFT, C_PIVOTED, C_NEWTON, C_SPARSE, C_PGS, C_END_DEPTH) = range(18)
 #: The counters that are maxima (the others are sums).
 MAXIMA = ('lcp_iterations_max', 'complementarity_max', 'max_depth', 'max_projected',
-          'projection_left')
+          'projection_left', 'end_depth')
 #: Why :func:`contact_steps` stopped: every step taken; an event (the Python path's);
 #: the detector's buffers too small (grow them and call again); the impact log full (read
 #: it and call again, or, where the first step's impacts alone overflow it, grow it).
@@ -3041,7 +3041,8 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
         if pas == 0 and deep:
             cnt[C_MAX_DEPTH] = max(cnt[C_MAX_DEPTH], dmax)
         pick = np.zeros(con[0], dtype=np.bool_)
-        reach = max(loc, dmax)   # (those apart by less than the deepest: ``_settle``)
+        # (those apart by less than the deepest overlap or the widest lift: ``_settle``)
+        reach = max(loc, dmax, left)
         for j in range(con[0]):
             pick[j] = held[j] or con[7][j] >= -reach
         idx = _where(pick)
@@ -3082,6 +3083,7 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
         if not have_active:
             active, have_active = _loaded(record), True
         held = _continuing(ctx, r_con, sel, r_y, active, con, y, active)[1]
+    cnt[C_END_DEPTH] = max(cnt[C_END_DEPTH], _deepest(con[7]))
     hs = _where(held)
     nh = hs.shape[0]
     if nh == 0:
@@ -3160,7 +3162,7 @@ def _merge(total: np.ndarray, cnt: np.ndarray) -> None:
     """Add a step's counters to ``total`` (the largest of the maxima)."""
     for x in range(cnt.shape[0]):
         if x in (C_ITERATIONS_MAX, C_COMPLEMENTARITY, C_MAX_DEPTH, C_MAX_PROJECTED,
-                 C_PROJECTION_LEFT):
+                 C_PROJECTION_LEFT, C_END_DEPTH):
             total[x] = max(total[x], cnt[x])
         else:
             total[x] += cnt[x]
