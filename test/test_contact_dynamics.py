@@ -205,6 +205,53 @@ def test_a_tilted_box_spawned_into_the_ground_is_projected_out_to_the_tolerance(
     assert np.max(np.abs(sim.contact.detect(sim.state).depth)) <= LOCATION_TOLERANCE
 
 
+def test_a_lifted_loaded_contact_pulled_back_drives_no_neighbour_into_overlap(monkeypatch):
+    # Sphere a rests on sphere b1 (their centres 30° off vertical), b1 on the ground: one
+    # step loads both contacts. The step's end is then set by hand: a lifted 0.1 mm off
+    # b1 along their normal, and a third sphere c beside a, 1e-7 m apart, 70° off that
+    # normal. The end's projection pulls the loaded contact back to its surface (a and b1
+    # meet halfway, equal masses), which closes a-c by (lift / 2) cos 70° = 1.7e-5 m:
+    # with c's contact a row (apart by less than the widest lift) it stops at its
+    # surface; before, it was no row, and a single pass (as a step's last one) left c
+    # 1.7e-5 m into a. One pass is linearized: what it leaves is its second order,
+    # (lift / 2)² / r = 5e-8 m, bounded here at twice that; b1 lifted off the ground
+    # by the pull is left as a lift, counted.
+    from rigid_body_sim.core import contact_step
+    from rigid_body_sim.core.bodies import State
+    r, theta, psi, lift, gap = 0.05, math.radians(30.0), math.radians(70.0), 1e-4, 1e-7
+    n1 = np.array([math.sin(theta), 0.0, math.cos(theta)])
+    u = -np.array([math.sin(theta + psi), 0.0, math.cos(theta + psi)])   # (a to c)
+    bodies = [RigidBody(name, 1.0, (0.4 * r * r,) * 3, position_world=p)
+              for name, p in (('b1', (0.0, 0.0, r)), ('a', tuple((0, 0, r) + 2 * r * n1)),
+                              ('c', (2.0, 0.0, 1.0)))]
+    shapes = [CollisionShape('plane', None, friction=0.5)] + [
+        CollisionShape('sphere', name, radius=r, friction=0.5) for name in ('b1', 'a', 'c')]
+    sim = Simulation(bodies, [Gravity()], integrator='rkmk4', dt=1e-3, shapes=shapes)
+    sim.contact.compiled = False
+    sim.step()
+    rec = sim.contact.record
+    loaded = np.sum(rec.force * rec.rows.contacts.normal, axis=1) > 0.0
+    assert sorted(zip(rec.rows.contacts.body_a[loaded], rec.rows.contacts.body_b[loaded])) \
+        == [(0, 1), (0, 3)]   # (b1-a, b1-ground; body 3 the world)
+    pos = sim.state.pos_com_world.copy()
+    pos[1] = pos[0] + (2 * r + lift) * n1
+    pos[2] = pos[1] + (2 * r + gap) * u
+    end = State(sim.state.time, pos, sim.state.quat_principal_world, sim.state.vel_com_world,
+                sim.state.ang_vel_principal)
+    monkeypatch.setattr(contact_step, 'PROJECTION_PASSES', 1)
+    out = sim.contact._settle(end, sim.contact.detect(end), rec)
+    con = sim.contact.detect(out)
+    depth = {(int(a), int(b)): float(d) for a, b, d in zip(con.body_a, con.body_b, con.depth)}
+    bound = 2 * (lift / 2) ** 2 / r
+    assert depth[(1, 2)] <= bound and abs(depth[(0, 1)]) <= bound
+    assert sim.contact.counters['end_depth'] <= bound
+    # b1 rose off the ground by its share of the pull along n1 (half, more where c's row
+    # holds a back; at most all of it): left, and counted as such.
+    rise = -depth[(0, 3)]
+    assert lift / 2 * math.cos(theta) <= rise <= lift * math.cos(theta)
+    assert sim.contact.counters['projection_left'] == pytest.approx(rise, rel=1e-12)
+
+
 def test_the_contact_residual_reads_equalities_pinned_rows_and_friction_beyond_its_bound():
     # One contact, rows (n, t1, t2) with A = I: w = p + q. The residual is in m/s.
     from rigid_body_sim.core.contact_step import _residual
