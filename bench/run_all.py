@@ -21,7 +21,8 @@ exact drives bounded by their efforts; the Panda's URDF from the bench requireme
 ``bench/contact_pairs.py`` (the narrow phases by pair of kinds),
 ``bench/contact_panda.py`` (the Panda pushing a box),
 ``bench/spawn.py`` (spawning and deleting against scene size),
-``bench/contact_dynamics.py`` (contact forces: cost, penetration, error) and
+``bench/contact_dynamics.py`` (contact forces: cost, penetration, error),
+``bench/kernel_profile.py`` (the contact step's cost by regime: flight, rest, sliding) and
 ``bench/accuracy_study.py`` (beside MuJoCo; ``--skip-mujoco``),
 and ``bench/node.py`` and ``bench/node_robot.py`` (the ROS node through DDS: rates, costs,
 latency; with the Panda, joint_states and /tf at 1 kHz; ``--skip-node``).
@@ -329,6 +330,12 @@ def sections(quick: bool, node_args: list) -> list:
             about='A sphere dropped, a box sliding to a stop, a stack of ten boxes: the '
                   "whole step's cost, the deepest penetration and each scene's error "
                   'against its closed form, ours and MuJoCo from the same state.')),
+        ('skip_mujoco', 'kernel_profile', ['--quick'] if quick else [], report.Section(
+            'Contact step cost by regime, beside MuJoCo',
+            f'./dev.sh python bench/kernel_profile.py{q}', [T('kernel_profile.md')],
+            about='A sphere in flight, a sphere at rest, a box at rest, a box sliding: the '
+                  "compiled contact step's cost beside MuJoCo's, one regime each, with the "
+                  'allocations a step (where the time goes by function: its `--perf`).')),
         (None, 'contact_robots', ['--quick'] if quick else [], report.Section(
             'Contact with robots: cost and quality',
             f'./dev.sh python bench/contact_robots.py{q}', [T('contact_robots.md')],
