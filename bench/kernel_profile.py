@@ -24,13 +24,13 @@ from __future__ import annotations
 
 import argparse
 import os
+from pathlib import Path
 import re
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import report  # noqa: E402, I100
@@ -258,7 +258,7 @@ def profile(short: str, steps: int) -> int:
                     '--record', short] + (['--quick'] if steps < 20000 else []), check=True)
     out = subprocess.run(['perf', 'report', '-i', data, '--no-children', '--sort', 'symbol',
                           '--stdio'], capture_output=True, text=True).stdout
-    print(f'# {SHORT[short]}: {100 * steps} steps (and the set-up: its share is Python\'s '
+    print(f"# {SHORT[short]}: {100 * steps} steps (and the set-up: its share is Python's "
           "and the loader's)")
     shown = [ln.rstrip()[:110] for ln in out.splitlines()
              if not ln.startswith('#') and '%' in ln][:30]
