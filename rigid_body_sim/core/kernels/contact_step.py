@@ -301,26 +301,16 @@ def _jacobian_into(frame: np.ndarray, ba: np.ndarray, bb: np.ndarray, la: np.nda
 def apply_rows(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
                vel: np.ndarray, om: np.ndarray) -> np.ndarray:
     """Return ``G ν`` (3c,) for the bodies' velocities ``vel`` (world), ``om`` (principal)."""
-    n = vel.shape[0]
-    w = np.zeros(Ga.shape[0])
+    w = np.empty(Ga.shape[0])
     for row in range(Ga.shape[0]):
-        k = row // 3
-        for side in range(2):
-            i = ba[k] if side == 0 else bb[k]
-            if i >= n:
-                continue
-            G = Ga if side == 0 else Gb
-            s = 0.0
-            for m in range(3):
-                s += G[row, m] * vel[i, m] + G[row, 3 + m] * om[i, m]
-            w[row] += s
+        w[row] = _row_rate(Ga, Gb, ba, bb, vel, om, row)
     return w
 
 
 @njit(cache=True)
 def _row_rate(Ga: np.ndarray, Gb: np.ndarray, ba: np.ndarray, bb: np.ndarray,
               vel: np.ndarray, om: np.ndarray, row: int) -> float:
-    """Return :func:`apply_rows`' entry ``row``, the same arithmetic in the same order."""
+    """Return :func:`apply_rows`' entry ``row``: its two bodies' sums (the world's: none)."""
     n = vel.shape[0]
     k = row // 3
     w = 0.0
@@ -2721,7 +2711,7 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
     pos, quat, vel, om = state_parts(y)
     c = sel.shape[0]
     approaching = 0
-    for k in range(c):   # (apply_rows' rates one row at a time: no array where none is)
+    for k in range(c):   # (apply_rows' entries one row at a time: no array where none is)
         if _row_rate(Ga, Gb, ba, bb, vel, om, 3 * k) < -rate:
             approaching += 1
     if approaching == 0:
