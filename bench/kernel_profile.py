@@ -233,7 +233,9 @@ def main(argv=None) -> int:
         sim, _, _ = scene(SHORT[args.record])
         for _ in range(steps):
             sim.step(100)
-        print(f'{_write_perf_map()} kernel functions named', file=sys.stderr)
+        count = _write_perf_map()
+        print(f'perf map /tmp/perf-{os.getpid()}.map: {count} kernel functions named',
+              file=sys.stderr)
         return 0
     if args.perf:
         return profile(args.perf, steps)
@@ -253,11 +255,16 @@ def profile(short: str, steps: int) -> int:
     if shutil.which('perf') is None:
         print('perf is not installed (the table runs without it)')
         return 1
-    data = os.path.join(tempfile.mkdtemp(), 'perf.data')
-    subprocess.run(['perf', 'record', '-q', '-o', data, sys.executable, __file__,
-                    '--record', short] + (['--quick'] if steps < 20000 else []), check=True)
-    out = subprocess.run(['perf', 'report', '-i', data, '--no-children', '--sort', 'symbol',
-                          '--stdio'], capture_output=True, text=True).stdout
+    with tempfile.TemporaryDirectory() as folder:
+        data = os.path.join(folder, 'perf.data')
+        run_ = subprocess.run(['perf', 'record', '-q', '-o', data, sys.executable, __file__,
+                               '--record', short] + (['--quick'] if steps < 20000 else []),
+                              check=True, capture_output=True, text=True)
+        out = subprocess.run(['perf', 'report', '-i', data, '--no-children', '--sort',
+                              'symbol', '--stdio'], capture_output=True, text=True).stdout
+    # (the map perf read: the recorded run's, removed once read)
+    for path in re.findall(r'perf map (/tmp/perf-\d+\.map)', run_.stderr):
+        os.unlink(path)
     print(f"# {SHORT[short]}: {100 * steps} steps (and the set-up: its share is Python's "
           "and the loader's)")
     shown = [ln.rstrip()[:110] for ln in out.splitlines()
