@@ -108,6 +108,7 @@ from .effects import Effect, KernelModel, Kinematics, WrenchAccumulator
 from .kernels import contact_step as kern
 from .kernels.free_step import HAS_POSITION_FORCES, state_outputs
 from .kernels.layout import B_INV_MASS, B_MOMENTS, O_WIDTH, W_BODY, W_FORCE, W_TORQUE, W_WIDTH
+from .kernels.views import Pinned
 from .rotation import cross, exp_quat, quat_multiply, quat_to_matrix
 from .shapes import ContactDetector, Contacts, ROW
 
@@ -409,6 +410,9 @@ class ContactSteps:
         self._island_key: Optional[tuple] = None
         self._island_prm = np.zeros(0)
         self._scratch: Optional[tuple] = None
+        #: The kernel's table of the detector's arrays (:meth:`_detector_table`): ``(det,
+        #: buffers, Pinned)``, kept while they are the same arrays.
+        self._dtab: Optional[tuple] = None
         #: The kernel's impacts, a row each: time, shapes a and b, approach, rebound.
         self._log = np.zeros((IMPACT_LOG, 5))
         self.counters: dict = {}
@@ -1208,9 +1212,9 @@ class ContactSteps:
             taken, code, y, warm, rec, logged = kern.contact_steps(
                 n, start.y, start.time, base, steps, dt, int(integ.KERNEL),
                 (model[0], model[1], wbuf), len(model[2]), model[3], integ._kick_buffer,
-                dyn.tally, STEPS, integ._ws, dyn.bodies.outputs_cache.frames, out, det,
-                self._buffers(), self._mu, self._e, self._radius, self._warm, prm, cnt,
-                self._log, minv)
+                dyn.tally, STEPS, integ._ws, dyn.bodies.outputs_cache.frames, out,
+                self._detector_table(det), self._mu, self._e, self._radius, self._warm, prm,
+                cnt, self._log, minv)
             if code not in (kern.GROW, kern.FULL) or taken:
                 break
             if code == kern.GROW:
@@ -1305,6 +1309,25 @@ class ContactSteps:
             scratch = self._scratch = (np.empty((ms, 3)), np.empty((ms, 3)), np.empty((m, 3)),
                                        np.empty((m, 3, 3)))
         return (d._pairs, d._plane_pairs, d._points, d._normals, d._depths, d._owner) + scratch
+
+    def _detector_table(self, det: tuple) -> np.ndarray:
+        """
+        Return ``det`` and the detector's buffers as the kernel's one table.
+
+        (:data:`.kernels.contact_step.DT_ARRAYS`; made again when any of them is another
+        array: the buffers grown, the scene's shapes changed.)
+        """
+        buf = self._buffers()
+        kept = self._dtab
+        if kept is not None and kept[0] is det and all(a is b for a, b in zip(kept[1], buf)):
+            return kept[2].table
+        arrays = det[:14] + (np.array([det[14]]),) + det[15:] + buf
+        dims = []
+        for a in arrays:
+            dims += list(a.shape) + [0] * (3 - a.ndim)
+        table = Pinned(arrays, dims)
+        self._dtab = (det, buf, table)
+        return table.table
 
     def _grow(self) -> None:
         """Double the detector's buffers (the kernel found them too small)."""

@@ -56,7 +56,7 @@ from .free_step import FINITE, free_step, HAS_POSITION_FORCES, outputs, state_pa
 from .layout import O_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_KIND, W_POINT, W_TORQUE, WRENCH_APPLIED
 from .so3 import quat_exp_multiply, quat_matrix
 from .sparse_box import block_product, mprgp
-from .views import raw_tree
+from .views import pinned, pinned_int, raw_tree
 
 #: Slots of the tolerances ``prm`` (the constants of :mod:`..contact_step`).
 (P_LOCATION, P_RATE, P_FRICTION_TOLERANCE, P_FRICTION_ITERATIONS, P_PROXIMAL,
@@ -149,6 +149,47 @@ def detect(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, d
             pt[j, a], nr[j, a] = points[j, a], normals[j, a]
         dp[j] = depths[j]
     return count, sa, sb, ba, bb, pt, nr, dp
+
+
+#: :func:`detect`'s ``det`` (its 16 arrays and its margin, as an array of one) and ``buf``
+#: (10 arrays) in one :class:`.views.Pinned` table (``ContactSteps._detector_table``): slot
+#: ``k < DT_ARRAYS`` the address of array ``k``, ``DT_DIMS + 3 k`` its dimensions (up to
+#: three). The contact steps pass it in ``ctx`` where they passed the 26 arrays: every
+#: call with ``ctx`` moved about 200 words more for them, and the step makes many.
+DT_ARRAYS = 27
+DT_DIMS = DT_ARRAYS
+
+
+@njit(cache=True, inline='always')
+def _dim(tab: np.ndarray, k: int, x: int) -> int:
+    """Return dimension ``x`` of the table's array ``k``."""
+    return tab[DT_DIMS + 3 * k + x]
+
+
+@njit(cache=True, inline='always')
+def _detector(tab: np.ndarray) -> tuple:
+    """Return :func:`detect`'s ``(det, buf)`` as views of the table's arrays (:data:`DT_ARRAYS`)."""
+    det = (pinned_int(tab, 0, (_dim(tab, 0, 0),)),
+           pinned(tab, 1, (_dim(tab, 1, 0), _dim(tab, 1, 1))),
+           pinned(tab, 2, (_dim(tab, 2, 0), _dim(tab, 2, 1))),
+           pinned(tab, 3, (_dim(tab, 3, 0), _dim(tab, 3, 1), _dim(tab, 3, 2))),
+           pinned_int(tab, 4, (_dim(tab, 4, 0),)), pinned_int(tab, 5, (_dim(tab, 5, 0),)),
+           pinned_int(tab, 6, (_dim(tab, 6, 0),)), pinned_int(tab, 7, (_dim(tab, 7, 0),)),
+           pinned_int(tab, 8, (_dim(tab, 8, 0),)), pinned_int(tab, 9, (_dim(tab, 9, 0),)),
+           pinned_int(tab, 10, (_dim(tab, 10, 0),)), pinned_int(tab, 11, (_dim(tab, 11, 0),)),
+           pinned_int(tab, 12, (_dim(tab, 12, 0),)), pinned_int(tab, 13, (_dim(tab, 13, 0),)),
+           pinned(tab, 14, (1,))[0], pinned(tab, 15, (_dim(tab, 15, 0),)),
+           pinned_int(tab, 16, (_dim(tab, 16, 0),)))
+    buf = (pinned_int(tab, 17, (_dim(tab, 17, 0), _dim(tab, 17, 1))),
+           pinned_int(tab, 18, (_dim(tab, 18, 0), _dim(tab, 18, 1))),
+           pinned(tab, 19, (_dim(tab, 19, 0), _dim(tab, 19, 1))),
+           pinned(tab, 20, (_dim(tab, 20, 0), _dim(tab, 20, 1))),
+           pinned(tab, 21, (_dim(tab, 21, 0),)), pinned_int(tab, 22, (_dim(tab, 22, 0),)),
+           pinned(tab, 23, (_dim(tab, 23, 0), _dim(tab, 23, 1))),
+           pinned(tab, 24, (_dim(tab, 24, 0), _dim(tab, 24, 1))),
+           pinned(tab, 25, (_dim(tab, 25, 0), _dim(tab, 25, 1))),
+           pinned(tab, 26, (_dim(tab, 26, 0), _dim(tab, 26, 1), _dim(tab, 26, 2))))
+    return det, buf
 
 
 @njit(cache=True)
@@ -2362,7 +2403,7 @@ def _advance(method: int, y0: np.ndarray, h: float, model: tuple, nw: int, flags
 def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: int,
                   dt: float, method: int, model: tuple, n_applied: int, flags: int,
                   kick: np.ndarray, counts: np.ndarray, steps_slot: int, ws: np.ndarray,
-                  frames: np.ndarray, out: np.ndarray, det: tuple, buf: tuple,
+                  frames: np.ndarray, out: np.ndarray, dtab: np.ndarray,
                   shape_mu: np.ndarray, shape_e: np.ndarray, radius: np.ndarray, warm: tuple,
                   prm: np.ndarray, cnt: np.ndarray, log: np.ndarray, minv: np.ndarray) -> tuple:
     """
@@ -2370,7 +2411,8 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
 
     Step ``k`` ends at ``base + (steps0 + k + 1) dt`` (the simulation's clock).
     ``model``: ``(body, gforce, wbuf)``, ``wbuf`` (k + n, W_WIDTH) the applied wrench
-    rows (first ``n_applied``) and room for one contact wrench per body; ``warm``:
+    rows (first ``n_applied``) and room for one contact wrench per body; ``dtab``:
+    :func:`detect`'s ``det`` and ``buf`` as one table (:data:`DT_ARRAYS`); ``warm``:
     ``(shape_a, shape_b, point, p_n)`` of the last step's rows; ``log`` (L, 5): the
     impacts, a row each (time, shape a, shape b, approach, rebound). Returns ``(taken,
     code, y, warm, record, impacts)``: the steps taken (``y`` the state after them;
@@ -2379,10 +2421,11 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
     ``(sel, force, contacts at its start, its start's state buffer, its time)`` and the
     rows of ``log`` written.
     """
-    # (Every helper takes ctx; its ~40 arrays, as raw views, are passed on uncounted.
-    # All are arguments, alive for the call; none is returned.)
+    # (Every helper takes ctx; its arrays, as raw views, are passed on uncounted. All are
+    # arguments, alive for the call; none is returned. The detector's 26 arrays are one
+    # table in it, of which _detect_ctx makes views where it detects.)
     ctx = raw_tree((method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out,
-                    det, buf, shape_mu, shape_e, radius, prm, minv, dt))
+                    dtab, shape_mu, shape_e, radius, prm, minv, dt))
     cnt, log = raw_tree((cnt, log))
     y, t = y0, t0
     # (made once a call, not once a step: the record of no rows, and a step's counters)
@@ -2414,18 +2457,16 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
 
 @njit(cache=True, inline='always')
 def _advance_ctx(ctx: tuple, y0: np.ndarray, h: float, nw: int, flags: int) -> tuple:
-    """Return :func:`_advance` with the arrays of ``ctx``."""
-    (method, model, n_applied, _, kick, counts, steps_slot, ws, frames, out, det, buf,
-     shape_mu, shape_e, radius, prm, minv, dt) = ctx
-    return _advance(method, y0, h, model, nw, flags, kick, counts, steps_slot, ws, frames)
+    """Return :func:`_advance` with the arrays of ``ctx`` (by index: no name for the rest)."""
+    return _advance(ctx[0], y0, h, ctx[1], nw, flags, ctx[4], ctx[5], ctx[6], ctx[7], ctx[8])
 
 
 @njit(cache=True, inline='always')
 def _detect_ctx(ctx: tuple, y: np.ndarray) -> tuple:
     """Return :func:`detect` at state buffer ``y`` with the arrays of ``ctx``."""
-    det, buf, frames, out = ctx[10], ctx[11], ctx[8], ctx[9]
+    det, buf = _detector(ctx[10])
     pos, quat, vel, om = state_parts(y)
-    return detect(pos, quat, vel, om, det, buf, frames, out)
+    return detect(pos, quat, vel, om, det, buf, ctx[8], ctx[9])
 
 
 @njit(cache=True, inline='always')
@@ -2436,7 +2477,7 @@ def _make_rows(ctx: tuple, y: np.ndarray, con: tuple, sel: np.ndarray) -> tuple:
     R = rotations(quat)
     ba_s, bb_s = ba[sel], bb[sel]
     frame, la, lb, mu, e, sliding, vn, Ga, Gb = rows(pos, vel, om, R, sel, ba, bb, pt, nr, sa,
-                                                     sb, ctx[12], ctx[13], ctx[15][P_RATE],
+                                                     sb, ctx[11], ctx[12], ctx[14][P_RATE],
                                                      ba_s, bb_s)
     return sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba_s, bb_s
 
@@ -2484,8 +2525,8 @@ def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
     pos0, quat0, _, _ = state_parts(r_y)
     pos1, quat1, _, _ = state_parts(y)
     return match(r_sel, sa0, sb0, ba0, pt0, pos0, rotations(quat0),
-                 which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), ctx[14],
-                 ctx[12].shape[0] + 1, also)
+                 which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), ctx[13],
+                 ctx[11].shape[0] + 1, also)
 
 
 @njit(cache=True, inline='always')
@@ -2500,8 +2541,8 @@ def _flight(ctx: tuple, y0: np.ndarray, cnt: np.ndarray) -> tuple:
     path takes the step. (Measured: a body in flight, 6 to 8 us a step through the
     general path; about the free step and the detection alone here.)
     """
-    prm = ctx[15]
-    free, finite = _advance_ctx(ctx, y0, ctx[17], ctx[2], ctx[3])
+    prm = ctx[14]
+    free, finite = _advance_ctx(ctx, y0, ctx[16], ctx[2], ctx[3])
     if not finite or prm[P_MAX_EVENTS] < 1.0:
         return False, free, _no_contacts(0)
     con1 = _detect_ctx(ctx, free)
@@ -2534,7 +2575,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     flags); ``cnt``: room for the step's counters (overwritten; added to ``cnt_total``
     when the step is taken).
     """
-    prm, dt = ctx[15], ctx[17]
+    prm, dt = ctx[14], ctx[16]
     loc, unlocated = prm[P_LOCATION], prm[P_UNLOCATED]
     max_events, max_bounces = int(prm[P_MAX_EVENTS]), int(prm[P_MAX_BOUNCES])
     cnt[:] = 0.0
@@ -2630,8 +2671,8 @@ def _in_margin(ctx: tuple, y: np.ndarray, con: tuple) -> tuple:
 
     Those touching while ``P_UNLOCATED`` is 0, else every contact of ``con``.
     """
-    if ctx[15][P_UNLOCATED] <= 0.0:
-        return _make_rows(ctx, y, con, _at_least(con[7], -ctx[15][P_LOCATION]))
+    if ctx[14][P_UNLOCATED] <= 0.0:
+        return _make_rows(ctx, y, con, _at_least(con[7], -ctx[14][P_LOCATION]))
     return _make_rows(ctx, y, con, np.arange(con[0]))
 
 
@@ -2689,7 +2730,7 @@ def _step_rows(ctx: tuple, con: tuple, near: tuple) -> tuple:
     while ``P_UNLOCATED`` is positive, the contacts apart within the margin that close
     slower than it (their rows ask the step to close at most their gap: ``_held``).
     """
-    prm = ctx[15]
+    prm = ctx[14]
     slow = prm[P_UNLOCATED]
     if slow <= 0.0:
         return _subset(near, _where(near[7] <= prm[P_RATE]))
@@ -2706,7 +2747,7 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
     """
     con, r = raw_tree((con, r))   # (y, which may be returned, is not borrowed)
     sel, frame, la, lb, mu, e, sliding, vn_, Ga, Gb, ba, bb = r
-    prm, minv = ctx[15], ctx[16]
+    prm, minv = ctx[14], ctx[15]
     rate = prm[P_RATE]
     pos, quat, vel, om = state_parts(y)
     c = sel.shape[0]
@@ -2783,8 +2824,9 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     hold them); ``matched`` :func:`_known`'s match of the rows on the contacts at ``new``
     where the model's check made it (``(known, held, True)``; else not made, False).
     """
-    (method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out, det, buf,
-     shape_mu, shape_e, radius, prm, minv, dt) = ctx
+    # (the entries of ctx this reads, by index: no name for the rest)
+    model, n_applied, flags = ctx[1], ctx[2], ctx[3]
+    shape_mu, radius, prm, minv = ctx[11], ctx[13], ctx[14], ctx[15]
     wbuf = model[2]
     # The arguments the result holds (con, y0, sel in the record; warm when the step is
     # not taken) stay counted; the rest are read through uncounted views (alive for the
@@ -2953,10 +2995,10 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndar
     with the forces held (``wbuf[:nw]``); ``τ = 0`` when the new contact overlaps at
     ``y0`` already; ``ov``: the overlaps ``y0`` has that are not rows (not new).
     """
-    prm = ctx[15]
+    prm = ctx[14]
     con, sel, ov = raw_tree((con, sel, ov))   # (y0, which may be returned, is not borrowed)
     loc, rate = prm[P_LOCATION], prm[P_RATE]
-    margin = ctx[10][14]
+    margin = pinned(ctx[10], 14, (1,))[0]
     g0, code = _new_depth(ctx, con, sel, ov, y0, con, y0, margin)
     if code != DONE:
         return code, y0, 0.0
@@ -3060,7 +3102,7 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
     counted); the loaded
     contacts' normal rates within ``HOLD_RATE`` of zero are set to zero.
     """
-    prm, minv = ctx[15], ctx[16]
+    prm, minv = ctx[14], ctx[15]
     loc = prm[P_LOCATION]
     # (record and held0 are read, never returned: passed on uncounted; y and con may be)
     record, held0 = raw_tree((record, held0))
