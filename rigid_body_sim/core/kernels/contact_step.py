@@ -56,7 +56,7 @@ from .free_step import FINITE, free_step, HAS_POSITION_FORCES, outputs, state_pa
 from .layout import O_WIDTH, W_BODY, W_FORCE, W_IN_BODY, W_KIND, W_POINT, W_TORQUE, WRENCH_APPLIED
 from .so3 import quat_exp_multiply, quat_matrix
 from .sparse_box import block_product, mprgp
-from .views import pinned, pinned_int, raw_tree
+from .views import address, pinned, pinned_int, raw_tree
 
 #: Slots of the tolerances ``prm`` (the constants of :mod:`..contact_step`).
 (P_LOCATION, P_RATE, P_FRICTION_TOLERANCE, P_FRICTION_ITERATIONS, P_PROXIMAL,
@@ -151,6 +151,117 @@ def detect(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, d
     return count, sa, sb, ba, bb, pt, nr, dp
 
 
+#: The slots of the contact steps' table of their arrays (:func:`_arrays_table`; ``ctx[5]``):
+#: slot ``k < MT_ARRAYS`` the address of array ``k``, ``MT_ARRAYS + 2 k`` its two
+#: dimensions (1: a vector). ``ctx`` is ``(method, n_applied, flags, steps_slot, dt,
+#: this table, the detector's table)``: a call with it moves a dozen words, not the
+#: hundreds of its arrays' descriptions, and counts no references.
+(MT_BODY, MT_GFORCE, MT_WBUF, MT_KICK, MT_COUNTS, MT_WS, MT_FRAMES, MT_OUT, MT_MU, MT_E,
+ MT_RADIUS, MT_PRM, MT_MINV, MT_ARRAYS) = range(14)
+
+
+@njit(cache=True, inline='always')
+def _slot(mt: np.ndarray, k: int, a: np.ndarray) -> None:
+    """Set the table's slot ``k``: array ``a``'s address and its dimensions."""
+    mt[k] = address(a)
+    mt[MT_ARRAYS + 2 * k] = a.shape[0]
+    mt[MT_ARRAYS + 2 * k + 1] = 1 if a.ndim == 1 else a.shape[a.ndim - 1]
+
+
+@njit(cache=True, inline='always')
+def _arrays_table(model: tuple, kick: np.ndarray, counts: np.ndarray, ws: np.ndarray,
+                  frames: np.ndarray, out: np.ndarray, shape_mu: np.ndarray,
+                  shape_e: np.ndarray, radius: np.ndarray, prm: np.ndarray,
+                  minv: np.ndarray) -> np.ndarray:
+    """Return the table of the contact steps' arrays (:data:`MT_ARRAYS`)."""
+    mt = np.empty(3 * MT_ARRAYS, dtype=np.int64)
+    _slot(mt, MT_BODY, model[0])
+    _slot(mt, MT_GFORCE, model[1])
+    _slot(mt, MT_WBUF, model[2])
+    _slot(mt, MT_KICK, kick)
+    _slot(mt, MT_COUNTS, counts)
+    _slot(mt, MT_WS, ws)
+    _slot(mt, MT_FRAMES, frames)
+    _slot(mt, MT_OUT, out)
+    _slot(mt, MT_MU, shape_mu)
+    _slot(mt, MT_E, shape_e)
+    _slot(mt, MT_RADIUS, radius)
+    _slot(mt, MT_PRM, prm)
+    _slot(mt, MT_MINV, minv)
+    return mt
+
+
+@njit(cache=True, inline='always')
+def _matrix(ctx: tuple, k: int) -> np.ndarray:
+    """Return the table's array ``k`` (two dimensions) as a view."""
+    mt = ctx[5]
+    return pinned(mt, k, (mt[MT_ARRAYS + 2 * k], mt[MT_ARRAYS + 2 * k + 1]))
+
+
+@njit(cache=True, inline='always')
+def _vector(ctx: tuple, k: int) -> np.ndarray:
+    """Return the table's array ``k`` (one dimension) as a view."""
+    mt = ctx[5]
+    return pinned(mt, k, (mt[MT_ARRAYS + 2 * k],))
+
+
+@njit(cache=True, inline='always')
+def _cx_model(ctx: tuple) -> tuple:
+    """Return ``(body, gforce, wbuf)``: the model :func:`_advance` takes."""
+    return _matrix(ctx, MT_BODY), _matrix(ctx, MT_GFORCE), _matrix(ctx, MT_WBUF)
+
+
+@njit(cache=True, inline='always')
+def _cx_kick(ctx: tuple) -> np.ndarray:
+    return _matrix(ctx, MT_KICK)
+
+
+@njit(cache=True, inline='always')
+def _cx_counts(ctx: tuple) -> np.ndarray:
+    mt = ctx[5]
+    return pinned_int(mt, MT_COUNTS, (mt[MT_ARRAYS + 2 * MT_COUNTS],))
+
+
+@njit(cache=True, inline='always')
+def _cx_ws(ctx: tuple) -> np.ndarray:
+    return _vector(ctx, MT_WS)
+
+
+@njit(cache=True, inline='always')
+def _cx_frames(ctx: tuple) -> np.ndarray:
+    return _matrix(ctx, MT_FRAMES)
+
+
+@njit(cache=True, inline='always')
+def _cx_out(ctx: tuple) -> np.ndarray:
+    return _matrix(ctx, MT_OUT)
+
+
+@njit(cache=True, inline='always')
+def _cx_mu(ctx: tuple) -> np.ndarray:
+    return _vector(ctx, MT_MU)
+
+
+@njit(cache=True, inline='always')
+def _cx_e(ctx: tuple) -> np.ndarray:
+    return _vector(ctx, MT_E)
+
+
+@njit(cache=True, inline='always')
+def _cx_radius(ctx: tuple) -> np.ndarray:
+    return _vector(ctx, MT_RADIUS)
+
+
+@njit(cache=True, inline='always')
+def _cx_prm(ctx: tuple) -> np.ndarray:
+    return _vector(ctx, MT_PRM)
+
+
+@njit(cache=True, inline='always')
+def _cx_minv(ctx: tuple) -> np.ndarray:
+    return _matrix(ctx, MT_MINV)
+
+
 #: :func:`detect`'s ``det`` (its 16 arrays and its margin, as an array of one) and ``buf``
 #: (10 arrays) in one :class:`.views.Pinned` table (``ContactSteps._detector_table``): slot
 #: ``k < DT_ARRAYS`` the address of array ``k``, ``DT_DIMS + 3 k`` its dimensions (up to
@@ -168,7 +279,7 @@ def _dim(tab: np.ndarray, k: int, x: int) -> int:
 
 @njit(cache=True, inline='always')
 def _detector(tab: np.ndarray) -> tuple:
-    """Return :func:`detect`'s ``(det, buf)`` as views of the table's arrays (:data:`DT_ARRAYS`)."""
+    """Return :func:`detect`'s ``(det, buf)``: views of the table's arrays (:data:`DT_ARRAYS`)."""
     det = (pinned_int(tab, 0, (_dim(tab, 0, 0),)),
            pinned(tab, 1, (_dim(tab, 1, 0), _dim(tab, 1, 1))),
            pinned(tab, 2, (_dim(tab, 2, 0), _dim(tab, 2, 1))),
@@ -2421,11 +2532,12 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
     ``(sel, force, contacts at its start, its start's state buffer, its time)`` and the
     rows of ``log`` written.
     """
-    # (Every helper takes ctx; its arrays, as raw views, are passed on uncounted. All are
-    # arguments, alive for the call; none is returned. The detector's 26 arrays are one
-    # table in it, of which _detect_ctx makes views where it detects.)
-    ctx = raw_tree((method, model, n_applied, flags, kick, counts, steps_slot, ws, frames, out,
-                    dtab, shape_mu, shape_e, radius, prm, minv, dt))
+    # (Every helper takes ctx: the call's numbers and two tables, of its arrays (its
+    # arguments, alive for the call) and of the detector's, of which the helpers make
+    # views where they read them, uncounted. None is returned.)
+    ctx = (method, n_applied, flags, steps_slot, dt,
+           _arrays_table(model, kick, counts, ws, frames, out, shape_mu, shape_e, radius, prm,
+                         minv), raw_tree(dtab))
     cnt, log = raw_tree((cnt, log))
     y, t = y0, t0
     # (made once a call, not once a step: the record of no rows, and a step's counters)
@@ -2458,15 +2570,16 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
 @njit(cache=True, inline='always')
 def _advance_ctx(ctx: tuple, y0: np.ndarray, h: float, nw: int, flags: int) -> tuple:
     """Return :func:`_advance` with the arrays of ``ctx`` (by index: no name for the rest)."""
-    return _advance(ctx[0], y0, h, ctx[1], nw, flags, ctx[4], ctx[5], ctx[6], ctx[7], ctx[8])
+    return _advance(ctx[0], y0, h, _cx_model(ctx), nw, flags, _cx_kick(ctx), _cx_counts(ctx),
+                    ctx[3], _cx_ws(ctx), _cx_frames(ctx))
 
 
 @njit(cache=True, inline='always')
 def _detect_ctx(ctx: tuple, y: np.ndarray) -> tuple:
     """Return :func:`detect` at state buffer ``y`` with the arrays of ``ctx``."""
-    det, buf = _detector(ctx[10])
+    det, buf = _detector(ctx[6])
     pos, quat, vel, om = state_parts(y)
-    return detect(pos, quat, vel, om, det, buf, ctx[8], ctx[9])
+    return detect(pos, quat, vel, om, det, buf, _cx_frames(ctx), _cx_out(ctx))
 
 
 @njit(cache=True, inline='always')
@@ -2477,7 +2590,8 @@ def _make_rows(ctx: tuple, y: np.ndarray, con: tuple, sel: np.ndarray) -> tuple:
     R = rotations(quat)
     ba_s, bb_s = ba[sel], bb[sel]
     frame, la, lb, mu, e, sliding, vn, Ga, Gb = rows(pos, vel, om, R, sel, ba, bb, pt, nr, sa,
-                                                     sb, ctx[11], ctx[12], ctx[14][P_RATE],
+                                                     sb, _cx_mu(ctx), _cx_e(ctx),
+                                                     _cx_prm(ctx)[P_RATE],
                                                      ba_s, bb_s)
     return sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba_s, bb_s
 
@@ -2525,8 +2639,8 @@ def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
     pos0, quat0, _, _ = state_parts(r_y)
     pos1, quat1, _, _ = state_parts(y)
     return match(r_sel, sa0, sb0, ba0, pt0, pos0, rotations(quat0),
-                 which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), ctx[13],
-                 ctx[11].shape[0] + 1, also)
+                 which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), _cx_radius(ctx),
+                 _cx_mu(ctx).shape[0] + 1, also)
 
 
 @njit(cache=True, inline='always')
@@ -2541,8 +2655,8 @@ def _flight(ctx: tuple, y0: np.ndarray, cnt: np.ndarray) -> tuple:
     path takes the step. (Measured: a body in flight, 6 to 8 us a step through the
     general path; about the free step and the detection alone here.)
     """
-    prm = ctx[14]
-    free, finite = _advance_ctx(ctx, y0, ctx[16], ctx[2], ctx[3])
+    prm = _cx_prm(ctx)
+    free, finite = _advance_ctx(ctx, y0, ctx[4], ctx[1], ctx[2])
     if not finite or prm[P_MAX_EVENTS] < 1.0:
         return False, free, _no_contacts(0)
     con1 = _detect_ctx(ctx, free)
@@ -2575,7 +2689,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     flags); ``cnt``: room for the step's counters (overwritten; added to ``cnt_total``
     when the step is taken).
     """
-    prm, dt = ctx[14], ctx[16]
+    prm, dt = _cx_prm(ctx), ctx[4]
     loc, unlocated = prm[P_LOCATION], prm[P_UNLOCATED]
     max_events, max_bounces = int(prm[P_MAX_EVENTS]), int(prm[P_MAX_BOUNCES])
     cnt[:] = 0.0
@@ -2671,8 +2785,8 @@ def _in_margin(ctx: tuple, y: np.ndarray, con: tuple) -> tuple:
 
     Those touching while ``P_UNLOCATED`` is 0, else every contact of ``con``.
     """
-    if ctx[14][P_UNLOCATED] <= 0.0:
-        return _make_rows(ctx, y, con, _at_least(con[7], -ctx[14][P_LOCATION]))
+    if _cx_prm(ctx)[P_UNLOCATED] <= 0.0:
+        return _make_rows(ctx, y, con, _at_least(con[7], -_cx_prm(ctx)[P_LOCATION]))
     return _make_rows(ctx, y, con, np.arange(con[0]))
 
 
@@ -2730,7 +2844,7 @@ def _step_rows(ctx: tuple, con: tuple, near: tuple) -> tuple:
     while ``P_UNLOCATED`` is positive, the contacts apart within the margin that close
     slower than it (their rows ask the step to close at most their gap: ``_held``).
     """
-    prm = ctx[14]
+    prm = _cx_prm(ctx)
     slow = prm[P_UNLOCATED]
     if slow <= 0.0:
         return _subset(near, _where(near[7] <= prm[P_RATE]))
@@ -2747,7 +2861,7 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
     """
     con, r = raw_tree((con, r))   # (y, which may be returned, is not borrowed)
     sel, frame, la, lb, mu, e, sliding, vn_, Ga, Gb, ba, bb = r
-    prm, minv = ctx[14], ctx[15]
+    prm, minv = _cx_prm(ctx), _cx_minv(ctx)
     rate = prm[P_RATE]
     pos, quat, vel, om = state_parts(y)
     c = sel.shape[0]
@@ -2825,8 +2939,8 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     where the model's check made it (``(known, held, True)``; else not made, False).
     """
     # (the entries of ctx this reads, by index: no name for the rest)
-    model, n_applied, flags = ctx[1], ctx[2], ctx[3]
-    shape_mu, radius, prm, minv = ctx[11], ctx[13], ctx[14], ctx[15]
+    model, n_applied, flags = _cx_model(ctx), ctx[1], ctx[2]
+    shape_mu, radius, prm, minv = _cx_mu(ctx), _cx_radius(ctx), _cx_prm(ctx), _cx_minv(ctx)
     wbuf = model[2]
     # The arguments the result holds (con, y0, sel in the record; warm when the step is
     # not taken) stay counted; the rest are read through uncounted views (alive for the
@@ -2995,10 +3109,10 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndar
     with the forces held (``wbuf[:nw]``); ``τ = 0`` when the new contact overlaps at
     ``y0`` already; ``ov``: the overlaps ``y0`` has that are not rows (not new).
     """
-    prm = ctx[14]
+    prm = _cx_prm(ctx)
     con, sel, ov = raw_tree((con, sel, ov))   # (y0, which may be returned, is not borrowed)
     loc, rate = prm[P_LOCATION], prm[P_RATE]
-    margin = pinned(ctx[10], 14, (1,))[0]
+    margin = pinned(ctx[6], 14, (1,))[0]
     g0, code = _new_depth(ctx, con, sel, ov, y0, con, y0, margin)
     if code != DONE:
         return code, y0, 0.0
@@ -3102,7 +3216,7 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
     counted); the loaded
     contacts' normal rates within ``HOLD_RATE`` of zero are set to zero.
     """
-    prm, minv = ctx[14], ctx[15]
+    prm, minv = _cx_prm(ctx), _cx_minv(ctx)
     loc = prm[P_LOCATION]
     # (record and held0 are read, never returned: passed on uncounted; y and con may be)
     record, held0 = raw_tree((record, held0))

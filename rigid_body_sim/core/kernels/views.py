@@ -50,6 +50,18 @@ def _pointer_at(dtype):
 _float_at, _int_at = _pointer_at(types.float64), _pointer_at(types.int64)
 
 
+@intrinsic
+def address(typingctx, arr):
+    """Return the address of the C-contiguous ``arr``'s data (an integer: a table's slot)."""
+    if not isinstance(arr, types.Array) or arr.layout != 'C':
+        return None
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        return builder.ptrtoint(ary.data, context.get_value_type(types.int64))
+    return types.int64(arr), codegen
+
+
 @njit(cache=True)
 def raw(a: np.ndarray) -> np.ndarray:
     """
@@ -141,6 +153,11 @@ if numba.config.DISABLE_JIT:
         return _PINNED[int(table[slot])].reshape(-1)[:math.prod(shape)].reshape(shape)
 
     pinned_int = pinned   # noqa: F811
+
+    def address(a: np.ndarray) -> int:   # noqa: F811
+        at = a.__array_interface__['data'][0]
+        _PINNED[at] = a
+        return at
 
     def raw_tree(tree: tuple) -> tuple:   # noqa: F811
         return tree
