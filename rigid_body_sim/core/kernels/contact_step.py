@@ -155,7 +155,8 @@ def detect(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, om: np.ndarray, d
 #: slot ``k < MT_ARRAYS`` the address of array ``k``, ``MT_ARRAYS + 2 k`` its two
 #: dimensions (1: a vector). ``ctx`` is ``(method, n_applied, flags, steps_slot, dt,
 #: this table, the detector's table)``: a call with it moves a dozen words, not the
-#: hundreds of its arrays' descriptions, and counts no references.
+#: hundreds of its arrays' descriptions, and counts one reference (the table's), not
+#: one for each array.
 (MT_BODY, MT_GFORCE, MT_WBUF, MT_KICK, MT_COUNTS, MT_WS, MT_FRAMES, MT_OUT, MT_MU, MT_E,
  MT_RADIUS, MT_PRM, MT_MINV, MT_ARRAYS) = range(14)
 
