@@ -194,7 +194,7 @@ def _arrays_table(model: tuple, kick: np.ndarray, counts: np.ndarray, ws: np.nda
 
 @njit(cache=True, inline='always')
 def _matrix(ctx: tuple, k: int) -> np.ndarray:
-    """Return the table's array ``k`` (two dimensions) as a view."""
+    """Return the table's array ``k`` (two dimensions; ``MT_*``) as a view."""
     mt = ctx[5]
     return pinned(mt, k, (mt[MT_ARRAYS + 2 * k], mt[MT_ARRAYS + 2 * k + 1]))
 
@@ -213,54 +213,10 @@ def _cx_model(ctx: tuple) -> tuple:
 
 
 @njit(cache=True, inline='always')
-def _cx_kick(ctx: tuple) -> np.ndarray:
-    return _matrix(ctx, MT_KICK)
-
-
-@njit(cache=True, inline='always')
 def _cx_counts(ctx: tuple) -> np.ndarray:
+    """Return the work tally (int64; :data:`MT_COUNTS`) as a view."""
     mt = ctx[5]
     return pinned_int(mt, MT_COUNTS, (mt[MT_ARRAYS + 2 * MT_COUNTS],))
-
-
-@njit(cache=True, inline='always')
-def _cx_ws(ctx: tuple) -> np.ndarray:
-    return _vector(ctx, MT_WS)
-
-
-@njit(cache=True, inline='always')
-def _cx_frames(ctx: tuple) -> np.ndarray:
-    return _matrix(ctx, MT_FRAMES)
-
-
-@njit(cache=True, inline='always')
-def _cx_out(ctx: tuple) -> np.ndarray:
-    return _matrix(ctx, MT_OUT)
-
-
-@njit(cache=True, inline='always')
-def _cx_mu(ctx: tuple) -> np.ndarray:
-    return _vector(ctx, MT_MU)
-
-
-@njit(cache=True, inline='always')
-def _cx_e(ctx: tuple) -> np.ndarray:
-    return _vector(ctx, MT_E)
-
-
-@njit(cache=True, inline='always')
-def _cx_radius(ctx: tuple) -> np.ndarray:
-    return _vector(ctx, MT_RADIUS)
-
-
-@njit(cache=True, inline='always')
-def _cx_prm(ctx: tuple) -> np.ndarray:
-    return _vector(ctx, MT_PRM)
-
-
-@njit(cache=True, inline='always')
-def _cx_minv(ctx: tuple) -> np.ndarray:
-    return _matrix(ctx, MT_MINV)
 
 
 #: :func:`detect`'s ``det`` (its 16 arrays and its margin, as an array of one) and ``buf``
@@ -2571,8 +2527,8 @@ def contact_steps(n_steps: int, y0: np.ndarray, t0: float, base: float, steps0: 
 @njit(cache=True, inline='always')
 def _advance_ctx(ctx: tuple, y0: np.ndarray, h: float, nw: int, flags: int) -> tuple:
     """Return :func:`_advance` with the arrays of ``ctx`` (by index: no name for the rest)."""
-    return _advance(ctx[0], y0, h, _cx_model(ctx), nw, flags, _cx_kick(ctx), _cx_counts(ctx),
-                    ctx[3], _cx_ws(ctx), _cx_frames(ctx))
+    return _advance(ctx[0], y0, h, _cx_model(ctx), nw, flags, _matrix(ctx, MT_KICK),
+                    _cx_counts(ctx), ctx[3], _vector(ctx, MT_WS), _matrix(ctx, MT_FRAMES))
 
 
 @njit(cache=True, inline='always')
@@ -2580,7 +2536,7 @@ def _detect_ctx(ctx: tuple, y: np.ndarray) -> tuple:
     """Return :func:`detect` at state buffer ``y`` with the arrays of ``ctx``."""
     det, buf = _detector(ctx[6])
     pos, quat, vel, om = state_parts(y)
-    return detect(pos, quat, vel, om, det, buf, _cx_frames(ctx), _cx_out(ctx))
+    return detect(pos, quat, vel, om, det, buf, _matrix(ctx, MT_FRAMES), _matrix(ctx, MT_OUT))
 
 
 @njit(cache=True, inline='always')
@@ -2591,8 +2547,8 @@ def _make_rows(ctx: tuple, y: np.ndarray, con: tuple, sel: np.ndarray) -> tuple:
     R = rotations(quat)
     ba_s, bb_s = ba[sel], bb[sel]
     frame, la, lb, mu, e, sliding, vn, Ga, Gb = rows(pos, vel, om, R, sel, ba, bb, pt, nr, sa,
-                                                     sb, _cx_mu(ctx), _cx_e(ctx),
-                                                     _cx_prm(ctx)[P_RATE],
+                                                     sb, _vector(ctx, MT_MU), _vector(ctx, MT_E),
+                                                     _vector(ctx, MT_PRM)[P_RATE],
                                                      ba_s, bb_s)
     return sel, frame, la, lb, mu, e, sliding, vn, Ga, Gb, ba_s, bb_s
 
@@ -2640,8 +2596,8 @@ def _continuing(ctx: tuple, r_con: tuple, r_sel: np.ndarray, r_y: np.ndarray,
     pos0, quat0, _, _ = state_parts(r_y)
     pos1, quat1, _, _ = state_parts(y)
     return match(r_sel, sa0, sb0, ba0, pt0, pos0, rotations(quat0),
-                 which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), _cx_radius(ctx),
-                 _cx_mu(ctx).shape[0] + 1, also)
+                 which, sa1, sb1, ba1, pt1, pos1, rotations(quat1), _vector(ctx, MT_RADIUS),
+                 _vector(ctx, MT_MU).shape[0] + 1, also)
 
 
 @njit(cache=True, inline='always')
@@ -2656,7 +2612,7 @@ def _flight(ctx: tuple, y0: np.ndarray, cnt: np.ndarray) -> tuple:
     path takes the step. (Measured: a body in flight, 6 to 8 us a step through the
     general path; about the free step and the detection alone here.)
     """
-    prm = _cx_prm(ctx)
+    prm = _vector(ctx, MT_PRM)
     free, finite = _advance_ctx(ctx, y0, ctx[4], ctx[1], ctx[2])
     if not finite or prm[P_MAX_EVENTS] < 1.0:
         return False, free, _no_contacts(0)
@@ -2690,7 +2646,7 @@ def _step(y0: np.ndarray, t0: float, t_end: float, ctx: tuple, warm: tuple,
     flags); ``cnt``: room for the step's counters (overwritten; added to ``cnt_total``
     when the step is taken).
     """
-    prm, dt = _cx_prm(ctx), ctx[4]
+    prm, dt = _vector(ctx, MT_PRM), ctx[4]
     loc, unlocated = prm[P_LOCATION], prm[P_UNLOCATED]
     max_events, max_bounces = int(prm[P_MAX_EVENTS]), int(prm[P_MAX_BOUNCES])
     cnt[:] = 0.0
@@ -2786,8 +2742,8 @@ def _in_margin(ctx: tuple, y: np.ndarray, con: tuple) -> tuple:
 
     Those touching while ``P_UNLOCATED`` is 0, else every contact of ``con``.
     """
-    if _cx_prm(ctx)[P_UNLOCATED] <= 0.0:
-        return _make_rows(ctx, y, con, _at_least(con[7], -_cx_prm(ctx)[P_LOCATION]))
+    if _vector(ctx, MT_PRM)[P_UNLOCATED] <= 0.0:
+        return _make_rows(ctx, y, con, _at_least(con[7], -_vector(ctx, MT_PRM)[P_LOCATION]))
     return _make_rows(ctx, y, con, np.arange(con[0]))
 
 
@@ -2845,7 +2801,7 @@ def _step_rows(ctx: tuple, con: tuple, near: tuple) -> tuple:
     while ``P_UNLOCATED`` is positive, the contacts apart within the margin that close
     slower than it (their rows ask the step to close at most their gap: ``_held``).
     """
-    prm = _cx_prm(ctx)
+    prm = _vector(ctx, MT_PRM)
     slow = prm[P_UNLOCATED]
     if slow <= 0.0:
         return _subset(near, _where(near[7] <= prm[P_RATE]))
@@ -2862,7 +2818,7 @@ def _impact(ctx: tuple, y: np.ndarray, t: float, con: tuple, r: tuple, inelastic
     """
     con, r = raw_tree((con, r))   # (y, which may be returned, is not borrowed)
     sel, frame, la, lb, mu, e, sliding, vn_, Ga, Gb, ba, bb = r
-    prm, minv = _cx_prm(ctx), _cx_minv(ctx)
+    prm, minv = _vector(ctx, MT_PRM), _matrix(ctx, MT_MINV)
     rate = prm[P_RATE]
     pos, quat, vel, om = state_parts(y)
     c = sel.shape[0]
@@ -2941,7 +2897,8 @@ def _held(ctx: tuple, y0: np.ndarray, t: float, con: tuple, r: tuple, h: float, 
     """
     # (the entries of ctx this reads, by index: no name for the rest)
     model, n_applied, flags = _cx_model(ctx), ctx[1], ctx[2]
-    shape_mu, radius, prm, minv = _cx_mu(ctx), _cx_radius(ctx), _cx_prm(ctx), _cx_minv(ctx)
+    shape_mu, radius = _vector(ctx, MT_MU), _vector(ctx, MT_RADIUS)
+    prm, minv = _vector(ctx, MT_PRM), _matrix(ctx, MT_MINV)
     wbuf = model[2]
     # The arguments the result holds (con, y0, sel in the record; warm when the step is
     # not taken) stay counted; the rest are read through uncounted views (alive for the
@@ -3110,7 +3067,7 @@ def _locate(ctx: tuple, y0: np.ndarray, con: tuple, sel: np.ndarray, ov: np.ndar
     with the forces held (``wbuf[:nw]``); ``τ = 0`` when the new contact overlaps at
     ``y0`` already; ``ov``: the overlaps ``y0`` has that are not rows (not new).
     """
-    prm = _cx_prm(ctx)
+    prm = _vector(ctx, MT_PRM)
     con, sel, ov = raw_tree((con, sel, ov))   # (y0, which may be returned, is not borrowed)
     loc, rate = prm[P_LOCATION], prm[P_RATE]
     margin = pinned(ctx[6], 14, (1,))[0]
@@ -3217,7 +3174,7 @@ def _accept(ctx: tuple, y: np.ndarray, record: tuple, cnt: np.ndarray, con: tupl
     counted); the loaded
     contacts' normal rates within ``HOLD_RATE`` of zero are set to zero.
     """
-    prm, minv = _cx_prm(ctx), _cx_minv(ctx)
+    prm, minv = _vector(ctx, MT_PRM), _matrix(ctx, MT_MINV)
     loc = prm[P_LOCATION]
     # (record and held0 are read, never returned: passed on uncounted; y and con may be)
     record, held0 = raw_tree((record, held0))
