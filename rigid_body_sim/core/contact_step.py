@@ -1315,7 +1315,7 @@ class ContactSteps:
         Return ``det`` and the detector's buffers as the kernel's one table.
 
         (:data:`.kernels.contact_step.DT_ARRAYS`; made again when any of them is another
-        array: the buffers grown, the scene's shapes changed.)
+        array: the buffers grown, ``det`` made again by :meth:`_kernel_arguments`.)
         """
         buf = self._buffers()
         kept = self._dtab
